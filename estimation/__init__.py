@@ -1,0 +1,29 @@
+"""Point cloud in, geometry and physical properties out. Knows nothing of MuJoCo or Zenoh."""
+
+from estimation.cloud import PointCloud, check_estimable, make_cloud
+from estimation.cloudfile import load_cloud, save_cloud
+from estimation.errors import CloudError, CloudFileError, MaterialError, ReconstructionError, TwinError
+from estimation.estimate import METHODS, PhysicalEstimate, Timings, estimate
+from estimation.inertia import MassProperties, mass_properties
+from estimation.obb import OrientedBox, oriented_box
+
+__all__ = [
+    "METHODS",
+    "CloudError",
+    "CloudFileError",
+    "MassProperties",
+    "MaterialError",
+    "OrientedBox",
+    "PhysicalEstimate",
+    "PointCloud",
+    "ReconstructionError",
+    "Timings",
+    "TwinError",
+    "check_estimable",
+    "estimate",
+    "load_cloud",
+    "make_cloud",
+    "mass_properties",
+    "oriented_box",
+    "save_cloud",
+]

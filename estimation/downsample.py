@@ -1,0 +1,49 @@
+"""Voxel-grid downsampling: the centroid (and mean normal) of the points in each voxel, as PCL's
+``VoxelGrid`` does. Pure numpy: on a million points it is several times faster than open3d's, which
+dominated the estimate's time."""
+
+from __future__ import annotations
+
+import numpy as np
+
+#: Largest voxel grid (cells) counted densely; beyond it we sort instead (memory ~16 bytes a cell).
+DENSE_LIMIT = 16_000_000
+
+
+def voxel_downsample(
+    points: np.ndarray, voxel: float, normals: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
+    """Average points (and normals) that fall in the same cube of side ``voxel``.
+
+    Args:
+        points: (n, 3) float64, metres.
+        voxel: cube side, metres, > 0.
+        normals: (n, 3) unit vectors or None. Averaged normals are renormalised; a voxel where opposite
+            normals cancel (a sheet thinner than a voxel) keeps the unnormalised mean's direction.
+
+    Returns:
+        (m, 3) centroids, (m, 3) unit normals or None, and (m,) points per voxel.
+    """
+    key = np.floor(points / voxel).astype(np.int64)
+    key -= key.min(axis=0)
+    dims = key.max(axis=0) + 1
+    linear = (key[:, 0] * dims[1] + key[:, 1]) * dims[2] + key[:, 2]
+    if np.prod(dims) <= DENSE_LIMIT:
+        # Counting into the full voxel grid is O(n); np.unique would sort.
+        dense = np.bincount(linear, minlength=int(np.prod(dims)))
+        occupied = np.flatnonzero(dense)
+        slot = np.zeros(len(dense), dtype=np.int64)
+        slot[occupied] = np.arange(len(occupied))
+        inverse, counts = slot[linear], dense[occupied]
+    else:
+        _, inverse, counts = np.unique(linear, return_inverse=True, return_counts=True)
+
+    def mean(values: np.ndarray) -> np.ndarray:
+        return np.stack([np.bincount(inverse, weights=values[:, i]) for i in range(3)], axis=1)
+
+    centroids = mean(points) / counts[:, None]
+    if normals is None:
+        return centroids, None, counts
+    summed = mean(normals)
+    length = np.linalg.norm(summed, axis=1, keepdims=True)
+    return centroids, summed / np.maximum(length, np.finfo(float).tiny), counts

@@ -1,0 +1,114 @@
+"""A regular grid of sample nodes around a cloud, and inside/outside by flood fill.
+
+The flood fill is what makes the project robust where the paper failed: a voxel shell of the points is
+closed, so everything reachable from the grid border without crossing it is outside. That answers
+"which side is out" for every normal and every far grid node, without a viewpoint.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import ndimage
+
+#: Empty cells kept between the data and the grid border, so the border is surely outside.
+PAD_CELLS = 4
+
+#: Closing radii (cells) tried in turn when the shell leaks (holes in the cloud wider than a cell).
+CLOSING_RADII = (1, 2, 3, 4)
+
+
+@dataclass(frozen=True)
+class Grid:
+    """Nodes ``origin + cell * (i, j, k)`` for ``0 <= (i, j, k) < shape``.
+
+    Attributes:
+        origin: (3,) metres, position of node (0, 0, 0).
+        cell: node spacing, metres.
+        shape: node counts along x, y, z.
+    """
+
+    origin: np.ndarray
+    cell: float
+    shape: tuple[int, int, int]
+
+    def index_of(self, points: np.ndarray) -> np.ndarray:
+        """Nearest node index (n, 3) int for points (n, 3) metres."""
+        return np.rint((points - self.origin) / self.cell).astype(np.int64)
+
+    def position(self, index: np.ndarray) -> np.ndarray:
+        """Node positions (n, 3) metres for indices (n, 3)."""
+        return self.origin + index * self.cell
+
+    def fractional(self, points: np.ndarray) -> np.ndarray:
+        """Continuous grid coordinates (3, n) for ``ndimage.map_coordinates``."""
+        return ((points - self.origin) / self.cell).T
+
+
+def grid_around(points: np.ndarray, cell: float, pad: int = PAD_CELLS) -> Grid:
+    """The smallest grid of spacing ``cell`` covering ``points`` with ``pad`` empty cells each side."""
+    low = points.min(axis=0) - pad * cell
+    span = points.max(axis=0) + pad * cell - low
+    shape = tuple(int(s) for s in np.ceil(span / cell).astype(int) + 1)
+    return Grid(origin=low, cell=float(cell), shape=shape)  # type: ignore[arg-type]
+
+
+@dataclass(frozen=True)
+class Occupancy:
+    """Which nodes are near the surface, outside, or inside.
+
+    Attributes:
+        shell: bool grid, nodes within ``closing`` cells of a point (the band where the surface lies).
+        outside: bool grid, nodes connected to the border without crossing the shell.
+        closing: the dilation radius, in cells, that closed the shell.
+    """
+
+    shell: np.ndarray
+    outside: np.ndarray
+    closing: int
+
+    @property
+    def inside(self) -> np.ndarray:
+        return ~self.shell & ~self.outside
+
+
+def occupancy(points: np.ndarray, grid: Grid) -> Occupancy:
+    """Flood-fill the outside of the voxel shell of ``points`` ((n, 3) metres).
+
+    Tries growing dilation radii until the shell encloses something; a cloud whose solid is thinner than
+    the shell keeps radius 1 (the band then decides every sign near it).
+    """
+    occupied = np.zeros(grid.shape, dtype=bool)
+    idx = grid.index_of(points)
+    occupied[idx[:, 0], idx[:, 1], idx[:, 2]] = True
+    first: Occupancy | None = None
+    for radius in CLOSING_RADII:
+        shell = ndimage.binary_dilation(occupied, structure=_ball(radius))
+        outside = _outside(shell)
+        result = Occupancy(shell, outside, radius)
+        if first is None:
+            first = result
+        if result.inside.any():
+            return result
+    return first  # type: ignore[return-value]
+
+
+def _outside(shell: np.ndarray) -> np.ndarray:
+    """Face-connected empty region that touches the border."""
+    labels, _ = ndimage.label(~shell)
+    border = np.unique(
+        np.concatenate(
+            [labels[0].ravel(), labels[-1].ravel(), labels[:, 0].ravel(), labels[:, -1].ravel(),
+             labels[:, :, 0].ravel(), labels[:, :, -1].ravel()]
+        )
+    )
+    border = border[border > 0]
+    return np.isin(labels, border)
+
+
+def _ball(radius: int) -> np.ndarray:
+    r = np.arange(-radius, radius + 1)
+    x, y, z = np.meshgrid(r, r, r, indexing="ij")
+    # A radius-1 ball is the full 3x3x3 cube: diagonal neighbours close diagonal gaps in the shell.
+    return (x**2 + y**2 + z**2) <= max(radius**2, 3)

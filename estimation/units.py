@@ -1,0 +1,40 @@
+"""Length units accepted on input, and the check for a cloud that is probably in the wrong ones."""
+
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+
+from estimation import tolerances as tol
+from estimation.errors import TwinError
+
+log = logging.getLogger(__name__)
+
+#: Metres per unit.
+UNIT_SCALE: dict[str, float] = {"m": 1.0, "cm": 0.01, "mm": 0.001}
+
+
+class UnitsError(TwinError, ValueError):
+    """An unknown unit name."""
+
+
+def unit_scale(units: str) -> float:
+    """Metres per ``units`` ('m', 'cm' or 'mm')."""
+    try:
+        return UNIT_SCALE[units]
+    except KeyError:
+        raise UnitsError(f"unknown units {units!r}; use one of {', '.join(UNIT_SCALE)}") from None
+
+
+def units_warning(extents_m: np.ndarray) -> str | None:
+    """Return a warning when an object's extents (metres) look like the wrong units, else None."""
+    largest = float(np.max(extents_m))
+    low, high = tol.PLAUSIBLE_EXTENT_M
+    if largest > high:
+        return (
+            f"object is {largest:.3g} m across; if the file is in mm or cm, pass --units mm or --units cm"
+        )
+    if largest < low:
+        return f"object is {largest * 1000:.3g} mm across; if the file is in metres already, check --units"
+    return None
