@@ -5,6 +5,7 @@ from estimation.cloudfile import load_cloud, save_cloud
 from estimation.errors import CloudError, CloudFileError, MaterialError, ReconstructionError, TwinError
 from estimation.estimate import METHODS, PhysicalEstimate, Timings, estimate
 from estimation.inertia import MassProperties, mass_properties
+from estimation.materials import Material, material, materials
 from estimation.obb import OrientedBox, oriented_box
 
 __all__ = [
@@ -12,6 +13,7 @@ __all__ = [
     "CloudError",
     "CloudFileError",
     "MassProperties",
+    "Material",
     "MaterialError",
     "OrientedBox",
     "PhysicalEstimate",
@@ -24,6 +26,8 @@ __all__ = [
     "load_cloud",
     "make_cloud",
     "mass_properties",
+    "material",
+    "materials",
     "oriented_box",
     "save_cloud",
 ]

@@ -15,8 +15,9 @@ import numpy as np
 from estimation import tolerances as tol
 from estimation.cloud import PointCloud, check_estimable
 from estimation.downsample import voxel_downsample
-from estimation.errors import CloudError, MaterialError
+from estimation.errors import CloudError
 from estimation.inertia import MassProperties, mass_properties
+from estimation.materials import check_density
 from estimation.obb import OrientedBox, oriented_box
 from estimation.units import units_warning
 
@@ -109,21 +110,26 @@ def estimate(
     """
     if method not in METHODS:
         raise ValueError(f"unknown method {method!r}; choose from {', '.join(METHODS)}")
-    if not np.isfinite(density) or density <= 0:
-        raise MaterialError(f"density must be a positive number of kg/m^3, got {density}")
+    density = check_density(density)
     check_estimable(cloud)
     warnings = [f"dropped {cloud.dropped_nonfinite} rows with NaN or inf"] if cloud.dropped_nonfinite else []
 
     box = oriented_box(cloud.points)
     if (hint := units_warning(box.extents)) is not None:
-        log.warning(hint)
+        log.info(hint)
         warnings.append(hint)
     stages: dict[str, float] = {"read": read_seconds}
 
     if method == "obb":
+        # As the paper's pipeline: PCL's moment-of-inertia box of the voxel-downsampled cloud (the grid
+        # is the cloud's own axes, which is why the paper's OBB error depends on the rotation).
         t0 = time.perf_counter()
-        vertices, faces = box_mesh(box)
-        return _finish(method, cloud, len(cloud), box, vertices, faces, True, 0.0, density, material,
+        voxel = float(box.extents.max()) / resolution
+        points, _, _ = voxel_downsample(cloud.points, voxel)
+        stages["downsample"] = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        vertices, faces = box_mesh(oriented_box(points))
+        return _finish(method, cloud, len(points), box, vertices, faces, True, voxel, density, material,
                        warnings, stages, t0)
     if method == "hull":
         from estimation.hull import convex_hull
@@ -158,16 +164,15 @@ def _estimate_from_surface(
     frame = box.rotation
     local = cloud.transformed(frame.T, -box.center @ frame)
     cell = float(box.extents.max()) / resolution
-    voxel = tol.DOWNSAMPLE_CELL_FRACTION * cell
-    points, normals, counts = voxel_downsample(local.points, voxel, local.normals)
-    # A surface crosses a voxel over about one voxel face, so the raw point spacing is about
-    # voxel / sqrt(points per voxel).
-    spacing = voxel / float(np.sqrt(counts.mean()))
-    if cell < tol.MIN_CELL_SPACINGS * spacing:
-        # Sparse cloud: a grid finer than the points would leave the voxel shell full of holes.
+    points, normals, _ = voxel_downsample(local.points, tol.DOWNSAMPLE_CELL_FRACTION * cell, local.normals)
+    tree = cKDTree(points)
+    # Downsampling leaves about one point per cell on a dense cloud; on a sparse one the points stay
+    # farther apart, and a grid finer than that would leave the voxel shell full of holes.
+    spacing = _median_spacing(points, tree)
+    if spacing > cell:
         cell = tol.MIN_CELL_SPACINGS * spacing
         points, normals, _ = voxel_downsample(local.points, tol.DOWNSAMPLE_CELL_FRACTION * cell, local.normals)
-    tree = cKDTree(points)
+        tree = cKDTree(points)
     stages["downsample"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
@@ -186,7 +191,7 @@ def _estimate_from_surface(
     if method == "auto":
         from estimation.implicit import signed_distance, surface_from_field
 
-        mesh = surface_from_field(signed_distance(points, normals, grid, occ), grid)
+        mesh = surface_from_field(signed_distance(points, normals, grid, occ, tree), grid)
         vertices, faces, watertight, apex = np.asarray(mesh.vertices), np.asarray(mesh.faces), True, None
     else:
         from estimation.surface import triangulate
@@ -230,6 +235,12 @@ def box_mesh(box: OrientedBox) -> tuple[np.ndarray, np.ndarray]:
     transform[:3, :3], transform[:3, 3] = box.rotation, box.center
     mesh = trimesh.creation.box(extents=box.extents, transform=transform)
     return np.asarray(mesh.vertices), np.asarray(mesh.faces)
+
+
+def _median_spacing(points: np.ndarray, tree) -> float:  # type: ignore[no-untyped-def]
+    """Median nearest-neighbour distance, metres, over at most 5000 of ``points``."""
+    sample = points[:: max(1, len(points) // 5000)]
+    return float(np.median(tree.query(sample, k=2, workers=-1)[0][:, 1]))
 
 
 def _rotate_properties(props: MassProperties, frame: np.ndarray, center: np.ndarray) -> MassProperties:

@@ -12,11 +12,17 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage
 
-#: Empty cells kept between the data and the grid border, so the border is surely outside.
-PAD_CELLS = 4
-
 #: Closing radii (cells) tried in turn when the shell leaks (holes in the cloud wider than a cell).
-CLOSING_RADII = (1, 2, 3, 4)
+CLOSING_RADII = (1, 2, 3, 4, 5)
+
+#: Empty cells kept between the data and the grid border: the widest shell plus two, so the border is
+#: surely outside.
+PAD_CELLS = max(CLOSING_RADII) + 2
+
+#: Growing a closed shell by one cell encloses about one more surface layer: up to ~1.7x the occupied
+#: node count on slanted faces, more where the shell curves outward. A jump beyond this many occupied
+#: counts means the smaller radius leaked.
+LEAK_JUMP_LAYERS = 4.0
 
 
 @dataclass(frozen=True)
@@ -76,22 +82,27 @@ class Occupancy:
 def occupancy(points: np.ndarray, grid: Grid) -> Occupancy:
     """Flood-fill the outside of the voxel shell of ``points`` ((n, 3) metres).
 
-    Tries growing dilation radii until the shell encloses something; a cloud whose solid is thinner than
-    the shell keeps radius 1 (the band then decides every sign near it).
+    The shell is the occupied nodes dilated by a closing radius. Holes in the cloud wider than the
+    shell let the flood into the interior, leaving nothing (or crumbs) inside; once they are closed, a
+    larger radius only thickens the shell by about one surface layer. So we take the smallest radius
+    that encloses something and after which growing it encloses no more than that. A solid thinner
+    than the shell never encloses anything: it keeps radius 1 and the band decides every sign.
     """
     occupied = np.zeros(grid.shape, dtype=bool)
     idx = grid.index_of(points)
     occupied[idx[:, 0], idx[:, 1], idx[:, 2]] = True
-    first: Occupancy | None = None
+    layer = LEAK_JUMP_LAYERS * int(occupied.sum())
+    results = []
     for radius in CLOSING_RADII:
         shell = ndimage.binary_dilation(occupied, structure=_ball(radius))
-        outside = _outside(shell)
-        result = Occupancy(shell, outside, radius)
-        if first is None:
-            first = result
-        if result.inside.any():
-            return result
-    return first  # type: ignore[return-value]
+        results.append(Occupancy(shell, _outside(shell), radius))
+        if len(results) >= 2:
+            before, after = results[-2], results[-1]
+            jump = int((~after.outside).sum()) - int((~before.outside).sum())
+            if before.inside.sum() > layer / LEAK_JUMP_LAYERS and jump <= layer:
+                return before
+    enclosing = [r for r in results if r.inside.any()]
+    return enclosing[-1] if enclosing else results[0]
 
 
 def _outside(shell: np.ndarray) -> np.ndarray:

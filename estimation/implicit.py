@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 import trimesh
+from scipy.spatial import cKDTree
 
 from estimation.errors import ReconstructionError
 from estimation.grid import Grid, Occupancy
@@ -22,6 +23,9 @@ KERNEL_CELLS = 1.0
 #: the surface only inside the band.
 CLAMP_CELLS = 2.0
 
+#: Nearest points averaged at shell nodes that no point's scatter reached.
+FALLBACK_NEIGHBOURS = 8
+
 #: How far (cells) node values are kept from the zero level.
 NUDGE_CELLS = 1e-3
 
@@ -29,15 +33,18 @@ NUDGE_CELLS = 1e-3
 MIN_PIECE_FRACTION = 1e-3
 
 
-def signed_distance(points: np.ndarray, normals: np.ndarray, grid: Grid, occ: Occupancy) -> np.ndarray:
+def signed_distance(
+    points: np.ndarray, normals: np.ndarray, grid: Grid, occ: Occupancy, tree: cKDTree
+) -> np.ndarray:
     """Signed distance (metres, positive outside) on every grid node, float32 of ``grid.shape``.
 
     Each point adds its Gaussian-weighted plane distance to the 27 nodes around it (a scatter with
-    ``bincount``, several times faster than a neighbour query per node); every shell node is within one
-    cell of a point, so each gets at least one contribution.
+    ``bincount``, several times faster than a neighbour query per node). Shell nodes farther than a
+    cell from every point (the shell is wider where it had to close holes) take the same average over
+    their nearest points instead.
 
     Args:
-        points: (n, 3) metres; normals: (n, 3) unit, outward.
+        points: (n, 3) metres; normals: (n, 3) unit, outward; tree: KD-tree over ``points``.
     """
     clamp = CLAMP_CELLS * grid.cell
     field = np.where(occ.outside, clamp, -clamp).astype(np.float32)
@@ -55,9 +62,23 @@ def signed_distance(points: np.ndarray, normals: np.ndarray, grid: Grid, occ: Oc
     linear = (base @ strides)[:, None] + (_NEIGHBOUR_OFFSETS @ strides)[None]
     weight_sum = np.bincount(linear.ravel(), weights=w, minlength=size)
     value_sum = np.bincount(linear.ravel(), weights=w * plane, minlength=size)
-    band = occ.shell.ravel() & (weight_sum > 0)
+    shell = occ.shell.ravel()
+    band = shell & (weight_sum > 0)
     flat = field.ravel()
     flat[band] = np.clip(value_sum[band] / weight_sum[band], -clamp, clamp)
+    uncovered = np.flatnonzero(shell & (weight_sum == 0))
+    if len(uncovered):
+        x = grid.position(np.stack(np.unravel_index(uncovered, grid.shape), axis=1))
+        k = min(FALLBACK_NEIGHBOURS, len(points))
+        dist, nbr = tree.query(x, k=k, workers=-1)
+        dist, nbr = dist.reshape(len(x), k), nbr.reshape(len(x), k)
+        # Weights relative to the nearest point: the same kernel, without underflow far from the data.
+        w = np.exp(-(dist**2 - dist[:, :1] ** 2) / h**2)
+        plane = np.einsum("nkj,nkj->nk", normals[nbr], x[:, None, :] - points[nbr])
+        flat[uncovered] = np.clip((w * plane).sum(axis=1) / w.sum(axis=1), -clamp, clamp)
+    # The border is outside by construction; pinning it keeps every level set closed.
+    for axis in range(3):
+        field.swapaxes(0, axis)[[0, -1]] = clamp
     return field
 
 
@@ -83,7 +104,7 @@ def surface_from_field(field: np.ndarray, grid: Grid) -> trimesh.Trimesh:
     mesh = trimesh.Trimesh(verts + grid.origin, faces, process=True)
     if mesh.body_count > 1:
         pieces = mesh.split(only_watertight=False)
-        volumes = np.array([p.volume for p in pieces])
+        volumes = np.array([_signed_volume(p.triangles) for p in pieces])
         # Inward-facing closed pieces would be cavities no sensor could see: noise, like tiny pieces.
         keep = [p for p, v in zip(pieces, volumes, strict=True) if v > MIN_PIECE_FRACTION * volumes.max()]
         mesh = keep[0] if len(keep) == 1 else trimesh.util.concatenate(keep)

@@ -1,9 +1,9 @@
 """Mass properties of a triangulated solid at uniform density: the one volume function of the project.
 
-Integrals over signed tetrahedra (apex, v1, v2, v3), one per face (trimesh's polyhedral mass
-properties). For a closed, consistently oriented mesh the apex does not matter. For the paper's open
-triangulations it does: the paper takes the OBB centre, and its sign rule (sign of n . (v1 - apex)) is
-what this gives when each face is wound to agree with its normal.
+Exact integrals over signed tetrahedra (apex, v1, v2, v3), one per face. For a closed, consistently
+oriented mesh the apex does not matter. For the paper's open triangulations it does: the paper takes the
+OBB centre, and its sign rule (sign of n . (v1 - apex)) is what this gives when each face is wound to
+agree with its normal. (The divergence-theorem shortcut used by trimesh agrees only on closed meshes.)
 """
 
 from __future__ import annotations
@@ -11,6 +11,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+
+from estimation.errors import ReconstructionError
 
 
 @dataclass(frozen=True)
@@ -47,23 +49,37 @@ def mass_properties(
         density: kg/m^3, > 0.
         apex: (3,) metres, the shared tetrahedron apex; defaults to the vertex centroid, which for a
             closed mesh changes nothing but rounding.
-    """
-    from trimesh.triangles import mass_properties as _polyhedral
 
+    Raises:
+        ReconstructionError: the signed volume is not positive (inside-out or no enclosed volume).
+    """
     vertices = np.asarray(vertices, dtype=np.float64)
     apex = vertices.mean(axis=0) if apex is None else np.asarray(apex, dtype=np.float64)
-    # Integrate about the apex: trimesh's tetrahedra all meet at the origin.
-    props = _polyhedral(vertices[np.asarray(faces)] - apex, density=density)
-    inertia = np.asarray(props.inertia, dtype=np.float64)
+    tri = vertices[np.asarray(faces)] - apex  # (f, 3 vertices, 3 coords), apex at the origin
+    signed = np.einsum("ij,ij->i", tri[:, 0], np.cross(tri[:, 1], tri[:, 2])) / 6
+    volume = float(signed.sum())
+    if volume <= 0:
+        raise ReconstructionError(f"the surface encloses no positive volume ({volume:.3g} m^3)")
+    # First moments: a tetrahedron's centroid is the mean of its four vertices (one is the origin).
+    vertex_sum = tri.sum(axis=1)
+    com = (signed[:, None] * vertex_sum).sum(axis=0) / 4 / volume
+    # Second moments, exact for a tetrahedron with a vertex at the origin:
+    # integral of x x^T = V / 20 * (sum_k p_k p_k^T + s s^T), s = sum_k p_k.
+    second = np.einsum("f,fki,fkj->ij", signed, tri, tri) + np.einsum("f,fi,fj->ij", signed, vertex_sum, vertex_sum)
+    second = density * second / 20
+    mass = density * volume
+    # Move the second moment to the centre of mass, then I = tr(C) 1 - C.
+    second -= mass * np.outer(com, com)
+    inertia = np.trace(second) * np.eye(3) - second
     inertia = (inertia + inertia.T) / 2
     moments, axes = np.linalg.eigh(inertia)
     if np.linalg.det(axes) < 0:
         axes[:, 2] *= -1
     return MassProperties(
-        volume=float(props.volume),
+        volume=volume,
         density=float(density),
-        mass=float(props.mass),
-        center_of_mass=np.asarray(props.center_mass, dtype=np.float64) + apex,
+        mass=mass,
+        center_of_mass=com + apex,
         inertia=inertia,
         principal_moments=moments,
         principal_axes=axes,

@@ -14,8 +14,8 @@ from scipy.spatial import cKDTree
 from estimation import tolerances as tol
 from estimation.grid import Grid, Occupancy
 
-#: How far (cells) along the normal we look for the outside on either side.
-PROBE_CELLS = 2.0
+#: How far (cells) beyond the shell's closing radius we look for the outside on either side of a point.
+PROBE_CELLS = 1.0
 
 #: Blur (cells) of the outside indicator: turns the 0/1 mask into a ramp we can compare on both sides.
 OUTSIDE_BLUR_CELLS = 1.5
@@ -44,7 +44,8 @@ def orient_outward(
 ) -> np.ndarray:
     """Flip ``normals`` ((n, 3), unit) so that each points out of the solid bounded by ``points``."""
     outside = ndimage.gaussian_filter(occ.outside.astype(np.float32), OUTSIDE_BLUR_CELLS)
-    step = PROBE_CELLS * grid.cell * normals
+    # The shell reaches ``closing`` cells from the points; the outside starts just beyond.
+    step = (occ.closing + PROBE_CELLS) * grid.cell * normals
     ahead = ndimage.map_coordinates(outside, grid.fractional(points + step), order=1, mode="nearest")
     behind = ndimage.map_coordinates(outside, grid.fractional(points - step), order=1, mode="nearest")
     difference = ahead - behind

@@ -17,7 +17,8 @@ class OrientedBox:
 
     Attributes:
         center: (3,) metres.
-        extents: (3,) full side lengths, metres, largest first.
+        extents: (3,) full side lengths, metres, along ``rotation``'s columns (ordered by decreasing
+            variance of the points, not by length).
         rotation: (3, 3) columns are the box axes in the cloud frame (a proper rotation, det = +1).
     """
 

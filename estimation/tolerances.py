@@ -19,9 +19,10 @@ FLATNESS_RATIO = 1e-3
 #: while keeping a 1M-point estimate under a second on two cores.
 GRID_RESOLUTION = 128
 
-#: The reconstruction grid is never finer than this many mean point spacings: below that, cells hold no
-#: points and the shell used for inside/outside has gaps.
-MIN_CELL_SPACINGS = 1.5
+#: When the points are sparser than the grid (median spacing after downsampling over one cell; a dense
+#: cloud sits at ~0.9), the cell grows to this many spacings: finer, cells hold no points and the shell
+#: used for inside/outside has gaps.
+MIN_CELL_SPACINGS = 1.1
 
 #: Voxel size for downsampling, as a fraction of the reconstruction cell. One point per surface cell is
 #: enough for the distance field (bench: < 0.07 % volume error on every paper object) and 4x cheaper

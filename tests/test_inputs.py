@@ -1,0 +1,178 @@
+"""Bad input gets a clear error naming the problem; good files of every format read the same."""
+
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+import pytest
+import trimesh
+
+from estimation import CloudError, CloudFileError, MaterialError, estimate, load_cloud, make_cloud, save_cloud
+from estimation.materials import material, materials
+from estimation.units import UnitsError, unit_scale
+from scenes.sampling import sample_surface
+
+
+@pytest.fixture(scope="module")
+def box_cloud():
+    return sample_surface(trimesh.creation.box(extents=(0.2, 0.1, 0.05)), 5_000, seed=1)
+
+
+def test_empty_cloud():
+    with pytest.raises(CloudError, match="empty"):
+        make_cloud(np.zeros((0, 3)))
+
+
+def test_wrong_shape():
+    with pytest.raises(CloudError, match=r"expected shape \(n, 3\)"):
+        make_cloud(np.zeros((10, 2)))
+
+
+def test_nan_rows_are_dropped_and_reported(box_cloud, caplog):
+    pts = box_cloud.points.copy()
+    pts[:7, 1] = np.nan
+    pts[7, 0] = np.inf
+    with caplog.at_level(logging.WARNING):
+        cloud = make_cloud(pts)
+    assert cloud.dropped_nonfinite == 8 and len(cloud) == len(pts) - 8
+    assert "dropped 8" in caplog.text
+    result = estimate(cloud, 1000.0)
+    assert any("dropped 8" in w for w in result.warnings)
+
+
+def test_all_nan():
+    with pytest.raises(CloudError, match="NaN or inf"):
+        make_cloud(np.full((50, 3), np.nan))
+
+
+def test_too_few_points(box_cloud):
+    with pytest.raises(CloudError, match="too few points: 40"):
+        estimate(make_cloud(box_cloud.points[:40]), 1000.0)
+
+
+def test_too_few_after_dropping_nan(box_cloud):
+    pts = box_cloud.points[:150].copy()
+    pts[:100] = np.nan
+    with pytest.raises(CloudError, match="too few points: 50"):
+        estimate(make_cloud(pts), 1000.0)
+
+
+def test_planar_cloud():
+    xy = np.random.default_rng(0).uniform(size=(1000, 2))
+    with pytest.raises(CloudError, match="flat"):
+        estimate(make_cloud(np.c_[xy, np.zeros(1000)]), 1000.0)
+
+
+def test_line_cloud():
+    t = np.linspace(0, 1, 500)
+    with pytest.raises(CloudError, match="line-like"):
+        estimate(make_cloud(np.c_[t, 2 * t, -t]), 1000.0)
+
+
+def test_identical_points():
+    with pytest.raises(CloudError, match="identical"):
+        estimate(make_cloud(np.ones((500, 3))), 1000.0)
+
+
+@pytest.mark.parametrize("density", [0.0, -5.0, float("nan"), float("inf")])
+def test_bad_density(box_cloud, density):
+    with pytest.raises(MaterialError, match="density must be a positive"):
+        estimate(box_cloud, density)
+
+
+def test_unknown_method(box_cloud):
+    with pytest.raises(ValueError, match="unknown method 'poisson'"):
+        estimate(box_cloud, 1000.0, method="poisson")
+
+
+def test_unknown_material_suggests():
+    with pytest.raises(MaterialError, match="did you mean wood_oak"):
+        material("wood_oka")
+
+
+def test_material_table_has_sources():
+    table = materials()
+    assert len(table) >= 20
+    for m in table.values():
+        assert m.density > 0 and m.friction > 0 and len(m.source) > 10
+    assert material("Wood-Oak").name == "wood_oak"
+
+
+def test_unit_scale():
+    assert unit_scale("mm") == 0.001
+    with pytest.raises(UnitsError, match="unknown units 'inch'"):
+        unit_scale("inch")
+
+
+def test_wrong_units_warns(box_cloud):
+    result = estimate(make_cloud(box_cloud.points, scale=1000.0), 1.0)  # a 200 m box
+    assert any("--units mm" in w for w in result.warnings)
+
+
+@pytest.mark.parametrize("suffix", [".ply", ".pcd", ".xyz", ".npy", ".npz"])
+@pytest.mark.parametrize("with_normals", [True, False])
+def test_round_trip_formats(tmp_path, box_cloud, suffix, with_normals):
+    if suffix == ".xyz" and with_normals:
+        suffix = ".xyzn"
+    cloud = box_cloud if with_normals else box_cloud.without_normals()
+    path = tmp_path / f"c{suffix}"
+    save_cloud(cloud, path)
+    back = load_cloud(path)
+    np.testing.assert_allclose(back.points, cloud.points, rtol=1e-6, atol=1e-6)
+    assert (back.normals is not None) == with_normals
+
+
+def test_text_file_in_millimetres(tmp_path, box_cloud):
+    path = tmp_path / "c.txt"
+    np.savetxt(path, np.c_[box_cloud.points * 1000, box_cloud.normals])
+    back = load_cloud(path, scale=0.001)
+    np.testing.assert_allclose(back.points, box_cloud.points, atol=1e-9)
+    assert back.normals is not None
+
+
+def test_text_file_with_colours(tmp_path, box_cloud):
+    path = tmp_path / "c.csv"
+    colours = np.full((len(box_cloud), 3), 200.0)
+    np.savetxt(path, np.c_[box_cloud.points, colours], delimiter=",")
+    back = load_cloud(path)
+    assert back.normals is None and back.colors is not None
+    np.testing.assert_allclose(back.colors, 200 / 255)
+
+
+def test_missing_file(tmp_path):
+    with pytest.raises(CloudFileError, match="no such file"):
+        load_cloud(tmp_path / "nope.ply")
+
+
+def test_unknown_format(tmp_path):
+    (tmp_path / "c.obj").write_text("v 0 0 0\n")
+    with pytest.raises(CloudFileError, match="unknown cloud format '.obj'"):
+        load_cloud(tmp_path / "c.obj")
+
+
+@pytest.mark.parametrize("suffix", [".ply", ".pcd", ".npy", ".txt"])
+def test_garbage_file(tmp_path, suffix):
+    path = tmp_path / f"c{suffix}"
+    path.write_bytes(b"\x00\x01garbage that is no cloud\xff" * 3)
+    with pytest.raises(CloudFileError):
+        load_cloud(path)
+
+
+def test_empty_file(tmp_path):
+    path = tmp_path / "c.ply"
+    path.write_bytes(b"")
+    with pytest.raises(CloudFileError, match="empty"):
+        load_cloud(path)
+
+
+def test_npz_without_points(tmp_path):
+    np.savez(tmp_path / "c.npz", xyz=np.zeros((10, 3)))
+    with pytest.raises(CloudFileError, match="'points'"):
+        load_cloud(tmp_path / "c.npz")
+
+
+def test_text_wrong_columns(tmp_path):
+    np.savetxt(tmp_path / "c.txt", np.zeros((10, 4)))
+    with pytest.raises(CloudFileError, match="3, 6 or 9 columns"):
+        load_cloud(tmp_path / "c.txt")
