@@ -54,6 +54,28 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     p.set_defaults(handler=_cmd_estimate)
 
+    p = sub.add_parser("build", help="build a scene file into DIR/scene.xml and DIR/assets/")
+    p.add_argument("scene", type=Path, help="scene TOML file")
+    p.add_argument("--out", type=Path, required=True, help="output directory (replaced atomically)")
+    _coacd_options(p)
+    p.set_defaults(handler=_cmd_build)
+
+    p = sub.add_parser("run", help="run the local twin loop, paced to real time")
+    p.add_argument("scene", type=Path, help="scene TOML file or a built directory with scene.xml")
+    p.add_argument("--duration", type=float, default=5.0, help="simulated seconds (default 5)")
+    p.add_argument("--rate", type=float, default=1000.0, help="loop rate, Hz (default 1000)")
+    p.add_argument("--viewer", action="store_true", help="open MuJoCo's passive viewer (needs a display)")
+    p.add_argument("--script", type=Path, help="end-effector trajectory CSV: t,x,y,z (s, m); default: a push")
+    p.add_argument("--no-realtime", action="store_true", help="run as fast as possible")
+    p.add_argument("--json", action="store_true")
+    _coacd_options(p)
+    p.set_defaults(handler=_cmd_run)
+
+    p = sub.add_parser("demo", help="end-to-end demo on the paper's objects (no server needed)")
+    p.add_argument("--duration", type=float, default=3.0)
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(handler=_cmd_demo)
+
     p = sub.add_parser("materials", help="list the material table")
     p.set_defaults(handler=_cmd_materials)
     return parser
@@ -155,6 +177,142 @@ def _write_mesh(vertices, faces, path: Path) -> None:  # type: ignore[no-untyped
         trimesh.Trimesh(vertices, faces, process=False).export(path)
     except (OSError, ValueError) as exc:
         raise TwinError(f"{path}: cannot write mesh ({exc})") from exc
+
+
+def _coacd_options(p: argparse.ArgumentParser) -> None:
+    from twin.decompose import CoacdSettings
+
+    d = CoacdSettings()
+    p.add_argument("--threshold", type=float, default=d.threshold, help=f"CoACD concavity (default {d.threshold})")
+    p.add_argument("--max-hulls", type=int, default=d.max_convex_hull, help=f"CoACD max hulls (default {d.max_convex_hull})")
+    p.add_argument("--cache-dir", type=Path, help="CoACD cache (default $TWIN_CACHE_DIR or ~/.cache/tactile-twin)")
+
+
+def _coacd_settings(args: argparse.Namespace):  # type: ignore[no-untyped-def]
+    from twin.decompose import CoacdSettings
+
+    if args.threshold <= 0 or args.max_hulls == 0:
+        raise TwinError("--threshold must be > 0 and --max-hulls non-zero")
+    return CoacdSettings(threshold=args.threshold, max_convex_hull=args.max_hulls)
+
+
+def _cmd_build(args: argparse.Namespace) -> int:
+    from twin.build import build_scene, write_scene
+    from twin.scenefile import load_scene
+
+    built = build_scene(load_scene(args.scene), coacd=_coacd_settings(args), cache_dir=args.cache_dir)
+    path = write_scene(built.spec, args.out)
+    _print_objects(built)
+    print(f"wrote {path} ({built.seconds:.1f} s)")
+    return 0
+
+
+def _print_objects(built) -> None:  # type: ignore[no-untyped-def]
+    from rich.console import Console
+    from rich.table import Table
+
+    table = Table(title=f"scene {built.scene.name}")
+    for col in ("object", "mass kg", "volume cm^3", "hulls", "cached", "material"):
+        table.add_column(col, justify="right" if col != "object" else "left")
+    for o in built.objects:
+        table.add_row(o.id, f"{o.estimate.mass.mass:.3f}", f"{o.estimate.volume * 1e6:.1f}", str(len(o.hulls)),
+                      "yes" if o.hull_cached else "no", o.estimate.material or f"{o.estimate.mass.density:g} kg/m^3")
+    Console().print(table)
+
+
+def _load_twin(args: argparse.Namespace):  # type: ignore[no-untyped-def]
+    """A Twin from a scene file (built now) or a directory written by ``twin build``."""
+    from twin.sim import Twin
+
+    path = Path(args.scene)
+    if path.is_dir():
+        import mujoco
+
+        xml = path / "scene.xml"
+        if not xml.is_file():
+            raise TwinError(f"{path}: no scene.xml (build it with 'twin build')")
+        try:
+            spec = mujoco.MjSpec.from_file(str(xml))
+        except ValueError as exc:
+            raise TwinError(f"{xml}: MuJoCo cannot load it ({exc})") from exc
+        return Twin(spec), None
+    from twin.build import build_scene
+    from twin.scenefile import load_scene
+
+    built = build_scene(load_scene(path), coacd=_coacd_settings(args), cache_dir=args.cache_dir)
+    return Twin(built.spec, built.model), built
+
+
+def _trajectory(args: argparse.Namespace, twin):  # type: ignore[no-untyped-def]
+    import numpy as np
+
+    from twin.sim import push_trajectory
+
+    if args.script is None:
+        start = twin.data.mocap_pos[0].copy() if twin.model.nmocap else np.zeros(3)
+        return push_trajectory(start, start + np.array([1.0, 0.0, -0.15]), max(args.duration, 1e-3))
+    try:
+        table = np.loadtxt(args.script, delimiter=",", ndmin=2)
+    except (OSError, ValueError) as exc:
+        raise TwinError(f"{args.script}: cannot read trajectory ({exc})") from exc
+    if table.shape[1] != 4 or not np.isfinite(table).all() or np.any(np.diff(table[:, 0]) <= 0):
+        raise TwinError(f"{args.script}: expected finite rows t,x,y,z with increasing t")
+
+    def at(t: float):  # type: ignore[no-untyped-def]
+        return np.array([np.interp(t, table[:, 0], table[:, i]) for i in (1, 2, 3)])
+
+    return at
+
+
+def _cmd_run(args: argparse.Namespace) -> int:
+    from twin.sim import run_paced
+
+    if args.duration <= 0 or args.rate <= 0:
+        raise TwinError("--duration and --rate must be positive")
+    twin, _ = _load_twin(args)
+    with twin:
+        trajectory = _trajectory(args, twin) if twin.model.nmocap else None
+        if args.viewer:
+            stats = _run_with_viewer(twin, args, trajectory)
+        else:
+            stats = run_paced(twin, args.duration, args.rate, trajectory=trajectory, realtime=not args.no_realtime)
+        record = {"steps": stats.steps, "rate_hz": args.rate, "step_p50_ms": stats.p50 * 1e3,
+                  "step_p99_ms": stats.p99 * 1e3, "step_max_ms": stats.max * 1e3, "missed_deadlines": stats.missed,
+                  "wall_s": stats.wall, "objects": len(twin.object_ids()),
+                  "ee_force_n": twin.end_effector_force().tolist() if twin.model.nmocap else None}
+    if args.json:
+        print(json.dumps(record))
+    else:
+        print(f"{record['steps']} loop iterations at {args.rate:g} Hz over {stats.wall:.2f} s wall: "
+              f"step p50 {record['step_p50_ms']:.3f} ms, p99 {record['step_p99_ms']:.3f} ms, "
+              f"max {record['step_max_ms']:.3f} ms, missed deadlines {stats.missed}")
+    return 0
+
+
+def _run_with_viewer(twin, args, trajectory):  # type: ignore[no-untyped-def]
+    import os
+
+    if not os.environ.get("DISPLAY") and not os.environ.get("WAYLAND_DISPLAY"):
+        raise TwinError("--viewer needs a display (DISPLAY is not set); run headless without --viewer")
+    import mujoco.viewer
+
+    from twin.sim import run_paced
+
+    with mujoco.viewer.launch_passive(twin.model, twin.data) as handle:
+        stats = None
+        while handle.is_running() and (stats is None or twin.time < args.duration):
+            stats = run_paced(twin, 1.0 / 60, args.rate, trajectory=trajectory)
+            handle.sync()
+    return stats
+
+
+def _cmd_demo(args: argparse.Namespace) -> int:
+    from twin.demo import run_demo
+
+    record = run_demo(duration=args.duration, progress=not args.json)
+    if args.json:
+        print(json.dumps(record))
+    return 0
 
 
 def _cmd_materials(args: argparse.Namespace) -> int:

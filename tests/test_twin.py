@@ -1,0 +1,239 @@
+"""The twin: scene files, real CoACD, real MjSpec models, live edits, the CLI."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import trimesh
+
+from twin.build import build_scene, write_scene
+from twin.cli import main
+from twin.decompose import CoacdSettings, decompose
+from twin.scenefile import SceneError, load_scene, parse_scene
+from twin.sim import Twin, push_trajectory, run_paced
+
+SMALL = """
+name = "small"
+[table]
+size = [1.0, 0.6, 0.04]
+height = 0.5
+[end_effector]
+radius = 0.02
+position = [-0.3, 0.0, 0.56]
+[[objects]]
+id = "crate"
+primitive = { type = "box", size = [0.12, 0.08, 0.06] }
+material = "wood_pine"
+position = [0.0, 0.0]
+points = 20000
+[[objects]]
+id = "can"
+primitive = { type = "cylinder", size = [0.03, 0.1] }
+density = 700
+position = [0.2, 0.1]
+points = 20000
+"""
+
+
+@pytest.fixture(autouse=True)
+def _cache(tmp_path_factory, monkeypatch):
+    monkeypatch.setenv("TWIN_CACHE_DIR", str(tmp_path_factory.getbasetemp() / "coacd"))
+
+
+@pytest.fixture(scope="module")
+def small_scene(tmp_path_factory) -> Path:
+    path = tmp_path_factory.mktemp("scene") / "small.toml"
+    path.write_text(SMALL)
+    return path
+
+
+@pytest.fixture(scope="module")
+def built(small_scene, tmp_path_factory):
+    return build_scene(load_scene(small_scene), cache_dir=tmp_path_factory.getbasetemp() / "coacd", progress=False)
+
+
+def test_model_has_explicit_estimated_inertia(built):
+    import mujoco
+
+    model = built.model
+    for obj in built.objects:
+        bid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, obj.id)
+        assert model.body_mass[bid] == pytest.approx(obj.estimate.mass.mass, rel=1e-9)
+        # MuJoCo stores the diagonalised inertia; its moments are the estimate's principal moments.
+        np.testing.assert_allclose(np.sort(model.body_inertia[bid]), obj.estimate.mass.principal_moments, rtol=1e-6)
+    crate = built.objects[0]
+    assert crate.estimate.mass.mass == pytest.approx(0.12 * 0.08 * 0.06 * 510, rel=0.01)
+
+
+def test_visual_geoms_do_not_collide(built):
+    import mujoco
+
+    model = built.model
+    for g in range(model.ngeom):
+        name = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_GEOM, g) or ""
+        if name.endswith("/visual"):
+            assert model.geom_contype[g] == 0 and model.geom_conaffinity[g] == 0
+        if "/hull" in name:
+            assert model.geom_contype[g] == 1
+
+
+def test_objects_rest_on_the_table(built):
+    with Twin(built.spec, built.model) as twin:
+        start = {o.id: twin.pose(o.id)[0] for o in built.objects}
+        twin.step(1000)
+        for o in built.objects:
+            moved = np.linalg.norm(twin.pose(o.id)[0] - start[o.id])
+            # Placed 1 mm above the table: they settle, they do not fall through or wander.
+            assert moved < 0.005, o.id
+
+
+def test_end_effector_push_moves_object_and_reads_force(built):
+    with Twin(built.spec, built.model) as twin:
+        start = twin.data.mocap_pos[0].copy()
+        twin.step(200)
+        before = twin.pose("crate")[0]
+        push = push_trajectory(start, start + [0.45, 0, -0.03], 1.0)  # at the crate's mid-height
+        forces = []
+        for _ in range(1000):
+            twin.set_end_effector(push(twin.time - 0.2))
+            twin.step()
+            forces.append(np.linalg.norm(twin.end_effector_force()))
+        assert twin.pose("crate")[0][0] - before[0] > 0.05
+        assert max(forces) > 0.1
+
+
+def test_live_add_and_remove_keep_state(built):
+    from twin.objects import prepare_objects
+    from twin.scenefile import ObjectSpec
+
+    with Twin(built.spec.copy(), None) as twin:
+        twin.step(300)
+        crate_before = twin.pose("crate")
+        extra = prepare_objects([ObjectSpec(id="ball", source="primitive", value={"type": "sphere", "size": (0.03,)},
+                                            density=500, position=(-0.2, 0.15), points=5000)],
+                                table_top=0.5, progress=False)[0]
+        twin.add(extra)
+        assert "ball" in twin.object_ids()
+        # recompile carries qpos over; the crate moves by no more than solver noise (~1e-8 m).
+        np.testing.assert_allclose(twin.pose("crate")[0], crate_before[0], atol=1e-6)
+        twin.step(10)
+        twin.remove("ball")
+        assert "ball" not in twin.object_ids()
+        with pytest.raises(KeyError, match="no object 'ball'"):
+            twin.pose("ball")
+
+
+def test_write_scene_round_trip(built, tmp_path):
+    import mujoco
+
+    path = write_scene(built.spec, tmp_path / "out")
+    model = mujoco.MjModel.from_xml_path(str(path))
+    assert model.nbody == built.model.nbody and model.ngeom == built.model.ngeom
+    # to_xml writes ~6 significant digits.
+    np.testing.assert_allclose(model.body_mass, built.model.body_mass, rtol=1e-5)
+    np.testing.assert_allclose(model.body_inertia, built.model.body_inertia, rtol=1e-4)
+    assert any((tmp_path / "out" / "assets").glob("*.stl"))
+
+
+def test_coacd_cache_and_determinism(tmp_path):
+    mesh = trimesh.creation.annulus(r_min=0.03, r_max=0.05, height=0.04, sections=32)
+    settings = CoacdSettings(max_convex_hull=6)
+    first, cached = decompose(mesh.vertices, mesh.faces, settings, cache_dir=tmp_path)
+    assert not cached and len(first) > 1  # a ring is not convex
+    again, cached = decompose(mesh.vertices, mesh.faces, settings, cache_dir=tmp_path)
+    assert cached and len(again) == len(first)
+    other, _ = decompose(mesh.vertices, mesh.faces, settings, cache_dir=tmp_path / "fresh")
+    for (a, _), (b, _) in zip(first, other, strict=True):  # seeded: same hulls without the cache
+        np.testing.assert_allclose(a, b)
+
+
+def test_degenerate_mesh_falls_back_to_hull(tmp_path, caplog):
+    v = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1.0]]) * 0.1
+    f = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
+    hulls, _ = decompose(v, f[:2], CoacdSettings(), cache_dir=tmp_path)  # an open, two-face "mesh"
+    assert len(hulls) >= 1
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ('name="x"\n[[objects]]\nid="a"\nprimitive={type="box",size=[1,1,1]}\ncolour="red"', "unknown key 'colour'"),
+        ('name="x"\n[[objects]]\nid="a"\nprimitive={type="box",size=[1,1,1]}\nmaterail="steel"', "did you mean 'material'"),
+        ('name="x"\n[[objects]]\nid="a"\nmesh="missing.stl"', "does not exist"),
+        ('name="x"\n[[objects]]\nid="a"\nprimitive={type="box",size=[1,1,1]}\ndensity=-3', "must be positive"),
+        ('name="x"\n[[objects]]\nid="a"\nprimitive={type="box",size=[1,0,1]}', "must be positive"),
+        ('name="x"\n[[objects]]\nid="a"\nprimitive={type="box",size=[1,1,1]}\nmaterial="unobtainium"', "unknown material"),
+        ('name="x"\n[[objects]]\nid="a"\nprimitive={type="box",size=[1,1,1]}\n[[objects]]\nid="a"\npaper="cone"', "duplicate"),
+        ('name="x"\n[[objects]]\nid="a"', "exactly one source"),
+        ('[[objects]]\nid="a"\npaper="cone"', "missing 'name'"),
+        ('name="x"\n[[objects]]\nid="a"\npaper="sphere"', "unknown paper object"),
+    ],
+)
+def test_scene_errors_name_the_problem(tmp_path, text, message):
+    path = tmp_path / "s.toml"
+    path.write_text(text)
+    with pytest.raises(SceneError, match=message):
+        load_scene(path)
+
+
+def test_scene_error_names_object():
+    with pytest.raises(SceneError, match="object 'mug'"):
+        parse_scene({"name": "x", "objects": [{"id": "mug", "paper": "mug", "density": 0}]})
+
+
+def test_cli_build_and_run(small_scene, tmp_path, capsys):
+    out = tmp_path / "built"
+    assert main(["build", str(small_scene), "--out", str(out)]) == 0
+    assert (out / "scene.xml").is_file()
+    capsys.readouterr()
+    assert main(["run", str(out), "--duration", "0.2", "--no-realtime", "--json"]) == 0
+    record = json.loads(capsys.readouterr().out)
+    assert record["steps"] == 200 and record["objects"] == 2 and record["step_p99_ms"] > 0
+
+
+def test_cli_build_bad_scene_leaves_nothing(tmp_path, capsys):
+    bad = tmp_path / "bad.toml"
+    bad.write_text('name="x"\n[[objects]]\nid="a"\nmesh="nope.stl"\n')
+    out = tmp_path / "out"
+    assert main(["build", str(bad), "--out", str(out)]) == 2
+    assert "does not exist" in capsys.readouterr().err
+    assert not out.exists() and not list(tmp_path.glob(".twin-build-*"))
+
+
+def test_cli_viewer_without_display(small_scene, monkeypatch, capsys):
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    assert main(["run", str(small_scene), "--viewer", "--duration", "0.1"]) == 2
+    assert "needs a display" in capsys.readouterr().err
+
+
+def test_paced_loop_statistics(built):
+    with Twin(built.spec, built.model) as twin:
+        stats = run_paced(twin, 0.05, 1000.0, realtime=True)
+    assert stats.steps == 50 and 0 < stats.p50 <= stats.p99 <= stats.max
+    assert stats.wall >= 0.05 * 0.95
+
+
+def test_cli_estimate_subprocess(tmp_path):
+    from estimation import save_cloud
+    from scenes.sampling import sample_surface
+
+    cloud = sample_surface(trimesh.creation.box(extents=(0.1, 0.06, 0.04)), 20_000, seed=1)
+    save_cloud(cloud, tmp_path / "box.ply")
+    twin = Path(sys.executable).with_name("twin")
+    res = subprocess.run([str(twin), "estimate", str(tmp_path / "box.ply"), "--material", "steel", "--json"],
+                         capture_output=True, text=True, check=False)
+    assert res.returncode == 0, res.stderr
+    record = json.loads(res.stdout)
+    assert record["mass_kg"] == pytest.approx(0.1 * 0.06 * 0.04 * 7850, rel=0.01)
+    for key in ("volume_m3", "density_kg_m3", "center_of_mass_m", "inertia_kg_m2", "obb", "method",
+                "points_in", "points_used", "watertight", "seconds"):
+        assert key in record
+    res = subprocess.run([str(twin), "estimate", str(tmp_path / "missing.ply")], capture_output=True, text=True,
+                         check=False)
+    assert res.returncode == 2 and res.stderr.strip().count("\n") == 0 and "no such file" in res.stderr

@@ -1,0 +1,185 @@
+"""Convex decomposition of reconstructed meshes with CoACD, cached on disk and run in worker processes.
+
+Collision in MuJoCo is between convex shapes; a concave object (a mug) needs several. CoACD is random
+by default, so its seed is part of the settings, and the settings are part of the cache key: the same
+mesh and settings always give the same hulls, and a second build runs no CoACD.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import logging
+import os
+from collections.abc import Sequence
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+log = logging.getLogger(__name__)
+
+Hull = tuple[np.ndarray, np.ndarray]  # vertices (v, 3) metres, faces (f, 3) int
+
+
+@dataclass(frozen=True)
+class CoacdSettings:
+    """CoACD's parameters (same names as ``coacd.run_coacd``), seed included.
+
+    ``threshold`` is the concavity tolerance (smaller: more, tighter hulls); ``max_convex_hull`` caps the
+    count (-1: no cap); ``max_ch_vertex`` caps vertices per hull (with ``decimate``), which bounds
+    collision cost. The defaults trade CoACD's (threshold 0.05, 150 MCTS iterations: ~60 s on the mug)
+    for ~10x less time; bench/twin_step.py shows what that costs in contact accuracy and speed.
+    """
+
+    threshold: float = 0.08
+    max_convex_hull: int = 16
+    # Our reconstructions are already closed manifolds; CoACD's remeshing would only cost time.
+    preprocess_mode: str = "off"
+    preprocess_resolution: int = 50
+    resolution: int = 1000
+    mcts_nodes: int = 10
+    mcts_iterations: int = 50
+    mcts_max_depth: int = 3
+    merge: bool = True
+    decimate: bool = True
+    max_ch_vertex: int = 32
+    seed: int = 0
+
+
+def default_cache_dir() -> Path:
+    """``$TWIN_CACHE_DIR``, else ``$XDG_CACHE_HOME/tactile-twin/coacd``, else ``~/.cache/...``."""
+    if env := os.environ.get("TWIN_CACHE_DIR"):
+        return Path(env)
+    base = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache"))
+    return base / "tactile-twin" / "coacd"
+
+
+def cache_key(vertices: np.ndarray, faces: np.ndarray, settings: CoacdSettings) -> str:
+    """sha256 of the mesh bytes and the settings."""
+    h = hashlib.sha256()
+    h.update(np.ascontiguousarray(vertices, dtype=np.float64).tobytes())
+    h.update(np.ascontiguousarray(faces, dtype=np.int64).tobytes())
+    h.update(json.dumps(asdict(settings), sort_keys=True).encode())
+    return h.hexdigest()
+
+
+def decompose(
+    vertices: np.ndarray, faces: np.ndarray, settings: CoacdSettings = CoacdSettings(), *,
+    cache_dir: Path | None = None,
+) -> tuple[list[Hull], bool]:
+    """Convex parts of one closed mesh; returns (hulls, from_cache).
+
+    A failed or empty decomposition falls back to the convex hull of the mesh, with a warning.
+    """
+    cache = Path(cache_dir or default_cache_dir())
+    key = cache_key(vertices, faces, settings)
+    path = cache / f"{key}.npz"
+    if path.is_file():
+        try:
+            with np.load(path) as data:
+                return _unpack(data), True
+        except (OSError, ValueError, KeyError):
+            log.warning("corrupt CoACD cache entry %s; recomputing", path.name)
+    hulls = _run_coacd(vertices, faces, settings)
+    cache.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_suffix(f".{os.getpid()}.tmp.npz")
+    np.savez(tmp, **_pack(hulls))
+    os.replace(tmp, path)  # atomic: a reader never sees half a file
+    return hulls, False
+
+
+def decompose_many(
+    meshes: Sequence[Hull], settings: CoacdSettings = CoacdSettings(), *, cache_dir: Path | None = None,
+    workers: int | None = None, progress: bool = True,
+) -> list[tuple[list[Hull], bool]]:
+    """:func:`decompose` for several meshes; cache misses run in parallel worker processes."""
+    cache = Path(cache_dir or default_cache_dir())
+    results: list[tuple[list[Hull], bool] | None] = [None] * len(meshes)
+    misses = []
+    for i, (v, f) in enumerate(meshes):
+        path = cache / f"{cache_key(v, f, settings)}.npz"
+        if path.is_file():
+            results[i] = decompose(v, f, settings, cache_dir=cache)
+        else:
+            misses.append(i)
+    if misses:
+        workers = workers or min(len(misses), os.cpu_count() or 1)
+        bar = _progress(progress, len(misses))
+        if workers == 1 or len(misses) == 1:
+            for i in misses:
+                results[i] = decompose(*meshes[i], settings, cache_dir=cache)
+                bar.advance()
+        else:
+            import multiprocessing as mp
+
+            # spawn: CoACD and MuJoCo hold threads; forking them is not safe.
+            with ProcessPoolExecutor(workers, mp_context=mp.get_context("spawn")) as pool:
+                futures = {pool.submit(decompose, *meshes[i], settings, cache_dir=cache): i for i in misses}
+                for future, i in futures.items():
+                    results[i] = future.result()
+                    bar.advance()
+        bar.close()
+    return [r for r in results if r is not None]
+
+
+def _run_coacd(vertices: np.ndarray, faces: np.ndarray, settings: CoacdSettings) -> list[Hull]:
+    import coacd
+    import trimesh
+
+    coacd.set_log_level("error")
+    params = asdict(settings)
+    if not trimesh.Trimesh(vertices, faces, process=True).is_watertight:
+        # CoACD on an open mesh without its manifold preprocessing searches for minutes; with it, seconds.
+        params["preprocess_mode"] = "on"
+    try:
+        parts = coacd.run_coacd(coacd.Mesh(np.asarray(vertices, float), np.asarray(faces, np.int32)), **params)
+    except Exception as exc:  # CoACD raises bare RuntimeErrors from C++; any failure means fall back.
+        log.warning("CoACD failed (%s); using the convex hull", exc)
+        parts = []
+    hulls = [(np.asarray(v, float), np.asarray(f, np.int64)) for v, f in parts if len(f) >= 4]
+    if not hulls:
+        log.warning("CoACD gave no convex parts; using the convex hull")
+        hulls = [_convex_hull(vertices)]
+    return hulls
+
+
+def _convex_hull(vertices: np.ndarray) -> Hull:
+    from estimation.hull import convex_hull
+
+    return convex_hull(np.asarray(vertices, float))
+
+
+def _pack(hulls: list[Hull]) -> dict[str, np.ndarray]:
+    out = {}
+    for i, (v, f) in enumerate(hulls):
+        out[f"v{i}"], out[f"f{i}"] = v, f
+    return out
+
+
+def _unpack(data) -> list[Hull]:  # type: ignore[no-untyped-def]
+    n = len(data.files) // 2
+    return [(data[f"v{i}"], data[f"f{i}"]) for i in range(n)]
+
+
+class _progress:
+    """A rich progress bar on stderr, or nothing."""
+
+    def __init__(self, enabled: bool, total: int) -> None:
+        self._bar = None
+        if enabled:
+            from rich.console import Console
+            from rich.progress import Progress
+
+            self._bar = Progress(console=Console(stderr=True), transient=True)
+            self._bar.start()
+            self._task = self._bar.add_task("CoACD", total=total)
+
+    def advance(self) -> None:
+        if self._bar is not None:
+            self._bar.advance(self._task)
+
+    def close(self) -> None:
+        if self._bar is not None:
+            self._bar.stop()

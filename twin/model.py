@@ -1,0 +1,157 @@
+"""MjSpec model building: the floor, the table, the operator's end effector, and one body per object.
+
+Every object body has a free joint, an explicit inertial (the estimate: MuJoCo must not recompute it
+from the hulls, whose union is not the object), a visual mesh that does not collide (group 1), and
+its CoACD hulls as colliding meshes (group 3). Each element's ``info`` names the object it came from,
+so a compile error points back to it.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from twin.objects import TwinObject
+from twin.scenefile import EndEffectorSpec, SceneSpec
+
+#: Physics step for the haptic loop: 1 kHz.
+TIMESTEP = 0.001
+
+#: Visual geoms neither collide nor are collided with.
+VISUAL_GROUP, COLLISION_GROUP = 1, 3
+
+#: Names of the end-effector parts (the twin's API for operator devices).
+EE_TARGET, EE_BODY, EE_SITE, EE_FORCE, EE_TORQUE = "ee_target", "ee", "ee_site", "ee_force", "ee_torque"
+
+#: Weld solref of the end effector to its mocap target: stiff (20 ms) but not rigid, so pushing into an
+#: object yields a force a haptic device can render instead of an impulse.
+EE_WELD_SOLREF = (0.02, 1.0)
+
+#: MuJoCo's per-mesh hull vertex cap for collision (CoACD already caps at 32; this guards raw meshes).
+MAX_HULL_VERTICES = 32
+
+
+def new_spec(scene: SceneSpec):  # type: ignore[no-untyped-def]
+    """An MjSpec with the floor, the table and the end effector, and no objects."""
+    import mujoco
+
+    spec = mujoco.MjSpec()
+    spec.modelname = scene.name
+    spec.option.timestep = TIMESTEP
+    # Objects rest on hulls of ~32 vertices; elliptic cones and a few more solver iterations keep
+    # stacks from creeping at 1 kHz.
+    spec.option.cone = mujoco.mjtCone.mjCONE_ELLIPTIC
+    spec.compiler.autolimits = True
+    spec.worldbody.add_light(pos=[0, 0, 3], dir=[0, 0, -1], type=mujoco.mjtLightType.mjLIGHT_DIRECTIONAL)
+    floor = spec.worldbody.add_geom(name="floor", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[5, 5, 0.1],
+                                    rgba=[0.8, 0.8, 0.8, 1])
+    floor.info = "floor"
+    if scene.table is not None:
+        t = scene.table
+        from estimation.materials import material
+
+        top = spec.worldbody.add_geom(name="table", type=mujoco.mjtGeom.mjGEOM_BOX,
+                                      size=[t.size[0] / 2, t.size[1] / 2, t.size[2] / 2],
+                                      pos=[0, 0, t.height - t.size[2] / 2], rgba=[0.55, 0.4, 0.3, 1],
+                                      friction=[material(t.material).friction, 0.005, 0.0001])
+        top.info = "table"
+    if scene.end_effector is not None:
+        add_end_effector(spec, scene.end_effector)
+    return spec
+
+
+def add_end_effector(spec, ee: EndEffectorSpec) -> None:  # type: ignore[no-untyped-def]
+    """A sphere welded (softly) to a mocap target, with a force/torque sensor at its centre."""
+    import mujoco
+
+    target = spec.worldbody.add_body(name=EE_TARGET, mocap=True, pos=list(ee.position))
+    target.add_geom(type=mujoco.mjtGeom.mjGEOM_SPHERE, size=[ee.radius * 0.5, 0, 0], contype=0,
+                    conaffinity=0, group=VISUAL_GROUP, rgba=[0.2, 0.8, 0.2, 0.4])
+    body = spec.worldbody.add_body(name=EE_BODY, pos=list(ee.position))
+    body.add_freejoint()
+    geom = body.add_geom(type=mujoco.mjtGeom.mjGEOM_SPHERE, size=[ee.radius, 0, 0], mass=0.2,
+                         rgba=[0.2, 0.6, 0.9, 1])
+    geom.info = "end effector"
+    body.add_site(name=EE_SITE)
+    weld = spec.add_equality(type=mujoco.mjtEq.mjEQ_WELD, name1=EE_TARGET, name2=EE_BODY,
+                             objtype=mujoco.mjtObj.mjOBJ_BODY)
+    weld.solref = list(EE_WELD_SOLREF)
+    # anchor (3), relative pose: position (3) and quaternion w x y z (4), torque scale. Set explicitly:
+    # the spec's default is MJCF's "from the initial pose" sentinel, which the compiled model keeps.
+    weld.data = [0, 0, 0, 0, 0, 0, 1, 0, 0, 0, 1] + [0] * (len(weld.data) - 11)
+    # The sphere would otherwise fall off its target under gravity; gravity compensation makes the weld
+    # carry only contact forces, which is what the sensor should read.
+    body.gravcomp = 1.0
+    spec.add_sensor(name=EE_FORCE, type=mujoco.mjtSensor.mjSENS_FORCE, objtype=mujoco.mjtObj.mjOBJ_SITE,
+                    objname=EE_SITE)
+    spec.add_sensor(name=EE_TORQUE, type=mujoco.mjtSensor.mjSENS_TORQUE, objtype=mujoco.mjtObj.mjOBJ_SITE,
+                    objname=EE_SITE)
+
+
+def add_object(spec, obj: TwinObject, *, rgba: tuple[float, float, float, float] | None = None) -> None:  # type: ignore[no-untyped-def]
+    """Add one object body (free joint, explicit inertia, visual mesh, collision hulls) to ``spec``."""
+    import mujoco
+
+    m = obj.estimate.mass
+    body = spec.worldbody.add_body(name=obj.id, pos=obj.position.tolist(), quat=obj.quat.tolist())
+    body.info = f"object {obj.id}"
+    body.add_freejoint(name=f"{obj.id}/free")
+    body.explicitinertial = True
+    body.mass = m.mass
+    body.ipos = [0.0, 0.0, 0.0]  # the body frame sits at the estimated centre of mass
+    i = m.inertia
+    body.fullinertia = [i[0, 0], i[1, 1], i[2, 2], i[0, 1], i[0, 2], i[1, 2]]
+    colour = list(rgba) if rgba is not None else list(object_colour(obj.id))
+    vis_name = f"{obj.id}/visual"
+    mesh = spec.add_mesh(name=vis_name, uservert=obj.visual[0].ravel().tolist(),
+                         userface=obj.visual[1].ravel().tolist())
+    mesh.info = f"object {obj.id} visual mesh"
+    geom = body.add_geom(name=vis_name, type=mujoco.mjtGeom.mjGEOM_MESH, meshname=vis_name, contype=0,
+                         conaffinity=0, group=VISUAL_GROUP, rgba=colour, mass=0)
+    geom.info = f"object {obj.id} visual"
+    for k, (v, f) in enumerate(obj.hulls):
+        name = f"{obj.id}/hull{k}"
+        hull = spec.add_mesh(name=name, uservert=v.ravel().tolist(), userface=f.ravel().tolist())
+        hull.maxhullvert = MAX_HULL_VERTICES
+        hull.info = f"object {obj.id} hull {k}"
+        g = body.add_geom(name=name, type=mujoco.mjtGeom.mjGEOM_MESH, meshname=name, group=COLLISION_GROUP,
+                          friction=[obj.friction, 0.005, 0.0001], rgba=hull_colour(k), mass=0)
+        g.info = f"object {obj.id} hull {k}"
+
+
+def remove_object(spec, object_id: str) -> None:  # type: ignore[no-untyped-def]
+    """Delete an object's body and its meshes from ``spec``."""
+    body = spec.body(object_id)
+    if body is None:
+        raise KeyError(f"no object {object_id!r} in the model")
+    prefix = f"{object_id}/"
+    meshes = [m for m in spec.meshes if m.name.startswith(prefix)]
+    spec.delete(body)
+    for m in meshes:
+        spec.delete(m)
+
+
+def object_colour(object_id: str) -> tuple[float, float, float, float]:
+    """A colour derived from the id: stable across runs (no unseeded randomness in outputs)."""
+    import zlib
+
+    h = zlib.crc32(object_id.encode())
+    return (0.3 + 0.6 * ((h & 0xFF) / 255), 0.3 + 0.6 * (((h >> 8) & 0xFF) / 255),
+            0.3 + 0.6 * (((h >> 16) & 0xFF) / 255), 1.0)
+
+
+def hull_colour(k: int) -> list[float]:
+    """Distinct colours for hull k (golden-ratio hue steps)."""
+    import colorsys
+
+    r, g, b = colorsys.hsv_to_rgb((k * 0.618034) % 1.0, 0.7, 0.95)
+    return [r, g, b, 0.5]
+
+
+def body_pose(model, data, object_id: str) -> tuple[np.ndarray, np.ndarray]:  # type: ignore[no-untyped-def]
+    """(position (3,), quaternion w x y z (4,)) of an object body, world frame."""
+    import mujoco
+
+    bid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, object_id)
+    if bid < 0:
+        raise KeyError(f"no object {object_id!r} in the model")
+    return data.xpos[bid].copy(), data.xquat[bid].copy()

@@ -1,0 +1,160 @@
+"""From a scene's object entry to what the twin needs: an estimate, a visual mesh and convex hulls.
+
+Mesh, primitive and paper sources stand for the remote object: they are sampled into a cloud (seeded)
+and estimated like any scan, so the twin is always built from estimates, never from the truth.
+"""
+
+from __future__ import annotations
+
+import logging
+import zlib
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import trimesh
+
+from estimation import PhysicalEstimate, estimate, load_cloud
+from estimation.materials import Material, material
+from estimation.units import unit_scale
+from twin.decompose import CoacdSettings, Hull, decompose_many
+from twin.scenefile import ObjectSpec, SceneError
+
+log = logging.getLogger(__name__)
+
+#: Faces kept in the visual mesh: enough to look right, light enough for a viewer and for CoACD.
+VISUAL_FACES = 3000
+
+#: Gap left between a resting object and the table when it is placed, metres.
+PLACEMENT_GAP = 0.001
+
+#: Friction for objects given by density only.
+DEFAULT_FRICTION = 0.5
+
+
+@dataclass(frozen=True)
+class TwinObject:
+    """One object ready for the model. Geometry is relative to the centre of mass (the body frame).
+
+    Attributes:
+        id: unique name in the scene.
+        estimate: the physical estimate (mass, inertia in the body frame's axes).
+        friction: sliding friction coefficient.
+        visual: decimated reconstruction, vertices (v, 3) metres relative to the centre of mass.
+        hulls: convex parts for collision, same frame.
+        position: (3,) world position of the centre of mass, metres.
+        quat: (4,) body orientation, w x y z (MuJoCo order).
+        hull_cached: the hulls came from the CoACD cache.
+    """
+
+    id: str
+    estimate: PhysicalEstimate
+    friction: float
+    visual: Hull
+    hulls: tuple[Hull, ...]
+    position: np.ndarray
+    quat: np.ndarray
+    hull_cached: bool = False
+
+
+def source_mesh(spec: ObjectSpec) -> trimesh.Trimesh | None:
+    """The true mesh of a mesh/primitive/paper object, rotated as the scene says (metres); None for clouds."""
+    from scenes.paper_objects import paper_object
+
+    if spec.source == "cloud":
+        return None
+    if spec.source == "paper":
+        mesh = paper_object(str(spec.value))
+    elif spec.source == "primitive":
+        mesh = _primitive(spec.value)  # type: ignore[arg-type]
+    else:
+        try:
+            mesh = trimesh.load_mesh(spec.value, force="mesh")
+        except (OSError, ValueError) as exc:
+            raise SceneError(f"object {spec.id!r}: cannot read mesh {spec.value} ({exc})") from exc
+        mesh.apply_scale(unit_scale(spec.units))
+        if not mesh.is_watertight:
+            log.warning("object %r: mesh %s is not watertight", spec.id, spec.value)
+    if any(spec.rotation_deg):
+        from scipy.spatial.transform import Rotation
+
+        transform = np.eye(4)
+        # rotation_deg is [about Z, about local X, about local Y], the paper's order.
+        transform[:3, :3] = Rotation.from_euler("ZXY", spec.rotation_deg, degrees=True).as_matrix()
+        mesh.apply_transform(transform)
+    return mesh
+
+
+def object_density(spec: ObjectSpec) -> tuple[float, float, str | None]:
+    """(density kg/m^3, friction, material name) for an object spec."""
+    if spec.material is not None:
+        mat: Material = material(spec.material)
+        return mat.density, mat.friction, mat.name
+    return (spec.density if spec.density is not None else 1000.0), DEFAULT_FRICTION, None
+
+
+def estimate_object(spec: ObjectSpec) -> tuple[PhysicalEstimate, float]:
+    """Estimate one scene object from its cloud (sampled from its mesh when it has one)."""
+    from scenes.sampling import sample_surface
+
+    density, friction, name = object_density(spec)
+    mesh = source_mesh(spec)
+    if mesh is None:
+        cloud = load_cloud(spec.value, scale=unit_scale(spec.units))  # type: ignore[arg-type]
+    else:
+        # Seeded by the id, so the same scene builds the same twin.
+        cloud = sample_surface(mesh, spec.points, seed=zlib.crc32(spec.id.encode()))
+    return estimate(cloud, density, material=name), friction
+
+
+def decimate(vertices: np.ndarray, faces: np.ndarray, target: int = VISUAL_FACES) -> Hull:
+    """Quadric decimation to about ``target`` faces (no-op when already smaller)."""
+    if len(faces) <= target:
+        return vertices, faces
+    import fast_simplification
+
+    v, f = fast_simplification.simplify(vertices.astype(np.float32), faces.astype(np.int32), target_count=target)
+    return np.asarray(v, np.float64), np.asarray(f, np.int64)
+
+
+def prepare_objects(
+    specs: list[ObjectSpec] | tuple[ObjectSpec, ...], *, table_top: float | None, coacd: CoacdSettings = CoacdSettings(),
+    cache_dir: Path | None = None, progress: bool = True,
+) -> list[TwinObject]:
+    """Estimate, decimate and decompose every object; CoACD runs in parallel over the cache misses."""
+    estimates = [estimate_object(s) for s in specs]
+    visuals = []
+    for (est, _), s in zip(estimates, specs, strict=True):
+        if est.mass.mass <= 0:
+            raise SceneError(f"object {s.id!r}: non-positive mass {est.mass.mass}")
+        com = est.mass.center_of_mass
+        visuals.append(decimate(est.vertices - com, est.faces))
+    hulls = decompose_many(visuals, coacd, cache_dir=cache_dir, progress=progress)
+    out = []
+    for s, (est, friction), visual, (parts, cached) in zip(specs, estimates, visuals, hulls, strict=True):
+        out.append(TwinObject(id=s.id, estimate=est, friction=friction, visual=visual, hulls=tuple(parts),
+                              position=placement(s, visual, est, table_top), quat=np.array([1.0, 0, 0, 0]),
+                              hull_cached=cached))
+    return out
+
+
+def placement(spec: ObjectSpec, visual: Hull, est: PhysicalEstimate, table_top: float | None) -> np.ndarray:
+    """World position of the centre of mass: [x, y] rests the object on the table (or floor)."""
+    if len(spec.position) == 3:
+        return np.asarray(spec.position, dtype=np.float64)
+    lowest = float(visual[0][:, 2].min())
+    base = table_top if table_top is not None else 0.0
+    return np.array([spec.position[0], spec.position[1], base - lowest + PLACEMENT_GAP])
+
+
+def _primitive(p: dict) -> trimesh.Trimesh:
+    kind, size = p["type"], p["size"]
+    if kind == "box":
+        return trimesh.creation.box(extents=size)
+    if kind == "cylinder":
+        return trimesh.creation.cylinder(radius=size[0], height=size[1], sections=64)
+    if kind == "sphere":
+        return trimesh.creation.icosphere(subdivisions=3, radius=size[0])
+    if kind == "capsule":
+        return trimesh.creation.capsule(height=size[1], radius=size[0], count=[32, 32])
+    return trimesh.creation.torus(major_radius=size[0], minor_radius=size[1], major_sections=64, minor_sections=32)
