@@ -147,7 +147,7 @@ def test_missing_file(tmp_path):
 
 def test_unknown_format(tmp_path):
     (tmp_path / "c.obj").write_text("v 0 0 0\n")
-    with pytest.raises(CloudFileError, match="unknown cloud format '.obj'"):
+    with pytest.raises(CloudFileError, match=r"unknown cloud format '\.obj'"):
         load_cloud(tmp_path / "c.obj")
 
 

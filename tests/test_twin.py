@@ -97,7 +97,7 @@ def test_end_effector_push_moves_object_and_reads_force(built):
         start = twin.data.mocap_pos[0].copy()
         twin.step(200)
         before = twin.pose("crate")[0]
-        push = push_trajectory(start, start + [0.45, 0, -0.03], 1.0)  # at the crate's mid-height
+        push = push_trajectory(start, start + np.array([0.45, 0, -0.03]), 1.0)  # at the crate's mid-height
         forces = []
         for _ in range(1000):
             twin.set_end_effector(push(twin.time - 0.2))

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from estimation.errors import TwinError
-from twin.decompose import CoacdSettings
+from twin.decompose import DEFAULT_SETTINGS, CoacdSettings
 from twin.model import add_object, new_spec
 from twin.objects import TwinObject, prepare_objects
 from twin.scenefile import SceneSpec
@@ -36,7 +36,7 @@ def table_top(scene: SceneSpec) -> float | None:
     return None if scene.table is None else scene.table.height
 
 
-def build_scene(scene: SceneSpec, *, coacd: CoacdSettings = CoacdSettings(), cache_dir: Path | None = None,
+def build_scene(scene: SceneSpec, *, coacd: CoacdSettings = DEFAULT_SETTINGS, cache_dir: Path | None = None,
                 progress: bool = True) -> BuiltScene:
     """Estimate every object, decompose it, and compile the whole scene.
 

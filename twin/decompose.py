@@ -48,6 +48,10 @@ class CoacdSettings:
     seed: int = 0
 
 
+#: The settings used when none are given.
+DEFAULT_SETTINGS = CoacdSettings()
+
+
 def default_cache_dir() -> Path:
     """``$TWIN_CACHE_DIR``, else ``$XDG_CACHE_HOME/tactile-twin/coacd``, else ``~/.cache/...``."""
     if env := os.environ.get("TWIN_CACHE_DIR"):
@@ -66,7 +70,7 @@ def cache_key(vertices: np.ndarray, faces: np.ndarray, settings: CoacdSettings) 
 
 
 def decompose(
-    vertices: np.ndarray, faces: np.ndarray, settings: CoacdSettings = CoacdSettings(), *,
+    vertices: np.ndarray, faces: np.ndarray, settings: CoacdSettings = DEFAULT_SETTINGS, *,
     cache_dir: Path | None = None,
 ) -> tuple[list[Hull], bool]:
     """Convex parts of one closed mesh; returns (hulls, from_cache).
@@ -91,7 +95,7 @@ def decompose(
 
 
 def decompose_many(
-    meshes: Sequence[Hull], settings: CoacdSettings = CoacdSettings(), *, cache_dir: Path | None = None,
+    meshes: Sequence[Hull], settings: CoacdSettings = DEFAULT_SETTINGS, *, cache_dir: Path | None = None,
     workers: int | None = None, progress: bool = True,
 ) -> list[tuple[list[Hull], bool]]:
     """:func:`decompose` for several meshes; cache misses run in parallel worker processes."""

@@ -10,6 +10,7 @@ from __future__ import annotations
 import time
 from importlib import resources
 
+import numpy as np
 from rich.console import Console
 
 from scenes.paper_objects import paper_object
@@ -38,7 +39,7 @@ def run_demo(*, duration: float = 3.0, progress: bool = True) -> dict:
                   f"{sum(o.hull_cached for o in built.objects)}/{len(built.objects)})")
     with Twin(built.spec, built.model) as twin:
         start = twin.data.mocap_pos[0].copy()
-        push = push_trajectory(start, start + [2.2, 0.0, -0.12], duration)
+        push = push_trajectory(start, start + np.array([2.2, 0.0, -0.12]), duration)
         stats = run_paced(twin, duration, 1000.0, trajectory=push)
         force = twin.end_effector_force()
         moved = {o.id: float(((twin.pose(o.id)[0] - o.position) ** 2).sum() ** 0.5) for o in built.objects}

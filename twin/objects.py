@@ -17,7 +17,7 @@ import trimesh
 from estimation import PhysicalEstimate, estimate, load_cloud
 from estimation.materials import Material, material
 from estimation.units import unit_scale
-from twin.decompose import CoacdSettings, Hull, decompose_many
+from twin.decompose import DEFAULT_SETTINGS, CoacdSettings, Hull, decompose_many
 from twin.scenefile import ObjectSpec, SceneError
 
 log = logging.getLogger(__name__)
@@ -118,7 +118,7 @@ def decimate(vertices: np.ndarray, faces: np.ndarray, target: int = VISUAL_FACES
 
 
 def prepare_objects(
-    specs: list[ObjectSpec] | tuple[ObjectSpec, ...], *, table_top: float | None, coacd: CoacdSettings = CoacdSettings(),
+    specs: list[ObjectSpec] | tuple[ObjectSpec, ...], *, table_top: float | None, coacd: CoacdSettings = DEFAULT_SETTINGS,
     cache_dir: Path | None = None, progress: bool = True,
 ) -> list[TwinObject]:
     """Estimate, decimate and decompose every object; CoACD runs in parallel over the cache misses."""

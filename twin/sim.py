@@ -140,7 +140,7 @@ def run_paced(twin: Twin, duration: float, rate: float, *,
     """
     period = 1.0 / rate
     substeps = max(1, round(period / twin.model.opt.timestep))
-    n = int(round(duration * rate))
+    n = round(duration * rate)
     times = np.empty(n)
     missed = 0
     start = time.perf_counter()
