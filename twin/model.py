@@ -26,8 +26,8 @@ EE_TARGET, EE_BODY, EE_SITE, EE_FORCE, EE_TORQUE = "ee_target", "ee", "ee_site",
 #: object yields a force a haptic device can render instead of an impulse.
 EE_WELD_SOLREF = (0.02, 1.0)
 
-#: MuJoCo's per-mesh hull vertex cap for collision (CoACD already caps at 32; this guards raw meshes).
-MAX_HULL_VERTICES = 32
+#: MuJoCo's per-mesh hull vertex cap for collision (CoACD already caps at 64; this guards raw meshes).
+MAX_HULL_VERTICES = 64
 
 
 def new_spec(scene: SceneSpec):  # type: ignore[no-untyped-def]
@@ -37,7 +37,7 @@ def new_spec(scene: SceneSpec):  # type: ignore[no-untyped-def]
     spec = mujoco.MjSpec()
     spec.modelname = scene.name
     spec.option.timestep = TIMESTEP
-    # Objects rest on hulls of ~32 vertices; elliptic cones and a few more solver iterations keep
+    # Objects rest on hulls of up to 64 vertices; elliptic cones keep
     # stacks from creeping at 1 kHz.
     spec.option.cone = mujoco.mjtCone.mjCONE_ELLIPTIC
     spec.compiler.autolimits = True

@@ -133,16 +133,20 @@ def prepare_objects(
     out = []
     for s, (est, friction), visual, (parts, cached) in zip(specs, estimates, visuals, hulls, strict=True):
         out.append(TwinObject(id=s.id, estimate=est, friction=friction, visual=visual, hulls=tuple(parts),
-                              position=placement(s, visual, est, table_top), quat=np.array([1.0, 0, 0, 0]),
+                              position=placement(s, parts, table_top), quat=np.array([1.0, 0, 0, 0]),
                               hull_cached=cached))
     return out
 
 
-def placement(spec: ObjectSpec, visual: Hull, est: PhysicalEstimate, table_top: float | None) -> np.ndarray:
-    """World position of the centre of mass: [x, y] rests the object on the table (or floor)."""
+def placement(spec: ObjectSpec, hulls: list[Hull], table_top: float | None) -> np.ndarray:
+    """World position of the centre of mass: [x, y] rests the object on the table (or floor).
+
+    Rests it by its collision hulls, not its visual mesh: contact is between hulls, and a hull reaching
+    below the visual mesh would start inside the table and be kicked out.
+    """
     if len(spec.position) == 3:
         return np.asarray(spec.position, dtype=np.float64)
-    lowest = float(visual[0][:, 2].min())
+    lowest = float(min(v[:, 2].min() for v, _ in hulls))
     base = table_top if table_top is not None else 0.0
     return np.array([spec.position[0], spec.position[1], base - lowest + PLACEMENT_GAP])
 
