@@ -91,7 +91,7 @@ def occupancy(points: np.ndarray, grid: Grid) -> Occupancy:
     occupied = np.zeros(grid.shape, dtype=bool)
     idx = grid.index_of(points)
     occupied[idx[:, 0], idx[:, 1], idx[:, 2]] = True
-    layer = LEAK_JUMP_LAYERS * int(occupied.sum())
+    surface_nodes = int(occupied.sum())
     results = []
     for radius in CLOSING_RADII:
         shell = ndimage.binary_dilation(occupied, structure=_ball(radius))
@@ -99,7 +99,7 @@ def occupancy(points: np.ndarray, grid: Grid) -> Occupancy:
         if len(results) >= 2:
             before, after = results[-2], results[-1]
             jump = int((~after.outside).sum()) - int((~before.outside).sum())
-            if before.inside.sum() > layer / LEAK_JUMP_LAYERS and jump <= layer:
+            if before.inside.sum() > surface_nodes and jump <= LEAK_JUMP_LAYERS * surface_nodes:
                 return before
     enclosing = [r for r in results if r.inside.any()]
     return enclosing[-1] if enclosing else results[0]

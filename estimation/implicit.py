@@ -14,6 +14,7 @@ from scipy.spatial import cKDTree
 
 from estimation.errors import ReconstructionError
 from estimation.grid import Grid, Occupancy
+from estimation.inertia import signed_volumes
 
 #: Gaussian width of the IMLS weights, in cells. Small keeps edges sharp (the nearest face dominates);
 #: large averages noise. One cell is both: the downsampled spacing is half a cell.
@@ -104,17 +105,13 @@ def surface_from_field(field: np.ndarray, grid: Grid) -> trimesh.Trimesh:
     mesh = trimesh.Trimesh(verts + grid.origin, faces, process=True)
     if mesh.body_count > 1:
         pieces = mesh.split(only_watertight=False)
-        volumes = np.array([_signed_volume(p.triangles) for p in pieces])
+        volumes = np.array([signed_volumes(p.triangles).sum() for p in pieces])
         # Inward-facing closed pieces would be cavities no sensor could see: noise, like tiny pieces.
         keep = [p for p, v in zip(pieces, volumes, strict=True) if v > MIN_PIECE_FRACTION * volumes.max()]
         mesh = keep[0] if len(keep) == 1 else trimesh.util.concatenate(keep)
-    if _signed_volume(mesh.triangles) <= 0:
+    if signed_volumes(mesh.triangles).sum() <= 0:
         raise ReconstructionError("reconstruction produced no closed solid")
     if not mesh.is_watertight:
         raise ReconstructionError("reconstruction is not watertight")
     return mesh
 
-
-def _signed_volume(triangles: np.ndarray) -> float:
-    """Divergence-theorem volume, for the orientation check only (mass properties come later)."""
-    return float(np.einsum("ij,ij->", triangles[:, 0], np.cross(triangles[:, 1], triangles[:, 2])) / 6)

@@ -38,6 +38,11 @@ class MassProperties:
     principal_axes: np.ndarray
 
 
+def signed_volumes(triangles: np.ndarray) -> np.ndarray:
+    """Signed volume (m^3) of each tetrahedron (origin, v1, v2, v3); triangles (f, 3, 3) metres."""
+    return np.einsum("ij,ij->i", triangles[:, 0], np.cross(triangles[:, 1], triangles[:, 2])) / 6
+
+
 def mass_properties(
     vertices: np.ndarray, faces: np.ndarray, density: float, *, apex: np.ndarray | None = None
 ) -> MassProperties:
@@ -56,7 +61,7 @@ def mass_properties(
     vertices = np.asarray(vertices, dtype=np.float64)
     apex = vertices.mean(axis=0) if apex is None else np.asarray(apex, dtype=np.float64)
     tri = vertices[np.asarray(faces)] - apex  # (f, 3 vertices, 3 coords), apex at the origin
-    signed = np.einsum("ij,ij->i", tri[:, 0], np.cross(tri[:, 1], tri[:, 2])) / 6
+    signed = signed_volumes(tri)
     volume = float(signed.sum())
     if volume <= 0:
         raise ReconstructionError(f"the surface encloses no positive volume ({volume:.3g} m^3)")

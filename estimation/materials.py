@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import difflib
+import math
 import sys
 from dataclasses import dataclass
 from functools import cache
@@ -70,12 +71,28 @@ def material(name: str) -> Material:
     raise MaterialError(f"unknown material {name!r}{hint}")
 
 
+#: Density used when neither a material nor a density is given: water, so mass (kg) = volume (litres).
+DEFAULT_DENSITY = 1000.0
+
+
+def resolve_density(material_name: str | None, density: float | None) -> tuple[float, Material | None]:
+    """(density kg/m^3, the material or None) from a material name, an explicit density, or neither.
+
+    Raises:
+        MaterialError: unknown material, or a density that is not a positive finite number.
+    """
+    if material_name is not None:
+        mat = material(material_name)
+        return mat.density, mat
+    return check_density(DEFAULT_DENSITY if density is None else density), None
+
+
 def check_density(density: float) -> float:
     """Return ``density`` (kg/m^3) if it is a positive finite number.
 
     Raises:
         MaterialError: zero, negative, NaN or infinite.
     """
-    if not (density == density) or density <= 0 or density == float("inf"):
+    if not math.isfinite(density) or density <= 0:
         raise MaterialError(f"density must be a positive number of kg/m^3, got {density}")
     return float(density)

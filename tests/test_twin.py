@@ -181,6 +181,15 @@ def test_scene_errors_name_the_problem(tmp_path, text, message):
         load_scene(path)
 
 
+def test_estimation_error_names_object(tmp_path):
+    from twin.objects import estimate_object
+
+    np.save(tmp_path / "tiny.npy", np.random.default_rng(0).uniform(size=(40, 3)))
+    scene = parse_scene({"name": "x", "objects": [{"id": "pebble", "cloud": "tiny.npy"}]}, base=tmp_path)
+    with pytest.raises(SceneError, match=r"object 'pebble': too few points: 40"):
+        estimate_object(scene.objects[0])
+
+
 def test_scene_error_names_object():
     with pytest.raises(SceneError, match="object 'mug'"):
         parse_scene({"name": "x", "objects": [{"id": "mug", "paper": "mug", "density": 0}]})

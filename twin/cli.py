@@ -81,24 +81,16 @@ def _parser() -> argparse.ArgumentParser:
     return parser
 
 
-#: Density used when neither --density nor --material is given: water, so mass (kg) = volume (litres).
-DEFAULT_DENSITY = 1000.0
-
-
 def _cmd_estimate(args: argparse.Namespace) -> int:
     import numpy as np
 
     from estimation import estimate, load_cloud
-    from estimation.materials import check_density, material
+    from estimation.materials import resolve_density
     from estimation.units import unit_scale
 
     scale = unit_scale(args.units)
-    name = None
-    if args.material is not None:
-        mat = material(args.material)
-        density, name = mat.density, mat.name
-    else:
-        density = check_density(args.density if args.density is not None else DEFAULT_DENSITY)
+    density, mat = resolve_density(args.material, args.density)
+    name = None if mat is None else mat.name
     t0 = time.perf_counter()
     cloud = load_cloud(args.cloud, scale=scale)
     read = time.perf_counter() - t0

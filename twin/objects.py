@@ -15,7 +15,8 @@ import numpy as np
 import trimesh
 
 from estimation import PhysicalEstimate, estimate, load_cloud
-from estimation.materials import Material, material
+from estimation.errors import TwinError
+from estimation.materials import resolve_density
 from estimation.units import unit_scale
 from twin.decompose import DEFAULT_SETTINGS, CoacdSettings, Hull, decompose_many
 from twin.scenefile import ObjectSpec, SceneError
@@ -85,26 +86,31 @@ def source_mesh(spec: ObjectSpec) -> trimesh.Trimesh | None:
     return mesh
 
 
-def object_density(spec: ObjectSpec) -> tuple[float, float, str | None]:
-    """(density kg/m^3, friction, material name) for an object spec."""
-    if spec.material is not None:
-        mat: Material = material(spec.material)
-        return mat.density, mat.friction, mat.name
-    return (spec.density if spec.density is not None else 1000.0), DEFAULT_FRICTION, None
-
-
 def estimate_object(spec: ObjectSpec) -> tuple[PhysicalEstimate, float]:
-    """Estimate one scene object from its cloud (sampled from its mesh when it has one)."""
+    """Estimate one scene object from its cloud (sampled from its mesh when it has one).
+
+    Returns the estimate and the object's friction.
+
+    Raises:
+        SceneError: anything estimation rejects (unreadable cloud, too few points, no enclosed volume),
+            with the object's id in the message.
+    """
     from scenes.sampling import sample_surface
 
-    density, friction, name = object_density(spec)
-    mesh = source_mesh(spec)
-    if mesh is None:
-        cloud = load_cloud(spec.value, scale=unit_scale(spec.units))  # type: ignore[arg-type]
-    else:
-        # Seeded by the id, so the same scene builds the same twin.
-        cloud = sample_surface(mesh, spec.points, seed=zlib.crc32(spec.id.encode()))
-    return estimate(cloud, density, material=name), friction
+    try:
+        density, mat = resolve_density(spec.material, spec.density)
+        mesh = source_mesh(spec)
+        if mesh is None:
+            cloud = load_cloud(spec.value, scale=unit_scale(spec.units))  # type: ignore[arg-type]
+        else:
+            # Seeded by the id, so the same scene builds the same twin.
+            cloud = sample_surface(mesh, spec.points, seed=zlib.crc32(spec.id.encode()))
+        result = estimate(cloud, density, material=None if mat is None else mat.name)
+    except SceneError:
+        raise
+    except TwinError as exc:
+        raise SceneError(f"object {spec.id!r}: {exc}") from exc
+    return result, DEFAULT_FRICTION if mat is None else mat.friction
 
 
 def decimate(vertices: np.ndarray, faces: np.ndarray, target: int = VISUAL_FACES) -> Hull:
@@ -123,12 +129,7 @@ def prepare_objects(
 ) -> list[TwinObject]:
     """Estimate, decimate and decompose every object; CoACD runs in parallel over the cache misses."""
     estimates = [estimate_object(s) for s in specs]
-    visuals = []
-    for (est, _), s in zip(estimates, specs, strict=True):
-        if est.mass.mass <= 0:
-            raise SceneError(f"object {s.id!r}: non-positive mass {est.mass.mass}")
-        com = est.mass.center_of_mass
-        visuals.append(decimate(est.vertices - com, est.faces))
+    visuals = [decimate(est.vertices - est.mass.center_of_mass, est.faces) for est, _ in estimates]
     hulls = decompose_many(visuals, coacd, cache_dir=cache_dir, progress=progress)
     out = []
     for s, (est, friction), visual, (parts, cached) in zip(specs, estimates, visuals, hulls, strict=True):
