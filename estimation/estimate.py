@@ -227,6 +227,25 @@ def _finish(method, cloud, used, box, vertices, faces, watertight, cell, density
     )
 
 
+def from_mesh(vertices: np.ndarray, faces: np.ndarray, density: float, *,
+              material: str | None = None) -> PhysicalEstimate:
+    """The exact record of a known closed mesh (metres, outward faces): no cloud, no reconstruction.
+
+    For reference models (the truth a twin is compared with) and for objects whose CAD mesh is known.
+    """
+    check_density(density)
+    vertices = np.asarray(vertices, dtype=np.float64)
+    faces = np.asarray(faces, dtype=np.int64)
+    t0 = time.perf_counter()
+    props = mass_properties(vertices, faces, density)
+    if props.volume <= 0:
+        raise CloudError("mesh encloses no volume (open, empty or inside-out)")
+    return PhysicalEstimate(
+        method="mesh", mass=props, obb=oriented_box(vertices), vertices=vertices, faces=faces,
+        watertight=_is_watertight(vertices, faces), points_in=0, points_used=0, cell=0.0,
+        timings=Timings(mass_properties=time.perf_counter() - t0), material=material)
+
+
 def box_mesh(box: OrientedBox) -> tuple[np.ndarray, np.ndarray]:
     """Vertices and outward faces of an oriented box."""
     import trimesh

@@ -12,7 +12,7 @@ import numpy as np
 
 from estimation.errors import TwinError
 from twin.decompose import DEFAULT_SETTINGS, CoacdSettings
-from twin.model import add_object, new_spec
+from twin.model import DEFAULT_PHYSICS, PhysicsSettings, add_object, new_spec
 from twin.objects import TwinObject, prepare_objects
 from twin.scenefile import SceneSpec
 
@@ -37,7 +37,7 @@ def table_top(scene: SceneSpec) -> float | None:
 
 
 def build_scene(scene: SceneSpec, *, coacd: CoacdSettings = DEFAULT_SETTINGS, cache_dir: Path | None = None,
-                progress: bool = True) -> BuiltScene:
+                progress: bool = True, physics: PhysicsSettings = DEFAULT_PHYSICS) -> BuiltScene:
     """Estimate every object, decompose it, and compile the whole scene.
 
     Raises:
@@ -46,7 +46,7 @@ def build_scene(scene: SceneSpec, *, coacd: CoacdSettings = DEFAULT_SETTINGS, ca
     t0 = time.perf_counter()
     objects = prepare_objects(scene.objects, table_top=table_top(scene), coacd=coacd, cache_dir=cache_dir,
                               progress=progress)
-    spec = new_spec(scene)
+    spec = new_spec(scene, physics)
     for obj in objects:
         add_object(spec, obj)
     model = compile_spec(spec)

@@ -46,6 +46,9 @@ class CoacdSettings:
     decimate: bool = True
     max_ch_vertex: int = 64
     seed: int = 0
+    #: Not CoACD's: a mesh whose convex hull is within this fraction of its own volume collides as that
+    #: one hull and skips CoACD (a can, a ball, a box). 0 sends every mesh to CoACD.
+    convex_tolerance: float = 0.03
 
 
 #: The settings used when none are given.
@@ -78,14 +81,9 @@ def decompose(
     A failed or empty decomposition falls back to the convex hull of the mesh, with a warning.
     """
     cache = Path(cache_dir or default_cache_dir())
-    key = cache_key(vertices, faces, settings)
-    path = cache / f"{key}.npz"
-    if path.is_file():
-        try:
-            with np.load(path) as data:
-                return _unpack(data), True
-        except (OSError, ValueError, KeyError):
-            log.warning("corrupt CoACD cache entry %s; recomputing", path.name)
+    path = cache / f"{cache_key(vertices, faces, settings)}.npz"
+    if (cached := _load_cached(path)) is not None:
+        return cached, True
     hulls = _run_coacd(vertices, faces, settings)
     cache.mkdir(parents=True, exist_ok=True)
     tmp = path.with_suffix(f".{os.getpid()}.tmp.npz")
@@ -103,9 +101,9 @@ def decompose_many(
     results: list[tuple[list[Hull], bool] | None] = [None] * len(meshes)
     misses = []
     for i, (v, f) in enumerate(meshes):
-        path = cache / f"{cache_key(v, f, settings)}.npz"
-        if path.is_file():
-            results[i] = decompose(v, f, settings, cache_dir=cache)
+        cached = _load_cached(cache / f"{cache_key(v, f, settings)}.npz")
+        if cached is not None:
+            results[i] = (cached, True)
         else:
             misses.append(i)
     if misses:
@@ -128,12 +126,26 @@ def decompose_many(
     return [r for r in results if r is not None]
 
 
+def _load_cached(path: Path) -> list[Hull] | None:
+    if not path.is_file():
+        return None
+    try:
+        with np.load(path) as data:
+            return _unpack(data)
+    except (OSError, ValueError, KeyError):
+        log.warning("corrupt CoACD cache entry %s; recomputing", path.name)
+        return None
+
+
 def _run_coacd(vertices: np.ndarray, faces: np.ndarray, settings: CoacdSettings) -> list[Hull]:
     import coacd
     import trimesh
 
+    if settings.convex_tolerance > 0 and _near_convex(vertices, faces, settings.convex_tolerance):
+        return [_convex_hull(vertices)]
     coacd.set_log_level("error")
     params = asdict(settings)
+    del params["convex_tolerance"]
     if not trimesh.Trimesh(vertices, faces, process=True).is_watertight:
         # CoACD on an open mesh without its manifold preprocessing searches for minutes; with it, seconds.
         params["preprocess_mode"] = "on"
@@ -147,6 +159,17 @@ def _run_coacd(vertices: np.ndarray, faces: np.ndarray, settings: CoacdSettings)
         log.warning("CoACD gave no convex parts; using the convex hull")
         hulls = [_convex_hull(vertices)]
     return hulls
+
+
+def _near_convex(vertices: np.ndarray, faces: np.ndarray, tolerance: float) -> bool:
+    """The convex hull adds less than ``tolerance`` of the mesh's own (signed) volume."""
+    from estimation.inertia import signed_volumes
+
+    volume = float(signed_volumes(np.asarray(vertices, float)[faces]).sum())
+    if volume <= 0:
+        return False  # open or inside-out: let CoACD (with preprocessing) judge
+    hv, hf = _convex_hull(vertices)
+    return float(signed_volumes(hv[hf]).sum()) <= volume * (1.0 + tolerance)
 
 
 def _convex_hull(vertices: np.ndarray) -> Hull:

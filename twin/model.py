@@ -8,6 +8,8 @@ so a compile error points back to it.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from twin.objects import TwinObject
@@ -30,16 +32,42 @@ EE_WELD_SOLREF = (0.02, 1.0)
 MAX_HULL_VERTICES = 64
 
 
-def new_spec(scene: SceneSpec):  # type: ignore[no-untyped-def]
+@dataclass(frozen=True)
+class PhysicsSettings:
+    """Solver options of the twin; bench/twin_step.py measures what each costs and buys.
+
+    Attributes:
+        timestep: seconds per physics step (1 kHz: the haptic rate).
+        sleep: let resting objects sleep (MuJoCo skips them until something touches or moves them).
+            Resting clutter is most of a tabletop, so this is the largest speed lever (~5x at 20 objects).
+        elliptic: elliptic friction cones (pyramidal ones let resting stacks creep at 1 kHz).
+        multiccd: several contact points per convex pair, so a box rests on its face, not a corner.
+        iterations: constraint solver iterations (MuJoCo's default 100; resting scenes converge in 1-3).
+    """
+
+    timestep: float = TIMESTEP
+    sleep: bool = True
+    elliptic: bool = True
+    multiccd: bool = True
+    iterations: int = 100
+
+
+DEFAULT_PHYSICS = PhysicsSettings()
+
+
+def new_spec(scene: SceneSpec, physics: PhysicsSettings = DEFAULT_PHYSICS):  # type: ignore[no-untyped-def]
     """An MjSpec with the floor, the table and the end effector, and no objects."""
     import mujoco
 
     spec = mujoco.MjSpec()
     spec.modelname = scene.name
-    spec.option.timestep = TIMESTEP
-    # Objects rest on hulls of up to 64 vertices; elliptic cones keep
-    # stacks from creeping at 1 kHz.
-    spec.option.cone = mujoco.mjtCone.mjCONE_ELLIPTIC
+    spec.option.timestep = physics.timestep
+    spec.option.cone = mujoco.mjtCone.mjCONE_ELLIPTIC if physics.elliptic else mujoco.mjtCone.mjCONE_PYRAMIDAL
+    spec.option.iterations = physics.iterations
+    if physics.sleep:
+        spec.option.enableflags |= mujoco.mjtEnableBit.mjENBL_SLEEP
+    if not physics.multiccd:
+        spec.option.disableflags |= mujoco.mjtDisableBit.mjDSBL_MULTICCD
     spec.compiler.autolimits = True
     spec.worldbody.add_light(pos=[0, 0, 3], dir=[0, 0, -1], type=mujoco.mjtLightType.mjLIGHT_DIRECTIONAL)
     floor = spec.worldbody.add_geom(name="floor", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[5, 5, 0.1],
@@ -67,6 +95,8 @@ def add_end_effector(spec, ee: EndEffectorSpec) -> None:  # type: ignore[no-unty
     target.add_geom(type=mujoco.mjtGeom.mjGEOM_SPHERE, size=[ee.radius * 0.5, 0, 0], contype=0,
                     conaffinity=0, group=VISUAL_GROUP, rgba=[0.2, 0.8, 0.2, 0.4])
     body = spec.worldbody.add_body(name=EE_BODY, pos=list(ee.position))
+    # The operator may hold still for a while; a sleeping end effector would not follow the next move.
+    body.sleep = mujoco.mjtSleepPolicy.mjSLEEP_NEVER
     body.add_freejoint()
     geom = body.add_geom(type=mujoco.mjtGeom.mjGEOM_SPHERE, size=[ee.radius, 0, 0], mass=0.2,
                          rgba=[0.2, 0.6, 0.9, 1])

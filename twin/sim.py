@@ -4,6 +4,9 @@ from __future__ import annotations
 
 import logging
 import time
+from collections import deque
+from collections.abc import Callable
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
@@ -29,6 +32,8 @@ class Twin:
         self.data = mujoco.MjData(self.model)
         mujoco.mj_forward(self.model, self.data)
         self._mocap = self._mocap_id()
+        self._editor: ThreadPoolExecutor | None = None
+        self._pending: deque[tuple[Future, Callable[[], None] | None]] = deque()
 
     def __enter__(self) -> Twin:
         return self
@@ -37,7 +42,10 @@ class Twin:
         self.close()
 
     def close(self) -> None:
-        """Release the model (nothing external is held; present for symmetry with sessions)."""
+        """Stop the background compiler (pending edits are dropped)."""
+        if self._editor is not None:
+            self._editor.shutdown(wait=True, cancel_futures=True)
+            self._editor = None
 
     @property
     def time(self) -> float:
@@ -47,6 +55,10 @@ class Twin:
         import mujoco
 
         mujoco.mj_step(self.model, self.data, n)
+
+    @property
+    def has_end_effector(self) -> bool:
+        return self._mocap is not None
 
     def set_end_effector(self, position: np.ndarray) -> None:
         """Move the operator's mocap target (world frame, metres)."""
@@ -89,8 +101,84 @@ class Twin:
         self._recompile()
         self.set_pose(obj.id, pos, quat)
 
-    def set_pose(self, object_id: str, position: np.ndarray, quat: np.ndarray) -> None:
-        """Teleport an object's free joint (world frame; quaternion w x y z)."""
+    def edit_async(self, edit: Callable[[object], None], then: Callable[[], None] | None = None) -> Future:
+        """Apply ``edit(spec)`` and compile in a background thread while the loop steps the old model.
+
+        :meth:`poll`, called from the loop, swaps the new model in between two steps, carrying over every
+        body's state as it is at that moment; ``then()`` runs right after the swap (e.g. to set a pose).
+        Edits apply in submission order. Do not call the synchronous edits while one is pending.
+        """
+        if self._editor is None:
+            self._editor = ThreadPoolExecutor(1, thread_name_prefix="twin-compile")
+
+        def work():  # type: ignore[no-untyped-def]
+            edit(self.spec)
+            return self.spec.compile()
+
+        future = self._editor.submit(work)
+        self._pending.append((future, then))
+        return future
+
+    @property
+    def edits_pending(self) -> int:
+        return len(self._pending)
+
+    def poll(self) -> int:
+        """Swap in every finished background edit (in order); returns how many were applied.
+
+        Raises: whatever the edit or the compiler raised (the spec may then hold the failed edit).
+        """
+        applied = 0
+        while self._pending and self._pending[0][0].done():
+            future, then = self._pending.popleft()
+            self._swap(future.result())
+            if then is not None:
+                then()
+            applied += 1
+        return applied
+
+    def _swap(self, model) -> None:  # type: ignore[no-untyped-def]
+        import mujoco
+
+        data = mujoco.MjData(model)
+        data.time = self.data.time
+        _copy_free_bodies(self.model, self.data, model, data)
+        old_mocap = self.data.mocap_pos.copy()
+        self.model, self.data = model, data
+        self._mocap = self._mocap_id()
+        if self._mocap is not None and len(old_mocap) == len(data.mocap_pos):
+            data.mocap_pos[:] = old_mocap
+        mujoco.mj_forward(model, data)
+
+    def velocity(self, object_id: str) -> tuple[np.ndarray, np.ndarray]:
+        """(linear m/s, angular rad/s) of an object's free joint, both in world axes."""
+        adr, xmat = self._dof(object_id)
+        return self.data.qvel[adr:adr + 3].copy(), xmat @ self.data.qvel[adr + 3:adr + 6]
+
+    def set_velocity(self, object_id: str, linear: np.ndarray, angular: np.ndarray) -> None:
+        """Set an object's free-joint velocity (linear m/s and angular rad/s, both in world axes)."""
+        adr, xmat = self._dof(object_id)
+        self.data.qvel[adr:adr + 3] = linear
+        self.data.qvel[adr + 3:adr + 6] = xmat.T @ np.asarray(angular)  # MuJoCo keeps it in body axes
+
+    def _dof(self, object_id: str) -> tuple[int, np.ndarray]:
+        import mujoco
+
+        jid = mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_JOINT, f"{object_id}/free")
+        if jid < 0:
+            raise KeyError(f"no object {object_id!r} in the model")
+        return int(self.model.jnt_dofadr[jid]), self.data.xmat[self.model.jnt_bodyid[jid]].reshape(3, 3)
+
+    def has(self, object_id: str) -> bool:
+        import mujoco
+
+        return mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_JOINT, f"{object_id}/free") >= 0
+
+    def set_pose(self, object_id: str, position: np.ndarray, quat: np.ndarray, *, forward: bool = True) -> None:
+        """Teleport an object's free joint (world frame; quaternion w x y z).
+
+        ``forward=False`` skips recomputing positions (the next step does it): for several poses at once.
+        """
         import mujoco
 
         jid = mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_JOINT, f"{object_id}/free")
@@ -99,7 +187,8 @@ class Twin:
         adr = self.model.jnt_qposadr[jid]
         self.data.qpos[adr:adr + 3] = position
         self.data.qpos[adr + 3:adr + 7] = quat
-        mujoco.mj_forward(self.model, self.data)
+        if forward:
+            mujoco.mj_forward(self.model, self.data)
 
     def _recompile(self) -> None:
         import mujoco
@@ -118,6 +207,25 @@ class Twin:
         return None if bid < 0 else int(self.model.body_mocapid[bid])
 
 
+def _copy_free_bodies(m_old, d_old, m_new, d_new) -> None:  # type: ignore[no-untyped-def]
+    """Copy qpos/qvel of every free-jointed body present (by name) in both models."""
+    import mujoco
+
+    free = mujoco.mjtJoint.mjJNT_FREE
+    for j in range(m_new.njnt):
+        if m_new.jnt_type[j] != free:
+            continue
+        name = mujoco.mj_id2name(m_new, mujoco.mjtObj.mjOBJ_BODY, m_new.jnt_bodyid[j])
+        b_old = mujoco.mj_name2id(m_old, mujoco.mjtObj.mjOBJ_BODY, name) if name else -1
+        if b_old < 0 or m_old.body_jntnum[b_old] != 1 or m_old.jnt_type[m_old.body_jntadr[b_old]] != free:
+            continue
+        j_old = m_old.body_jntadr[b_old]
+        qa, qb = m_old.jnt_qposadr[j_old], m_new.jnt_qposadr[j]
+        va, vb = m_old.jnt_dofadr[j_old], m_new.jnt_dofadr[j]
+        d_new.qpos[qb:qb + 7] = d_old.qpos[qa:qa + 7]
+        d_new.qvel[vb:vb + 6] = d_old.qvel[va:va + 6]
+
+
 @dataclass(frozen=True)
 class LoopStats:
     """Timing of a paced loop, seconds."""
@@ -130,6 +238,39 @@ class LoopStats:
     wall: float
 
 
+class Pacer:
+    """Deadlines of a fixed-rate loop and the time each iteration's work took.
+
+    ``begin()`` before the work, ``end()`` after it; ``end`` returns the seconds left until the next
+    deadline (negative: the deadline was missed). The caller decides how to wait.
+    """
+
+    def __init__(self, rate: float) -> None:
+        self.period = 1.0 / rate
+        self.start = time.perf_counter()
+        self.iterations = 0
+        self.missed = 0
+        self.work: list[float] = []
+        self._t0 = self.start
+
+    def begin(self) -> None:
+        self._t0 = time.perf_counter()
+
+    def end(self) -> float:
+        t1 = time.perf_counter()
+        self.work.append(t1 - self._t0)
+        self.iterations += 1
+        left = self.start + self.iterations * self.period - t1
+        if left < 0:
+            self.missed += 1
+        return left
+
+    def stats(self) -> LoopStats:
+        w = np.asarray(self.work) if self.work else np.zeros(1)
+        return LoopStats(self.iterations, float(np.percentile(w, 50)), float(np.percentile(w, 99)), float(w.max()),
+                         self.missed, time.perf_counter() - self.start)
+
+
 def run_paced(twin: Twin, duration: float, rate: float, *,
               trajectory=None, realtime: bool = True) -> LoopStats:  # type: ignore[no-untyped-def]
     """Step ``twin`` at ``rate`` Hz for ``duration`` simulated seconds.
@@ -138,27 +279,17 @@ def run_paced(twin: Twin, duration: float, rate: float, *,
     enough to cover 1/rate of simulated time, and, when ``realtime``, sleeps to the next deadline. A step
     that ends after its deadline counts as missed.
     """
-    period = 1.0 / rate
-    substeps = max(1, round(period / twin.model.opt.timestep))
-    n = round(duration * rate)
-    times = np.empty(n)
-    missed = 0
-    start = time.perf_counter()
-    for k in range(n):
-        t0 = time.perf_counter()
+    substeps = max(1, round(1.0 / rate / twin.model.opt.timestep))
+    pacer = Pacer(rate)
+    for _ in range(round(duration * rate)):
+        pacer.begin()
         if trajectory is not None:
             twin.set_end_effector(trajectory(twin.time))
         twin.step(substeps)
-        t1 = time.perf_counter()
-        times[k] = t1 - t0
-        deadline = start + (k + 1) * period
-        if t1 > deadline:
-            missed += 1
-        elif realtime:
-            time.sleep(max(0.0, deadline - time.perf_counter()))
-    wall = time.perf_counter() - start
-    return LoopStats(n, float(np.percentile(times, 50)), float(np.percentile(times, 99)), float(times.max()),
-                     missed, wall)
+        left = pacer.end()
+        if realtime and left > 0:
+            time.sleep(left)
+    return pacer.stats()
 
 
 def push_trajectory(start: np.ndarray, end: np.ndarray, duration: float):  # type: ignore[no-untyped-def]

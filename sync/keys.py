@@ -1,0 +1,84 @@
+"""The one place that knows the key expressions.
+
+Layout, under ``twin/<scene>/``::
+
+    scene                       SceneInfo: table and end effector (queryable: what a late joiner asks first)
+    objects/<id>/cloud          Cloud: when an object appears or changes (also answered by the queryable)
+    objects/<id>/pose           Pose: when the remote pose leaves the deadband (also answered by the queryable)
+    objects/<id>/gone           Gone: the object left the scene
+    remote/heartbeat            Heartbeat: a few times a second, so silence can be told from stillness
+    operator/command            OperatorCommand: the operator's end-effector target, local -> remote
+
+Object ids are restricted to ``[A-Za-z0-9_-]`` by the scene format, so they are safe key chunks.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+
+PREFIX = "twin"
+_CHUNK = re.compile(r"^[A-Za-z0-9_-]{1,64}$")
+OBJECT_KINDS = ("cloud", "pose", "gone")
+
+
+@dataclass(frozen=True)
+class Keys:
+    """Key expressions for one scene."""
+
+    scene: str
+
+    def __post_init__(self) -> None:
+        if not _CHUNK.match(self.scene):
+            raise ValueError(f"scene name {self.scene!r} is not a valid key chunk ([A-Za-z0-9_-], 1-64)")
+
+    @property
+    def root(self) -> str:
+        return f"{PREFIX}/{self.scene}"
+
+    @property
+    def info(self) -> str:
+        return f"{self.root}/scene"
+
+    def object(self, object_id: str, kind: str) -> str:
+        if kind not in OBJECT_KINDS or not _CHUNK.match(object_id):
+            raise ValueError(f"bad object key: {object_id!r}/{kind!r}")
+        return f"{self.root}/objects/{object_id}/{kind}"
+
+    @property
+    def objects(self) -> str:
+        """Every object message (subscribe here)."""
+        return f"{self.root}/objects/**"
+
+    @property
+    def state(self) -> str:
+        """What a late joiner asks for: clouds and poses of every current object."""
+        return f"{self.root}/objects/*/*"
+
+    @property
+    def heartbeat(self) -> str:
+        return f"{self.root}/remote/heartbeat"
+
+    @property
+    def operator(self) -> str:
+        return f"{self.root}/operator/command"
+
+    def parse_object(self, key: str) -> tuple[str, str] | None:
+        """(object id, kind) of an object key of this scene, else None."""
+        parts = key.split("/")
+        if len(parts) == 5 and parts[:3] == [PREFIX, self.scene, "objects"] and parts[4] in OBJECT_KINDS:
+            return parts[3], parts[4]
+        return None
+
+
+def any_scene_info() -> str:
+    """Selector for the scene info of every scene on the network (discovery)."""
+    return f"{PREFIX}/*/scene"
+
+
+def scene_of(key: str) -> str:
+    """The scene name in a key under ``twin/<scene>/``."""
+    parts = key.split("/")
+    if len(parts) < 2 or parts[0] != PREFIX:
+        raise ValueError(f"not a tactile-twin key: {key!r}")
+    return parts[1]

@@ -1,0 +1,312 @@
+"""The local side C': the twin the operator touches, kept in step with the remote scene.
+
+Nothing here blocks the loop: Zenoh's threads only queue decoded messages; estimation and CoACD run in a
+worker process; the new model compiles in a background thread (:meth:`twin.sim.Twin.edit_async`) and is
+swapped in between two steps. Pose corrections blend in over ``correction_tau`` unless they are large,
+in which case the object is moved at once.
+"""
+
+from __future__ import annotations
+
+import logging
+import multiprocessing as mp
+import queue
+import time
+from concurrent.futures import Future, ProcessPoolExecutor
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from estimation import estimate, make_cloud
+from estimation.materials import resolve_density
+from sync.keys import Keys, any_scene_info
+from sync.link import Link
+from sync.messages import (
+    VERSION,
+    Cloud,
+    Gone,
+    OperatorCommand,
+    Pose,
+    SceneInfo,
+    decode,
+    now_ns,
+    unpack_points,
+)
+from twin.decompose import DEFAULT_SETTINGS, CoacdSettings
+from twin.model import add_object, new_spec, remove_object
+from twin.objects import DEFAULT_FRICTION, TwinObject, object_at_estimate
+from twin.poses import angle_deg, nlerp, quat_conj, quat_mul, rotation
+from twin.scenefile import EndEffectorSpec, SceneSpec, TableSpec
+from twin.sim import LoopStats, Pacer, Twin
+
+log = logging.getLogger(__name__)
+
+
+class SyncError(RuntimeError):
+    pass
+
+
+@dataclass(frozen=True)
+class LocalSettings:
+    """How the twin follows the remote.
+
+    Attributes:
+        stale_after: seconds without any message before the link is marked stale.
+        correction_tau: time constant of the blend towards a corrected pose, seconds.
+        snap_distance, snap_angle_deg: a correction larger than this moves the object at once.
+        operator_deadband: the operator's command is published when it moved more than this, metres.
+        workers: processes estimating clouds.
+    """
+
+    stale_after: float = 1.0
+    correction_tau: float = 0.02
+    snap_distance: float = 0.05
+    snap_angle_deg: float = 20.0
+    operator_deadband: float = 0.0002
+    workers: int = 1
+    coacd: CoacdSettings = DEFAULT_SETTINGS
+    cache_dir: Path | None = None
+
+
+@dataclass
+class LocalReport:
+    """What the local side saw. Latencies in seconds."""
+
+    objects_synced: int = 0
+    pose_updates: int = 0
+    pose_latency: list[float] = field(default_factory=list)
+    add_latency: list[float] = field(default_factory=list)  # cloud received -> touchable in the twin
+    worst_step_while_adding: float = 0.0
+    stale_events: int = 0
+    recoveries: int = 0
+    estimation_errors: int = 0
+
+
+def build_from_cloud(data: bytes, coacd: CoacdSettings, cache_dir: Path | None) -> TwinObject:
+    """Worker-process job: a cloud message's bytes -> a twin object at the estimated place."""
+    msg = decode(data)
+    assert isinstance(msg, Cloud)
+    density, mat = resolve_density(msg.material, msg.density)
+    est = estimate(make_cloud(unpack_points(msg)), density, material=None if mat is None else mat.name)
+    friction = DEFAULT_FRICTION if mat is None else mat.friction
+    return object_at_estimate(msg.object_id, est, friction, coacd=coacd, cache_dir=cache_dir)
+
+
+class Local:
+    """The twin C' on a Zenoh session. Call :meth:`run` (or :meth:`iterate` from your own loop)."""
+
+    def __init__(self, session, *, scene: str | None = None,  # type: ignore[no-untyped-def]
+                 settings: LocalSettings = LocalSettings(), wait: float = 10.0) -> None:
+        self.settings = settings
+        self.link = Link(session)
+        self.report = LocalReport()
+        info = self._find_scene(scene, wait)
+        self.keys = Keys(info.name)
+        self.twin = Twin(new_spec(_scene_spec(info)))
+        self.inbox: queue.SimpleQueue = queue.SimpleQueue()
+        self.stale = False
+        self._jobs: dict[str, tuple[Future, Cloud, float]] = {}
+        self._clouds: dict[str, int] = {}  # id -> seq of the cloud in (or going into) the twin
+        self._offsets: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+        self._latest: dict[str, Pose] = {}
+        self._targets: dict[str, Pose] = {}
+        self._sent_operator: np.ndarray | None = None
+        self._seq = 0
+        self._pool = ProcessPoolExecutor(settings.workers, mp_context=mp.get_context("spawn"))
+        self.link.subscribe(self.keys.objects, self._enqueue)
+        self.link.subscribe(self.keys.heartbeat, self._enqueue)
+        # A late joiner asks for the current scene: every cloud and pose the remote last published.
+        self.link.query(self.keys.state, self._enqueue, timeout=wait)
+        self._start = time.monotonic()
+
+    # -- loop ----------------------------------------------------------------------------------------
+
+    def run(self, duration: float, *, rate: float = 1000.0, trajectory=None,  # type: ignore[no-untyped-def]
+            until=None) -> LoopStats:  # type: ignore[no-untyped-def]
+        """Run the twin in real time for ``duration`` seconds, or until ``until()`` is true.
+
+        ``trajectory(t) -> (3,)`` is the operator's end-effector target at twin time t (None: hold).
+        Between steps the loop waits on incoming messages, so a pose correction is applied when it
+        arrives, not at the next step.
+        """
+        pacer = Pacer(rate)
+        n = round(duration * rate)
+        while pacer.iterations < n and not (until is not None and until()):
+            pacer.begin()
+            busy = bool(self._jobs) or self.twin.edits_pending > 0
+            self.iterate(trajectory)
+            left = pacer.end()
+            if busy:
+                self.report.worst_step_while_adding = max(self.report.worst_step_while_adding, pacer.work[-1])
+            deadline = time.perf_counter() + left
+            while left > 0:
+                try:
+                    item = self.inbox.get(timeout=left)
+                except queue.Empty:
+                    break
+                self._handle(*item)
+                left = deadline - time.perf_counter()
+        return pacer.stats()
+
+    def iterate(self, trajectory=None) -> None:  # type: ignore[no-untyped-def]
+        """One loop iteration: handle messages, take finished objects, correct poses, step once."""
+        while True:
+            try:
+                item = self.inbox.get_nowait()
+            except queue.Empty:
+                break
+            self._handle(*item)
+        self._collect()
+        self.twin.poll()
+        for object_id in list(self._targets):
+            self._correct(object_id)
+        if trajectory is not None and self.twin.has_end_effector:
+            target = np.asarray(trajectory(self.twin.time), dtype=float)
+            self.twin.set_end_effector(target)
+            self._publish_operator(target)
+        self.twin.step()
+        self._check_link()
+
+    def close(self) -> None:
+        self._pool.shutdown(wait=True, cancel_futures=True)
+        self.link.close()
+        self.twin.close()
+
+    @property
+    def objects(self) -> list[str]:
+        return [i for i in self._clouds if self.twin.has(i)]
+
+    # -- messages ------------------------------------------------------------------------------------
+
+    def _enqueue(self, key: str, msg) -> None:  # type: ignore[no-untyped-def]
+        self.inbox.put((time.monotonic(), key, msg))  # Zenoh thread: queue only, never touch the twin
+
+    def _handle(self, received: float, key: str, msg) -> None:  # type: ignore[no-untyped-def]
+        if isinstance(msg, Pose):
+            last = self._latest.get(msg.object_id)
+            if last is not None and last.seq >= msg.seq:
+                return  # the late-join reply raced a newer live pose
+            self._latest[msg.object_id] = msg
+            if msg.object_id in self._offsets and self.twin.has(msg.object_id):
+                self._targets[msg.object_id] = msg
+                self._correct(msg.object_id)
+                self.report.pose_updates += 1
+                self.report.pose_latency.append((now_ns() - msg.stamp_ns) * 1e-9)
+        elif isinstance(msg, Cloud):
+            if self._clouds.get(msg.object_id, -1) >= msg.seq:
+                return
+            self._clouds[msg.object_id] = msg.seq
+            from sync.messages import encode
+
+            future = self._pool.submit(build_from_cloud, encode(msg), self.settings.coacd, self.settings.cache_dir)
+            self._jobs[msg.object_id] = (future, msg, received)
+        elif isinstance(msg, Gone):
+            self._jobs.pop(msg.object_id, None)
+            self._clouds.pop(msg.object_id, None)
+            self._offsets.pop(msg.object_id, None)
+            self._targets.pop(msg.object_id, None)
+            if self.twin.has(msg.object_id):
+                self.twin.edit_async(lambda spec, i=msg.object_id: remove_object(spec, i))
+
+    def _collect(self) -> None:
+        for object_id, (future, msg, received) in list(self._jobs.items()):
+            if not future.done():
+                continue
+            del self._jobs[object_id]
+            try:
+                obj = future.result()
+            except Exception as exc:  # a cloud the estimator rejects: the twin goes on without it
+                self.report.estimation_errors += 1
+                log.warning("object %r: could not estimate its cloud: %s", object_id, exc)
+                continue
+            exists = self.twin.has(object_id)
+
+            def edit(spec, obj=obj, exists=exists) -> None:  # type: ignore[no-untyped-def]
+                if exists:
+                    remove_object(spec, obj.id)
+                add_object(spec, obj)
+
+            def done(obj=obj, msg=msg, received=received) -> None:  # type: ignore[no-untyped-def]
+                self._offsets[obj.id] = _offset(obj, msg)
+                latest = self._latest.get(obj.id)
+                if latest is not None and latest.seq > msg.seq:
+                    self._targets[obj.id] = latest
+                self.report.objects_synced += 1
+                self.report.add_latency.append(time.monotonic() - received)
+
+            self.twin.edit_async(edit, then=done)
+
+    def _correct(self, object_id: str) -> None:
+        """Move the object a step towards where the remote says it is (at once if far off)."""
+        target = self._targets[object_id]
+        off_p, off_q = self._offsets[object_id]
+        r = rotation(np.asarray(target.quat))
+        want_p = np.asarray(target.position) + r @ off_p
+        want_q = quat_mul(np.asarray(target.quat), off_q)
+        pos, quat = self.twin.pose(object_id)
+        dist = float(np.linalg.norm(want_p - pos))
+        angle = angle_deg(quat, want_q)
+        s = self.settings
+        if dist > s.snap_distance or angle > s.snap_angle_deg:
+            alpha = 1.0
+        else:
+            alpha = 1.0 - float(np.exp(-self.twin.model.opt.timestep / s.correction_tau))
+        new_p = pos + alpha * (want_p - pos)
+        new_q = nlerp(quat, want_q, alpha)
+        self.twin.set_pose(object_id, new_p, new_q, forward=False)
+        lin, ang = self.twin.velocity(object_id)
+        self.twin.set_velocity(object_id, lin + alpha * (np.asarray(target.linvel) - lin),
+                               ang + alpha * (np.asarray(target.angvel) - ang))
+        if alpha == 1.0 or (dist < 2e-4 and angle < 0.1):
+            del self._targets[object_id]
+
+    def _publish_operator(self, target: np.ndarray) -> None:
+        if self._sent_operator is not None and np.linalg.norm(target - self._sent_operator) <= self.settings.operator_deadband:
+            return
+        self._sent_operator = target.copy()
+        self._seq += 1
+        self.link.put(self.keys.operator, OperatorCommand(v=VERSION, stamp_ns=now_ns(), seq=self._seq,
+                                                          position=tuple(float(x) for x in target)))
+
+    def _check_link(self) -> None:
+        last = self.link.counters.last_received or self._start
+        silent = time.monotonic() - last
+        if not self.stale and silent > self.settings.stale_after:
+            self.stale = True
+            self.report.stale_events += 1
+            log.warning("link stale: no message from the remote for %.1f s; the twin runs on", silent)
+        elif self.stale and silent <= self.settings.stale_after:
+            self.stale = False
+            self.report.recoveries += 1
+            log.warning("link recovered")
+
+    def _find_scene(self, scene: str | None, wait: float) -> SceneInfo:
+        selector = Keys(scene).info if scene else any_scene_info()
+        found: list[SceneInfo] = []
+        deadline = time.monotonic() + wait
+        while not found and time.monotonic() < deadline:
+            self.link.query(selector, lambda _k, m: found.append(m) if isinstance(m, SceneInfo) else None,
+                            timeout=min(1.0, wait))
+            if not found:
+                time.sleep(0.1)
+        if not found:
+            raise SyncError(f"no remote scene answered on {selector} within {wait:g} s")
+        names = sorted({f.name for f in found})
+        if len(names) > 1:
+            raise SyncError(f"several remote scenes answer ({', '.join(names)}); choose one with --scene")
+        return found[0]
+
+
+def _scene_spec(info: SceneInfo) -> SceneSpec:
+    table = None if info.table_size is None else TableSpec(size=info.table_size, height=info.table_height,
+                                                          material=info.table_material)
+    ee = None if info.ee_radius <= 0 else EndEffectorSpec(radius=info.ee_radius, position=info.ee_position)
+    return SceneSpec(name=info.name, objects=(), table=table, end_effector=ee)
+
+
+def _offset(obj: TwinObject, msg: Cloud) -> tuple[np.ndarray, np.ndarray]:
+    """The twin body's pose in the remote body's frame, at the moment the cloud was taken."""
+    q_r = np.asarray(msg.body_quat)
+    p = rotation(q_r).T @ (obj.position - np.asarray(msg.body_position))
+    return p, quat_mul(quat_conj(q_r), obj.quat)

@@ -1,0 +1,206 @@
+"""The remote side C: the ground-truth simulation, its sensor, and what it publishes.
+
+The ground truth is built from the true meshes (exact mass properties, CoACD of the true surface), so the
+twin never sees it: it gets only point clouds sampled off the true surfaces at the bodies' current poses,
+and poses when they leave a deadband.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+import zlib
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+
+from scenes.sampling import sample_surface
+from sync.keys import Keys
+from sync.link import Link
+from sync.messages import VERSION, Gone, Heartbeat, OperatorCommand, Pose, SceneInfo, cloud_message, now_ns
+from twin.model import add_object, new_spec
+from twin.objects import TwinObject, prepare_objects, reference_estimate, source_mesh
+from twin.poses import angle_deg, rotation
+from twin.scenefile import ObjectSpec, SceneSpec
+from twin.sim import LoopStats, Pacer, Twin
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class Deadband:
+    """A pose is published when it moved more than ``position`` metres or ``angle_deg`` degrees since the
+    last one published. 1 mm and 0.5 degree: below what an operator can see at arm's length."""
+
+    position: float = 0.001
+    angle_deg: float = 0.5
+
+
+class Remote:
+    """The remote scene C on a Zenoh session. ``run()`` steps it; everything else is message handling."""
+
+    def __init__(self, scene: SceneSpec, session, *, deadband: Deadband = Deadband(),  # type: ignore[no-untyped-def]
+                 points: int | None = None, heartbeat_s: float = 0.2, cache_dir: Path | None = None,
+                 progress: bool = False, publish: bool = True) -> None:
+        self.scene = scene
+        self.keys = Keys(scene.name)
+        self.deadband = deadband
+        self.points = points
+        self.heartbeat_s = heartbeat_s
+        self.link = Link(session)
+        self._lock = threading.Lock()
+        self._replies: dict[str, bytes] = {}  # key -> last encoded message, for late joiners
+        self._operator: np.ndarray | None = None
+        self._seq = 0
+        self._published: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+        self._body_mesh: dict[str, object] = {}
+        self._specs: dict[str, ObjectSpec] = {}
+        self._cache_dir = cache_dir
+        self.pose_updates = 0
+        top = scene.table.height if scene.table else None
+        truth = prepare_objects(scene.objects, table_top=top, cache_dir=cache_dir, progress=progress,
+                                estimates=[reference_estimate(s) for s in scene.objects])
+        spec = new_spec(scene)
+        for spec_obj, obj in zip(scene.objects, truth, strict=True):
+            add_object(spec, obj)
+            self._remember(spec_obj, obj)
+        self.twin = Twin(spec)
+        self._info = self.link.put(self.keys.info, self._scene_info()) if publish else None
+        self.link.queryable(self.keys.info, lambda _k: [(self.keys.info, self._info or b"")])
+        self.link.queryable(self.keys.state, lambda _k: list(self._replies_snapshot()))
+        self.link.subscribe(self.keys.operator, self._on_operator)
+        if publish:
+            for spec_obj in scene.objects:
+                self.publish_cloud(spec_obj.id)
+        self._last_heartbeat = 0.0
+
+    # -- what the operator and the scene do ------------------------------------------------------
+
+    def add(self, spec: ObjectSpec, position: np.ndarray | None = None) -> None:
+        """An object appears: add it to the ground truth and publish its cloud."""
+        top = self.scene.table.height if self.scene.table else None
+        (obj,) = prepare_objects([spec], table_top=top, cache_dir=self._cache_dir, progress=False,
+                                 estimates=[reference_estimate(spec)])
+        if position is not None:
+            obj = replace(obj, position=np.asarray(position, float))
+        self.twin.add(obj)
+        self._remember(spec, obj)
+        self.publish_cloud(spec.id)
+
+    def remove(self, object_id: str) -> None:
+        self.twin.remove(object_id)
+        self._specs.pop(object_id, None)
+        self._published.pop(object_id, None)
+        for kind in ("cloud", "pose"):
+            self._replies.pop(self.keys.object(object_id, kind), None)
+        self.link.put(self.keys.object(object_id, "gone"), Gone(v=VERSION, stamp_ns=now_ns(), object_id=object_id,
+                                                               seq=self._next()))
+
+    def sense(self, object_id: str, points: int | None = None) -> np.ndarray:
+        """A cloud of the object's true surface at its current pose, world frame (n, 3) metres."""
+        spec = self._specs[object_id]
+        n = points or self.points or spec.points
+        cloud = sample_surface(self._body_mesh[object_id], n, seed=zlib.crc32(object_id.encode()) + self._seq)
+        pos, quat = self.twin.pose(object_id)
+        return cloud.points @ rotation(quat).T + pos
+
+    def publish_cloud(self, object_id: str, points: int | None = None) -> int:
+        """Sense and publish one object's cloud (with its current pose); returns the bytes sent."""
+        spec = self._specs[object_id]
+        pos, quat = self.twin.pose(object_id)
+        msg = cloud_message(object_id, self._next(), self.sense(object_id, points), material=spec.material,
+                            density=spec.density, body_position=pos, body_quat=quat)
+        data = self.link.put(self.keys.object(object_id, "cloud"), msg)
+        with self._lock:
+            self._replies[self.keys.object(object_id, "cloud")] = data
+        self._publish_pose(object_id, force=True)
+        return len(data)
+
+    # -- the loop ------------------------------------------------------------------------------------
+
+    def step(self) -> None:
+        """One physics step: apply the operator's latest command, step, publish what left the deadband."""
+        if self._operator is not None:
+            self.twin.set_end_effector(self._operator)
+        self.twin.step()
+        for object_id in self._specs:
+            self._publish_pose(object_id)
+        now = time.monotonic()
+        if now - self._last_heartbeat >= self.heartbeat_s:
+            self._last_heartbeat = now
+            self.link.put(self.keys.heartbeat, Heartbeat(v=VERSION, stamp_ns=now_ns(), seq=self._next(),
+                                                         sim_time=self.twin.time, objects=len(self._specs)))
+
+    def run(self, duration: float, *, rate: float = 1000.0, stop: threading.Event | None = None) -> LoopStats:
+        """Step in real time for ``duration`` seconds (or until ``stop`` is set)."""
+        pacer = Pacer(rate)
+        substeps = max(1, round(1.0 / rate / self.twin.model.opt.timestep))
+        for _ in range(round(duration * rate)):
+            if stop is not None and stop.is_set():
+                break
+            pacer.begin()
+            for _ in range(substeps):
+                self.step()
+            left = pacer.end()
+            if left > 0:
+                time.sleep(left)
+        return pacer.stats()
+
+    def close(self) -> None:
+        self.link.close()
+        self.twin.close()
+
+    # -- internals -----------------------------------------------------------------------------------
+
+    def _remember(self, spec: ObjectSpec, obj: TwinObject) -> None:
+        mesh = source_mesh(spec)
+        mesh.apply_translation(-obj.estimate.mass.center_of_mass)  # the body frame: origin at the COM
+        self._body_mesh[spec.id] = mesh
+        self._specs[spec.id] = spec
+
+    def _publish_pose(self, object_id: str, *, force: bool = False) -> None:
+        pos, quat = self.twin.pose(object_id)
+        last = self._published.get(object_id)
+        if not force and last is not None:
+            moved = float(np.linalg.norm(pos - last[0]))
+            turned = angle_deg(quat, last[1])
+            if moved <= self.deadband.position and turned <= self.deadband.angle_deg:
+                return
+        self._published[object_id] = (pos, quat)
+        lin, ang = self.twin.velocity(object_id)
+        msg = Pose(v=VERSION, stamp_ns=now_ns(), object_id=object_id, seq=self._next(), sim_time=self.twin.time,
+                   position=_floats(pos), quat=_floats(quat), linvel=_floats(lin), angvel=_floats(ang))
+        data = self.link.put(self.keys.object(object_id, "pose"), msg)
+        with self._lock:
+            self._replies[self.keys.object(object_id, "pose")] = data
+        if not force:
+            self.pose_updates += 1
+
+    def _replies_snapshot(self) -> list[tuple[str, bytes]]:
+        with self._lock:
+            items = list(self._replies.items())
+        # Clouds first: a pose is only useful to a twin that knows the object.
+        return sorted(items, key=lambda kv: not kv[0].endswith("/cloud"))
+
+    def _on_operator(self, _key: str, msg) -> None:  # type: ignore[no-untyped-def]
+        if isinstance(msg, OperatorCommand):
+            self._operator = np.asarray(msg.position)
+
+    def _scene_info(self) -> SceneInfo:
+        t, ee = self.scene.table, self.scene.end_effector
+        return SceneInfo(v=VERSION, stamp_ns=now_ns(), name=self.scene.name,
+                         table_size=None if t is None else _floats(t.size), table_height=0.0 if t is None else t.height,
+                         table_material="" if t is None else t.material,
+                         ee_radius=0.0 if ee is None else ee.radius,
+                         ee_position=(0.0, 0.0, 0.0) if ee is None else _floats(ee.position))
+
+    def _next(self) -> int:
+        self._seq += 1
+        return self._seq
+
+
+def _floats(values) -> tuple[float, ...]:  # type: ignore[no-untyped-def]
+    """Plain floats for the encoder (it takes no numpy scalars)."""
+    return tuple(float(x) for x in values)

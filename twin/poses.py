@@ -1,0 +1,43 @@
+"""Rigid-body orientation arithmetic on w x y z quaternions (MuJoCo's order), via MuJoCo's own routines."""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def rotation(q: np.ndarray) -> np.ndarray:
+    """3x3 rotation matrix of quaternion ``q`` (normalised here)."""
+    import mujoco
+
+    q = np.asarray(q, dtype=np.float64)
+    m = np.empty(9)
+    mujoco.mju_quat2Mat(m, q / np.linalg.norm(q))
+    return m.reshape(3, 3)
+
+
+def quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The rotation ``a`` after ``b``."""
+    import mujoco
+
+    out = np.empty(4)
+    mujoco.mju_mulQuat(out, np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64))
+    return out
+
+
+def quat_conj(q: np.ndarray) -> np.ndarray:
+    """Inverse of a unit quaternion."""
+    return np.array([q[0], -q[1], -q[2], -q[3]], dtype=np.float64)
+
+
+def angle_deg(a: np.ndarray, b: np.ndarray) -> float:
+    """Angle between two orientations, degrees (0 to 180)."""
+    return float(2 * np.degrees(np.arccos(min(1.0, abs(float(np.dot(a, b)))))))
+
+
+def nlerp(a: np.ndarray, b: np.ndarray, t: float) -> np.ndarray:
+    """Normalised linear blend from ``a`` (t=0) to ``b`` (t=1) along the short way: slerp for small steps."""
+    b = np.asarray(b, dtype=np.float64)
+    if np.dot(a, b) < 0:
+        b = -b
+    out = np.asarray(a, dtype=np.float64) + t * (b - a)
+    return out / np.linalg.norm(out)
