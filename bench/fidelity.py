@@ -17,9 +17,9 @@ from rich.table import Table
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from twin.fidelity import compare  # noqa: E402
-from twin.objects import estimate_object, prepare_objects, reference_estimate  # noqa: E402
-from twin.scenefile import load_scene  # noqa: E402
+from twin.fidelity import compare
+from twin.objects import estimate_object, prepare_objects, reference_estimate
+from twin.scenefile import load_scene
 
 
 def main() -> int:

@@ -31,12 +31,12 @@ from rich.table import Table
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from estimation.inertia import signed_volumes  # noqa: E402
-from twin.decompose import DEFAULT_SETTINGS, CoacdSettings  # noqa: E402
-from twin.model import DEFAULT_PHYSICS, PhysicsSettings, add_object, new_spec  # noqa: E402
-from twin.objects import TwinObject, estimate_object, prepare_objects  # noqa: E402
-from twin.scenefile import SceneSpec, load_scene  # noqa: E402
-from twin.sim import Twin, push_trajectory  # noqa: E402
+from estimation.inertia import signed_volumes
+from twin.decompose import DEFAULT_SETTINGS, CoacdSettings
+from twin.model import DEFAULT_PHYSICS, PhysicsSettings, add_object, new_spec
+from twin.objects import TwinObject, estimate_object, prepare_objects
+from twin.scenefile import SceneSpec, load_scene
+from twin.sim import Twin, push_trajectory
 
 PUSH_SECONDS = 3.0
 NAIVE_COACD = replace(DEFAULT_SETTINGS, threshold=0.05, max_convex_hull=-1, max_ch_vertex=256, convex_tolerance=0.0)

@@ -104,6 +104,7 @@ class Local:
         info = self._find_scene(scene, wait)
         self.keys = Keys(info.name)
         self.twin = Twin(new_spec(_scene_spec(info)))
+        self._floor = info.table_height if info.table_size is not None else 0.0
         self.inbox: queue.SimpleQueue = queue.SimpleQueue()
         self.stale = False
         self._jobs: dict[str, tuple[Future, Cloud, float]] = {}
@@ -119,6 +120,7 @@ class Local:
         # A late joiner asks for the current scene: every cloud and pose the remote last published.
         self.link.query(self.keys.state, self._enqueue, timeout=wait)
         self._start = time.monotonic()
+        self._drain()  # start estimating what the query brought before the loop runs
 
     # -- loop ----------------------------------------------------------------------------------------
 
@@ -151,12 +153,7 @@ class Local:
 
     def iterate(self, trajectory=None) -> None:  # type: ignore[no-untyped-def]
         """One loop iteration: handle messages, take finished objects, correct poses, step once."""
-        while True:
-            try:
-                item = self.inbox.get_nowait()
-            except queue.Empty:
-                break
-            self._handle(*item)
+        self._drain()
         self._collect()
         self.twin.poll()
         for object_id in list(self._targets):
@@ -168,10 +165,34 @@ class Local:
         self.twin.step()
         self._check_link()
 
+    def _drain(self) -> None:
+        while True:
+            try:
+                item = self.inbox.get_nowait()
+            except queue.Empty:
+                return
+            self._handle(*item)
+
     def close(self) -> None:
         self._pool.shutdown(wait=True, cancel_futures=True)
         self.link.close()
         self.twin.close()
+
+    def remote_pose(self, object_id: str) -> np.ndarray | None:
+        """Where the remote last said the object is, mapped onto the twin's body (world, metres)."""
+        latest, offset = self._latest.get(object_id), self._offsets.get(object_id)
+        if latest is None or offset is None:
+            return None
+        return np.asarray(latest.position) + rotation(np.asarray(latest.quat)) @ offset[0]
+
+    @property
+    def expected(self) -> int:
+        """Objects the twin knows of (in the twin or being estimated)."""
+        return len(self._clouds)
+
+    @property
+    def adding(self) -> bool:
+        return bool(self._jobs) or self.twin.edits_pending > 0
 
     @property
     def objects(self) -> list[str]:
@@ -220,6 +241,7 @@ class Local:
                 self.report.estimation_errors += 1
                 log.warning("object %r: could not estimate its cloud: %s", object_id, exc)
                 continue
+            obj = self._clear_of_support(obj)
             exists = self.twin.has(object_id)
 
             def edit(spec, obj=obj, exists=exists) -> None:  # type: ignore[no-untyped-def]
@@ -236,6 +258,22 @@ class Local:
                 self.report.add_latency.append(time.monotonic() - received)
 
             self.twin.edit_async(edit, then=done)
+
+    def _clear_of_support(self, obj: TwinObject) -> TwinObject:
+        """Lift an object whose hulls reach into the table (or floor) out of it.
+
+        An estimated surface can bulge a few cells past the true one; placed where the remote body rests,
+        its hulls would start inside the table and be shot out. The lift becomes part of the object's
+        offset, so later corrections keep it.
+        """
+        lowest = obj.position[2] + min(float(v[:, 2].min()) for v, _ in obj.hulls)
+        if obj.position[2] > self._floor > lowest - 0.01:
+            from dataclasses import replace
+
+            lift = self._floor - lowest + 0.0005
+            if lift > 0:
+                return replace(obj, position=obj.position + np.array([0.0, 0.0, lift]))
+        return obj
 
     def _correct(self, object_id: str) -> None:
         """Move the object a step towards where the remote says it is (at once if far off)."""

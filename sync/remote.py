@@ -43,12 +43,14 @@ class Remote:
 
     def __init__(self, scene: SceneSpec, session, *, deadband: Deadband = Deadband(),  # type: ignore[no-untyped-def]
                  points: int | None = None, heartbeat_s: float = 0.2, cache_dir: Path | None = None,
-                 progress: bool = False, publish: bool = True) -> None:
+                 progress: bool = False, publish: bool = True, keyframe_s: float = 1.0) -> None:
         self.scene = scene
         self.keys = Keys(scene.name)
         self.deadband = deadband
         self.points = points
         self.heartbeat_s = heartbeat_s
+        self.keyframe_s = keyframe_s
+        self._last_keyframe = time.monotonic()
         self.link = Link(session)
         self._lock = threading.Lock()
         self._replies: dict[str, bytes] = {}  # key -> last encoded message, for late joiners
@@ -98,6 +100,10 @@ class Remote:
         self.link.put(self.keys.object(object_id, "gone"), Gone(v=VERSION, stamp_ns=now_ns(), object_id=object_id,
                                                                seq=self._next()))
 
+    def cloud_points(self) -> dict[str, int]:
+        """Points per object cloud this remote sends."""
+        return {i: self.points or s.points for i, s in self._specs.items()}
+
     def sense(self, object_id: str, points: int | None = None) -> np.ndarray:
         """A cloud of the object's true surface at its current pose, world frame (n, 3) metres."""
         spec = self._specs[object_id]
@@ -128,6 +134,12 @@ class Remote:
         for object_id in self._specs:
             self._publish_pose(object_id)
         now = time.monotonic()
+        if self.keyframe_s > 0 and now - self._last_keyframe >= self.keyframe_s:
+            # Every pose now and then, moved or not: a twin that drifted on its own (its estimated shape
+            # is not the true one) is pulled back even when the remote object is still.
+            self._last_keyframe = now
+            for object_id in self._specs:
+                self._publish_pose(object_id, force=True)
         if now - self._last_heartbeat >= self.heartbeat_s:
             self._last_heartbeat = now
             self.link.put(self.keys.heartbeat, Heartbeat(v=VERSION, stamp_ns=now_ns(), seq=self._next(),
@@ -175,8 +187,7 @@ class Remote:
         data = self.link.put(self.keys.object(object_id, "pose"), msg)
         with self._lock:
             self._replies[self.keys.object(object_id, "pose")] = data
-        if not force:
-            self.pose_updates += 1
+        self.pose_updates += 1
 
     def _replies_snapshot(self) -> list[tuple[str, bytes]]:
         with self._lock:

@@ -71,10 +71,29 @@ def _parser() -> argparse.ArgumentParser:
     _coacd_options(p)
     p.set_defaults(handler=_cmd_run)
 
-    p = sub.add_parser("demo", help="end-to-end demo on the paper's objects (no server needed)")
-    p.add_argument("--duration", type=float, default=3.0)
-    p.add_argument("--json", action="store_true")
+    p = sub.add_parser("demo", help="remote scene and local twin synchronised over Zenoh on loopback (no server)")
+    p.add_argument("--duration", type=float, default=5.0, help="seconds of pushing after the twin is built")
+    p.add_argument("--scene", type=Path, help="scene TOML for the remote (default: the paper's objects)")
+    p.add_argument("--zenoh-config", type=Path, help="a Zenoh JSON5 config for both sides")
+    p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     p.set_defaults(handler=_cmd_demo)
+
+    p = sub.add_parser("remote", help="the remote scene C: ground truth, sensor, publishes clouds and poses")
+    p.add_argument("scene", type=Path, help="scene TOML file")
+    p.add_argument("--duration", type=float, default=3600.0, help="seconds to run (default 1 h)")
+    p.add_argument("--points", type=int, help="points per object cloud (default: the scene's)")
+    p.add_argument("--deadband-mm", type=float, default=1.0, help="pose deadband, position (default 1 mm)")
+    p.add_argument("--deadband-deg", type=float, default=0.5, help="pose deadband, angle (default 0.5 deg)")
+    _network_options(p, listen_default="tcp/127.0.0.1:7447")
+    p.set_defaults(handler=_cmd_remote)
+
+    p = sub.add_parser("local", help="the local twin C': follows a remote scene over Zenoh")
+    p.add_argument("--scene", help="scene name (default: the one remote that answers)")
+    p.add_argument("--duration", type=float, default=3600.0, help="seconds to run (default 1 h)")
+    p.add_argument("--stale-after", type=float, default=1.0, help="seconds of silence before the link is stale")
+    p.add_argument("--json", action="store_true", help="print the session report as JSON at the end")
+    _network_options(p, connect_default="tcp/127.0.0.1:7447")
+    p.set_defaults(handler=_cmd_local)
 
     p = sub.add_parser("materials", help="list the material table")
     p.set_defaults(handler=_cmd_materials)
@@ -298,10 +317,79 @@ def _run_with_viewer(twin, args, trajectory):  # type: ignore[no-untyped-def]
     return stats
 
 
+def _network_options(p: argparse.ArgumentParser, *, listen_default: str | None = None,
+                     connect_default: str | None = None) -> None:
+    p.add_argument("--connect", action="append", metavar="ENDPOINT",
+                   help=f"Zenoh endpoint to connect to, e.g. tcp/HOST:7447 (a zenohd router); repeatable"
+                        f"{f' (default {connect_default})' if connect_default else ''}")
+    p.add_argument("--listen", action="append", metavar="ENDPOINT",
+                   help=f"Zenoh endpoint to listen on{f' (default {listen_default})' if listen_default else ''}")
+    p.add_argument("--zenoh-config", type=Path, help="a Zenoh JSON5 config (TLS, access control, routers)")
+    p.set_defaults(listen_default=listen_default, connect_default=connect_default)
+
+
+def _session(args: argparse.Namespace):  # type: ignore[no-untyped-def]
+    from sync.session import make_config, open_session
+
+    listen = args.listen or ([args.listen_default] if args.listen_default and not args.zenoh_config else None)
+    connect = args.connect or ([args.connect_default] if args.connect_default and not args.zenoh_config else None)
+    return open_session(make_config(listen=listen, connect=connect, config_file=args.zenoh_config))
+
+
+def _cmd_remote(args: argparse.Namespace) -> int:
+    from sync.remote import Deadband, Remote
+    from twin.scenefile import load_scene
+
+    scene = load_scene(args.scene)
+    if args.deadband_mm < 0 or args.deadband_deg < 0:
+        raise TwinError("--deadband-mm and --deadband-deg must be >= 0")
+    session = _session(args)
+    try:
+        remote = Remote(scene, session, deadband=Deadband(args.deadband_mm * 1e-3, args.deadband_deg),
+                        points=args.points, progress=True)
+        print(f"remote scene {scene.name!r}: {len(scene.objects)} objects published; running (Ctrl-C stops)")
+        stats = remote.run(args.duration)
+        c = remote.link.counters
+        print(f"ran {stats.steps} steps; sent {c.messages_sent} messages, {c.bytes_sent:,} bytes; "
+              f"{remote.pose_updates} pose updates")
+        remote.close()
+    finally:
+        session.close()
+    return 0
+
+
+def _cmd_local(args: argparse.Namespace) -> int:
+    from sync.local import Local, LocalSettings, SyncError
+
+    session = _session(args)
+    try:
+        try:
+            local = Local(session, scene=args.scene, settings=LocalSettings(stale_after=args.stale_after))
+        except (SyncError, ValueError) as exc:
+            raise TwinError(str(exc)) from exc
+        stats = local.run(args.duration)
+        r, c = local.report, local.link.counters
+        record = {"objects_synced": r.objects_synced, "pose_updates": r.pose_updates,
+                  "dropped_malformed": c.dropped_malformed, "stale_events": r.stale_events,
+                  "step_p99_ms": stats.p99 * 1e3, "missed_deadlines": stats.missed}
+        print(json.dumps(record) if args.json else "  ".join(f"{k} {v}" for k, v in record.items()))
+        local.close()
+    finally:
+        session.close()
+    return 0
+
+
 def _cmd_demo(args: argparse.Namespace) -> int:
     from twin.demo import run_demo
 
-    record = run_demo(duration=args.duration, progress=not args.json)
+    if args.duration <= 0:
+        raise TwinError("--duration must be > 0")
+    if args.scene is not None:
+        from twin.scenefile import load_scene
+
+        load_scene(args.scene)  # a bad scene fails here with its own message, not in the remote process
+    record = run_demo(duration=args.duration, scene_path=args.scene, progress=not args.json,
+                      zenoh_config=None if args.zenoh_config is None else str(args.zenoh_config))
     if args.json:
         print(json.dumps(record))
     return 0
