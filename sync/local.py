@@ -30,6 +30,7 @@ from sync.messages import (
     Pose,
     SceneInfo,
     decode,
+    encode,
     now_ns,
     unpack_points,
 )
@@ -218,8 +219,6 @@ class Local:
             if self._clouds.get(msg.object_id, -1) >= msg.seq:
                 return
             self._clouds[msg.object_id] = msg.seq
-            from sync.messages import encode
-
             future = self._pool.submit(build_from_cloud, encode(msg), self.settings.coacd, self.settings.cache_dir)
             self._jobs[msg.object_id] = (future, msg, received)
         elif isinstance(msg, Gone):
