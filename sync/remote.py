@@ -95,8 +95,9 @@ class Remote:
         self.twin.remove(object_id)
         self._specs.pop(object_id, None)
         self._published.pop(object_id, None)
-        for kind in ("cloud", "pose"):
-            self._replies.pop(self.keys.object(object_id, kind), None)
+        with self._lock:  # the queryable reads these from Zenoh's threads
+            for kind in ("cloud", "pose"):
+                self._replies.pop(self.keys.object(object_id, kind), None)
         self.link.put(self.keys.object(object_id, "gone"), Gone(v=VERSION, stamp_ns=now_ns(), object_id=object_id,
                                                                seq=self._next()))
 
