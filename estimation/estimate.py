@@ -60,6 +60,9 @@ class PhysicalEstimate:
         timings: seconds per stage.
         material: the material name, if the density came from the table.
         warnings: things the user should know (suspicious units, dropped rows, an open surface).
+        points: (points_used, 3) float32, metres, cloud frame: the downsampled points the surface was
+            built from (None for 'obb', 'hull' and 'mesh'). For display and debugging.
+        normals: (points_used, 3) float32, unit, cloud frame: their outward normals (given or estimated).
     """
 
     method: str
@@ -74,6 +77,8 @@ class PhysicalEstimate:
     timings: Timings
     material: str | None = None
     warnings: tuple[str, ...] = field(default=())
+    points: np.ndarray | None = field(default=None, repr=False)
+    normals: np.ndarray | None = field(default=None, repr=False)
 
     @property
     def volume(self) -> float:
@@ -213,6 +218,7 @@ def _estimate_from_surface(
         method=method, mass=props, obb=box, vertices=vertices, faces=np.asarray(faces, dtype=np.int64),
         watertight=watertight, points_in=len(cloud), points_used=len(points), cell=cell,
         timings=Timings(**stages), material=material, warnings=tuple(warnings),
+        points=(points @ frame.T + box.center).astype(np.float32), normals=(normals @ frame.T).astype(np.float32),
     )
 
 

@@ -38,6 +38,7 @@ from twin.decompose import DEFAULT_SETTINGS, CoacdSettings
 from twin.model import add_object, new_spec, remove_object
 from twin.objects import DEFAULT_FRICTION, TwinObject, object_at_estimate
 from twin.poses import angle_deg, nlerp, quat_conj, quat_mul, rotation
+from twin.rerunlog import OFF, RerunLog, display_subset
 from twin.scenefile import EndEffectorSpec, SceneSpec, TableSpec
 from twin.sim import LoopStats, Pacer, Twin
 
@@ -84,28 +85,39 @@ class LocalReport:
     estimation_errors: int = 0
 
 
-def build_from_cloud(data: bytes, coacd: CoacdSettings, cache_dir: Path | None) -> TwinObject:
-    """Worker-process job: a cloud message's bytes -> a twin object at the estimated place."""
+def build_from_cloud(data: bytes, coacd: CoacdSettings, cache_dir: Path | None,
+                     display: bool = False) -> tuple[TwinObject, np.ndarray | None]:
+    """Worker-process job: a cloud message's bytes -> a twin object at the estimated place.
+
+    With ``display``, also a subset of the cloud (world frame at capture) for the rerun view, so the
+    loop's process never unpacks a cloud.
+    """
     msg = decode(data)
     assert isinstance(msg, Cloud)
     density, mat = resolve_density(msg.material, msg.density)
-    est = estimate(make_cloud(unpack_points(msg)), density, material=None if mat is None else mat.name)
+    points = unpack_points(msg)
+    est = estimate(make_cloud(points), density, material=None if mat is None else mat.name)
     friction = DEFAULT_FRICTION if mat is None else mat.friction
-    return object_at_estimate(msg.object_id, est, friction, coacd=coacd, cache_dir=cache_dir)
+    obj = object_at_estimate(msg.object_id, est, friction, coacd=coacd, cache_dir=cache_dir)
+    return obj, display_subset(points) if display else None
 
 
 class Local:
     """The twin C' on a Zenoh session. Call :meth:`run` (or :meth:`iterate` from your own loop)."""
 
     def __init__(self, session, *, scene: str | None = None,  # type: ignore[no-untyped-def]
-                 settings: LocalSettings = LocalSettings(), wait: float = 10.0) -> None:
+                 settings: LocalSettings = LocalSettings(), wait: float = 10.0, rlog: RerunLog = OFF) -> None:
         self.settings = settings
+        self.rlog = rlog
         self.link = Link(session)
         self.report = LocalReport()
         info = self._find_scene(scene, wait)
         self.keys = Keys(info.name)
         self.twin = Twin(new_spec(_scene_spec(info)))
         self._floor = info.table_height if info.table_size is not None else 0.0
+        if info.table_size is not None:
+            rlog.table(info.table_size, info.table_height)
+        self._dropped_seen = 0
         self.inbox: queue.SimpleQueue = queue.SimpleQueue()
         self.stale = False
         self._jobs: dict[str, tuple[Future, Cloud, float]] = {}
@@ -164,6 +176,8 @@ class Local:
             self.twin.set_end_effector(target)
             self._publish_operator(target)
         self.twin.step()
+        if self.rlog.due(self.twin.time):
+            self.rlog.frame(self.twin, remote={i: self.remote_pose(i) for i in self._offsets})
         self._check_link()
 
     def _drain(self) -> None:
@@ -179,12 +193,14 @@ class Local:
         self.link.close()
         self.twin.close()
 
-    def remote_pose(self, object_id: str) -> np.ndarray | None:
-        """Where the remote last said the object is, mapped onto the twin's body (world, metres)."""
+    def remote_pose(self, object_id: str) -> tuple[np.ndarray, np.ndarray] | None:
+        """Where the remote last said the object is, mapped onto the twin's body: (position m, quaternion
+        w x y z), world frame. None before the object is in the twin and a pose has arrived."""
         latest, offset = self._latest.get(object_id), self._offsets.get(object_id)
         if latest is None or offset is None:
             return None
-        return np.asarray(latest.position) + rotation(np.asarray(latest.quat)) @ offset[0]
+        q = np.asarray(latest.quat)
+        return np.asarray(latest.position) + rotation(q) @ offset[0], quat_mul(q, offset[1])
 
     @property
     def expected(self) -> int:
@@ -215,12 +231,15 @@ class Local:
                 self._correct(msg.object_id)
                 self.report.pose_updates += 1
                 self.report.pose_latency.append((now_ns() - msg.stamp_ns) * 1e-9)
+                self.rlog.event(self.twin.time, f"{msg.object_id}: pose correction (seq {msg.seq})", "DEBUG")
         elif isinstance(msg, Cloud):
             if self._clouds.get(msg.object_id, -1) >= msg.seq:
                 return
             self._clouds[msg.object_id] = msg.seq
-            future = self._pool.submit(build_from_cloud, encode(msg), self.settings.coacd, self.settings.cache_dir)
+            future = self._pool.submit(build_from_cloud, encode(msg), self.settings.coacd, self.settings.cache_dir,
+                                       self.rlog.enabled)
             self._jobs[msg.object_id] = (future, msg, received)
+            self.rlog.event(self.twin.time, f"{msg.object_id}: cloud received (seq {msg.seq}); estimating")
         elif isinstance(msg, Gone):
             self._jobs.pop(msg.object_id, None)
             self._clouds.pop(msg.object_id, None)
@@ -228,6 +247,9 @@ class Local:
             self._targets.pop(msg.object_id, None)
             if self.twin.has(msg.object_id):
                 self.twin.edit_async(lambda spec, i=msg.object_id: remove_object(spec, i))
+            for side in ("twin", "remote"):
+                self.rlog.removed(side, msg.object_id, self.twin.time)
+            self.rlog.event(self.twin.time, f"{msg.object_id}: removed by the remote")
 
     def _collect(self) -> None:
         for object_id, (future, msg, received) in list(self._jobs.items()):
@@ -235,10 +257,11 @@ class Local:
                 continue
             del self._jobs[object_id]
             try:
-                obj = future.result()
+                obj, display = future.result()
             except Exception as exc:  # a cloud the estimator rejects: the twin goes on without it
                 self.report.estimation_errors += 1
                 log.warning("object %r: could not estimate its cloud: %s", object_id, exc)
+                self.rlog.event(self.twin.time, f"{object_id}: could not estimate its cloud: {exc}", "ERROR")
                 continue
             obj = self._clear_of_support(obj)
             exists = self.twin.has(object_id)
@@ -248,13 +271,19 @@ class Local:
                     remove_object(spec, obj.id)
                 add_object(spec, obj)
 
-            def done(obj=obj, msg=msg, received=received) -> None:  # type: ignore[no-untyped-def]
+            def done(obj=obj, msg=msg, received=received, display=display) -> None:  # type: ignore[no-untyped-def]
                 self._offsets[obj.id] = _offset(obj, msg)
                 latest = self._latest.get(obj.id)
                 if latest is not None and latest.seq > msg.seq:
                     self._targets[obj.id] = latest
                 self.report.objects_synced += 1
                 self.report.add_latency.append(time.monotonic() - received)
+                if self.rlog.enabled:
+                    t, m = self.twin.time, obj.estimate.mass
+                    self.rlog.object("twin", obj, sim_time=t, cloud=display, pose=self.twin.pose(obj.id))
+                    self.rlog.ghost(obj, sim_time=t)
+                    self.rlog.event(t, f"{obj.id}: added to the twin ({m.mass:.3g} kg, {len(obj.hulls)} hulls) "
+                                       f"{self.report.add_latency[-1]:.2f} s after its cloud arrived")
 
             self.twin.edit_async(edit, then=done)
 
@@ -295,6 +324,9 @@ class Local:
         lin, ang = self.twin.velocity(object_id)
         self.twin.set_velocity(object_id, lin + alpha * (np.asarray(target.linvel) - lin),
                                ang + alpha * (np.asarray(target.angvel) - ang))
+        if alpha == 1.0:
+            self.rlog.event(self.twin.time, f"{object_id}: snapped {dist * 1e3:.1f} mm, {angle:.1f} deg to the "
+                                            f"remote pose", "WARN")
         if alpha == 1.0 or (dist < 2e-4 and angle < 0.1):
             del self._targets[object_id]
 
@@ -313,10 +345,17 @@ class Local:
             self.stale = True
             self.report.stale_events += 1
             log.warning("link stale: no message from the remote for %.1f s; the twin runs on", silent)
+            self.rlog.event(self.twin.time, f"link stale: no message for {silent:.1f} s", "WARN")
         elif self.stale and silent <= self.settings.stale_after:
             self.stale = False
             self.report.recoveries += 1
             log.warning("link recovered")
+            self.rlog.event(self.twin.time, "link recovered")
+        dropped = self.link.counters.dropped_malformed
+        if dropped != self._dropped_seen:
+            self.rlog.event(self.twin.time, f"dropped {dropped - self._dropped_seen} malformed message(s) "
+                                            f"({dropped} in all)", "WARN")
+            self._dropped_seen = dropped
 
     def _find_scene(self, scene: str | None, wait: float) -> SceneInfo:
         selector = Keys(scene).info if scene else any_scene_info()

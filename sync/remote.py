@@ -23,6 +23,7 @@ from sync.messages import VERSION, Gone, Heartbeat, OperatorCommand, Pose, Scene
 from twin.model import add_object, new_spec
 from twin.objects import TwinObject, prepare_objects, reference_estimate, source_mesh
 from twin.poses import angle_deg, rotation
+from twin.rerunlog import OFF, RerunLog
 from twin.scenefile import ObjectSpec, SceneSpec
 from twin.sim import LoopStats, Pacer, Twin
 
@@ -43,8 +44,10 @@ class Remote:
 
     def __init__(self, scene: SceneSpec, session, *, deadband: Deadband = Deadband(),  # type: ignore[no-untyped-def]
                  points: int | None = None, heartbeat_s: float = 0.2, cache_dir: Path | None = None,
-                 progress: bool = False, publish: bool = True, keyframe_s: float = 1.0) -> None:
+                 progress: bool = False, publish: bool = True, keyframe_s: float = 1.0,
+                 rlog: RerunLog = OFF) -> None:
         self.scene = scene
+        self.rlog = rlog
         self.keys = Keys(scene.name)
         self.deadband = deadband
         self.points = points
@@ -59,6 +62,7 @@ class Remote:
         self._published: dict[str, tuple[np.ndarray, np.ndarray]] = {}
         self._body_mesh: dict[str, object] = {}
         self._specs: dict[str, ObjectSpec] = {}
+        self._truth: dict[str, TwinObject] = {}
         self._cache_dir = cache_dir
         self.pose_updates = 0
         top = scene.table.height if scene.table else None
@@ -69,6 +73,8 @@ class Remote:
             add_object(spec, obj)
             self._remember(spec_obj, obj)
         self.twin = Twin(spec)
+        if scene.table is not None:
+            rlog.table(scene.table.size, scene.table.height)
         self._info = self.link.put(self.keys.info, self._scene_info()) if publish else None
         self.link.queryable(self.keys.info, lambda _k: [(self.keys.info, self._info or b"")])
         self.link.queryable(self.keys.state, lambda _k: list(self._replies_snapshot()))
@@ -93,7 +99,10 @@ class Remote:
 
     def remove(self, object_id: str) -> None:
         self.twin.remove(object_id)
+        self.rlog.removed("remote", object_id, self.twin.time)
+        self.rlog.event(self.twin.time, f"{object_id}: removed")
         self._specs.pop(object_id, None)
+        self._truth.pop(object_id, None)
         self._published.pop(object_id, None)
         with self._lock:  # the queryable reads these from Zenoh's threads
             for kind in ("cloud", "pose"):
@@ -117,9 +126,15 @@ class Remote:
         """Sense and publish one object's cloud (with its current pose); returns the bytes sent."""
         spec = self._specs[object_id]
         pos, quat = self.twin.pose(object_id)
-        msg = cloud_message(object_id, self._next(), self.sense(object_id, points), material=spec.material,
+        cloud = self.sense(object_id, points)
+        msg = cloud_message(object_id, self._next(), cloud, material=spec.material,
                             density=spec.density, body_position=pos, body_quat=quat)
         data = self.link.put(self.keys.object(object_id, "cloud"), msg)
+        if self.rlog.enabled:
+            truth = self._truth[object_id]  # its estimate's frame is the true mesh's: body frame + COM
+            in_mesh_frame = (cloud - pos) @ rotation(quat) + truth.estimate.mass.center_of_mass
+            self.rlog.object("remote", truth, sim_time=self.twin.time, cloud=in_mesh_frame, pose=(pos, quat))
+            self.rlog.event(self.twin.time, f"{object_id}: cloud published ({len(cloud):,} points, {len(data):,} bytes)")
         with self._lock:
             self._replies[self.keys.object(object_id, "cloud")] = data
         self._publish_pose(object_id, force=True)
@@ -132,6 +147,8 @@ class Remote:
         if self._operator is not None:
             self.twin.set_end_effector(self._operator)
         self.twin.step()
+        if self.rlog.due(self.twin.time):
+            self.rlog.frame(self.twin, side="remote")
         for object_id in self._specs:
             self._publish_pose(object_id)
         now = time.monotonic()
@@ -172,6 +189,7 @@ class Remote:
         mesh.apply_translation(-obj.estimate.mass.center_of_mass)  # the body frame: origin at the COM
         self._body_mesh[spec.id] = mesh
         self._specs[spec.id] = spec
+        self._truth[spec.id] = obj
 
     def _publish_pose(self, object_id: str, *, force: bool = False) -> None:
         pos, quat = self.twin.pose(object_id)

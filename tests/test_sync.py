@@ -2,14 +2,12 @@
 
 from __future__ import annotations
 
-import threading
 import time
 
 import numpy as np
 import pytest
 
 from sync.keys import Keys
-from sync.local import Local, LocalSettings
 from sync.messages import (
     VERSION,
     Heartbeat,
@@ -19,40 +17,9 @@ from sync.messages import (
     encode,
     unpack_points,
 )
-from sync.remote import Remote
-from sync.session import SessionError, free_port, make_config, open_session
-from twin.scenefile import parse_scene
+from sync.session import SessionError, free_port, make_config
 
-SCENE = {
-    "name": "synctest",
-    "table": {"size": [1.0, 0.6, 0.04], "height": 0.5},
-    "end_effector": {"radius": 0.02, "position": [-0.3, 0.0, 0.56]},
-    "objects": [
-        {"id": "crate", "primitive": {"type": "box", "size": [0.12, 0.08, 0.06]}, "material": "wood_pine",
-         "position": [0.0, 0.0], "points": 8000},
-        {"id": "can", "primitive": {"type": "cylinder", "size": [0.03, 0.1]}, "density": 700,
-         "position": [0.2, 0.1], "points": 8000},
-    ],
-}
-
-
-class RemoteRunner:
-    """A remote scene stepping in a thread; stop() and start() make it fall silent and come back."""
-
-    def __init__(self, remote: Remote) -> None:
-        self.remote = remote
-        self._stop = threading.Event()
-        self._thread: threading.Thread | None = None
-
-    def start(self) -> None:
-        self._stop.clear()
-        self._thread = threading.Thread(target=self.remote.run, args=(600.0,), kwargs={"stop": self._stop})
-        self._thread.start()
-
-    def stop(self) -> None:
-        self._stop.set()
-        if self._thread is not None:
-            self._thread.join()
+from loopback import SCENE, close_local, open_local, running_remote, wait_objects
 
 
 @pytest.fixture
@@ -62,31 +29,12 @@ def endpoint() -> str:
 
 @pytest.fixture
 def remote(endpoint, tmp_path_factory):
-    session = open_session(make_config(listen=[endpoint]))
-    r = Remote(parse_scene(SCENE), session, cache_dir=tmp_path_factory.getbasetemp() / "coacd")
-    runner = RemoteRunner(r)
-    runner.start()
-    yield runner
-    runner.stop()
-    r.close()
-    session.close()
+    with running_remote(endpoint, tmp_path_factory.getbasetemp() / "coacd") as runner:
+        yield runner
 
 
 def _local(endpoint, tmp_path_factory, **settings):  # type: ignore[no-untyped-def]
-    session = open_session(make_config(connect=[endpoint]))
-    local = Local(session, settings=LocalSettings(cache_dir=tmp_path_factory.getbasetemp() / "coacd", **settings))
-    local._session = session  # closed with it below
-    return local
-
-
-def _close(local: Local) -> None:
-    local.close()
-    local._session.close()
-
-
-def _wait_objects(local: Local, n: int, timeout: float = 60.0) -> None:
-    local.run(timeout, until=lambda: len(local.objects) >= n)
-    assert len(local.objects) == n, f"only {local.objects} arrived in {timeout} s"
+    return open_local(endpoint, tmp_path_factory.getbasetemp() / "coacd", **settings)
 
 
 def test_cloud_codec_round_trip_and_ratio():
@@ -120,7 +68,7 @@ def test_late_joiner_gets_the_whole_scene_and_follows_poses(remote, endpoint, tm
     time.sleep(0.5)  # the remote has published everything before the twin exists
     local = _local(endpoint, tmp_path_factory)
     try:
-        _wait_objects(local, 2)
+        wait_objects(local, 2)
         assert local.report.objects_synced == 2
         # The remote moves the crate; the twin follows through deadband pose updates.
         r = remote.remote
@@ -133,13 +81,13 @@ def test_late_joiner_gets_the_whole_scene_and_follows_poses(remote, endpoint, tm
         assert local.report.pose_updates > 0
         assert local.link.counters.dropped_malformed == 0
     finally:
-        _close(local)
+        close_local(local)
 
 
 def test_malformed_messages_are_dropped_counted_and_survived(remote, endpoint, tmp_path_factory):
     local = _local(endpoint, tmp_path_factory)
     try:
-        _wait_objects(local, 2)
+        wait_objects(local, 2)
         keys = Keys(SCENE["name"])
         bad = [b"garbage", encode(Heartbeat(v=99, stamp_ns=0, seq=1, sim_time=0.0, objects=0))[:-1],
                encode(Heartbeat(v=99, stamp_ns=0, seq=1, sim_time=0.0, objects=0))]
@@ -151,13 +99,13 @@ def test_malformed_messages_are_dropped_counted_and_survived(remote, endpoint, t
         assert local.link.counters.dropped_malformed == len(bad) + 1
         assert sorted(local.objects) == ["can", "crate"]  # and the twin runs on
     finally:
-        _close(local)
+        close_local(local)
 
 
 def test_remote_silence_marks_stale_then_recovers(remote, endpoint, tmp_path_factory):
     local = _local(endpoint, tmp_path_factory, stale_after=0.3)
     try:
-        _wait_objects(local, 2)
+        wait_objects(local, 2)
         local.run(0.2)
         assert not local.stale
         remote.stop()
@@ -169,14 +117,14 @@ def test_remote_silence_marks_stale_then_recovers(remote, endpoint, tmp_path_fac
         local.run(0.5)
         assert not local.stale and local.report.recoveries == 1
     finally:
-        _close(local)
+        close_local(local)
 
 
 def test_two_twins_on_one_remote_and_operator_commands(remote, endpoint, tmp_path_factory):
     a, b = _local(endpoint, tmp_path_factory), _local(endpoint, tmp_path_factory)
     try:
-        _wait_objects(a, 2)
-        _wait_objects(b, 2)
+        wait_objects(a, 2)
+        wait_objects(b, 2)
         target = np.array([-0.25, -0.1, 0.6])
         a.run(0.5, trajectory=lambda t: target)
         ee = remote.remote.twin.data.mocap_pos[0]
@@ -185,8 +133,8 @@ def test_two_twins_on_one_remote_and_operator_commands(remote, endpoint, tmp_pat
             for oid in ("crate", "can"):
                 assert np.linalg.norm(local.twin.pose(oid)[0] - remote.remote.twin.pose(oid)[0]) < 0.01
     finally:
-        _close(a)
-        _close(b)
+        close_local(a)
+        close_local(b)
 
 
 def test_a_missing_config_file_is_a_clear_error(tmp_path):

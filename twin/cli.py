@@ -52,12 +52,14 @@ def _parser() -> argparse.ArgumentParser:
                    help="sensor position (file units) to orient estimated normals towards")
     p.add_argument("--mesh-out", type=Path, help="write the reconstructed mesh (.stl, .ply, .obj)")
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
+    _rerun_option(p)
     p.set_defaults(handler=_cmd_estimate)
 
     p = sub.add_parser("build", help="build a scene file into DIR/scene.xml and DIR/assets/")
     p.add_argument("scene", type=Path, help="scene TOML file")
     p.add_argument("--out", type=Path, required=True, help="output directory (replaced atomically)")
     _coacd_options(p)
+    _rerun_option(p)
     p.set_defaults(handler=_cmd_build)
 
     p = sub.add_parser("run", help="run the local twin loop, paced to real time")
@@ -69,6 +71,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--no-realtime", action="store_true", help="run as fast as possible")
     p.add_argument("--json", action="store_true")
     _coacd_options(p)
+    _rerun_option(p)
     p.set_defaults(handler=_cmd_run)
 
     p = sub.add_parser("demo", help="remote scene and local twin synchronised over Zenoh on loopback (no server)")
@@ -76,6 +79,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--scene", type=Path, help="scene TOML for the remote (default: the paper's objects)")
     p.add_argument("--zenoh-config", type=Path, help="a Zenoh JSON5 config for both sides")
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
+    _rerun_option(p)
     p.set_defaults(handler=_cmd_demo)
 
     p = sub.add_parser("remote", help="the remote scene C: ground truth, sensor, publishes clouds and poses")
@@ -85,6 +89,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--deadband-mm", type=float, default=1.0, help="pose deadband, position (default 1 mm)")
     p.add_argument("--deadband-deg", type=float, default=0.5, help="pose deadband, angle (default 0.5 deg)")
     _network_options(p, listen_default="tcp/127.0.0.1:7447")
+    _rerun_option(p)
     p.set_defaults(handler=_cmd_remote)
 
     p = sub.add_parser("local", help="the local twin C': follows a remote scene over Zenoh")
@@ -93,6 +98,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--stale-after", type=float, default=1.0, help="seconds of silence before the link is stale")
     p.add_argument("--json", action="store_true", help="print the session report as JSON at the end")
     _network_options(p, connect_default="tcp/127.0.0.1:7447")
+    _rerun_option(p)
     p.set_defaults(handler=_cmd_local)
 
     p = sub.add_parser("materials", help="list the material table")
@@ -110,15 +116,17 @@ def _cmd_estimate(args: argparse.Namespace) -> int:
     scale = unit_scale(args.units)
     density, mat = resolve_density(args.material, args.density)
     name = None if mat is None else mat.name
-    t0 = time.perf_counter()
-    cloud = load_cloud(args.cloud, scale=scale)
-    read = time.perf_counter() - t0
-    viewpoint = None if args.viewpoint is None else np.asarray(args.viewpoint) * scale
-    result = estimate(cloud, density, method=args.method, material=name, viewpoint=viewpoint,
-                      read_seconds=read)
-    if args.mesh_out is not None:
-        _write_mesh(result.vertices, result.faces, args.mesh_out)
-    seconds = time.perf_counter() - t0
+    with _open_rerun(args) as rlog:
+        t0 = time.perf_counter()
+        cloud = load_cloud(args.cloud, scale=scale)
+        read = time.perf_counter() - t0
+        viewpoint = None if args.viewpoint is None else np.asarray(args.viewpoint) * scale
+        result = estimate(cloud, density, method=args.method, material=name, viewpoint=viewpoint,
+                          read_seconds=read)
+        if args.mesh_out is not None:
+            _write_mesh(result.vertices, result.faces, args.mesh_out)
+        seconds = time.perf_counter() - t0
+        rlog.estimate(args.cloud.stem, result, cloud.points)
     record = estimate_to_json(result, seconds)
     if args.json:
         print(json.dumps(record))
@@ -211,8 +219,10 @@ def _cmd_build(args: argparse.Namespace) -> int:
     from twin.build import build_scene, write_scene
     from twin.scenefile import load_scene
 
-    built = build_scene(load_scene(args.scene), coacd=_coacd_settings(args), cache_dir=args.cache_dir)
-    path = write_scene(built.spec, args.out)
+    with _open_rerun(args) as rlog:  # before the work: a bad --rerun should not cost a build
+        built = build_scene(load_scene(args.scene), coacd=_coacd_settings(args), cache_dir=args.cache_dir)
+        path = write_scene(built.spec, args.out)
+        _log_built(rlog, built)
     _print_objects(built)
     print(f"wrote {path} ({built.seconds:.1f} s)")
     return 0
@@ -280,17 +290,21 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
     if args.duration <= 0 or args.rate <= 0:
         raise TwinError("--duration and --rate must be positive")
-    twin, _ = _load_twin(args)
-    with twin:
-        trajectory = _trajectory(args, twin) if twin.model.nmocap else None
-        if args.viewer:
-            stats = _run_with_viewer(twin, args, trajectory)
-        else:
-            stats = run_paced(twin, args.duration, args.rate, trajectory=trajectory, realtime=not args.no_realtime)
-        record = {"steps": stats.steps, "rate_hz": args.rate, "step_p50_ms": stats.p50 * 1e3,
-                  "step_p99_ms": stats.p99 * 1e3, "step_max_ms": stats.max * 1e3, "missed_deadlines": stats.missed,
-                  "wall_s": stats.wall, "objects": len(twin.object_ids()),
-                  "ee_force_n": twin.end_effector_force().tolist() if twin.model.nmocap else None}
+    with _open_rerun(args) as rlog:
+        twin, built = _load_twin(args)
+        with twin:
+            if built is not None:
+                _log_built(rlog, built)
+            trajectory = _trajectory(args, twin) if twin.model.nmocap else None
+            if args.viewer:
+                stats = _run_with_viewer(twin, args, trajectory)
+            else:
+                stats = run_paced(twin, args.duration, args.rate, trajectory=trajectory, realtime=not args.no_realtime,
+                                  rlog=rlog)
+            record = {"steps": stats.steps, "rate_hz": args.rate, "step_p50_ms": stats.p50 * 1e3,
+                      "step_p99_ms": stats.p99 * 1e3, "step_max_ms": stats.max * 1e3, "missed_deadlines": stats.missed,
+                      "wall_s": stats.wall, "objects": len(twin.object_ids()),
+                      "ee_force_n": twin.end_effector_force().tolist() if twin.model.nmocap else None}
     if args.json:
         print(json.dumps(record))
     else:
@@ -317,6 +331,33 @@ def _run_with_viewer(twin, args, trajectory):  # type: ignore[no-untyped-def]
     return stats
 
 
+def _rerun_option(p: argparse.ArgumentParser) -> None:
+    from twin.rerunlog import DEFAULT_RATE_HZ
+
+    p.add_argument("--rerun", nargs="+", metavar="MODE",
+                   help="log to rerun: 'spawn' (a viewer), 'save FILE.rrd', or 'connect [HOST:PORT]'")
+    p.add_argument("--rerun-rate", type=float, default=DEFAULT_RATE_HZ,
+                   help=f"poses and forces logged per simulated second (default {DEFAULT_RATE_HZ:g})")
+
+
+def _open_rerun(args: argparse.Namespace):  # type: ignore[no-untyped-def]
+    """The rerun log the command's --rerun asks for (off without it)."""
+    from twin.rerunlog import RerunLog, parse_target
+
+    target = None if args.rerun is None else parse_target(args.rerun, args.rerun_rate)
+    if target is not None and target.mode == "save":
+        print(f"rerun: recording to {target.address} (open it with: rerun {target.address})", file=sys.stderr)
+    return RerunLog.open(target)
+
+
+def _log_built(rlog, built) -> None:  # type: ignore[no-untyped-def]
+    t = built.scene.table
+    if t is not None:
+        rlog.table(t.size, t.height)
+    for obj in built.objects:
+        rlog.object("twin", obj)
+
+
 def _network_options(p: argparse.ArgumentParser, *, listen_default: str | None = None,
                      connect_default: str | None = None) -> None:
     p.add_argument("--connect", action="append", metavar="ENDPOINT",
@@ -337,16 +378,23 @@ def _session(args: argparse.Namespace):  # type: ignore[no-untyped-def]
 
 
 def _cmd_remote(args: argparse.Namespace) -> int:
-    from sync.remote import Deadband, Remote
     from twin.scenefile import load_scene
 
     scene = load_scene(args.scene)
     if args.deadband_mm < 0 or args.deadband_deg < 0:
         raise TwinError("--deadband-mm and --deadband-deg must be >= 0")
+    with _open_rerun(args) as rlog:
+        _run_remote(args, scene, rlog)
+    return 0
+
+
+def _run_remote(args: argparse.Namespace, scene, rlog) -> None:  # type: ignore[no-untyped-def]
+    from sync.remote import Deadband, Remote
+
     session = _session(args)
     try:
         remote = Remote(scene, session, deadband=Deadband(args.deadband_mm * 1e-3, args.deadband_deg),
-                        points=args.points, progress=True)
+                        points=args.points, progress=True, rlog=rlog)
         print(f"remote scene {scene.name!r}: {len(scene.objects)} objects published; running (Ctrl-C stops)")
         stats = remote.run(args.duration)
         c = remote.link.counters
@@ -355,16 +403,22 @@ def _cmd_remote(args: argparse.Namespace) -> int:
         remote.close()
     finally:
         session.close()
-    return 0
 
 
 def _cmd_local(args: argparse.Namespace) -> int:
+    with _open_rerun(args) as rlog:
+        _run_local(args, rlog)
+    return 0
+
+
+def _run_local(args: argparse.Namespace, rlog) -> None:  # type: ignore[no-untyped-def]
     from sync.local import Local, LocalSettings, SyncError
 
     session = _session(args)
     try:
         try:
-            local = Local(session, scene=args.scene, settings=LocalSettings(stale_after=args.stale_after))
+            local = Local(session, scene=args.scene, settings=LocalSettings(stale_after=args.stale_after),
+                          rlog=rlog)
         except (SyncError, ValueError) as exc:
             raise TwinError(str(exc)) from exc
         stats = local.run(args.duration)
@@ -376,7 +430,6 @@ def _cmd_local(args: argparse.Namespace) -> int:
         local.close()
     finally:
         session.close()
-    return 0
 
 
 def _cmd_demo(args: argparse.Namespace) -> int:
@@ -388,8 +441,9 @@ def _cmd_demo(args: argparse.Namespace) -> int:
         from twin.scenefile import load_scene
 
         load_scene(args.scene)  # a bad scene fails here with its own message, not in the remote process
-    record = run_demo(duration=args.duration, scene_path=args.scene, progress=not args.json,
-                      zenoh_config=None if args.zenoh_config is None else str(args.zenoh_config))
+    with _open_rerun(args) as rlog:
+        record = run_demo(duration=args.duration, scene_path=args.scene, progress=not args.json,
+                          zenoh_config=None if args.zenoh_config is None else str(args.zenoh_config), rlog=rlog)
     if args.json:
         print(json.dumps(record))
     return 0

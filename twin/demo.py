@@ -17,6 +17,8 @@ from pathlib import Path
 import numpy as np
 from rich.console import Console
 
+from twin.rerunlog import OFF, RerunLog
+
 #: What streaming raw clouds would cost: float32 x y z per point, at a depth camera's frame rate.
 RAW_BYTES_PER_POINT, RAW_STREAM_HZ = 12, 30.0
 
@@ -45,8 +47,12 @@ def _remote_main(scene_path: str, endpoint: str, zenoh_config: str | None, ready
 
 
 def run_demo(*, duration: float = 5.0, scene_path: Path | None = None, zenoh_config: str | None = None,
-             progress: bool = True) -> dict:
-    """Run both sides and return the summary (the ``--json`` record)."""
+             progress: bool = True, rlog: RerunLog = OFF) -> dict:
+    """Run both sides and return the summary (the ``--json`` record).
+
+    ``rlog``: where the twin's side logs (its objects, its poses beside the remote poses it received,
+    divergence, force, sync events). The remote process logs nothing.
+    """
     from sync.local import Local, LocalSettings
     from sync.session import SessionError, free_port, make_config, open_session
     from twin.sim import push_trajectory
@@ -72,7 +78,7 @@ def run_demo(*, duration: float = 5.0, scene_path: Path | None = None, zenoh_con
     local = None
     try:
         t_join = time.perf_counter()
-        local = Local(session, settings=LocalSettings(workers=2))
+        local = Local(session, settings=LocalSettings(workers=2), rlog=rlog)
         expected = local.expected
         console.print(f"twin joined late and got {expected} clouds; estimating them while the loop runs at 1 kHz")
         local.run(600.0, until=lambda: len(local.objects) >= expected and not local.adding)
@@ -84,8 +90,8 @@ def run_demo(*, duration: float = 5.0, scene_path: Path | None = None, zenoh_con
         stats = local.run(duration, trajectory=lambda t: push(t - t_push))
         session_s = time.perf_counter() - t_join
         report, counters = local.report, local.link.counters
-        drift = {i: float(np.linalg.norm(local.twin.pose(i)[0] - local.remote_pose(i))) for i in local.objects
-                 if local.remote_pose(i) is not None}
+        drift = {i: float(np.linalg.norm(local.twin.pose(i)[0] - r[0])) for i in local.objects
+                 if (r := local.remote_pose(i)) is not None}
     finally:
         stop.set()
         if local is not None:

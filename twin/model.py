@@ -21,8 +21,8 @@ TIMESTEP = 0.001
 #: Visual geoms neither collide nor are collided with.
 VISUAL_GROUP, COLLISION_GROUP = 1, 3
 
-#: Names of the end-effector parts (the twin's API for operator devices).
-EE_TARGET, EE_BODY, EE_SITE, EE_FORCE, EE_TORQUE = "ee_target", "ee", "ee_site", "ee_force", "ee_torque"
+#: Names of the end-effector bodies (the twin's API for operator devices).
+EE_TARGET, EE_BODY = "ee_target", "ee"
 
 #: Weld solref of the end effector to its mocap target: stiff (20 ms) but not rigid, so pushing into an
 #: object yields a force a haptic device can render instead of an impulse.
@@ -88,7 +88,7 @@ def new_spec(scene: SceneSpec, physics: PhysicsSettings = DEFAULT_PHYSICS):  # t
 
 
 def add_end_effector(spec, ee: EndEffectorSpec) -> None:  # type: ignore[no-untyped-def]
-    """A sphere welded (softly) to a mocap target, with a force/torque sensor at its centre."""
+    """A sphere welded (softly) to a mocap target; :meth:`twin.sim.Twin.end_effector_force` reads its contacts."""
     import mujoco
 
     target = spec.worldbody.add_body(name=EE_TARGET, mocap=True, pos=list(ee.position))
@@ -101,20 +101,15 @@ def add_end_effector(spec, ee: EndEffectorSpec) -> None:  # type: ignore[no-unty
     geom = body.add_geom(type=mujoco.mjtGeom.mjGEOM_SPHERE, size=[ee.radius, 0, 0], mass=0.2,
                          rgba=[0.2, 0.6, 0.9, 1])
     geom.info = "end effector"
-    body.add_site(name=EE_SITE)
     weld = spec.add_equality(type=mujoco.mjtEq.mjEQ_WELD, name1=EE_TARGET, name2=EE_BODY,
                              objtype=mujoco.mjtObj.mjOBJ_BODY)
     weld.solref = list(EE_WELD_SOLREF)
     # anchor (3), relative pose: position (3) and quaternion w x y z (4), torque scale. Set explicitly:
     # the spec's default is MJCF's "from the initial pose" sentinel, which the compiled model keeps.
     weld.data = [0, 0, 0, 0, 0, 0, 1, 0, 0, 0, 1] + [0] * (len(weld.data) - 11)
-    # The sphere would otherwise fall off its target under gravity; gravity compensation makes the weld
-    # carry only contact forces, which is what the sensor should read.
+    # The sphere would otherwise sag below its target under gravity; gravity compensation makes the weld
+    # carry only contact forces.
     body.gravcomp = 1.0
-    spec.add_sensor(name=EE_FORCE, type=mujoco.mjtSensor.mjSENS_FORCE, objtype=mujoco.mjtObj.mjOBJ_SITE,
-                    objname=EE_SITE)
-    spec.add_sensor(name=EE_TORQUE, type=mujoco.mjtSensor.mjSENS_TORQUE, objtype=mujoco.mjtObj.mjOBJ_SITE,
-                    objname=EE_SITE)
 
 
 def add_object(spec, obj: TwinObject, *, rgba: tuple[float, float, float, float] | None = None) -> None:  # type: ignore[no-untyped-def]

@@ -41,3 +41,9 @@ def nlerp(a: np.ndarray, b: np.ndarray, t: float) -> np.ndarray:
         b = -b
     out = np.asarray(a, dtype=np.float64) + t * (b - a)
     return out / np.linalg.norm(out)
+
+
+def to_xyzw(q: np.ndarray) -> np.ndarray:
+    """MuJoCo's w x y z quaternion in the x y z w order that rerun and scipy use."""
+    q = np.asarray(q, dtype=np.float64)
+    return np.array([q[1], q[2], q[3], q[0]])

@@ -11,8 +11,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from twin.model import EE_FORCE, EE_TARGET, add_object, body_pose, remove_object
+from twin.model import EE_BODY, EE_TARGET, add_object, body_pose, remove_object
 from twin.objects import TwinObject
+from twin.rerunlog import OFF, RerunLog
 
 log = logging.getLogger(__name__)
 
@@ -34,6 +35,7 @@ class Twin:
         self._mocap = self._mocap_id()
         self._editor: ThreadPoolExecutor | None = None
         self._pending: deque[tuple[Future, Callable[[], None] | None]] = deque()
+        self._ids_of, self._ids = None, []  # object_ids() of this model
 
     def __enter__(self) -> Twin:
         return self
@@ -67,22 +69,44 @@ class Twin:
         self.data.mocap_pos[self._mocap] = position
 
     def end_effector_force(self) -> np.ndarray:
-        """Contact force on the end effector (N, sensor frame = world axes at identity pose), (3,)."""
+        """Net contact force the scene exerts on the end effector, world axes, newtons, (3,).
+
+        The sum over the sphere's contacts: what a haptic device should render (zero in free space). A
+        force sensor at the sphere would also read its own weight, which gravity compensation cancels
+        in the dynamics but not in the sensor (a constant 1.96 N at rest).
+        """
         import mujoco
 
-        sid = mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_SENSOR, EE_FORCE)
-        if sid < 0:
+        if self._mocap is None:
             raise LookupError("this scene has no end effector")
-        adr = self.model.sensor_adr[sid]
-        return self.data.sensordata[adr:adr + 3].copy()
+        m, d = self.model, self.data
+        ee = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, EE_BODY)
+        total, f6 = np.zeros(3), np.zeros(6)
+        for i in range(d.ncon):
+            c = d.contact[i]
+            b1, b2 = m.geom_bodyid[c.geom1], m.geom_bodyid[c.geom2]
+            if ee not in (b1, b2) or c.efc_address < 0:
+                continue
+            mujoco.mj_contactForce(m, d, i, f6)
+            force = c.frame.reshape(3, 3).T @ f6[:3]  # contact frame -> world; acts on geom2, from geom1
+            total += force if b2 == ee else -force
+        return total
 
     def pose(self, object_id: str) -> tuple[np.ndarray, np.ndarray]:
         """(position, quaternion w x y z) of an object's centre of mass."""
         return body_pose(self.model, self.data, object_id)
 
     def object_ids(self) -> list[str]:
-        # Objects are the bodies with a free joint named "<id>/free" (element info is not saved in XML).
-        return [b.name for b in self.spec.bodies if any(j.name == f"{b.name}/free" for j in b.joints)]
+        """The objects in the running model (not in a spec edit still compiling)."""
+        if self._ids_of is not self.model:
+            # Objects are the bodies with a free joint named "<id>/free" (element info is not saved in XML).
+            import mujoco
+
+            m = self.model
+            names = (mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_JOINT, j) or "" for j in range(m.njnt))
+            self._ids = [n.removesuffix("/free") for n in names if n.endswith("/free")]
+            self._ids_of = self.model
+        return list(self._ids)
 
     def add(self, obj: TwinObject) -> None:
         """Add an object without disturbing the others."""
@@ -271,13 +295,13 @@ class Pacer:
                          self.missed, time.perf_counter() - self.start)
 
 
-def run_paced(twin: Twin, duration: float, rate: float, *,
-              trajectory=None, realtime: bool = True) -> LoopStats:  # type: ignore[no-untyped-def]
+def run_paced(twin: Twin, duration: float, rate: float, *, trajectory=None, realtime: bool = True,  # type: ignore[no-untyped-def]
+              rlog: RerunLog = OFF) -> LoopStats:
     """Step ``twin`` at ``rate`` Hz for ``duration`` simulated seconds.
 
     Each iteration moves the end effector along ``trajectory(t) -> (3,)`` (if given), steps the physics
     enough to cover 1/rate of simulated time, and, when ``realtime``, sleeps to the next deadline. A step
-    that ends after its deadline counts as missed.
+    that ends after its deadline counts as missed. Poses and force go to ``rlog`` at its own rate.
     """
     substeps = max(1, round(1.0 / rate / twin.model.opt.timestep))
     pacer = Pacer(rate)
@@ -286,6 +310,8 @@ def run_paced(twin: Twin, duration: float, rate: float, *,
         if trajectory is not None:
             twin.set_end_effector(trajectory(twin.time))
         twin.step(substeps)
+        if rlog.due(twin.time):
+            rlog.frame(twin)
         left = pacer.end()
         if realtime and left > 0:
             time.sleep(left)

@@ -1,0 +1,177 @@
+"""Rerun logging: recordings written by the real commands and read back with rerun's own chunk reader."""
+
+from __future__ import annotations
+
+import time
+from collections import Counter, defaultdict
+
+import numpy as np
+import pytest
+import trimesh
+
+from estimation.errors import TwinError
+from scenes.sampling import sample_surface
+from sync.session import free_port
+from twin.cli import main
+from twin.rerunlog import DISPLAY_POINTS, OFF, RerunLog, RerunTarget, parse_target
+
+from loopback import SCENE, close_local, open_local, running_remote, wait_objects
+
+
+class Recording:
+    """What an .rrd holds: rows per entity, timelines, and the column values of each entity."""
+
+    def __init__(self, path) -> None:  # type: ignore[no-untyped-def]
+        import pyarrow as pa
+        from rerun.chunk import RrdReader
+
+        reader = RrdReader(path)
+        assert len(reader.recordings()) == 1
+        assert reader.blueprints(), "no default blueprint in the file"
+        self.rows: Counter[str] = Counter()
+        self.timelines: set[str] = set()
+        self.columns: dict[str, dict[str, list]] = defaultdict(lambda: defaultdict(list))
+        for chunk in reader.stream():
+            path = chunk.entity_path.lstrip("/")
+            self.rows[path] += chunk.num_rows
+            self.timelines |= set(chunk.timeline_names)
+            batch = chunk.to_record_batch()
+            for name in batch.schema.names:
+                column = batch.column(name)
+                if pa.types.is_temporal(column.type):
+                    column = column.cast(pa.int64())  # nanoseconds: pyarrow's datetimes stop at microseconds
+                self.columns[path][name].extend(column.to_pylist())
+
+    def under(self, prefix: str) -> dict[str, int]:
+        return {p: n for p, n in self.rows.items() if p.startswith(prefix)}
+
+    def texts(self) -> list[str]:
+        return [t for batch in self.columns["events"]["TextLog:text"] for t in (batch or [])]
+
+
+def test_parse_target_accepts_the_three_modes_and_names_what_is_wrong(tmp_path):
+    assert parse_target(["spawn"]) == RerunTarget("spawn", None)
+    assert parse_target(["save", str(tmp_path / "a.rrd")], 10).rate_hz == 10
+    assert parse_target(["connect"]).address == "rerun+http://127.0.0.1:9876/proxy"
+    assert parse_target(["connect", "host:1234"]).address == "rerun+http://host:1234/proxy"
+    with pytest.raises(TwinError, match=r"should end in \.rrd"):
+        parse_target(["save", str(tmp_path / "a.txt")])
+    with pytest.raises(TwinError, match="does not exist"):
+        parse_target(["save", str(tmp_path / "no" / "a.rrd")])
+    with pytest.raises(TwinError, match="expects 'spawn'"):
+        parse_target(["record", "x"])
+    with pytest.raises(TwinError, match="must be > 0"):
+        parse_target(["spawn"], 0)
+
+
+def test_off_logs_nothing_and_is_never_due():
+    assert not OFF.enabled
+    assert not any(OFF.due(t) for t in np.arange(0, 1, 0.001))
+    OFF.event(0.0, "nothing")
+    OFF.close()
+
+
+@pytest.fixture(scope="module")
+def box_cloud(tmp_path_factory):
+    path = tmp_path_factory.mktemp("rr") / "crate.npy"
+    np.save(path, sample_surface(trimesh.creation.box(extents=[0.12, 0.08, 0.06]), 30_000, seed=3).points)
+    return path
+
+
+def test_estimate_writes_cloud_normals_mesh_obb_and_properties(box_cloud, tmp_path, capsys):
+    out = tmp_path / "est.rrd"
+    assert main(["estimate", str(box_cloud), "--material", "wood_pine", "--json", "--rerun", "save", str(out)]) == 0
+    rec = Recording(out)
+    base = "world/estimate/crate"
+    assert set(rec.under(base)) == {f"{base}/{p}" for p in ("cloud", "normals", "mesh", "obb", "com", "properties")}
+    (positions,) = rec.columns[f"{base}/cloud"]["Points3D:positions"]
+    assert len(positions) == DISPLAY_POINTS  # 30k in, the display cap shown
+    assert rec.columns[f"{base}/cloud"]["Points3D:labels"] == [["30,000 points (20,000 shown)"]]
+    (label,) = rec.columns[f"{base}/com"]["Points3D:labels"][0]
+    assert "kg" in label and "cm³" in label
+    (doc,) = rec.columns[f"{base}/properties"]["TextDocument:text"][0]
+    assert "wood_pine" in doc and "mass" in doc
+
+
+def test_a_bad_rerun_option_is_exit_2_and_writes_nothing(box_cloud, tmp_path, monkeypatch, capsys):
+    assert main(["estimate", str(box_cloud), "--density", "500", "--rerun", "save", str(tmp_path / "x.png")]) == 2
+    assert main(["estimate", str(box_cloud), "--density", "500", "--rerun", "bogus"]) == 2
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    assert main(["estimate", str(box_cloud), "--density", "500", "--rerun", "spawn"]) == 2
+    err = capsys.readouterr().err
+    assert "should end in .rrd" in err and "expects 'spawn'" in err and "needs a display" in err
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_run_logs_objects_once_and_poses_at_the_rerun_rate(tmp_path, capsys):
+    scene = tmp_path / "scene.toml"
+    scene.write_text("""
+name = "rr"
+[table]
+size = [1.0, 0.6, 0.04]
+height = 0.5
+[end_effector]
+radius = 0.02
+position = [-0.3, 0.0, 0.56]
+[[objects]]
+id = "crate"
+primitive = { type = "box", size = [0.12, 0.08, 0.06] }
+material = "wood_pine"
+position = [0.0, 0.0]
+points = 8000
+""")
+    out = tmp_path / "run.rrd"
+    argv = ["run", str(scene), "--duration", "1", "--no-realtime", "--rerun", "save", str(out), "--rerun-rate", "20",
+            "--cache-dir", str(tmp_path / "coacd")]
+    assert main(argv) == 0
+    rec = Recording(out)
+    assert {"sim_time", "wall_time"} <= rec.timelines
+    assert rec.rows["world/table"] == 1
+    for part in ("mesh", "obb", "com", "cloud", "normals", "properties", "hulls/0"):
+        assert rec.rows[f"world/twin/crate/{part}"] == 1, part
+    # 1 s at 20 Hz: 20 frames (+1 for the pose logged with the object).
+    assert rec.rows["world/twin/crate"] == 21
+    assert rec.rows["plots/ee_force"] == 20 and rec.rows["world/end_effector"] == 20
+    times = np.array(rec.columns["plots/ee_force"]["sim_time"]) * 1e-9
+    assert np.allclose(np.diff(times), 0.05, atol=0.0015)
+
+
+def test_a_synchronised_session_logs_both_sides_divergence_and_events(tmp_path):
+    endpoint, cache = f"tcp/127.0.0.1:{free_port()}", tmp_path / "coacd"
+    remote_rrd, twin_rrd = tmp_path / "remote.rrd", tmp_path / "twin.rrd"
+    with RerunLog.open(RerunTarget("save", str(remote_rrd))) as remote_log, \
+            running_remote(endpoint, cache, rlog=remote_log) as remote:
+        with RerunLog.open(RerunTarget("save", str(twin_rrd), rate_hz=50)) as twin_log:
+            local = open_local(endpoint, cache, rlog=twin_log)
+            try:
+                wait_objects(local, 2)
+                t0 = local.twin.time
+                r = remote.remote
+                pos, quat = r.twin.pose("crate")
+                r.twin.set_pose("crate", pos + np.array([0.08, 0.0, 0.0]), quat)  # the remote moves the crate
+                local.run(1.0)
+                time_in_session = local.twin.time - t0
+            finally:
+                close_local(local)
+        time.sleep(0.1)
+    twin = Recording(twin_rrd)
+    ids = [o["id"] for o in SCENE["objects"]]
+    for i in ids:
+        assert twin.rows[f"world/twin/{i}/hulls/0"] >= 1 and twin.rows[f"world/twin/{i}/cloud"] == 1
+        assert twin.rows[f"world/remote/{i}/mesh"] == 1  # the ghost of where C has it
+        # Divergence is logged at 50 Hz from the moment the object is in the twin.
+        assert twin.rows[f"plots/divergence/{i}"] >= 0.9 * 50 * time_in_session
+    texts = twin.texts()
+    for i in ids:
+        assert any(t.startswith(f"{i}: cloud received") for t in texts)
+        assert any(t.startswith(f"{i}: added to the twin") for t in texts)
+    assert any(t.startswith("crate: pose correction") for t in texts)
+    assert any(t.startswith("crate: snapped 8") for t in texts)  # 80 mm is past the 50 mm snap distance
+    crate_gap = np.array([v[0] for v in twin.columns["plots/divergence/crate"]["Scalars:scalars"]])
+    assert np.isfinite(crate_gap).all() and crate_gap[-1] < 2  # mm, after the correction
+
+    remote_rec = Recording(remote_rrd)
+    for i in ids:
+        assert remote_rec.rows[f"world/remote/{i}/hulls/0"] >= 1 and remote_rec.rows[f"world/remote/{i}/cloud"] >= 1
+        assert remote_rec.rows[f"world/remote/{i}"] > 10

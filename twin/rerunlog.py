@@ -1,0 +1,409 @@
+"""Visual debugging in rerun: the one module that imports rerun and knows its entity paths.
+
+Off by default: :data:`OFF` accepts every call and does nothing, so the rest of the code calls it
+unconditionally and needs no viewer. When on, a call only copies the arrays it needs and queues them; one
+background thread builds rerun's archetypes and sends them, so the 1 kHz loop pays a queue put, not
+rerun's serialisation. Per-frame state (poses, divergence, force) is logged at ``rate_hz`` of simulated
+time (:meth:`RerunLog.due`); events and objects are logged when they happen.
+
+Entity tree (``<side>`` is ``twin`` for C', ``remote`` for C, ``estimate`` for ``twin estimate``)::
+
+    world/table                    Boxes3D (static)
+    world/<side>/<id>              Transform3D: the body pose (origin at the centre of mass), per frame
+    world/<side>/<id>/cloud        Points3D, body frame: the input cloud (at most DISPLAY_POINTS; count in label)
+    world/<side>/<id>/normals      Arrows3D, body frame: the normals the surface was built from (a subset)
+    world/<side>/<id>/mesh         Mesh3D, body frame: the reconstructed (decimated) surface
+    world/<side>/<id>/obb          Boxes3D, body frame: the points' oriented bounding box
+    world/<side>/<id>/hulls/<k>    Mesh3D, body frame: CoACD's convex parts, one colour each
+    world/<side>/<id>/com          Points3D: centre of mass, labelled with mass and volume
+    world/<side>/<id>/properties   TextDocument: the estimate in full
+    world/end_effector             Points3D: the operator's sphere; .../force Arrows3D (N drawn at FORCE_SCALE)
+    plots/divergence/<id>          Scalars: |twin - remote| of the centre of mass, mm
+    plots/ee_force                 Scalars: end-effector contact force x y z, N
+    events                         TextLog: clouds received, objects added/removed, corrections, stale link,
+                                   dropped messages
+
+Timelines: ``sim_time`` (simulated seconds) and ``wall_time`` (Unix time).
+"""
+
+from __future__ import annotations
+
+import colorsys
+import logging
+import queue
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from estimation import PhysicalEstimate
+from estimation.errors import TwinError
+from twin.poses import to_xyzw
+
+log = logging.getLogger(__name__)
+
+APP_ID = "tactile-twin"
+
+#: Points of a cloud shown in the viewer: past this the viewer gets slow and the picture no denser.
+DISPLAY_POINTS = 20_000
+
+#: Normals drawn per object (every k-th of the points used): more is a hedgehog.
+DISPLAY_NORMALS = 400
+
+#: Arrow length per newton of end-effector force, metres.
+FORCE_SCALE = 0.01
+
+#: Default frame rate of per-frame state, Hz of simulated time: smooth to the eye, ~3 % of a 1 kHz loop.
+DEFAULT_RATE_HZ = 30.0
+
+#: The default viewer address for ``connect`` (rerun's own default gRPC proxy).
+DEFAULT_CONNECT = "rerun+http://127.0.0.1:9876/proxy"
+
+#: Tolerance on simulated time when deciding a frame is due, seconds (a nanosecond: far below a step).
+_TIME_SLACK = 1e-9
+
+_CLOUD_RGB = (60, 170, 90)
+_MESH_RGBA = {"twin": (110, 140, 200, 255), "remote": (240, 150, 40, 90), "estimate": (110, 140, 200, 255)}
+
+
+@dataclass(frozen=True)
+class RerunTarget:
+    """Where a recording goes: ``spawn`` a viewer, ``save`` to an .rrd file, or ``connect`` to a viewer.
+
+    Attributes:
+        mode: 'spawn', 'save' or 'connect'.
+        address: the file (save) or the viewer URL (connect); None for spawn.
+        rate_hz: per-frame logging rate, Hz of simulated time.
+    """
+
+    mode: str
+    address: str | None = None
+    rate_hz: float = DEFAULT_RATE_HZ
+
+
+def parse_target(words: list[str], rate_hz: float = DEFAULT_RATE_HZ) -> RerunTarget:
+    """``['spawn']``, ``['save', 'FILE.rrd']`` or ``['connect']`` / ``['connect', 'HOST:PORT' or URL]``.
+
+    Raises:
+        TwinError: anything else, a save path that is not a writable .rrd, or a non-positive rate.
+    """
+    if not rate_hz > 0:
+        raise TwinError(f"--rerun-rate must be > 0 Hz, got {rate_hz}")
+    mode, rest = (words[0], words[1:]) if words else ("", [])
+    if mode == "spawn" and not rest:
+        return RerunTarget("spawn", None, rate_hz)
+    if mode == "save" and len(rest) == 1:
+        path = Path(rest[0])
+        if path.suffix != ".rrd":
+            raise TwinError(f"--rerun save: {path} should end in .rrd")
+        if not path.parent.resolve().is_dir():
+            raise TwinError(f"--rerun save: directory {path.parent} does not exist")
+        return RerunTarget("save", str(path), rate_hz)
+    if mode == "connect" and len(rest) <= 1:
+        address = rest[0] if rest else DEFAULT_CONNECT
+        if "://" not in address:  # HOST:PORT shorthand
+            address = f"rerun+http://{address}/proxy"
+        return RerunTarget("connect", address, rate_hz)
+    raise TwinError(f"--rerun expects 'spawn', 'save FILE.rrd' or 'connect [HOST:PORT]', got {' '.join(words)!r}")
+
+
+def display_subset(points: np.ndarray, cap: int = DISPLAY_POINTS, *, seed: int = 0) -> np.ndarray:
+    """At most ``cap`` of ``points`` ((n, 3)), a seeded random choice, as float32 (for display only)."""
+    points = np.asarray(points)
+    if len(points) > cap:
+        points = points[np.random.default_rng(seed).choice(len(points), cap, replace=False)]
+    return points.astype(np.float32)
+
+
+def distinct_colours(n: int) -> np.ndarray:
+    """(n, 3) uint8 colours with hues a golden angle apart: neighbours differ, the same every run."""
+    hues = (np.arange(n) * 0.618033988749895) % 1.0
+    return np.array([[round(255 * c) for c in colorsys.hsv_to_rgb(h, 0.65, 0.95)] for h in hues], dtype=np.uint8)
+
+
+def blueprint():  # type: ignore[no-untyped-def]
+    """The default layout: the 3D scene on the left; divergence, force and the event log on the right."""
+    import rerun.blueprint as rrb
+
+    return rrb.Blueprint(
+        rrb.Horizontal(
+            rrb.Spatial3DView(origin="/world", name="remote C (orange) and twin C' (blue)"),
+            rrb.Vertical(
+                rrb.TimeSeriesView(origin="/plots/divergence", name="divergence |C' - C|, mm"),
+                rrb.TimeSeriesView(origin="/plots/ee_force", name="end-effector force, N"),
+                rrb.TextLogView(origin="/events", name="sync events"),
+            ),
+            column_shares=[3, 2],
+        ),
+        rrb.TimePanel(timeline="sim_time", play_state="following"),  # opens at the latest state
+        collapse_panels=True,
+    )
+
+
+class RerunLog:
+    """A rerun recording fed from a background thread. ``RerunLog()`` (or :data:`OFF`) logs nothing.
+
+    Use as a context manager or call :meth:`close`, which waits until everything queued is sent.
+    """
+
+    def __init__(self, stream=None, *, rate_hz: float = DEFAULT_RATE_HZ, queue_size: int = 4096) -> None:  # type: ignore[no-untyped-def]
+        self.stream = stream
+        self.period = 1.0 / rate_hz
+        self.dropped = 0  # items not logged because the queue was full
+        self.logged = 0
+        self._next_frame = -np.inf
+        self._queue: queue.Queue = queue.Queue(queue_size)
+        self._thread: threading.Thread | None = None
+        if stream is not None:
+            self._thread = threading.Thread(target=self._drain, name="rerun-log", daemon=True)
+            self._thread.start()
+
+    @classmethod
+    def open(cls, target: RerunTarget | None, *, recording_id: str | None = None) -> RerunLog:
+        """A log to ``target`` (None: off)."""
+        if target is None:
+            return cls()
+        import rerun as rr
+
+        stream = rr.RecordingStream(APP_ID, recording_id=recording_id)
+        if target.mode == "spawn":
+            _check_display()
+            stream.spawn(default_blueprint=blueprint())
+        elif target.mode == "save":
+            stream.save(target.address, default_blueprint=blueprint())
+        else:
+            stream.connect_grpc(target.address, default_blueprint=blueprint())
+        return cls(stream, rate_hz=target.rate_hz)
+
+    @property
+    def enabled(self) -> bool:
+        return self.stream is not None
+
+    def __enter__(self) -> RerunLog:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def close(self) -> None:
+        """Send what is queued, flush and disconnect. Idempotent."""
+        if self._thread is None:
+            return
+        self._queue.put(None)
+        self._thread.join()
+        self._thread = None
+        self.stream.flush()
+        self.stream.disconnect()
+        if self.dropped:
+            log.warning("rerun: %d items dropped (the logging thread fell behind)", self.dropped)
+
+    # -- what callers log ----------------------------------------------------------------------------
+
+    def due(self, sim_time: float) -> bool:
+        """True at most ``rate_hz`` times per simulated second: the caller then logs a :meth:`frame`."""
+        # Simulated time is a sum of float steps: 0.051 may come out as 0.0509999.
+        if self.stream is None or sim_time < self._next_frame - _TIME_SLACK:
+            return False
+        following = self._next_frame + self.period
+        self._next_frame = following if following > sim_time else sim_time + self.period
+        return True
+
+    def frame(self, twin, *, side: str = "twin",  # type: ignore[no-untyped-def]
+              remote: dict[str, tuple[np.ndarray, np.ndarray] | None] | None = None) -> None:
+        """Every object's pose in ``twin`` (a :class:`twin.sim.Twin`), the end effector and its force.
+
+        ``remote`` maps ids to where the remote (C) last said the object is (position, quaternion w x y z,
+        already mapped onto the twin's body): logged under world/remote with the divergence.
+        """
+        if self.stream is None:
+            return
+        poses = {i: twin.pose(i) for i in twin.object_ids()}
+        ee = force = None
+        if twin.has_end_effector:
+            ee, force = twin.data.mocap_pos[0].copy(), twin.end_effector_force()
+        others = None if remote is None else {i: p for i, p in remote.items() if p is not None}
+        self._put(twin.time, self._frame, side, poses, others, ee, force)
+
+    def estimate(self, name: str, est: PhysicalEstimate, cloud: np.ndarray | None = None) -> None:
+        """One estimate in its cloud's frame (``twin estimate``): cloud, normals, mesh, OBB, properties."""
+        if self.stream is None:
+            return
+        self._put(0.0, self._geometry, f"world/estimate/{name}", "estimate", est, np.zeros(3),
+                  (est.vertices, est.faces), (), _display(cloud))
+
+    def object(self, side: str, obj, *, sim_time: float = 0.0, cloud: np.ndarray | None = None,  # type: ignore[no-untyped-def]
+               pose: tuple[np.ndarray, np.ndarray] | None = None) -> None:
+        """One :class:`twin.objects.TwinObject`: its geometry in its body frame, and its pose.
+
+        Args:
+            side: 'twin' or 'remote'.
+            cloud: (n, 3) metres in the estimate's frame (the frame of ``obj.estimate.vertices``).
+            pose: (position, quaternion w x y z) to show it at; default ``obj.position`` and ``obj.quat``.
+        """
+        if self.stream is None:
+            return
+        path = f"world/{side}/{obj.id}"
+        pos, quat = pose if pose is not None else (obj.position, obj.quat)
+        com = obj.estimate.mass.center_of_mass
+        self._put(sim_time, self._geometry, path, side, obj.estimate, com, obj.visual, obj.hulls, _display(cloud))
+        self._put(sim_time, self._pose, path, np.array(pos, dtype=float), np.array(quat, dtype=float))
+
+    def ghost(self, obj, *, sim_time: float = 0.0) -> None:  # type: ignore[no-untyped-def]
+        """The twin's picture of where C has the object: its own mesh, translucent, under world/remote."""
+        if self.stream is None:
+            return
+        self._put(sim_time, self._mesh, f"world/remote/{obj.id}/mesh", obj.visual, _MESH_RGBA["remote"])
+
+    def removed(self, side: str, object_id: str, sim_time: float) -> None:
+        if self.stream is None:
+            return
+        self._put(sim_time, self._clear, f"world/{side}/{object_id}")
+
+    def table(self, size: tuple[float, float, float], height: float) -> None:
+        """The support: a box of full ``size`` (m) whose top is at ``height`` (m)."""
+        if self.stream is None:
+            return
+        self._put(0.0, self._table, np.asarray(size, float), float(height))
+
+    def event(self, sim_time: float, text: str, level: str = "INFO") -> None:
+        """A sync event for the log view; ``level`` is rerun's (TRACE, DEBUG, INFO, WARN, ERROR)."""
+        if self.stream is None:
+            return
+        self._put(sim_time, self._text, text, level)
+
+    # -- the logging thread --------------------------------------------------------------------------
+
+    def _put(self, sim_time: float, fn: Callable[..., None], *args: object) -> None:
+        try:
+            self._queue.put_nowait((sim_time, time.time(), fn, args))
+        except queue.Full:
+            self.dropped += 1
+
+    def _drain(self) -> None:
+        while (item := self._queue.get()) is not None:
+            sim_time, wall, fn, args = item
+            # Timelines are per thread in rerun's SDK; this is the only thread that logs.
+            self.stream.set_time("sim_time", duration=sim_time)
+            self.stream.set_time("wall_time", timestamp=wall)
+            try:
+                fn(*args)
+                self.logged += 1
+            except Exception:  # a viewer problem must never take the twin down
+                log.exception("rerun: could not log %s", getattr(fn, "__name__", fn))
+
+    def _pose(self, path: str, pos: np.ndarray, quat: np.ndarray) -> None:
+        import rerun as rr
+
+        self.stream.log(path, rr.Transform3D(translation=pos, quaternion=rr.Quaternion(xyzw=to_xyzw(quat))))
+
+    def _frame(self, side: str, poses: dict, remote: dict | None, ee: np.ndarray | None,
+               force: np.ndarray | None) -> None:
+        import rerun as rr
+
+        for object_id, (pos, quat) in poses.items():
+            self._pose(f"world/{side}/{object_id}", pos, quat)
+        for object_id, (pos, quat) in (remote or {}).items():
+            self._pose(f"world/remote/{object_id}", pos, quat)
+            if object_id in poses:
+                gap = 1e3 * float(np.linalg.norm(poses[object_id][0] - pos))
+                self.stream.log(f"plots/divergence/{object_id}", rr.Scalars(gap))
+        if ee is not None and force is not None:
+            self.stream.log("world/end_effector", rr.Points3D([ee], radii=0.005, colors=[(50, 200, 50)]))
+            self.stream.log("world/end_effector/force",
+                            rr.Arrows3D(origins=[ee], vectors=[force * FORCE_SCALE], colors=[(220, 40, 40)]))
+            self.stream.log("plots/ee_force", rr.Scalars(force))
+
+    def _geometry(self, path: str, side: str, est: PhysicalEstimate, com: np.ndarray,
+                  mesh: tuple[np.ndarray, np.ndarray], hulls, cloud: np.ndarray | None) -> None:  # type: ignore[no-untyped-def]
+        import rerun as rr
+
+        s = self.stream
+        self._mesh(f"{path}/mesh", mesh, _MESH_RGBA[side])
+        if hulls:
+            s.log(f"{path}/hulls", rr.Clear(recursive=True))  # a replaced object may have had more parts
+        for k, ((v, f), rgb) in enumerate(zip(hulls, distinct_colours(len(hulls)), strict=True)):
+            s.log(f"{path}/hulls/{k}", rr.Mesh3D(vertex_positions=v, triangle_indices=f,
+                                                 albedo_factor=(*rgb.tolist(), 170)))
+        box = est.obb
+        s.log(f"{path}/obb", rr.Boxes3D(centers=[box.center - com], half_sizes=[box.extents / 2],
+                                        quaternions=[rr.Quaternion(xyzw=_matrix_xyzw(box.rotation))],
+                                        colors=[(230, 200, 40)], radii=0.0005))
+        m = est.mass
+        label = f"{_leaf(path)} {m.mass:.3g} kg, {m.volume * 1e6:,.0f} cm³"
+        s.log(f"{path}/com", rr.Points3D([np.zeros(3)], radii=0.003, colors=[(255, 255, 255)], labels=[label]))
+        s.log(f"{path}/properties", rr.TextDocument(_properties(est, len(hulls)), media_type="text/markdown"))
+        if cloud is None and est.points is not None:
+            cloud = display_subset(est.points)  # the input is gone: show the points the surface was built from
+        if cloud is not None:
+            n = est.points_in or len(cloud)
+            s.log(f"{path}/cloud", rr.Points3D(cloud - com, radii=0.0008, colors=[_CLOUD_RGB],
+                                               labels=[f"{n:,} points" + (f" ({len(cloud):,} shown)" if n > len(cloud) else "")],
+                                               show_labels=False))
+        if est.points is not None and est.normals is not None:
+            k = max(1, len(est.points) // DISPLAY_NORMALS)
+            length = 0.03 * float(est.obb.extents.max())
+            s.log(f"{path}/normals", rr.Arrows3D(origins=est.points[::k] - com, vectors=est.normals[::k] * length,
+                                                 colors=[(80, 120, 255)], radii=0.0003))
+
+    def _mesh(self, path: str, mesh: tuple[np.ndarray, np.ndarray], rgba: tuple[int, ...]) -> None:
+        import rerun as rr
+
+        self.stream.log(path, rr.Mesh3D(vertex_positions=mesh[0], triangle_indices=mesh[1], albedo_factor=rgba))
+
+    def _clear(self, path: str) -> None:
+        import rerun as rr
+
+        self.stream.log(path, rr.Clear(recursive=True))
+
+    def _table(self, size: np.ndarray, height: float) -> None:
+        import rerun as rr
+
+        self.stream.log("world/table", rr.Boxes3D(centers=[[0, 0, height - size[2] / 2]], half_sizes=[size / 2],
+                                                  colors=[(140, 100, 75)], fill_mode="solid"), static=True)
+
+    def _text(self, text: str, level: str) -> None:
+        import rerun as rr
+
+        self.stream.log("events", rr.TextLog(text, level=level))
+
+
+#: The log that logs nothing: the default everywhere.
+OFF = RerunLog()
+
+
+def _leaf(path: str) -> str:
+    return path.rsplit("/", 1)[-1]
+
+
+def _display(cloud: np.ndarray | None) -> np.ndarray | None:
+    return None if cloud is None else display_subset(cloud)
+
+
+def _matrix_xyzw(rotation: np.ndarray) -> np.ndarray:
+    from scipy.spatial.transform import Rotation
+
+    return Rotation.from_matrix(rotation).as_quat()  # scipy's order is x y z w, rerun's too
+
+
+def _properties(est: PhysicalEstimate, hulls: int) -> str:
+    m = est.mass
+    com = ", ".join(f"{x:.4f}" for x in m.center_of_mass)
+    moments = ", ".join(f"{x:.4g}" for x in m.principal_moments)
+    rows = [("method", est.method), ("mass", f"{m.mass:.4g} kg"), ("volume", f"{m.volume * 1e6:.4g} cm³"),
+            ("density", f"{m.density:g} kg/m³" + (f" ({est.material})" if est.material else "")),
+            ("centre of mass (estimate frame)", f"[{com}] m"), ("principal moments", f"{moments} kg m²"),
+            ("points", f"{est.points_in:,} in, {est.points_used:,} used"), ("watertight", str(est.watertight)),
+            ("collision hulls", str(hulls))]
+    return "\n".join(["| | |", "|---|---|", *(f"| {k} | {v} |" for k, v in rows)])
+
+
+def _check_display() -> None:
+    import os
+    import sys
+
+    if sys.platform.startswith("linux") and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
+        raise TwinError("--rerun spawn needs a display (DISPLAY is not set); use --rerun save FILE.rrd "
+                        "and open it later with 'rerun FILE.rrd'")
