@@ -39,13 +39,17 @@ class Deadband:
     angle_deg: float = 0.5
 
 
+#: Joint speed below which the ground truth counts as at rest, m/s or rad/s: a millimetre per second.
+SETTLED_SPEED = 1e-3
+
+
 class Remote:
     """The remote scene C on a Zenoh session. ``run()`` steps it; everything else is message handling."""
 
     def __init__(self, scene: SceneSpec, session, *, deadband: Deadband = Deadband(),  # type: ignore[no-untyped-def]
                  points: int | None = None, heartbeat_s: float = 0.2, cache_dir: Path | None = None,
                  progress: bool = False, publish: bool = True, keyframe_s: float = 1.0,
-                 rlog: RerunLog = OFF) -> None:
+                 settle_s: float = 3.0, rlog: RerunLog = OFF) -> None:
         self.scene = scene
         self.rlog = rlog
         self.keys = Keys(scene.name)
@@ -73,6 +77,7 @@ class Remote:
             add_object(spec, obj)
             self._remember(spec_obj, obj)
         self.twin = Twin(spec)
+        self.settled_after = self._settle(settle_s)
         if scene.table is not None:
             rlog.table(scene.table.size, scene.table.height)
         self._info = self.link.put(self.keys.info, self._scene_info()) if publish else None
@@ -190,6 +195,20 @@ class Remote:
         self._body_mesh[spec.id] = mesh
         self._specs[spec.id] = spec
         self._truth[spec.id] = obj
+
+    def _settle(self, limit: float) -> float:
+        """Step until nothing moves (or ``limit`` simulated seconds): returns the time it took.
+
+        A scene file places objects, it does not promise they rest there (the paper's stack topples);
+        a sensor sees a scene at rest, and a twin built from a toppling object's first cloud would be
+        snapped along its fall at every keyframe.
+        """
+        check = 50
+        while self.twin.time < limit:
+            self.twin.step(check)
+            if float(np.abs(self.twin.data.qvel).max(initial=0.0)) < SETTLED_SPEED:
+                break
+        return self.twin.time
 
     def _publish_pose(self, object_id: str, *, force: bool = False) -> None:
         pos, quat = self.twin.pose(object_id)

@@ -169,7 +169,8 @@ def test_a_synchronised_session_logs_both_sides_divergence_and_events(tmp_path):
     assert any(t.startswith("crate: pose correction") for t in texts)
     assert any(t.startswith("crate: snapped 8") for t in texts)  # 80 mm is past the 50 mm snap distance
     crate_gap = np.array([v[0] for v in twin.columns["plots/divergence/crate"]["Scalars:scalars"]])
-    assert np.isfinite(crate_gap).all() and crate_gap[-1] < 2  # mm, after the correction
+    # After the correction: within the 1 mm deadband plus where the estimated shape comes to rest.
+    assert np.isfinite(crate_gap).all() and crate_gap[-1] < 5  # mm
 
     remote_rec = Recording(remote_rrd)
     for i in ids:

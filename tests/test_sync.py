@@ -140,3 +140,23 @@ def test_two_twins_on_one_remote_and_operator_commands(remote, endpoint, tmp_pat
 def test_a_missing_config_file_is_a_clear_error(tmp_path):
     with pytest.raises(SessionError, match="no such file"):
         make_config(config_file=tmp_path / "nope.json5")
+
+
+def test_the_remote_settles_its_scene_before_sensing_it(endpoint, tmp_path_factory):
+    from sync.remote import SETTLED_SPEED, Remote
+    from sync.session import open_session
+    from twin.scenefile import parse_scene
+
+    falling = {**SCENE, "objects": [{**SCENE["objects"][0], "position": [0.0, 0.0, 0.7]}]}  # 17 cm above the table
+    session = open_session(make_config(listen=[endpoint]))
+    try:
+        r = Remote(parse_scene(falling), session, cache_dir=tmp_path_factory.getbasetemp() / "coacd")
+        try:
+            assert 0.1 < r.settled_after < 3.0
+            assert np.abs(r.twin.data.qvel).max() < SETTLED_SPEED
+            z = r.twin.pose("crate")[0][2]
+            assert z == pytest.approx(0.5 + 0.03, abs=0.002)  # the crate's centre, resting on the table
+        finally:
+            r.close()
+    finally:
+        session.close()

@@ -59,6 +59,9 @@ FORCE_SCALE = 0.01
 #: Default frame rate of per-frame state, Hz of simulated time: smooth to the eye, ~3 % of a 1 kHz loop.
 DEFAULT_RATE_HZ = 30.0
 
+#: Per-frame rows are sent in batches this often (wall seconds): what a live viewer lags by, at most.
+BATCH_SECONDS = 0.5
+
 #: The default viewer address for ``connect`` (rerun's own default gRPC proxy).
 DEFAULT_CONNECT = "rerun+http://127.0.0.1:9876/proxy"
 
@@ -66,6 +69,7 @@ DEFAULT_CONNECT = "rerun+http://127.0.0.1:9876/proxy"
 _TIME_SLACK = 1e-9
 
 _CLOUD_RGB = (60, 170, 90)
+_EE_RGB, _FORCE_RGB = (50, 200, 50), (220, 40, 40)
 _MESH_RGBA = {"twin": (110, 140, 200, 255), "remote": (240, 150, 40, 90), "estimate": (110, 140, 200, 255)}
 
 
@@ -156,6 +160,9 @@ class RerunLog:
         self.logged = 0
         self._next_frame = -np.inf
         self._queue: queue.Queue = queue.Queue(queue_size)
+        self._now = (0.0, 0.0)  # (sim, wall) of the item being logged; logging thread only
+        self._rows: dict[tuple[str, str], list] = {}
+        self._batch_start = 0.0
         self._thread: threading.Thread | None = None
         if stream is not None:
             self._thread = threading.Thread(target=self._drain, name="rerun-log", daemon=True)
@@ -286,6 +293,7 @@ class RerunLog:
         while (item := self._queue.get()) is not None:
             sim_time, wall, fn, args = item
             # Timelines are per thread in rerun's SDK; this is the only thread that logs.
+            self._now = (sim_time, wall)
             self.stream.set_time("sim_time", duration=sim_time)
             self.stream.set_time("wall_time", timestamp=wall)
             try:
@@ -293,28 +301,58 @@ class RerunLog:
                 self.logged += 1
             except Exception:  # a viewer problem must never take the twin down
                 log.exception("rerun: could not log %s", getattr(fn, "__name__", fn))
+        self._send_rows()
 
     def _pose(self, path: str, pos: np.ndarray, quat: np.ndarray) -> None:
+        """One pose now (an object appearing); per-frame poses go through :meth:`_row`."""
         import rerun as rr
 
         self.stream.log(path, rr.Transform3D(translation=pos, quaternion=rr.Quaternion(xyzw=to_xyzw(quat))))
 
     def _frame(self, side: str, poses: dict, remote: dict | None, ee: np.ndarray | None,
                force: np.ndarray | None) -> None:
-        import rerun as rr
-
+        # Frames are gathered into columns and sent every BATCH_SECONDS: one send per entity per batch
+        # instead of one log call per entity per frame (a fifth of the cost at 20 objects, 30 Hz).
         for object_id, (pos, quat) in poses.items():
-            self._pose(f"world/{side}/{object_id}", pos, quat)
+            self._row("pose", f"world/{side}/{object_id}", np.concatenate([pos, to_xyzw(quat)]))
         for object_id, (pos, quat) in (remote or {}).items():
-            self._pose(f"world/remote/{object_id}", pos, quat)
+            self._row("pose", f"world/remote/{object_id}", np.concatenate([pos, to_xyzw(quat)]))
             if object_id in poses:
                 gap = 1e3 * float(np.linalg.norm(poses[object_id][0] - pos))
-                self.stream.log(f"plots/divergence/{object_id}", rr.Scalars(gap))
+                self._row("scalars", f"plots/divergence/{object_id}", np.array([gap]))
         if ee is not None and force is not None:
-            self.stream.log("world/end_effector", rr.Points3D([ee], radii=0.005, colors=[(50, 200, 50)]))
-            self.stream.log("world/end_effector/force",
-                            rr.Arrows3D(origins=[ee], vectors=[force * FORCE_SCALE], colors=[(220, 40, 40)]))
-            self.stream.log("plots/ee_force", rr.Scalars(force))
+            self._row("point", "world/end_effector", ee)
+            self._row("arrow", "world/end_effector/force", np.concatenate([ee, force * FORCE_SCALE]))
+            self._row("scalars", "plots/ee_force", force)
+        if self._now[1] - self._batch_start >= BATCH_SECONDS:
+            self._send_rows()
+
+    def _row(self, kind: str, path: str, values: np.ndarray) -> None:
+        self._rows.setdefault((kind, path), []).append((*self._now, values))
+
+    def _send_rows(self) -> None:
+        import rerun as rr
+
+        for (kind, path), rows in self._rows.items():
+            sim = np.array([r[0] for r in rows])
+            wall = np.array([r[1] for r in rows])
+            v = np.array([r[2] for r in rows])
+            n = len(rows)
+            if kind == "pose":
+                columns = rr.Transform3D.columns(translation=v[:, :3], quaternion=v[:, 3:])
+            elif kind == "scalars":
+                columns = rr.Scalars.columns(scalars=v.ravel()).partition(np.full(n, v.shape[1]))
+            elif kind == "point":
+                columns = rr.Points3D.columns(positions=v, radii=np.full(n, 0.005),
+                                              colors=np.tile(np.array(_EE_RGB, np.uint8), (n, 1)))
+            else:
+                columns = rr.Arrows3D.columns(origins=v[:, :3], vectors=v[:, 3:],
+                                              colors=np.tile(np.array(_FORCE_RGB, np.uint8), (n, 1)))
+            rr.send_columns(path, indexes=[rr.TimeColumn("sim_time", duration=sim),
+                                           rr.TimeColumn("wall_time", timestamp=wall)],
+                            columns=columns, recording=self.stream)
+        self._rows.clear()
+        self._batch_start = self._now[1]
 
     def _geometry(self, path: str, side: str, est: PhysicalEstimate, com: np.ndarray,
                   mesh: tuple[np.ndarray, np.ndarray], hulls, cloud: np.ndarray | None) -> None:  # type: ignore[no-untyped-def]
