@@ -4,7 +4,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 APT_STAMP := $(VENV)/.apt-installed
-DEBS   := libusb-1.0-0 libgl1 libgomp1
+DEBS   := libusb-1.0-0 libgl1 libgomp1 openssl
 
 .PHONY: demo test test-slow bench lint clean
 

@@ -160,3 +160,66 @@ def test_the_remote_settles_its_scene_before_sensing_it(endpoint, tmp_path_facto
             r.close()
     finally:
         session.close()
+
+
+def _certificates(folder):  # type: ignore[no-untyped-def]
+    """A CA and a server certificate for localhost / 127.0.0.1 it signed, made with the openssl CLI."""
+    import subprocess
+
+    def run(*args: str) -> None:
+        subprocess.run(["openssl", *args], cwd=folder, check=True, capture_output=True)
+
+    run("req", "-x509", "-newkey", "rsa:2048", "-nodes", "-days", "2", "-subj", "/CN=tactile-twin test CA",
+        "-keyout", "ca.key", "-out", "ca.pem")
+    run("req", "-newkey", "rsa:2048", "-nodes", "-subj", "/CN=localhost", "-keyout", "server.key", "-out", "server.csr")
+    (folder / "san.ext").write_text("subjectAltName=DNS:localhost,IP:127.0.0.1\n")
+    run("x509", "-req", "-in", "server.csr", "-CA", "ca.pem", "-CAkey", "ca.key", "-CAcreateserial", "-days", "2",
+        "-extfile", "san.ext", "-out", "server.pem")
+    return folder / "ca.pem", folder / "server.key", folder / "server.pem"
+
+
+def _tls_config(path, tls: dict) -> None:  # type: ignore[no-untyped-def]
+    import json
+
+    path.write_text(json.dumps({"mode": "peer", "scouting": {"multicast": {"enabled": False}},
+                                "transport": {"link": {"tls": tls}}}))
+
+
+def test_tls_on_loopback_with_generated_certificates(tmp_path, tmp_path_factory):
+    import shutil
+
+    from sync.local import Local, LocalSettings, SyncError
+    from sync.remote import Remote
+    from sync.session import open_session
+    from twin.scenefile import parse_scene
+
+    if shutil.which("openssl") is None:
+        pytest.fail("the openssl CLI is needed to make the test certificates")
+    ca, key, cert = _certificates(tmp_path)
+    _tls_config(tmp_path / "remote.json5", {"listen_private_key": str(key), "listen_certificate": str(cert)})
+    _tls_config(tmp_path / "twin.json5", {"root_ca_certificate": str(ca)})
+    other_ca, _, _ = _certificates(tmp_path_factory.mktemp("other"))
+    _tls_config(tmp_path / "stranger.json5", {"root_ca_certificate": str(other_ca)})
+    endpoint = f"tls/localhost:{free_port()}"
+    cache = tmp_path_factory.getbasetemp() / "coacd"
+    server = open_session(make_config(listen=[endpoint], config_file=tmp_path / "remote.json5"))
+    try:
+        remote = Remote(parse_scene(SCENE), server, cache_dir=cache)
+        # A twin trusting another CA cannot complete the handshake, so no scene ever answers it.
+        stranger = open_session(make_config(connect=[endpoint], config_file=tmp_path / "stranger.json5"))
+        try:
+            with pytest.raises(SyncError, match="no remote scene answered"):
+                Local(stranger, wait=2.0)
+        finally:
+            stranger.close()
+        client = open_session(make_config(connect=[endpoint], config_file=tmp_path / "twin.json5"))
+        local = Local(client, settings=LocalSettings(cache_dir=cache))
+        try:
+            wait_objects(local, 2)
+            assert local.link.counters.bytes_received > 0
+        finally:
+            local.close()
+            client.close()
+        remote.close()
+    finally:
+        server.close()
