@@ -79,6 +79,8 @@ class LocalReport:
     pose_updates: int = 0
     pose_latency: list[float] = field(default_factory=list)
     add_latency: list[float] = field(default_factory=list)  # cloud received -> touchable in the twin
+    # id -> (seconds from the cloud's publish stamp, seconds from its arrival) to touchable, latest cloud
+    touchable_after: dict[str, tuple[float, float]] = field(default_factory=dict)
     worst_step_while_adding: float = 0.0
     stale_events: int = 0
     recoveries: int = 0
@@ -278,6 +280,7 @@ class Local:
                     self._targets[obj.id] = latest
                 self.report.objects_synced += 1
                 self.report.add_latency.append(time.monotonic() - received)
+                self.report.touchable_after[obj.id] = ((now_ns() - msg.stamp_ns) * 1e-9, self.report.add_latency[-1])
                 if self.rlog.enabled:
                     t, m = self.twin.time, obj.estimate.mass
                     self.rlog.object("twin", obj, sim_time=t, cloud=display, pose=self.twin.pose(obj.id))
