@@ -6,7 +6,7 @@ STAMP  := $(VENV)/.installed
 APT_STAMP := $(VENV)/.apt-installed
 DEBS   := libusb-1.0-0 libgl1 libgomp1 openssl
 
-.PHONY: demo test test-slow bench lint clean
+.PHONY: demo test test-slow lint clean
 
 $(PY):
 	python3 -m venv $(VENV)

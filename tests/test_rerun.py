@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import time
 from collections import Counter, defaultdict
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -105,22 +106,7 @@ def test_a_bad_rerun_option_is_exit_2_and_writes_nothing(box_cloud, tmp_path, mo
 
 
 def test_run_logs_objects_once_and_poses_at_the_rerun_rate(tmp_path, capsys):
-    scene = tmp_path / "scene.toml"
-    scene.write_text("""
-name = "rr"
-[table]
-size = [1.0, 0.6, 0.04]
-height = 0.5
-[end_effector]
-radius = 0.02
-position = [-0.3, 0.0, 0.56]
-[[objects]]
-id = "crate"
-primitive = { type = "box", size = [0.12, 0.08, 0.06] }
-material = "wood_pine"
-position = [0.0, 0.0]
-points = 8000
-""")
+    scene = Path(__file__).parent / "data" / "small.toml"
     out = tmp_path / "run.rrd"
     argv = ["run", str(scene), "--duration", "1", "--no-realtime", "--rerun", "save", str(out), "--rerun-rate", "20",
             "--cache-dir", str(tmp_path / "coacd")]

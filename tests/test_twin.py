@@ -17,27 +17,7 @@ from twin.decompose import CoacdSettings, decompose
 from twin.scenefile import SceneError, load_scene, parse_scene
 from twin.sim import Twin, push_trajectory, run_paced
 
-SMALL = """
-name = "small"
-[table]
-size = [1.0, 0.6, 0.04]
-height = 0.5
-[end_effector]
-radius = 0.02
-position = [-0.3, 0.0, 0.56]
-[[objects]]
-id = "crate"
-primitive = { type = "box", size = [0.12, 0.08, 0.06] }
-material = "wood_pine"
-position = [0.0, 0.0]
-points = 20000
-[[objects]]
-id = "can"
-primitive = { type = "cylinder", size = [0.03, 0.1] }
-density = 700
-position = [0.2, 0.1]
-points = 20000
-"""
+SMALL = Path(__file__).parent / "data" / "small.toml"
 
 
 @pytest.fixture(autouse=True)
@@ -46,10 +26,8 @@ def _cache(tmp_path_factory, monkeypatch):
 
 
 @pytest.fixture(scope="module")
-def small_scene(tmp_path_factory) -> Path:
-    path = tmp_path_factory.mktemp("scene") / "small.toml"
-    path.write_text(SMALL)
-    return path
+def small_scene() -> Path:
+    return SMALL
 
 
 @pytest.fixture(scope="module")
