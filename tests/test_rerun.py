@@ -22,13 +22,13 @@ from loopback import SCENE, close_local, open_local, running_remote, wait_object
 class Recording:
     """What an .rrd holds: rows per entity, timelines, and the column values of each entity."""
 
-    def __init__(self, path) -> None:  # type: ignore[no-untyped-def]
+    def __init__(self, path, *, blueprint: bool = True) -> None:  # type: ignore[no-untyped-def]
         import pyarrow as pa
         from rerun.chunk import RrdReader
 
         reader = RrdReader(path)
         assert len(reader.recordings()) == 1
-        assert reader.blueprints(), "no default blueprint in the file"
+        assert reader.blueprints() or not blueprint, "no default blueprint in the file"
         self.rows: Counter[str] = Counter()
         self.timelines: set[str] = set()
         self.columns: dict[str, dict[str, list]] = defaultdict(lambda: defaultdict(list))
@@ -162,3 +162,33 @@ def test_a_synchronised_session_logs_both_sides_divergence_and_events(tmp_path):
     for i in ids:
         assert remote_rec.rows[f"world/remote/{i}/hulls/0"] >= 1 and remote_rec.rows[f"world/remote/{i}/cloud"] >= 1
         assert remote_rec.rows[f"world/remote/{i}"] > 10
+
+
+@pytest.mark.filterwarnings("ignore:RRD file has no footer")  # a server's streamed file has none
+def test_connect_streams_to_a_running_rerun_server(box_cloud, tmp_path, capsys):
+    import signal
+    import subprocess
+    import sys
+
+    out, port = tmp_path / "received.rrd", free_port()
+    rerun = Path(sys.executable).parent / "rerun"
+    server = subprocess.Popen([str(rerun), "--port", str(port), "--save", str(out)],
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        deadline = time.monotonic() + 30
+        while not _listening(port) and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert main(["estimate", str(box_cloud), "--density", "500", "--rerun", "connect", f"127.0.0.1:{port}"]) == 0
+        time.sleep(1.0)
+    finally:
+        server.send_signal(signal.SIGINT)  # the server writes what it received and exits
+        server.wait(30)
+    rec = Recording(out, blueprint=False)
+    assert {f"world/estimate/crate/{p}" for p in ("cloud", "mesh", "obb")} <= set(rec.rows)
+
+
+def _listening(port: int) -> bool:
+    import socket
+
+    with socket.socket() as s:
+        return s.connect_ex(("127.0.0.1", port)) == 0
