@@ -19,7 +19,7 @@ from sync.messages import (
 )
 from sync.session import SessionError, free_port, make_config
 
-from loopback import SCENE, close_local, open_local, running_remote, wait_objects
+from loopback import SCENE, RemoteRunner, close_local, open_local, running_remote, wait_objects
 
 
 @pytest.fixture
@@ -221,5 +221,42 @@ def test_tls_on_loopback_with_generated_certificates(tmp_path, tmp_path_factory)
             local.close()
             client.close()
         remote.close()
+    finally:
+        server.close()
+
+
+def test_access_control_in_the_remote_config_refuses_operator_commands(tmp_path, tmp_path_factory):
+    """An ACL in the remote's --zenoh-config: this twin may watch the scene but not drive the end effector."""
+    import json
+
+    from sync.remote import Remote
+    from sync.session import open_session
+    from twin.scenefile import parse_scene
+
+    acl = {"enabled": True, "default_permission": "allow",
+           "rules": [{"id": "no-operator", "permission": "deny", "flows": ["ingress"], "messages": ["put"],
+                      "key_exprs": ["twin/*/operator/**"]}],
+           "subjects": [{"id": "loopback", "interfaces": ["lo"]}],
+           "policies": [{"rules": ["no-operator"], "subjects": ["loopback"]}]}
+    (tmp_path / "remote.json5").write_text(json.dumps({"mode": "peer", "scouting": {"multicast": {"enabled": False}},
+                                                       "access_control": acl}))
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    cache = tmp_path_factory.getbasetemp() / "coacd"
+    server = open_session(make_config(listen=[endpoint], config_file=tmp_path / "remote.json5"))
+    try:
+        runner = RemoteRunner(Remote(parse_scene(SCENE), server, cache_dir=cache))
+        runner.start()
+        local = open_local(endpoint, cache)
+        try:
+            wait_objects(local, 2)  # clouds, poses and queries still flow
+            start = runner.remote.twin.data.mocap_pos[0].copy()
+            target = start + np.array([0.05, -0.1, 0.04])
+            local.run(0.5, trajectory=lambda t: target)
+            assert local.link.counters.messages_sent > 0  # the twin did publish its commands
+            assert np.allclose(runner.remote.twin.data.mocap_pos[0], start)  # and the remote never saw them
+        finally:
+            close_local(local)
+            runner.stop()
+            runner.remote.close()
     finally:
         server.close()
