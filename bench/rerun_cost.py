@@ -38,7 +38,7 @@ RATES = (None, 30.0, 100.0, 1000.0)  # None: rerun off
 
 
 def run_once(built, rate: float | None, seconds: float, folder: Path, *,  # type: ignore[no-untyped-def]
-             realtime: bool) -> dict:
+             realtime: bool, settle: float = 0.0) -> dict:
     path = folder / f"bench-{rate}-{realtime}.rrd"
     rlog = OFF if rate is None else RerunLog.open(RerunTarget("save", str(path), rate_hz=rate))
     with Twin(built.spec) as twin:
@@ -47,6 +47,7 @@ def run_once(built, rate: float | None, seconds: float, folder: Path, *,  # type
             rlog.table(t.size, t.height)
         for obj in built.objects:
             rlog.object("twin", obj)
+        time.sleep(settle)  # let the writer start and draw the objects: what follows is the steady state
         start = twin.data.mocap_pos[0].copy()
         push = push_trajectory(start, start + np.array([1.0, 0.0, -0.12]), seconds)
         stats = run_paced(twin, seconds, 1000.0, trajectory=push, realtime=realtime, rlog=rlog)
@@ -63,6 +64,9 @@ def main() -> int:
     parser.add_argument("--objects", type=int, default=20)
     parser.add_argument("--seconds", type=float, default=3.0)
     parser.add_argument("--rounds", type=int, default=3)
+    parser.add_argument("--settle", type=float, default=3.0,
+                        help="seconds between logging the objects and starting the loop (0: the start-up burst "
+                             "falls into the measured loop)")
     parser.add_argument("--json", action="store_true")
     args = parser.parse_args()
 
@@ -75,7 +79,8 @@ def main() -> int:
             runs: dict[float | None, list[dict]] = {r: [] for r in RATES}
             for k in range(args.rounds):
                 for rate in RATES if k % 2 == 0 else RATES[::-1]:
-                    runs[rate].append(run_once(built, rate, args.seconds, Path(tmp), realtime=realtime))
+                    runs[rate].append(run_once(built, rate, args.seconds, Path(tmp), realtime=realtime,
+                                               settle=args.settle))
             rows = []
             for rate in RATES:
                 med = {key: float(np.median([r[key] for r in runs[rate]])) for key in runs[rate][0] if key != "rate_hz"}

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import time
 from collections import Counter, defaultdict
 from pathlib import Path
@@ -192,3 +193,12 @@ def _listening(port: int) -> bool:
 
     with socket.socket() as s:
         return s.connect_ex(("127.0.0.1", port)) == 0
+
+
+def test_an_unreachable_viewer_costs_a_warning_not_the_result(box_cloud, caplog, capsys):
+    port = free_port()  # nobody listens there
+    with caplog.at_level("WARNING", logger="twin.rerunlog"):
+        assert main(["estimate", str(box_cloud), "--density", "500", "--json", "--rerun", "connect",
+                     f"127.0.0.1:{port}"]) == 0
+    assert json.loads(capsys.readouterr().out)["mass_kg"] > 0
+    assert any("could not deliver the recording" in r.getMessage() for r in caplog.records)

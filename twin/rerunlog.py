@@ -1,10 +1,11 @@
 """Visual debugging in rerun: the one module that imports rerun and knows its entity paths.
 
 Off by default: :data:`OFF` accepts every call and does nothing, so the rest of the code calls it
-unconditionally and needs no viewer. When on, a call only copies the arrays it needs and queues them; one
-background thread builds rerun's archetypes and sends them, so the 1 kHz loop pays a queue put, not
-rerun's serialisation. Per-frame state (poses, divergence, force) is logged at ``rate_hz`` of simulated
-time (:meth:`RerunLog.due`); events and objects are logged when they happen.
+unconditionally and needs no viewer. When on, a call only copies the arrays it needs into a queue; a
+child process builds rerun's archetypes and sends them, so the 1 kHz loop pays a queue put, not rerun's
+serialisation under its own GIL. Per-frame state (poses, divergence, force) is logged at ``rate_hz`` of
+simulated time (:meth:`RerunLog.due`) and sent as columns every BATCH_SECONDS; events and objects are
+logged when they happen.
 
 Entity tree (``<side>`` is ``twin`` for C', ``remote`` for C, ``estimate`` for ``twin estimate``)::
 
@@ -30,10 +31,9 @@ from __future__ import annotations
 
 import colorsys
 import logging
+import multiprocessing as mp
 import queue
-import threading
 import time
-from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -61,6 +61,9 @@ DEFAULT_RATE_HZ = 30.0
 
 #: Per-frame rows are sent in batches this often (wall seconds): what a live viewer lags by, at most.
 BATCH_SECONDS = 0.5
+
+#: How long close() waits for the writer process to finish the recording, seconds.
+WRITER_CLOSE_S = 120.0
 
 #: The default viewer address for ``connect`` (rerun's own default gRPC proxy).
 DEFAULT_CONNECT = "rerun+http://127.0.0.1:9876/proxy"
@@ -148,46 +151,43 @@ def blueprint():  # type: ignore[no-untyped-def]
 
 
 class RerunLog:
-    """A rerun recording fed from a background thread. ``RerunLog()`` (or :data:`OFF`) logs nothing.
+    """A rerun recording written by a child process. ``RerunLog()`` (or :data:`OFF`) logs nothing.
 
-    Use as a context manager or call :meth:`close`, which waits until everything queued is sent.
+    The loop's process only copies what is to be shown into a queue; building rerun's archetypes and
+    rerun's own encoding run in the child, so they do not hold this process's GIL while the loop waits
+    for it. Use as a context manager or call :meth:`close`, which waits until everything queued is written.
     """
 
-    def __init__(self, stream=None, *, rate_hz: float = DEFAULT_RATE_HZ, queue_size: int = 4096) -> None:  # type: ignore[no-untyped-def]
-        self.stream = stream
-        self.period = 1.0 / rate_hz
+    def __init__(self, target: RerunTarget | None = None, *, recording_id: str | None = None,
+                 queue_size: int = 4096) -> None:
+        self.target = target
+        self.period = 1.0 / (target.rate_hz if target is not None else DEFAULT_RATE_HZ)
         self.dropped = 0  # items not logged because the queue was full
-        self.logged = 0
+        self.logged = 0  # items the writer logged (known after close)
         self._next_frame = -np.inf
-        self._queue: queue.Queue = queue.Queue(queue_size)
-        self._now = (0.0, 0.0)  # (sim, wall) of the item being logged; logging thread only
-        self._rows: dict[tuple[str, str], list] = {}
-        self._batch_start = 0.0
-        self._thread: threading.Thread | None = None
-        if stream is not None:
-            self._thread = threading.Thread(target=self._drain, name="rerun-log", daemon=True)
-            self._thread.start()
+        self._proc = None
+        if target is not None:
+            ctx = mp.get_context("spawn")
+            self._queue = ctx.Queue(queue_size)
+            self._result = ctx.Queue(1)
+            self._proc = ctx.Process(target=_writer_main, args=(target, recording_id, self._queue, self._result),
+                                     name="rerun-log", daemon=True)
+            self._proc.start()
 
     @classmethod
     def open(cls, target: RerunTarget | None, *, recording_id: str | None = None) -> RerunLog:
-        """A log to ``target`` (None: off)."""
-        if target is None:
-            return cls()
-        import rerun as rr
+        """A log to ``target`` (None: off).
 
-        stream = rr.RecordingStream(APP_ID, recording_id=recording_id)
-        if target.mode == "spawn":
+        Raises:
+            TwinError: ``spawn`` without a display.
+        """
+        if target is not None and target.mode == "spawn":
             _check_display()
-            stream.spawn(default_blueprint=blueprint())
-        elif target.mode == "save":
-            stream.save(target.address, default_blueprint=blueprint())
-        else:
-            stream.connect_grpc(target.address, default_blueprint=blueprint())
-        return cls(stream, rate_hz=target.rate_hz)
+        return cls(target, recording_id=recording_id)
 
     @property
     def enabled(self) -> bool:
-        return self.stream is not None
+        return self._proc is not None
 
     def __enter__(self) -> RerunLog:
         return self
@@ -196,23 +196,40 @@ class RerunLog:
         self.close()
 
     def close(self) -> None:
-        """Send what is queued, flush and disconnect. Idempotent."""
-        if self._thread is None:
+        """Write what is queued, flush and disconnect. Idempotent; never raises for the writer's sake."""
+        if self._proc is None:
             return
-        self._queue.put(None)
-        self._thread.join()
-        self._thread = None
-        self.stream.flush()
-        self.stream.disconnect()
+        proc, self._proc = self._proc, None
+        try:
+            self._queue.put(None, timeout=5)
+        except queue.Full:
+            pass
+        outcome = None
+        deadline = time.monotonic() + WRITER_CLOSE_S
+        while outcome is None and time.monotonic() < deadline:
+            try:
+                outcome = self._result.get(timeout=0.2)
+            except queue.Empty:
+                if not proc.is_alive():
+                    break
+        if isinstance(outcome, int):
+            self.logged = outcome
+        else:
+            log.warning("rerun: %s", outcome or f"the writer process ended without finishing the recording "
+                                                f"(exit code {proc.exitcode})")
+            self._queue.cancel_join_thread()  # nobody will read what is left
+        proc.join(timeout=10)
+        if proc.is_alive():
+            proc.terminate()
         if self.dropped:
-            log.warning("rerun: %d items dropped (the logging thread fell behind)", self.dropped)
+            log.warning("rerun: %d items dropped (the writer fell behind)", self.dropped)
 
     # -- what callers log ----------------------------------------------------------------------------
 
     def due(self, sim_time: float) -> bool:
         """True at most ``rate_hz`` times per simulated second: the caller then logs a :meth:`frame`."""
         # Simulated time is a sum of float steps: 0.051 may come out as 0.0509999.
-        if self.stream is None or sim_time < self._next_frame - _TIME_SLACK:
+        if self._proc is None or sim_time < self._next_frame - _TIME_SLACK:
             return False
         following = self._next_frame + self.period
         self._next_frame = following if following > sim_time else sim_time + self.period
@@ -225,21 +242,21 @@ class RerunLog:
         ``remote`` maps ids to where the remote (C) last said the object is (position, quaternion w x y z,
         already mapped onto the twin's body): logged under world/remote with the divergence.
         """
-        if self.stream is None:
+        if self._proc is None:
             return
         poses = {i: twin.pose(i) for i in twin.object_ids()}
         ee = force = None
         if twin.has_end_effector:
             ee, force = twin.data.mocap_pos[0].copy(), twin.end_effector_force()
         others = None if remote is None else {i: p for i, p in remote.items() if p is not None}
-        self._put(twin.time, self._frame, side, poses, others, ee, force)
+        self._put(twin.time, "frame", side, poses, others, ee, force)
 
     def estimate(self, name: str, est: PhysicalEstimate, cloud: np.ndarray | None = None) -> None:
         """One estimate in its cloud's frame (``twin estimate``): cloud, normals, mesh, OBB, properties."""
-        if self.stream is None:
+        if self._proc is None:
             return
-        self._put(0.0, self._geometry, f"world/estimate/{name}", "estimate", est, np.zeros(3),
-                  (est.vertices, est.faces), (), _display(cloud))
+        self._put(0.0, "geometry", f"world/estimate/{name}", "estimate", _slim(est), np.zeros(3),
+                  (est.vertices, est.faces), (), _display(cloud, est))
 
     def object(self, side: str, obj, *, sim_time: float = 0.0, cloud: np.ndarray | None = None,  # type: ignore[no-untyped-def]
                pose: tuple[np.ndarray, np.ndarray] | None = None) -> None:
@@ -247,61 +264,103 @@ class RerunLog:
 
         Args:
             side: 'twin' or 'remote'.
-            cloud: (n, 3) metres in the estimate's frame (the frame of ``obj.estimate.vertices``).
+            cloud: (n, 3) metres in the estimate's frame (the frame of ``obj.estimate.vertices``); default:
+                the points the estimate was built from.
             pose: (position, quaternion w x y z) to show it at; default ``obj.position`` and ``obj.quat``.
         """
-        if self.stream is None:
+        if self._proc is None:
             return
         path = f"world/{side}/{obj.id}"
         pos, quat = pose if pose is not None else (obj.position, obj.quat)
-        com = obj.estimate.mass.center_of_mass
-        self._put(sim_time, self._geometry, path, side, obj.estimate, com, obj.visual, obj.hulls, _display(cloud))
-        self._put(sim_time, self._pose, path, np.array(pos, dtype=float), np.array(quat, dtype=float))
+        est = obj.estimate
+        self._put(sim_time, "geometry", path, side, _slim(est), est.mass.center_of_mass, obj.visual, obj.hulls,
+                  _display(cloud, est))
+        self._put(sim_time, "pose", path, np.array(pos, dtype=float), np.array(quat, dtype=float))
 
     def ghost(self, obj, *, sim_time: float = 0.0) -> None:  # type: ignore[no-untyped-def]
         """The twin's picture of where C has the object: its own mesh, translucent, under world/remote."""
-        if self.stream is None:
+        if self._proc is None:
             return
-        self._put(sim_time, self._mesh, f"world/remote/{obj.id}/mesh", obj.visual, _MESH_RGBA["remote"])
+        self._put(sim_time, "mesh", f"world/remote/{obj.id}/mesh", obj.visual, _MESH_RGBA["remote"])
 
     def removed(self, side: str, object_id: str, sim_time: float) -> None:
-        if self.stream is None:
+        if self._proc is None:
             return
-        self._put(sim_time, self._clear, f"world/{side}/{object_id}")
+        self._put(sim_time, "clear", f"world/{side}/{object_id}")
 
     def table(self, size: tuple[float, float, float], height: float) -> None:
         """The support: a box of full ``size`` (m) whose top is at ``height`` (m)."""
-        if self.stream is None:
+        if self._proc is None:
             return
-        self._put(0.0, self._table, np.asarray(size, float), float(height))
+        self._put(0.0, "table", np.asarray(size, float), float(height))
 
     def event(self, sim_time: float, text: str, level: str = "INFO") -> None:
         """A sync event for the log view; ``level`` is rerun's (TRACE, DEBUG, INFO, WARN, ERROR)."""
-        if self.stream is None:
+        if self._proc is None:
             return
-        self._put(sim_time, self._text, text, level)
+        self._put(sim_time, "text", text, level)
 
-    # -- the logging thread --------------------------------------------------------------------------
-
-    def _put(self, sim_time: float, fn: Callable[..., None], *args: object) -> None:
+    def _put(self, sim_time: float, what: str, *args: object) -> None:
         try:
-            self._queue.put_nowait((sim_time, time.time(), fn, args))
+            self._queue.put_nowait((sim_time, time.time(), what, args))
         except queue.Full:
             self.dropped += 1
 
-    def _drain(self) -> None:
-        while (item := self._queue.get()) is not None:
-            sim_time, wall, fn, args = item
-            # Timelines are per thread in rerun's SDK; this is the only thread that logs.
-            self._now = (sim_time, wall)
-            self.stream.set_time("sim_time", duration=sim_time)
-            self.stream.set_time("wall_time", timestamp=wall)
-            try:
-                fn(*args)
-                self.logged += 1
-            except Exception:  # a viewer problem must never take the twin down
-                log.exception("rerun: could not log %s", getattr(fn, "__name__", fn))
-        self._send_rows()
+
+def _writer_main(target: RerunTarget, recording_id: str | None, items, result) -> None:  # type: ignore[no-untyped-def]
+    """The child process: open the recording, log every queued item, report how many (or what failed)."""
+    import os
+    import signal
+    import sys
+
+    import rerun as rr
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's to handle; it then closes us
+    try:
+        stream = rr.RecordingStream(APP_ID, recording_id=recording_id)
+        if target.mode == "spawn":
+            # rerun looks for its viewer on PATH; ours is beside this interpreter, which may not be on it.
+            os.environ["PATH"] = os.path.dirname(sys.executable) + os.pathsep + os.environ.get("PATH", "")
+            stream.spawn(default_blueprint=blueprint())
+        elif target.mode == "save":
+            stream.save(target.address, default_blueprint=blueprint())
+        else:
+            stream.connect_grpc(target.address, default_blueprint=blueprint())
+    except Exception as exc:  # reported to the parent, which warns and goes on without rerun
+        result.put(f"could not open the recording ({target.mode}): {exc}".splitlines()[0])
+        return
+    writer = _Writer(stream)
+    while (item := items.get()) is not None:
+        writer.log(*item)
+    try:
+        writer.send_rows()
+        stream.flush()
+        stream.disconnect()
+    except Exception as exc:  # e.g. nobody listening at a connect address
+        result.put(f"could not deliver the recording ({target.mode} {target.address or ''}): {exc}".splitlines()[0])
+        return
+    result.put(writer.logged)
+
+
+class _Writer:
+    """Turns queued items into rerun calls (in the writer process)."""
+
+    def __init__(self, stream) -> None:  # type: ignore[no-untyped-def]
+        self.stream = stream
+        self.logged = 0
+        self._now = (0.0, 0.0)  # (sim, wall) of the item being logged
+        self._rows: dict[tuple[str, str], list] = {}
+        self._batch_start = 0.0
+
+    def log(self, sim_time: float, wall: float, what: str, args: tuple) -> None:
+        self._now = (sim_time, wall)
+        self.stream.set_time("sim_time", duration=sim_time)
+        self.stream.set_time("wall_time", timestamp=wall)
+        try:
+            getattr(self, f"_{what}")(*args)
+            self.logged += 1
+        except Exception:  # one bad item must not end the recording
+            log.exception("rerun: could not log %s", what)
 
     def _pose(self, path: str, pos: np.ndarray, quat: np.ndarray) -> None:
         """One pose now (an object appearing); per-frame poses go through :meth:`_row`."""
@@ -325,12 +384,12 @@ class RerunLog:
             self._row("arrow", "world/end_effector/force", np.concatenate([ee, force * FORCE_SCALE]))
             self._row("scalars", "plots/ee_force", force)
         if self._now[1] - self._batch_start >= BATCH_SECONDS:
-            self._send_rows()
+            self.send_rows()
 
     def _row(self, kind: str, path: str, values: np.ndarray) -> None:
         self._rows.setdefault((kind, path), []).append((*self._now, values))
 
-    def _send_rows(self) -> None:
+    def send_rows(self) -> None:
         import rerun as rr
 
         for (kind, path), rows in self._rows.items():
@@ -373,17 +432,14 @@ class RerunLog:
         label = f"{_leaf(path)} {m.mass:.3g} kg, {m.volume * 1e6:,.0f} cm³"
         s.log(f"{path}/com", rr.Points3D([np.zeros(3)], radii=0.003, colors=[(255, 255, 255)], labels=[label]))
         s.log(f"{path}/properties", rr.TextDocument(_properties(est, len(hulls)), media_type="text/markdown"))
-        if cloud is None and est.points is not None:
-            cloud = display_subset(est.points)  # the input is gone: show the points the surface was built from
         if cloud is not None:
             n = est.points_in or len(cloud)
             s.log(f"{path}/cloud", rr.Points3D(cloud - com, radii=0.0008, colors=[_CLOUD_RGB],
                                                labels=[f"{n:,} points" + (f" ({len(cloud):,} shown)" if n > len(cloud) else "")],
                                                show_labels=False))
-        if est.points is not None and est.normals is not None:
-            k = max(1, len(est.points) // DISPLAY_NORMALS)
+        if est.points is not None and est.normals is not None:  # already thinned to DISPLAY_NORMALS
             length = 0.03 * float(est.obb.extents.max())
-            s.log(f"{path}/normals", rr.Arrows3D(origins=est.points[::k] - com, vectors=est.normals[::k] * length,
+            s.log(f"{path}/normals", rr.Arrows3D(origins=est.points - com, vectors=est.normals * length,
                                                  colors=[(80, 120, 255)], radii=0.0003))
 
     def _mesh(self, path: str, mesh: tuple[np.ndarray, np.ndarray], rgba: tuple[int, ...]) -> None:
@@ -416,8 +472,21 @@ def _leaf(path: str) -> str:
     return path.rsplit("/", 1)[-1]
 
 
-def _display(cloud: np.ndarray | None) -> np.ndarray | None:
-    return None if cloud is None else display_subset(cloud)
+def _display(cloud: np.ndarray | None, est: PhysicalEstimate) -> np.ndarray | None:
+    """What to show as the cloud: the input's display subset, else the points the surface was built from."""
+    if cloud is not None:
+        return display_subset(cloud)
+    return None if est.points is None else display_subset(est.points)
+
+
+def _slim(est: PhysicalEstimate) -> PhysicalEstimate:
+    """The estimate without what the writer does not draw (the full mesh, all points): less to pickle."""
+    from dataclasses import replace
+
+    k = 1 if est.points is None else max(1, len(est.points) // DISPLAY_NORMALS)
+    return replace(est, vertices=np.empty((0, 3)), faces=np.empty((0, 3), np.int64),
+                   points=None if est.points is None else est.points[::k],
+                   normals=None if est.normals is None else est.normals[::k])
 
 
 def _matrix_xyzw(rotation: np.ndarray) -> np.ndarray:
