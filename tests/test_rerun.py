@@ -202,3 +202,25 @@ def test_an_unreachable_viewer_costs_a_warning_not_the_result(box_cloud, caplog,
                      f"127.0.0.1:{port}"]) == 0
     assert json.loads(capsys.readouterr().out)["mass_kg"] > 0
     assert any("could not deliver the recording" in r.getMessage() for r in caplog.records)
+
+
+def test_run_on_a_built_directory_logs_the_compiled_geometry(tmp_path, capsys):
+    scene, built = Path(__file__).parent / "data" / "small.toml", tmp_path / "built"
+    assert main(["build", str(scene), "--out", str(built), "--cache-dir", str(tmp_path / "coacd")]) == 0
+    out = tmp_path / "dir.rrd"
+    assert main(["run", str(built), "--duration", "0.2", "--no-realtime", "--rerun", "save", str(out)]) == 0
+    rec = Recording(out)
+    assert rec.rows["world/table"] == 1
+    from twin.build import build_scene
+    from twin.scenefile import load_scene
+
+    objects = {o.id: o for o in build_scene(load_scene(scene), cache_dir=tmp_path / "coacd", progress=False).objects}
+    for i, obj in objects.items():
+        assert rec.rows[f"world/twin/{i}/mesh"] == 1
+        assert {p for p in rec.rows if p.startswith(f"world/twin/{i}/hulls/")} == \
+            {f"world/twin/{i}/hulls/{k}" for k in range(len(obj.hulls))}
+        # The compiled mesh, brought back to the body frame, is the mesh the object was built with.
+        (vertices,) = rec.columns[f"world/twin/{i}/mesh"]["Mesh3D:vertex_positions"]
+        logged, built_with = np.array(vertices), obj.visual[0]
+        assert np.allclose(logged.min(axis=0), built_with.min(axis=0), atol=1e-6)
+        assert np.allclose(logged.max(axis=0), built_with.max(axis=0), atol=1e-6)

@@ -295,6 +295,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
         with twin:
             if built is not None:
                 _log_built(rlog, built)
+            else:
+                rlog.model_geometry(twin)
             trajectory = _trajectory(args, twin) if twin.model.nmocap else None
             if args.viewer:
                 stats = _run_with_viewer(twin, args, trajectory)

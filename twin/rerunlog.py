@@ -29,7 +29,6 @@ Timelines: ``sim_time`` (simulated seconds) and ``wall_time`` (Unix time).
 
 from __future__ import annotations
 
-import colorsys
 import logging
 import multiprocessing as mp
 import queue
@@ -41,7 +40,8 @@ import numpy as np
 
 from estimation import PhysicalEstimate
 from estimation.errors import TwinError
-from twin.poses import to_xyzw
+from twin.model import COLLISION_GROUP, VISUAL_GROUP, hull_colour
+from twin.poses import rotation, to_xyzw
 
 log = logging.getLogger(__name__)
 
@@ -123,12 +123,6 @@ def display_subset(points: np.ndarray, cap: int = DISPLAY_POINTS, *, seed: int =
     if len(points) > cap:
         points = points[np.random.default_rng(seed).choice(len(points), cap, replace=False)]
     return points.astype(np.float32)
-
-
-def distinct_colours(n: int) -> np.ndarray:
-    """(n, 3) uint8 colours with hues a golden angle apart: neighbours differ, the same every run."""
-    hues = (np.arange(n) * 0.618033988749895) % 1.0
-    return np.array([[round(255 * c) for c in colorsys.hsv_to_rgb(h, 0.65, 0.95)] for h in hues], dtype=np.uint8)
 
 
 def blueprint():  # type: ignore[no-untyped-def]
@@ -277,6 +271,39 @@ class RerunLog:
                   _display(cloud, est))
         self._put(sim_time, "pose", path, np.array(pos, dtype=float), np.array(quat, dtype=float))
 
+    def model_geometry(self, twin, *, side: str = "twin") -> None:  # type: ignore[no-untyped-def]
+        """Each object's visual mesh and hulls as compiled in ``twin``'s model, and the table.
+
+        For a twin loaded from XML (``twin build`` output), where no estimate is at hand: no cloud,
+        normals, OBB or properties.
+        """
+        if self._proc is None:
+            return
+        import mujoco
+
+        m = twin.model
+        table = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, "table")
+        if table >= 0:
+            half = m.geom_size[table]
+            self.table(tuple(2 * half), float(m.geom_pos[table][2] + half[2]))
+        for object_id in twin.object_ids():
+            body = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, object_id)
+            path, hulls = f"world/{side}/{object_id}", 0
+            for g in range(m.body_geomadr[body], m.body_geomadr[body] + m.body_geomnum[body]):
+                if m.geom_type[g] != mujoco.mjtGeom.mjGEOM_MESH:
+                    continue
+                mesh = m.geom_dataid[g]
+                v = m.mesh_vert[m.mesh_vertadr[mesh]:m.mesh_vertadr[mesh] + m.mesh_vertnum[mesh]]
+                f = m.mesh_face[m.mesh_faceadr[mesh]:m.mesh_faceadr[mesh] + m.mesh_facenum[mesh]]
+                # MuJoCo re-centres each mesh on its own frame; the geom's pose puts it back in the body's.
+                v = v @ rotation(m.geom_quat[g]).T + m.geom_pos[g]
+                if m.geom_group[g] == VISUAL_GROUP:
+                    self._put(twin.time, "mesh", f"{path}/mesh", (v, f.copy()), _MESH_RGBA[side])
+                elif m.geom_group[g] == COLLISION_GROUP:
+                    self._put(twin.time, "mesh", f"{path}/hulls/{hulls}", (v, f.copy()), _hull_rgba(hulls))
+                    hulls += 1
+            self._put(twin.time, "pose", path, *twin.pose(object_id))
+
     def ghost(self, obj, *, sim_time: float = 0.0) -> None:  # type: ignore[no-untyped-def]
         """The twin's picture of where C has the object: its own mesh, translucent, under world/remote."""
         if self._proc is None:
@@ -421,9 +448,8 @@ class _Writer:
         self._mesh(f"{path}/mesh", mesh, _MESH_RGBA[side])
         if hulls:
             s.log(f"{path}/hulls", rr.Clear(recursive=True))  # a replaced object may have had more parts
-        for k, ((v, f), rgb) in enumerate(zip(hulls, distinct_colours(len(hulls)), strict=True)):
-            s.log(f"{path}/hulls/{k}", rr.Mesh3D(vertex_positions=v, triangle_indices=f,
-                                                 albedo_factor=(*rgb.tolist(), 170)))
+        for k, (v, f) in enumerate(hulls):
+            s.log(f"{path}/hulls/{k}", rr.Mesh3D(vertex_positions=v, triangle_indices=f, albedo_factor=_hull_rgba(k)))
         box = est.obb
         s.log(f"{path}/obb", rr.Boxes3D(centers=[box.center - com], half_sizes=[box.extents / 2],
                                         quaternions=[rr.Quaternion(xyzw=_matrix_xyzw(box.rotation))],
@@ -466,6 +492,12 @@ class _Writer:
 
 #: The log that logs nothing: the default everywhere.
 OFF = RerunLog()
+
+
+def _hull_rgba(k: int) -> tuple[int, int, int, int]:
+    """Hull k in the model's own palette (as MuJoCo's viewer shows it), a little more opaque."""
+    r, g, b, _ = hull_colour(k)
+    return round(255 * r), round(255 * g), round(255 * b), 170
 
 
 def _leaf(path: str) -> str:
