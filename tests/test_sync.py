@@ -260,3 +260,29 @@ def test_access_control_in_the_remote_config_refuses_operator_commands(tmp_path,
             runner.remote.close()
     finally:
         server.close()
+
+
+def test_objects_appearing_and_vanishing_remotely_follow_in_the_twin(remote, endpoint, tmp_path_factory):
+    from twin.scenefile import ObjectSpec
+
+    local = _local(endpoint, tmp_path_factory)
+    try:
+        wait_objects(local, 2)
+        r = remote.remote
+        remote.stop()  # the remote's scene is edited between its steps, not during them
+        r.add(ObjectSpec(id="ball", source="primitive", value={"type": "sphere", "size": [0.03]}, material="rubber",
+                         position=(-0.2, -0.15), points=6000))
+        remote.start()
+        wait_objects(local, 3)
+        twin_mass = local.twin.model.body("ball").mass[0]
+        truth_mass = r.twin.model.body("ball").mass[0]
+        assert twin_mass == pytest.approx(truth_mass, rel=0.02)
+        assert np.linalg.norm(local.twin.pose("ball")[0] - r.twin.pose("ball")[0]) < 0.005
+        remote.stop()
+        r.remove("crate")
+        remote.start()
+        local.run(2.0, until=lambda: not local.twin.has("crate") and not local.adding)
+        assert not local.twin.has("crate")
+        assert sorted(local.objects) == ["ball", "can"]
+    finally:
+        close_local(local)
