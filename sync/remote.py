@@ -20,7 +20,7 @@ from scenes.sampling import sample_surface
 from sync.keys import Keys
 from sync.link import Link
 from sync.messages import VERSION, Gone, Heartbeat, OperatorCommand, Pose, SceneInfo, cloud_message, now_ns
-from twin.model import add_object, new_spec
+from twin.model import add_object, new_spec, remove_object
 from twin.objects import TwinObject, prepare_objects, reference_estimate, source_mesh
 from twin.poses import angle_deg, rotation
 from twin.rerunlog import OFF, RerunLog
@@ -91,19 +91,33 @@ class Remote:
 
     # -- what the operator and the scene do ------------------------------------------------------
 
-    def add(self, spec: ObjectSpec, position: np.ndarray | None = None) -> None:
-        """An object appears: add it to the ground truth and publish its cloud."""
+    def add(self, spec: ObjectSpec, position: np.ndarray | None = None):  # type: ignore[no-untyped-def]
+        """An object appears: publish its cloud once it is in the ground truth. Returns a Future.
+
+        The true mesh's mass properties, CoACD and the compile run in the background while the loop
+        steps (a 200k-point object took over a second, long enough for twins to mark the link stale);
+        :meth:`step` swaps the new model in and publishes the cloud.
+        """
         top = self.scene.table.height if self.scene.table else None
-        (obj,) = prepare_objects([spec], table_top=top, cache_dir=self._cache_dir, progress=False,
-                                 estimates=[reference_estimate(spec)])
-        if position is not None:
-            obj = replace(obj, position=np.asarray(position, float))
-        self.twin.add(obj)
-        self._remember(spec, obj)
-        self.publish_cloud(spec.id)
+        prepared: list[TwinObject] = []
+
+        def edit(model_spec) -> None:  # type: ignore[no-untyped-def]
+            (obj,) = prepare_objects([spec], table_top=top, cache_dir=self._cache_dir, progress=False,
+                                     estimates=[reference_estimate(spec)])
+            if position is not None:
+                obj = replace(obj, position=np.asarray(position, float))
+            add_object(model_spec, obj)
+            prepared.append(obj)
+
+        def then() -> None:
+            self._remember(spec, prepared[0])
+            self.publish_cloud(spec.id)
+
+        return self.twin.edit_async(edit, then=then)
 
     def remove(self, object_id: str) -> None:
-        self.twin.remove(object_id)
+        """An object vanishes: twins are told now; the ground truth drops it between two steps."""
+        self.twin.edit_async(lambda spec: remove_object(spec, object_id))
         self.rlog.removed("remote", object_id, self.twin.time)
         self.rlog.event(self.twin.time, f"{object_id}: removed")
         self._specs.pop(object_id, None)
@@ -149,6 +163,7 @@ class Remote:
 
     def step(self) -> None:
         """One physics step: apply the operator's latest command, step, publish what left the deadband."""
+        self.twin.poll()  # objects added in the background
         if self._operator is not None:
             self.twin.set_end_effector(self._operator)
         self.twin.step()
