@@ -39,6 +39,15 @@ class Deadband:
     angle_deg: float = 0.5
 
 
+@dataclass(frozen=True)
+class _Truth:
+    """One ground-truth object: its scene entry, its body in the model, its true surface in the body frame."""
+
+    spec: ObjectSpec
+    obj: TwinObject
+    body_mesh: object  # trimesh.Trimesh, origin at the centre of mass
+
+
 #: Joint speed below which the ground truth counts as at rest, m/s or rad/s: a millimetre per second.
 SETTLED_SPEED = 1e-3
 
@@ -64,9 +73,7 @@ class Remote:
         self._operator: np.ndarray | None = None
         self._seq = 0
         self._published: dict[str, tuple[np.ndarray, np.ndarray]] = {}
-        self._body_mesh: dict[str, object] = {}
-        self._specs: dict[str, ObjectSpec] = {}
-        self._truth: dict[str, TwinObject] = {}
+        self._objects: dict[str, _Truth] = {}
         self._cache_dir = cache_dir
         self.pose_updates = 0
         top = scene.table.height if scene.table else None
@@ -120,8 +127,7 @@ class Remote:
         self.twin.edit_async(lambda spec: remove_object(spec, object_id))
         self.rlog.removed("remote", object_id, self.twin.time)
         self.rlog.event(self.twin.time, f"{object_id}: removed")
-        self._specs.pop(object_id, None)
-        self._truth.pop(object_id, None)
+        self._objects.pop(object_id, None)
         self._published.pop(object_id, None)
         with self._lock:  # the queryable reads these from Zenoh's threads
             for kind in ("cloud", "pose"):
@@ -131,28 +137,29 @@ class Remote:
 
     def cloud_points(self) -> dict[str, int]:
         """Points per object cloud this remote sends."""
-        return {i: self.points or s.points for i, s in self._specs.items()}
+        return {i: self.points or t.spec.points for i, t in self._objects.items()}
 
     def sense(self, object_id: str, points: int | None = None) -> np.ndarray:
         """A cloud of the object's true surface at its current pose, world frame (n, 3) metres."""
-        spec = self._specs[object_id]
-        n = points or self.points or spec.points
-        cloud = sample_surface(self._body_mesh[object_id], n, seed=zlib.crc32(object_id.encode()) + self._seq)
+        truth = self._objects[object_id]
+        n = points or self.points or truth.spec.points
+        cloud = sample_surface(truth.body_mesh, n, seed=zlib.crc32(object_id.encode()) + self._seq)
         pos, quat = self.twin.pose(object_id)
         return cloud.points @ rotation(quat).T + pos
 
     def publish_cloud(self, object_id: str, points: int | None = None) -> int:
         """Sense and publish one object's cloud (with its current pose); returns the bytes sent."""
-        spec = self._specs[object_id]
+        truth = self._objects[object_id]
+        spec = truth.spec
         pos, quat = self.twin.pose(object_id)
         cloud = self.sense(object_id, points)
         msg = cloud_message(object_id, self._next(), cloud, material=spec.material,
                             density=spec.density, body_position=pos, body_quat=quat)
         data = self.link.put(self.keys.object(object_id, "cloud"), msg)
         if self.rlog.enabled:
-            truth = self._truth[object_id]  # its estimate's frame is the true mesh's: body frame + COM
-            in_mesh_frame = (cloud - pos) @ rotation(quat) + truth.estimate.mass.center_of_mass
-            self.rlog.object("remote", truth, sim_time=self.twin.time, cloud=in_mesh_frame, pose=(pos, quat))
+            # The truth's estimate frame is the true mesh's: body frame + COM.
+            in_mesh_frame = (cloud - pos) @ rotation(quat) + truth.obj.estimate.mass.center_of_mass
+            self.rlog.object("remote", truth.obj, sim_time=self.twin.time, cloud=in_mesh_frame, pose=(pos, quat))
             self.rlog.event(self.twin.time, f"{object_id}: cloud published ({len(cloud):,} points, {len(data):,} bytes)")
         with self._lock:
             self._replies[self.keys.object(object_id, "cloud")] = data
@@ -169,19 +176,19 @@ class Remote:
         self.twin.step()
         if self.rlog.due(self.twin.time):
             self.rlog.frame(self.twin, side="remote")
-        for object_id in self._specs:
+        for object_id in self._objects:
             self._publish_pose(object_id)
         now = time.monotonic()
         if self.keyframe_s > 0 and now - self._last_keyframe >= self.keyframe_s:
             # Every pose now and then, moved or not: a twin that drifted on its own (its estimated shape
             # is not the true one) is pulled back even when the remote object is still.
             self._last_keyframe = now
-            for object_id in self._specs:
+            for object_id in self._objects:
                 self._publish_pose(object_id, force=True)
         if now - self._last_heartbeat >= self.heartbeat_s:
             self._last_heartbeat = now
             self.link.put(self.keys.heartbeat, Heartbeat(v=VERSION, stamp_ns=now_ns(), seq=self._next(),
-                                                         sim_time=self.twin.time, objects=len(self._specs)))
+                                                         sim_time=self.twin.time, objects=len(self._objects)))
 
     def run(self, duration: float, *, rate: float = 1000.0, stop: threading.Event | None = None) -> LoopStats:
         """Step in real time for ``duration`` seconds (or until ``stop`` is set)."""
@@ -207,9 +214,7 @@ class Remote:
     def _remember(self, spec: ObjectSpec, obj: TwinObject) -> None:
         mesh = source_mesh(spec)
         mesh.apply_translation(-obj.estimate.mass.center_of_mass)  # the body frame: origin at the COM
-        self._body_mesh[spec.id] = mesh
-        self._specs[spec.id] = spec
-        self._truth[spec.id] = obj
+        self._objects[spec.id] = _Truth(spec, obj, mesh)
 
     def _settle(self, limit: float) -> float:
         """Step until nothing moves (or ``limit`` simulated seconds): returns the time it took.
