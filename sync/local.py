@@ -233,7 +233,8 @@ class Local:
                 self._correct(msg.object_id)
                 self.report.pose_updates += 1
                 self.report.pose_latency.append((now_ns() - msg.stamp_ns) * 1e-9)
-                self.rlog.event(self.twin.time, f"{msg.object_id}: pose correction (seq {msg.seq})", "DEBUG")
+                if self.rlog.enabled:  # every pose passes here: no string building with rerun off
+                    self.rlog.event(self.twin.time, f"{msg.object_id}: pose correction (seq {msg.seq})", "DEBUG")
         elif isinstance(msg, Cloud):
             if self._clouds.get(msg.object_id, -1) >= msg.seq:
                 return

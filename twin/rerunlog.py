@@ -154,7 +154,6 @@ class RerunLog:
 
     def __init__(self, target: RerunTarget | None = None, *, recording_id: str | None = None,
                  queue_size: int = 4096) -> None:
-        self.target = target
         self.period = 1.0 / (target.rate_hz if target is not None else DEFAULT_RATE_HZ)
         self.dropped = 0  # items not logged because the queue was full
         self.logged = 0  # items the writer logged (known after close)
