@@ -8,9 +8,12 @@ and poses when they leave a deadband.
 from __future__ import annotations
 
 import logging
+import queue
 import threading
 import time
 import zlib
+from collections.abc import Callable
+from concurrent.futures import Future
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -53,7 +56,11 @@ SETTLED_SPEED = 1e-3
 
 
 class Remote:
-    """The remote scene C on a Zenoh session. ``run()`` steps it; everything else is message handling."""
+    """The remote scene C on a Zenoh session. ``run()`` steps it; everything else is message handling.
+
+    What happens to the scene (:meth:`add`, :meth:`remove`, :meth:`move`) may be called from any thread:
+    it is queued and done by the loop between two steps, never during one.
+    """
 
     def __init__(self, scene: SceneSpec, session, *, deadband: Deadband = Deadband(),  # type: ignore[no-untyped-def]
                  points: int | None = None, heartbeat_s: float = 0.2, cache_dir: Path | None = None,
@@ -69,6 +76,7 @@ class Remote:
         self._last_keyframe = time.monotonic()
         self.link = Link(session)
         self._lock = threading.Lock()
+        self._actions: queue.SimpleQueue[Callable[[], None]] = queue.SimpleQueue()  # run by step()
         self._replies: dict[str, bytes] = {}  # key -> last encoded message, for late joiners
         self._operator: np.ndarray | None = None
         self._seq = 0
@@ -98,8 +106,8 @@ class Remote:
 
     # -- what the operator and the scene do ------------------------------------------------------
 
-    def add(self, spec: ObjectSpec, position: np.ndarray | None = None):  # type: ignore[no-untyped-def]
-        """An object appears: publish its cloud once it is in the ground truth. Returns a Future.
+    def add(self, spec: ObjectSpec, position: np.ndarray | None = None) -> Future:
+        """An object appears. Returns a Future that resolves to its id once its cloud is published.
 
         The true mesh's mass properties, CoACD and the compile run in the background while the loop
         steps (a 200k-point object took over a second, long enough for twins to mark the link stale);
@@ -107,6 +115,7 @@ class Remote:
         """
         top = self.scene.table.height if self.scene.table else None
         prepared: list[TwinObject] = []
+        done: Future = Future()
 
         def edit(model_spec) -> None:  # type: ignore[no-untyped-def]
             (obj,) = prepare_objects([spec], table_top=top, cache_dir=self._cache_dir, progress=False,
@@ -119,21 +128,22 @@ class Remote:
         def then() -> None:
             self._remember(spec, prepared[0])
             self.publish_cloud(spec.id)
+            done.set_result(spec.id)
 
-        return self.twin.edit_async(edit, then=then)
+        self._actions.put(lambda: self.twin.edit_async(edit, then=then))
+        return done
 
     def remove(self, object_id: str) -> None:
-        """An object vanishes: twins are told now; the ground truth drops it between two steps."""
-        self.twin.edit_async(lambda spec: remove_object(spec, object_id))
-        self.rlog.removed("remote", object_id, self.twin.time)
-        self.rlog.event(self.twin.time, f"{object_id}: removed")
-        self._objects.pop(object_id, None)
-        self._published.pop(object_id, None)
-        with self._lock:  # the queryable reads these from Zenoh's threads
-            for kind in ("cloud", "pose"):
-                self._replies.pop(self.keys.object(object_id, kind), None)
-        self.link.put(self.keys.object(object_id, "gone"), Gone(v=VERSION, stamp_ns=now_ns(), object_id=object_id,
-                                                               seq=self._next()))
+        """An object vanishes: twins are told at the next step; the ground truth drops it soon after."""
+        self._actions.put(lambda: self._remove(object_id))
+
+    def move(self, object_id: str, position: np.ndarray, quat: np.ndarray) -> None:
+        """Something outside the twin's view moves an object (world frame, quaternion w x y z), at rest."""
+        def teleport() -> None:
+            self.twin.set_pose(object_id, np.asarray(position, float), np.asarray(quat, float))
+            self.twin.set_velocity(object_id, np.zeros(3), np.zeros(3))
+
+        self._actions.put(teleport)
 
     def cloud_points(self) -> dict[str, int]:
         """Points per object cloud this remote sends."""
@@ -170,6 +180,11 @@ class Remote:
 
     def step(self) -> None:
         """One physics step: apply the operator's latest command, step, publish what left the deadband."""
+        while True:
+            try:
+                self._actions.get_nowait()()
+            except queue.Empty:
+                break
         self.twin.poll()  # objects added in the background
         if self._operator is not None:
             self.twin.set_end_effector(self._operator)
@@ -210,6 +225,18 @@ class Remote:
         self.twin.close()
 
     # -- internals -----------------------------------------------------------------------------------
+
+    def _remove(self, object_id: str) -> None:
+        self.twin.edit_async(lambda spec: remove_object(spec, object_id))
+        self.rlog.removed("remote", object_id, self.twin.time)
+        self.rlog.event(self.twin.time, f"{object_id}: removed")
+        self._objects.pop(object_id, None)
+        self._published.pop(object_id, None)
+        with self._lock:  # the queryable reads these from Zenoh's threads
+            for kind in ("cloud", "pose"):
+                self._replies.pop(self.keys.object(object_id, kind), None)
+        self.link.put(self.keys.object(object_id, "gone"), Gone(v=VERSION, stamp_ns=now_ns(), object_id=object_id,
+                                                               seq=self._next()))
 
     def _remember(self, spec: ObjectSpec, obj: TwinObject) -> None:
         mesh = source_mesh(spec)

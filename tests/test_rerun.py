@@ -136,7 +136,7 @@ def test_a_synchronised_session_logs_both_sides_divergence_and_events(tmp_path):
                 t0 = local.twin.time
                 r = remote.remote
                 pos, quat = r.twin.pose("crate")
-                r.twin.set_pose("crate", pos + np.array([0.08, 0.0, 0.0]), quat)  # the remote moves the crate
+                r.move("crate", pos + np.array([0.08, 0.0, 0.0]), quat)
                 local.run(1.0)
                 time_in_session = local.twin.time - t0
             finally:

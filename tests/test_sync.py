@@ -73,7 +73,7 @@ def test_late_joiner_gets_the_whole_scene_and_follows_poses(remote, endpoint, tm
         # The remote moves the crate; the twin follows through deadband pose updates.
         r = remote.remote
         pos, quat = r.twin.pose("crate")
-        r.twin.set_pose("crate", pos + np.array([0.1, 0.05, 0.0]), quat)
+        r.move("crate", pos + np.array([0.1, 0.05, 0.0]), quat)
         local.run(1.0)
         twin_pos, _ = local.twin.pose("crate")
         true_pos, _ = r.twin.pose("crate")
@@ -269,20 +269,40 @@ def test_objects_appearing_and_vanishing_remotely_follow_in_the_twin(remote, end
     try:
         wait_objects(local, 2)
         r = remote.remote
-        remote.stop()  # the remote's scene is edited between its steps, not during them
-        r.add(ObjectSpec(id="ball", source="primitive", value={"type": "sphere", "size": [0.03]}, material="rubber",
-                         position=(-0.2, -0.15), points=6000))
-        remote.start()
+        added = r.add(ObjectSpec(id="ball", source="primitive", value={"type": "sphere", "size": [0.03]},
+                                 material="rubber", position=(-0.2, -0.15), points=6000))
+        assert added.result(timeout=60) == "ball"  # the remote published it
         wait_objects(local, 3)
         twin_mass = local.twin.model.body("ball").mass[0]
         truth_mass = r.twin.model.body("ball").mass[0]
         assert twin_mass == pytest.approx(truth_mass, rel=0.02)
         assert np.linalg.norm(local.twin.pose("ball")[0] - r.twin.pose("ball")[0]) < 0.005
-        remote.stop()
         r.remove("crate")
-        remote.start()
         local.run(2.0, until=lambda: not local.twin.has("crate") and not local.adding)
         assert not local.twin.has("crate")
         assert sorted(local.objects) == ["ball", "can"]
     finally:
         close_local(local)
+
+
+def test_the_scene_can_be_moved_from_another_thread_while_the_remote_steps(remote):
+    # MuJoCo releases the GIL inside mj_step: a set_pose from this thread used to run mj_forward on the
+    # remote's mjData during a step of its loop thread, and crashed the process within seconds.
+    r = remote.remote
+    start, quat = r.twin.pose("crate")
+    lift = np.array([0.0, 0.0, 0.05])
+    deadline = time.monotonic() + 2.0
+    moves = 0
+    while time.monotonic() < deadline:
+        r.move("crate", start + lift * (moves % 2), quat)
+        moves += 1
+    r.move("crate", start + 2 * lift, quat)  # the last one wins
+    time.sleep(0.05)
+    remote.stop()
+    try:
+        assert moves > 1000
+        # From 10 cm up it has fallen for at most 50 ms (12 mm) and is still in the air.
+        z = r.twin.pose("crate")[0][2]
+        assert start[2] + 0.08 < z <= start[2] + 0.1 + 1e-9
+    finally:
+        remote.start()

@@ -23,6 +23,11 @@ class Twin:
 
     Use as a context manager. Live edits (:meth:`add`, :meth:`remove`, :meth:`replace`) recompile the
     spec keeping every other body's state (MjSpec.recompile carries qpos/qvel over).
+
+    Not thread-safe: MuJoCo releases the GIL inside ``mj_step``, so a ``set_pose`` (``mj_forward``) from a
+    second thread runs on the same ``mjData`` at the same time and corrupts it (a segfault in practice).
+    One thread steps and edits a twin; others hand it work (:meth:`edit_async`, or a queue drained by the
+    loop as :class:`sync.remote.Remote` and :class:`sync.local.Local` do).
     """
 
     def __init__(self, spec, model=None) -> None:  # type: ignore[no-untyped-def]
