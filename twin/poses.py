@@ -35,12 +35,13 @@ def angle_deg(a: np.ndarray, b: np.ndarray) -> float:
 
 
 def nlerp(a: np.ndarray, b: np.ndarray, t: float) -> np.ndarray:
-    """Normalised linear blend from ``a`` (t=0) to ``b`` (t=1) along the short way: slerp for small steps."""
-    b = np.asarray(b, dtype=np.float64)
-    if np.dot(a, b) < 0:
-        b = -b
-    out = np.asarray(a, dtype=np.float64) + t * (b - a)
-    return out / np.linalg.norm(out)
+    """Normalised linear blend from ``a`` (t=0) to ``b`` (t=1) along the short way: slerp for small steps.
+
+    Quaternions (4,) or stacks (n, 4)."""
+    a, b = np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64)
+    flip = np.einsum("...i,...i->...", a, b) < 0
+    out = a + t * (np.where(flip[..., None], -b, b) - a)
+    return out / np.sqrt(np.einsum("...i,...i->...", out, out))[..., None]
 
 
 def to_xyzw(q: np.ndarray) -> np.ndarray:
