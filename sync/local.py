@@ -3,7 +3,8 @@
 Nothing here blocks the loop: Zenoh's threads only queue decoded messages; estimation and CoACD run in a
 worker process; the new model compiles in a background thread (:meth:`twin.sim.Twin.edit_async`) and is
 swapped in between two steps. Pose corrections blend in over ``correction_tau`` unless they are large,
-in which case the object is moved at once.
+in which case the object is moved at once. Between corrections, an object the remote reports at rest and
+the operator leaves alone is held at the remote's pose (:mod:`sync.hold`).
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ import numpy as np
 
 from estimation import estimate, make_cloud
 from estimation.materials import resolve_density
+from sync.hold import DEFAULT_HOLD, Hold, HoldSettings
 from sync.keys import Keys, any_scene_info
 from sync.link import Link
 from sync.messages import (
@@ -59,6 +61,7 @@ class LocalSettings:
         snap_distance, snap_angle_deg: a correction larger than this moves the object at once.
         operator_deadband: the operator's command is published when it moved more than this, metres.
         workers: processes estimating clouds.
+        hold: when an undisturbed object is pinned to the remote's pose (:mod:`sync.hold`).
     """
 
     stale_after: float = 1.0
@@ -67,6 +70,7 @@ class LocalSettings:
     snap_angle_deg: float = 20.0
     operator_deadband: float = 0.0002
     workers: int = 1
+    hold: HoldSettings = DEFAULT_HOLD
     coacd: CoacdSettings = DEFAULT_SETTINGS
     cache_dir: Path | None = None
 
@@ -85,6 +89,14 @@ class LocalReport:
     stale_events: int = 0
     recoveries: int = 0
     estimation_errors: int = 0
+    holds: int = 0  # times an object strayed from the remote's pose on its own and was pinned to it
+    snaps: int = 0  # corrections too large to blend in: the object was moved at once
+    # id -> |twin - remote| position, metres, every DIVERGENCE_EVERY seconds of twin time while both are known
+    divergence: dict[str, list[float]] = field(default_factory=dict)
+
+
+#: How often (twin time, seconds) the report samples each object's divergence from the remote.
+DIVERGENCE_EVERY = 0.01
 
 
 def build_from_cloud(data: bytes, coacd: CoacdSettings, cache_dir: Path | None,
@@ -127,6 +139,8 @@ class Local:
         self._offsets: dict[str, tuple[np.ndarray, np.ndarray]] = {}
         self._latest: dict[str, Pose] = {}
         self._targets: dict[str, Pose] = {}
+        self.hold = Hold(settings.hold, tau=settings.correction_tau)
+        self._next_sample = 0.0
         self._sent_operator: np.ndarray | None = None
         self._seq = 0
         self._pool = ProcessPoolExecutor(settings.workers, mp_context=mp.get_context("spawn"))
@@ -177,7 +191,14 @@ class Local:
             target = np.asarray(trajectory(self.twin.time), dtype=float)
             self.twin.set_end_effector(target)
             self._publish_operator(target)
+        for object_id in self.hold.apply(self.twin):
+            self.report.holds += 1
+            if self.rlog.enabled:
+                self.rlog.event(self.twin.time, f"{object_id}: strayed from the remote's pose on its own; held there")
         self.twin.step()
+        if self.twin.time >= self._next_sample:
+            self._next_sample = self.twin.time + DIVERGENCE_EVERY
+            self._sample_divergence()
         if self.rlog.due(self.twin.time):
             self.rlog.frame(self.twin, remote={i: self.remote_pose(i) for i in self._offsets})
         self._check_link()
@@ -230,6 +251,7 @@ class Local:
             self._latest[msg.object_id] = msg
             if msg.object_id in self._offsets and self.twin.has(msg.object_id):
                 self._targets[msg.object_id] = msg
+                self._hold_at(msg.object_id)
                 self._correct(msg.object_id)
                 self.report.pose_updates += 1
                 self.report.pose_latency.append((now_ns() - msg.stamp_ns) * 1e-9)
@@ -248,6 +270,7 @@ class Local:
             self._clouds.pop(msg.object_id, None)
             self._offsets.pop(msg.object_id, None)
             self._targets.pop(msg.object_id, None)
+            self.hold.forget(msg.object_id)
             if self.twin.has(msg.object_id):
                 self.twin.edit_async(lambda spec, i=msg.object_id: remove_object(spec, i))
             for side in ("twin", "remote"):
@@ -279,6 +302,7 @@ class Local:
                 latest = self._latest.get(obj.id)
                 if latest is not None and latest.seq > msg.seq:
                     self._targets[obj.id] = latest
+                self._hold_at(obj.id)
                 self.report.objects_synced += 1
                 self.report.add_latency.append(time.monotonic() - received)
                 self.report.touchable_after[obj.id] = ((now_ns() - msg.stamp_ns) * 1e-9, self.report.add_latency[-1])
@@ -329,10 +353,24 @@ class Local:
         self.twin.set_velocity(object_id, lin + alpha * (np.asarray(target.linvel) - lin),
                                ang + alpha * (np.asarray(target.angvel) - ang))
         if alpha == 1.0:
+            self.report.snaps += 1
             self.rlog.event(self.twin.time, f"{object_id}: snapped {dist * 1e3:.1f} mm, {angle:.1f} deg to the "
                                             f"remote pose", "WARN")
         if alpha == 1.0 or (dist < 2e-4 and angle < 0.1):
             del self._targets[object_id]
+
+    def _sample_divergence(self) -> None:
+        for object_id in self._offsets:
+            remote = self.remote_pose(object_id)
+            if remote is not None and self.twin.has(object_id):
+                gap = float(np.linalg.norm(self.twin.pose(object_id)[0] - remote[0]))
+                self.report.divergence.setdefault(object_id, []).append(gap)
+
+    def _hold_at(self, object_id: str) -> None:
+        """Tell the hold where the remote last had the object (mapped onto the twin's body)."""
+        pose, latest = self.remote_pose(object_id), self._latest.get(object_id)
+        if pose is not None and latest is not None:
+            self.hold.target(object_id, *pose, latest.linvel, latest.angvel, now=self.twin.time)
 
     def _publish_operator(self, target: np.ndarray) -> None:
         if self._sent_operator is not None and np.linalg.norm(target - self._sent_operator) <= self.settings.operator_deadband:

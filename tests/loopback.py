@@ -46,10 +46,12 @@ class RemoteRunner:
 
 
 @contextlib.contextmanager
-def running_remote(endpoint: str, cache_dir: Path, rlog: RerunLog = OFF) -> Iterator[RemoteRunner]:
-    """The SCENE's remote, listening on ``endpoint`` and stepping in a thread until the block ends."""
+def running_remote(endpoint: str, cache_dir: Path, rlog: RerunLog = OFF,
+                   **remote) -> Iterator[RemoteRunner]:  # type: ignore[no-untyped-def]
+    """The SCENE's remote (``remote``: more Remote arguments), listening on ``endpoint`` and stepping in a
+    thread until the block ends."""
     session = open_session(make_config(listen=[endpoint]))
-    r = Remote(parse_scene(SCENE), session, cache_dir=cache_dir, rlog=rlog)
+    r = Remote(parse_scene(SCENE), session, cache_dir=cache_dir, rlog=rlog, **remote)
     runner = RemoteRunner(r)
     runner.start()
     try:

@@ -306,3 +306,24 @@ def test_the_scene_can_be_moved_from_another_thread_while_the_remote_steps(remot
         assert start[2] + 0.08 < z <= start[2] + 0.1 + 1e-9
     finally:
         remote.start()
+
+
+def test_a_twin_object_straying_on_its_own_is_held_at_the_remote_pose(tmp_path):
+    from sync.hold import HoldSettings
+
+    endpoint, cache = f"tcp/127.0.0.1:{free_port()}", tmp_path / "coacd"
+    gaps = {}
+    with running_remote(endpoint, cache, keyframe_s=0.0):  # no keyframes: only the hold can pull it back
+        for enabled in (False, True):
+            local = open_local(endpoint, cache, hold=HoldSettings(enabled=enabled))
+            try:
+                wait_objects(local, 2)
+                local.run(0.5)
+                local.twin.set_velocity("crate", np.array([0.6, 0.0, 0.0]), np.array([0.0, 0.0, 3.0]))  # C's is still
+                local.run(1.0)
+                remote_pos, _ = local.remote_pose("crate")
+                gaps[enabled] = float(np.linalg.norm(local.twin.pose("crate")[0] - remote_pos)), local.report.holds
+            finally:
+                close_local(local)
+    assert gaps[False][0] > 0.02 and gaps[False][1] == 0  # it slid away, and nothing brings it back
+    assert gaps[True][0] < 0.002 and gaps[True][1] >= 1

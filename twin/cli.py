@@ -79,6 +79,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--scene", type=Path, help="scene TOML for the remote (default: the paper's objects)")
     p.add_argument("--zenoh-config", type=Path, help="a Zenoh JSON5 config for both sides")
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
+    _hold_option(p)
     _rerun_option(p)
     p.set_defaults(handler=_cmd_demo)
 
@@ -97,6 +98,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--duration", type=float, default=3600.0, help="seconds to run (default 1 h)")
     p.add_argument("--stale-after", type=float, default=1.0, help="seconds of silence before the link is stale")
     p.add_argument("--json", action="store_true", help="print the session report as JSON at the end")
+    _hold_option(p)
     _network_options(p, connect_default="tcp/127.0.0.1:7447")
     _rerun_option(p)
     p.set_defaults(handler=_cmd_local)
@@ -333,6 +335,11 @@ def _run_with_viewer(twin, args, trajectory):  # type: ignore[no-untyped-def]
     return stats
 
 
+def _hold_option(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--no-hold", dest="hold", action="store_false",
+                   help="do not pin objects the remote reports at rest to its pose while nothing touches them")
+
+
 def _rerun_option(p: argparse.ArgumentParser) -> None:
     from twin.rerunlog import DEFAULT_RATE_HZ
 
@@ -414,12 +421,14 @@ def _cmd_local(args: argparse.Namespace) -> int:
 
 
 def _run_local(args: argparse.Namespace, rlog) -> None:  # type: ignore[no-untyped-def]
+    from sync.hold import HoldSettings
     from sync.local import Local, LocalSettings, SyncError
 
     session = _session(args)
     try:
         try:
-            local = Local(session, scene=args.scene, settings=LocalSettings(stale_after=args.stale_after),
+            local = Local(session, scene=args.scene, settings=LocalSettings(stale_after=args.stale_after,
+                                                                               hold=HoldSettings(enabled=args.hold)),
                           rlog=rlog)
         except (SyncError, ValueError) as exc:
             raise TwinError(str(exc)) from exc
@@ -427,6 +436,7 @@ def _run_local(args: argparse.Namespace, rlog) -> None:  # type: ignore[no-untyp
         r, c = local.report, local.link.counters
         record = {"objects_synced": r.objects_synced, "pose_updates": r.pose_updates,
                   "dropped_malformed": c.dropped_malformed, "stale_events": r.stale_events,
+                  "snaps": r.snaps, "holds": r.holds,
                   "step_p99_ms": stats.p99 * 1e3, "missed_deadlines": stats.missed}
         print(json.dumps(record) if args.json else "  ".join(f"{k} {v}" for k, v in record.items()))
         local.close()
@@ -445,7 +455,8 @@ def _cmd_demo(args: argparse.Namespace) -> int:
         load_scene(args.scene)  # a bad scene fails here with its own message, not in the remote process
     with _open_rerun(args) as rlog:
         record = run_demo(duration=args.duration, scene_path=args.scene, progress=not args.json,
-                          zenoh_config=None if args.zenoh_config is None else str(args.zenoh_config), rlog=rlog)
+                          zenoh_config=None if args.zenoh_config is None else str(args.zenoh_config), rlog=rlog,
+                          hold=args.hold)
     if args.json:
         print(json.dumps(record))
     return 0

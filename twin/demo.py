@@ -47,12 +47,15 @@ def _remote_main(scene_path: str, endpoint: str, zenoh_config: str | None, ready
 
 
 def run_demo(*, duration: float = 5.0, scene_path: Path | None = None, zenoh_config: str | None = None,
-             progress: bool = True, rlog: RerunLog = OFF) -> dict:
+             progress: bool = True, rlog: RerunLog = OFF, hold: bool = True) -> dict:
     """Run both sides and return the summary (the ``--json`` record).
+
+    ``hold``: pin objects the remote reports at rest while the operator leaves them alone (:mod:`sync.hold`).
 
     ``rlog``: where the twin's side logs (its objects, its poses beside the remote poses it received,
     divergence, force, sync events). The remote process logs nothing.
     """
+    from sync.hold import HoldSettings
     from sync.local import Local, LocalSettings
     from sync.session import SessionError, free_port, make_config, open_session
     from twin.sim import push_trajectory
@@ -78,7 +81,7 @@ def run_demo(*, duration: float = 5.0, scene_path: Path | None = None, zenoh_con
     local = None
     try:
         t_join = time.perf_counter()
-        local = Local(session, settings=LocalSettings(workers=2), rlog=rlog)
+        local = Local(session, settings=LocalSettings(workers=2, hold=HoldSettings(enabled=hold)), rlog=rlog)
         expected = local.expected
         console.print(f"twin joined late and got {expected} clouds; estimating them while the loop runs at 1 kHz")
         local.run(600.0, until=lambda: len(local.objects) >= expected and not local.adding)
@@ -103,6 +106,7 @@ def run_demo(*, duration: float = 5.0, scene_path: Path | None = None, zenoh_con
         remote.terminate()
     raw = sum(remote_stats["points"].values()) * RAW_BYTES_PER_POINT * RAW_STREAM_HZ * session_s
     lat = np.asarray(report.pose_latency) * 1e3 if report.pose_latency else np.zeros(1)
+    gaps = np.concatenate([np.asarray(g) for g in report.divergence.values()] or [np.zeros(1)]) * 1e3
     out = {
         "objects_synced": report.objects_synced,
         "pose_updates": report.pose_updates,
@@ -118,6 +122,12 @@ def run_demo(*, duration: float = 5.0, scene_path: Path | None = None, zenoh_con
         "step_p99_ms": stats.p99 * 1e3,
         "missed_deadlines": stats.missed,
         "stale_events": report.stale_events,
+        "divergence_p50_mm": float(np.percentile(gaps, 50)),
+        "divergence_p99_mm": float(np.percentile(gaps, 99)),
+        "divergence_max_mm": float(gaps.max()),
+        "divergence_max_mm_by_object": {i: round(max(g) * 1e3, 2) for i, g in report.divergence.items() if g},
+        "snaps": report.snaps,
+        "holds": report.holds,
         "session_s": session_s,
         "twin_minus_remote_m": drift,
     }
@@ -127,5 +137,8 @@ def run_demo(*, duration: float = 5.0, scene_path: Path | None = None, zenoh_con
         f"bytes sent {out['bytes_sent']:,} vs {out['raw_stream_bytes']:,} for raw clouds at 30 Hz "
         f"({out['bandwidth_ratio']:,.0f}x less); malformed dropped {out['dropped_malformed']}\n"
         f"twin loop: p50 {out['step_p50_ms']:.3f} ms, p99 {out['step_p99_ms']:.3f} ms per step; worst step while "
-        f"an object was being added {out['worst_step_while_adding_ms']:.1f} ms")
+        f"an object was being added {out['worst_step_while_adding_ms']:.1f} ms\n"
+        f"twin - remote (every 10 ms, all objects): p50 {out['divergence_p50_mm']:.1f} mm, p99 "
+        f"{out['divergence_p99_mm']:.1f} mm, max {out['divergence_max_mm']:.1f} mm; {out['snaps']} snaps, "
+        f"{out['holds']} holds")
     return out
