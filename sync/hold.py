@@ -127,7 +127,7 @@ class Hold:
     def apply(self, twin) -> list[str]:  # type: ignore[no-untyped-def]
         """Release what the operator disturbs, pin what strays, hold what is pinned. Returns the newly pinned.
 
-        Vectorised over objects: a few numpy calls a step, however many objects there are.
+        Vectorised over objects. Between two looks (``check_every``) it only re-applies what it holds.
         """
         if not self.settings.enabled or not self._targets:
             return []
