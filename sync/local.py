@@ -222,8 +222,7 @@ class Local:
         latest, offset = self._latest.get(object_id), self._offsets.get(object_id)
         if latest is None or offset is None:
             return None
-        q = np.asarray(latest.quat)
-        return np.asarray(latest.position) + rotation(q) @ offset[0], quat_mul(q, offset[1])
+        return _on_twin_body(latest, offset)
 
     @property
     def expected(self) -> int:
@@ -334,10 +333,7 @@ class Local:
     def _correct(self, object_id: str) -> None:
         """Move the object a step towards where the remote says it is (at once if far off)."""
         target = self._targets[object_id]
-        off_p, off_q = self._offsets[object_id]
-        r = rotation(np.asarray(target.quat))
-        want_p = np.asarray(target.position) + r @ off_p
-        want_q = quat_mul(np.asarray(target.quat), off_q)
+        want_p, want_q = _on_twin_body(target, self._offsets[object_id])
         pos, quat = self.twin.pose(object_id)
         dist = float(np.linalg.norm(want_p - pos))
         angle = angle_deg(quat, want_q)
@@ -421,6 +417,12 @@ def _scene_spec(info: SceneInfo) -> SceneSpec:
                                                           material=info.table_material)
     ee = None if info.ee_radius <= 0 else EndEffectorSpec(radius=info.ee_radius, position=info.ee_position)
     return SceneSpec(name=info.name, objects=(), table=table, end_effector=ee)
+
+
+def _on_twin_body(pose: Pose, offset: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """A remote body pose mapped onto the twin's body through its :func:`_offset`: (position, quat w x y z)."""
+    q = np.asarray(pose.quat)
+    return np.asarray(pose.position) + rotation(q) @ offset[0], quat_mul(q, offset[1])
 
 
 def _offset(obj: TwinObject, msg: Cloud) -> tuple[np.ndarray, np.ndarray]:
