@@ -71,8 +71,9 @@ class _Arrays:
         import mujoco
 
         self.model = model
-        self.ids = [i for i in targets if mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, f"{i}/free") >= 0]
-        joints = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, f"{i}/free") for i in self.ids]
+        found = {i: mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, f"{i}/free") for i in targets}
+        self.ids = [i for i, j in found.items() if j >= 0]
+        joints = [found[i] for i in self.ids]
         self.body = np.array([model.jnt_bodyid[j] for j in joints], dtype=int)
         q = np.array([model.jnt_qposadr[j] for j in joints], dtype=int)
         d = np.array([model.jnt_dofadr[j] for j in joints], dtype=int)
