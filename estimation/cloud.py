@@ -23,12 +23,17 @@ class PointCloud:
         normals: (n, 3) float64 unit vectors pointing out of the object, or None when unknown.
         colors: (n, 3) float64 in [0, 1], or None.
         dropped_nonfinite: rows removed because a coordinate was NaN or inf.
+        sensor_origins: (n, 3) float64, metres, same frame as ``points``: where the sensor stood when it
+            saw each point (for orienting normals and carving free space), or None when unknown. One
+            origin for the whole cloud is stored as a read-only broadcast view (row stride 0), so it costs
+            24 bytes, not 24 bytes a point.
     """
 
     points: np.ndarray
     normals: np.ndarray | None = None
     colors: np.ndarray | None = None
     dropped_nonfinite: int = field(default=0)
+    sensor_origins: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.points)
@@ -37,10 +42,24 @@ class PointCloud:
         return replace(self, normals=None)
 
     def transformed(self, rotation: np.ndarray, translation: np.ndarray) -> PointCloud:
-        """Return the cloud moved by ``x -> R x + t`` (normals rotated too)."""
+        """Return the cloud moved by ``x -> R x + t`` (normals rotated, sensor origins moved too)."""
         rotation = np.asarray(rotation, dtype=np.float64)
+        translation = np.asarray(translation, dtype=np.float64)
         normals = None if self.normals is None else self.normals @ rotation.T
-        return replace(self, points=self.points @ rotation.T + np.asarray(translation), normals=normals)
+        origins = self.sensor_origins
+        if origins is not None:
+            if is_single_origin(origins):
+                origins = np.broadcast_to(rotation @ origins[0] + translation, origins.shape)
+            else:
+                origins = origins @ rotation.T + translation
+        return replace(
+            self, points=self.points @ rotation.T + translation, normals=normals, sensor_origins=origins
+        )
+
+
+def is_single_origin(origins: np.ndarray) -> bool:
+    """True when ``origins`` ((n, 3)) is one origin broadcast to every row, as make_cloud stores a (3,)."""
+    return origins.ndim == 2 and origins.strides[0] == 0
 
 
 def make_cloud(
@@ -49,6 +68,8 @@ def make_cloud(
     colors: object | None = None,
     *,
     scale: float = 1.0,
+    sensor_origins: object | None = None,
+    copy: bool = True,
 ) -> PointCloud:
     """Build a clean :class:`PointCloud`: drop non-finite rows, scale to metres, normalise normals.
 
@@ -58,28 +79,39 @@ def make_cloud(
             normals are dropped (estimated later) rather than half-trusted.
         colors: (n, 3) or None; 0-255 integers are rescaled to [0, 1].
         scale: multiply coordinates by this to get metres (0.001 for millimetres).
+        sensor_origins: (3,) one sensor position for every point, or (n, 3) one per point, in the same
+            frame and units as ``points`` (scaled with them); rows dropped from ``points`` are dropped
+            here too. None when unknown.
+        copy: False lets the record share the given arrays when nothing needs changing (the file
+            readers hand over fresh arrays); True never aliases the caller's arrays.
 
     Raises:
-        CloudError: empty cloud, wrong shapes, or no finite point left.
+        CloudError: empty cloud, wrong shapes, no finite point left, or non-finite sensor origins.
     """
     pts = as_points(points, "points", allow_nonfinite=True)
     if len(pts) == 0:
         raise CloudError("the cloud is empty (0 points)")
-    good = np.isfinite(pts).all(axis=1)
+    # The flat check is ~15x faster than the per-row one and true for almost every cloud.
+    good = np.ones(len(pts), dtype=bool) if np.isfinite(pts).all() else np.isfinite(pts).all(axis=1)
     dropped = int((~good).sum())
     if dropped == len(pts):
         raise CloudError(f"all {len(pts)} points have NaN or inf coordinates")
     if dropped:
         log.warning("dropped %d of %d points with NaN or inf coordinates", dropped, len(pts))
-    pts = pts[good] * float(scale)
+        pts = pts[good]
+    if scale != 1.0:
+        pts = pts * float(scale)
+    elif copy and not dropped and np.may_share_memory(pts, points):
+        pts = pts.copy()  # the record must not alias the caller's array
 
     nrm = None
     if normals is not None:
         n = as_points(normals, "normals", allow_nonfinite=True)
         if len(n) != len(good):
             raise CloudError(f"normals: expected {len(good)} rows to match points, got {len(n)}")
-        n = n[good]
-        length = np.linalg.norm(n, axis=1)
+        if dropped:
+            n = n[good]
+        length = np.sqrt(np.einsum("ij,ij->i", n, n))  # 3x faster than np.linalg.norm(n, axis=1)
         if np.isfinite(length).all() and (length > 0).all():
             nrm = n / length[:, None]
         else:
@@ -89,9 +121,30 @@ def make_cloud(
     if colors is not None:
         c = np.asarray(colors, dtype=np.float64)
         if c.shape == (len(good), 3):
-            c = c[good]
+            c = c[good] if dropped else c.copy() if copy and np.may_share_memory(c, colors) else c
             col = c / 255.0 if c.max(initial=0.0) > 1.0 else c
-    return PointCloud(pts, nrm, col, dropped)
+    origins = None if sensor_origins is None else _origins(sensor_origins, good, dropped, float(scale))
+    return PointCloud(pts, nrm, col, dropped, origins)
+
+
+def _origins(value: object, good: np.ndarray, dropped: int, scale: float) -> np.ndarray:
+    """Check and scale ``sensor_origins`` for make_cloud: (3,) is broadcast, (n, 3) follows the points."""
+    try:
+        arr = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise CloudError(
+            f"sensor_origins: expected a numeric (3,) or (n, 3) array, got {type(value).__name__}"
+        ) from exc
+    kept = len(good) - dropped
+    if arr.shape == (3,):
+        one = as_points(arr[None], "sensor_origins")[0] * scale
+        one.flags.writeable = False
+        return np.broadcast_to(one, (kept, 3))
+    if arr.ndim != 2 or arr.shape != (len(good), 3):
+        raise CloudError(f"sensor_origins: expected shape (3,) or ({len(good)}, 3) to match points, got {arr.shape}")
+    if dropped:
+        arr = arr[good]
+    return as_points(arr, "sensor_origins") * scale
 
 
 def check_estimable(cloud: PointCloud) -> None:

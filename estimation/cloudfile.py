@@ -1,107 +1,679 @@
 """Reading and writing point-cloud files.
 
-PLY, PCD and XYZ-family files are read by open3d; NPY/NPZ by numpy; TXT/CSV by ``numpy.loadtxt``
-(columns x y z [nx ny nz] [r g b]). Open3d loads lazily so ``import estimation`` stays light.
+PLY (ascii, binary little and big endian) and PCD (ascii, binary) are read by our own numpy code: the
+header is parsed, a structured dtype is built from it, and the vertex block is read in one
+``np.fromfile``. Open3d is not imported on the read path (its import alone costs 0.7 s); it is only the
+fallback for PCD ``binary_compressed`` (LZF), after our header checks passed. XYZ-family and TXT/CSV
+files go through ``numpy.loadtxt``, NPY/NPZ through numpy.
+
+Every reader checks what the header claims against the file before it allocates: the point count against
+``max_points`` and, for binary data, the exact byte size (for text, at least one short line a point).
+A file that claims more points than it holds is a :class:`CloudFileError` naming the claimed and the
+present counts, never a cloud padded with points at the origin.
+
+Sensor origins: a PCD ``VIEWPOINT tx ty tz qw qx qy qz`` becomes the cloud's single sensor origin
+``(tx, ty, tz)``, read as the sensor's position in the points' own frame (as PCL's range-image code and
+octomap use ``sensor_origin_``; the rotation does not move an origin and is not kept). The format's
+default ``VIEWPOINT 0 0 0 1 0 0 0`` is what every writer puts there when it knows nothing, so it is read
+as "no viewpoint" (None), not as a sensor at the origin.
 """
 
 from __future__ import annotations
 
+import logging
+import warnings
+import zipfile
+from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from estimation.cloud import PointCloud, make_cloud
+from estimation.cloud import PointCloud, is_single_origin, make_cloud
 from estimation.errors import CloudFileError
 
-OPEN3D_SUFFIXES = {".ply", ".pcd", ".xyz", ".xyzn", ".xyzrgb", ".pts"}
+log = logging.getLogger(__name__)
+
+PLY_SUFFIXES = {".ply"}
+PCD_SUFFIXES = {".pcd"}
+XYZ_SUFFIXES = {".xyz", ".xyzn", ".xyzrgb", ".pts"}
 NUMPY_SUFFIXES = {".npy", ".npz"}
 TEXT_SUFFIXES = {".txt", ".csv", ".asc"}
-SUFFIXES = OPEN3D_SUFFIXES | NUMPY_SUFFIXES | TEXT_SUFFIXES
+SUFFIXES = PLY_SUFFIXES | PCD_SUFFIXES | XYZ_SUFFIXES | NUMPY_SUFFIXES | TEXT_SUFFIXES
+#: Kept for callers of the old name: the suffixes open3d used to read. Only compressed PCD still goes there.
+OPEN3D_SUFFIXES = PLY_SUFFIXES | PCD_SUFFIXES | XYZ_SUFFIXES
+
+#: Default cap on the points a file may claim. 50 M points are 1.2 GB of float64 xyz (3.6 GB with normals
+#: and colours) before any estimation work: above any one-object scan we take (a 4K depth frame is 8.3 M
+#: points), and about what the few-GB machines we run on can still hold. Raise it with ``max_points``.
+MAX_POINTS = 50_000_000
+
+#: Headers longer than this are not searched for their end. Real PLY/PCD headers are under 1 KB even with
+#: comments; the bound keeps a large non-cloud file with a cloud suffix from being scanned whole.
+MAX_HEADER_BYTES = 1 << 20
+
+#: PLY scalar type names (both spellings the spec allows) -> numpy type codes without byte order.
+_PLY_TYPES = {
+    "char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1",
+    "short": "i2", "int16": "i2", "ushort": "u2", "uint16": "u2",
+    "int": "i4", "int32": "i4", "uint": "u4", "uint32": "u4",
+    "float": "f4", "float32": "f4", "double": "f8", "float64": "f8",
+}  # fmt: skip
+_PLY_FORMATS = {"ascii": None, "binary_little_endian": "<", "binary_big_endian": ">"}
+#: PCD (TYPE, SIZE) -> numpy type code. PCD binary data is little endian (PCL writes x86 memory).
+_PCD_TYPES = {
+    ("I", 1): "i1", ("U", 1): "u1", ("I", 2): "i2", ("U", 2): "u2", ("I", 4): "i4", ("U", 4): "u4",
+    ("I", 8): "i8", ("U", 8): "u8", ("F", 4): "f4", ("F", 8): "f8",
+}  # fmt: skip
+_PCD_KEYS = ("VERSION", "FIELDS", "SIZE", "TYPE", "COUNT", "WIDTH", "HEIGHT", "VIEWPOINT", "POINTS", "DATA")
+#: The PCD format's default VIEWPOINT (no translation, identity rotation w x y z): "no viewpoint known".
+_DEFAULT_VIEWPOINT = (0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0)
+#: The shortest text a point can take: one digit and one separator per value ("0 0 0\n").
+_MIN_TEXT_BYTES_PER_VALUE = 2
 
 
-def load_cloud(path: str | Path, *, scale: float = 1.0) -> PointCloud:
+@dataclass(frozen=True)
+class _Columns:
+    """What a reader found, in file units; make_cloud cleans and scales it."""
+
+    points: np.ndarray
+    normals: np.ndarray | None = None
+    colors: np.ndarray | None = None
+    sensor_origins: np.ndarray | None = None
+
+
+def load_cloud(path: str | Path, *, scale: float = 1.0, max_points: int = MAX_POINTS) -> PointCloud:
     """Read a cloud file into a :class:`PointCloud` in metres.
 
     Args:
         path: a .ply, .pcd, .xyz/.xyzn/.xyzrgb/.pts, .npy, .npz, or .txt/.csv/.asc file.
-        scale: metres per file unit (0.001 for a file in millimetres).
+        scale: metres per file unit (0.001 for a file in millimetres); applied to sensor origins too.
+        max_points: refuse files that claim more points than this, before allocating anything.
+
+    Returns:
+        The cloud; ``sensor_origins`` is set from a non-default PCD VIEWPOINT or an .npz
+        ``sensor_origins`` array.
 
     Raises:
-        CloudFileError: missing, unreadable, or unknown format.
+        CloudFileError: missing, a directory, empty, unreadable, unknown format, a malformed header, more
+            points claimed than the file holds, or more than ``max_points``.
         CloudError: the file holds no usable points.
     """
     path = Path(path)
-    if not path.is_file():
+    if path.is_dir():
+        raise CloudFileError(f"{path}: is a directory, not a cloud file")
+    if not path.exists():
         raise CloudFileError(f"{path}: no such file")
+    if not path.is_file():
+        raise CloudFileError(f"{path}: not a regular file")
     suffix = path.suffix.lower()
     if suffix not in SUFFIXES:
         raise CloudFileError(f"{path}: unknown cloud format {suffix!r}; use one of {sorted(SUFFIXES)}")
     try:
-        if suffix in OPEN3D_SUFFIXES:
-            points, normals, colors = _read_open3d(path)
+        if path.stat().st_size == 0:
+            raise CloudFileError(f"{path}: the file is empty (0 bytes)")
+        if suffix in PLY_SUFFIXES:
+            cols = _read_ply(path, max_points)
+        elif suffix in PCD_SUFFIXES:
+            cols = _read_pcd(path, max_points)
         elif suffix in NUMPY_SUFFIXES:
-            points, normals, colors = _read_numpy(path)
+            cols = _read_numpy(path, max_points)
         else:
-            points, normals, colors = _split_columns(np.loadtxt(path, delimiter=_delimiter(path), ndmin=2))
+            cols = _read_text(path, max_points)
     except CloudFileError:
         raise
-    except (OSError, ValueError, KeyError, EOFError) as exc:
-        raise CloudFileError(f"{path}: unreadable ({exc})") from exc
-    return make_cloud(points, normals, colors, scale=scale)
+    except (OSError, ValueError, KeyError, EOFError, OverflowError, zipfile.BadZipFile) as exc:
+        reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise CloudFileError(f"{path}: unreadable ({reason})") from exc
+    return make_cloud(
+        cols.points, cols.normals, cols.colors, scale=scale, sensor_origins=cols.sensor_origins, copy=False
+    )
 
 
-def save_cloud(cloud: PointCloud, path: str | Path) -> None:
-    """Write ``cloud`` (metres) to .ply/.pcd/.xyz via open3d or .npy/.npz via numpy."""
+def save_cloud(cloud: PointCloud, path: str | Path, *, ascii: bool = False) -> None:
+    """Write ``cloud`` (metres) to a file; the suffix picks the format.
+
+    .ply: binary little endian (x y z nx ny nz as double, red green blue as uchar). .pcd: binary, x y z
+    normal_x.. as F 4 and packed ``rgb`` (what PCL reads), with VIEWPOINT when the cloud has a single sensor
+    origin. .npz keeps everything, sensor origins included; .npy holds x y z [nx ny nz]; .xyz/.xyzn/.xyzrgb/
+    .pts are text. Per-point (not single) sensor origins survive .npz only.
+
+    Args:
+        cloud: the cloud to write.
+        path: the file to create or overwrite.
+        ascii: write .ply or .pcd as text instead of binary.
+
+    Raises:
+        CloudFileError: an unwritable path, a format we do not write, or .xyzn/.xyzrgb without the normals
+            or colours they hold.
+    """
     path = Path(path)
     suffix = path.suffix.lower()
-    if suffix == ".npz":
-        arrays = {"points": cloud.points}
-        if cloud.normals is not None:
-            arrays["normals"] = cloud.normals
-        if cloud.colors is not None:
-            arrays["colors"] = cloud.colors
-        np.savez(path, **arrays)
-    elif suffix == ".npy":
-        cols = [cloud.points] + ([cloud.normals] if cloud.normals is not None else [])
-        np.save(path, np.hstack(cols))
-    elif suffix in OPEN3D_SUFFIXES:
-        import open3d as o3d
+    try:
+        if suffix == ".npz":
+            arrays = {"points": cloud.points}
+            if cloud.normals is not None:
+                arrays["normals"] = cloud.normals
+            if cloud.colors is not None:
+                arrays["colors"] = cloud.colors
+            if cloud.sensor_origins is not None:
+                origins = cloud.sensor_origins
+                arrays["sensor_origins"] = origins[0] if is_single_origin(origins) else origins
+            np.savez(path, **arrays)
+        elif suffix == ".npy":
+            cols = [cloud.points] + ([cloud.normals] if cloud.normals is not None else [])
+            np.save(path, np.hstack(cols))
+        elif suffix in PLY_SUFFIXES:
+            _write_ply(cloud, path, ascii=ascii)
+        elif suffix in PCD_SUFFIXES:
+            _write_pcd(cloud, path, ascii=ascii)
+        elif suffix in XYZ_SUFFIXES:
+            _write_xyz(cloud, path, suffix)
+        else:
+            raise CloudFileError(f"{path}: cannot write format {suffix!r}")
+    except OSError as exc:
+        if isinstance(exc, CloudFileError):
+            raise
+        raise CloudFileError(f"{path}: could not write ({exc.strerror or exc})") from exc
 
-        pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(cloud.points))
-        if cloud.normals is not None:
-            pcd.normals = o3d.utility.Vector3dVector(cloud.normals)
-        if cloud.colors is not None:
-            pcd.colors = o3d.utility.Vector3dVector(cloud.colors)
-        if not o3d.io.write_point_cloud(str(path), pcd):
-            raise CloudFileError(f"{path}: could not write")
+
+# --- headers -----------------------------------------------------------------------------------------
+
+
+def _read_head(path: Path) -> tuple[bytes, int]:
+    """The file's first bytes (up to MAX_HEADER_BYTES) and its size."""
+    size = path.stat().st_size
+    with path.open("rb") as fh:
+        return fh.read(min(size, MAX_HEADER_BYTES)), size
+
+
+def _header_lines(head: bytes, is_last: Callable[[str], bool]) -> tuple[list[str], int] | None:
+    """Split ``head`` into stripped text lines up to the one ``is_last`` accepts.
+
+    Returns the lines (the last one included) and the byte offset just past it, or None when no line in
+    ``head`` ends the header.
+    """
+    lines: list[str] = []
+    pos = 0
+    while pos < len(head):
+        end = head.find(b"\n", pos)
+        stop = len(head) if end < 0 else end + 1
+        # latin-1 decodes any byte, so garbage reaches the checks below instead of a UnicodeDecodeError.
+        line = head[pos:stop].decode("latin-1").strip()
+        lines.append(line)
+        pos = stop
+        if is_last(line):
+            return lines, pos
+    return None
+
+
+def _count(path: Path, text: str, what: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise CloudFileError(f"{path}: {what} count {text[:40]!r} is not an integer") from None
+    if value < 0:
+        raise CloudFileError(f"{path}: {what} count is negative ({value})")
+    return value
+
+
+def _check_max(path: Path, claimed: int, max_points: int) -> None:
+    if claimed > max_points:
+        raise CloudFileError(
+            f"{path}: the header claims {claimed} points, more than max_points={max_points} "
+            "(pass a larger max_points to load_cloud if the file is real)"
+        )
+
+
+def _check_binary_size(path: Path, size: int, offset: int, claimed: int, itemsize: int, what: str) -> None:
+    """Raise unless ``claimed`` records of ``itemsize`` bytes fit between ``offset`` and the end."""
+    available = max(0, size - offset)
+    if claimed * itemsize > available:
+        raise CloudFileError(
+            f"{path}: truncated: the header claims {claimed} {what} but the file holds "
+            f"{available // itemsize} ({available} bytes after the header, {itemsize} bytes each)"
+        )
+
+
+def _check_text_size(path: Path, size: int, offset: int, claimed: int, values: int, what: str) -> None:
+    """Raise when fewer bytes follow the header than the shortest text ``claimed`` rows could take."""
+    available = max(0, size - offset)
+    least = claimed * values * _MIN_TEXT_BYTES_PER_VALUE
+    if least > available:
+        raise CloudFileError(
+            f"{path}: truncated: the header claims {claimed} {what} of {values} values, which need at least "
+            f"{least} bytes, but {available} follow the header"
+        )
+
+
+def _parse_numbers(text: bytes) -> np.ndarray:
+    """Whitespace-separated numbers (nan and inf included) -> float64, or ValueError on anything else."""
+    with warnings.catch_warnings():
+        # numpy < 2.3 only warns on trailing garbage; make it the error newer numpy raises.
+        warnings.simplefilter("error", DeprecationWarning)
+        try:
+            return np.fromstring(text, dtype=np.float64, sep=" ")
+        except DeprecationWarning as exc:
+            raise ValueError(str(exc)) from None
+
+
+def _unit_colors(values: np.ndarray, dtype: np.dtype) -> np.ndarray:
+    """Colour channels to [0, 1] by their declared type: integers span the type, floats already do."""
+    if dtype.kind in "ui":
+        return values / float(np.iinfo(dtype).max)
+    return values
+
+
+# --- PLY ---------------------------------------------------------------------------------------------
+
+
+@dataclass
+class _PlyElement:
+    name: str
+    count: int
+    #: (name, type code) for scalars; (name, None) for list properties.
+    props: list[tuple[str, str | None]]
+    #: (count type, item type) of each list property, by name; a list's size per element is only known
+    #: when reading it.
+    lists: dict[str, tuple[str, str]]
+
+    def dtype(self, order: str) -> np.dtype | None:
+        """The record dtype, or None when a list property makes the size vary."""
+        if self.lists:
+            return None
+        return np.dtype([(name, order + code) for name, code in self.props])  # type: ignore[operator]
+
+
+def _parse_ply_header(path: Path, head: bytes) -> tuple[str, list[_PlyElement], int]:
+    if not (head.startswith(b"ply\n") or head.startswith(b"ply\r\n")):
+        raise CloudFileError(f"{path}: not a PLY file (it starts with {head[:16]!r}, not 'ply')")
+    found = _header_lines(head, lambda line: line == "end_header")
+    if found is None:
+        where = "the file" if len(head) < MAX_HEADER_BYTES else f"the first {MAX_HEADER_BYTES} bytes"
+        raise CloudFileError(f"{path}: the PLY header has no end_header line in {where}")
+    lines, offset = found
+    fmt = None
+    elements: list[_PlyElement] = []
+    for line in lines[1:-1]:
+        words = line.split()
+        if not words or words[0] in ("comment", "obj_info"):
+            continue
+        key = words[0]
+        if key == "format" and len(words) >= 2:
+            if words[1] not in _PLY_FORMATS:
+                raise CloudFileError(f"{path}: unknown PLY format {words[1][:40]!r}; use one of {list(_PLY_FORMATS)}")
+            fmt = words[1]
+        elif key == "element" and len(words) == 3:
+            elements.append(_PlyElement(words[1], _count(path, words[2], f"element {words[1][:40]!r}"), [], {}))
+        elif key == "property" and len(words) >= 3:
+            if not elements:
+                raise CloudFileError(f"{path}: PLY property before any element: {line[:60]!r}")
+            element = elements[-1]
+            if words[1] == "list" and len(words) == 5:
+                types = [_ply_type(path, t) for t in words[2:4]]
+                name = words[4]
+                element.lists[name] = (types[0], types[1])
+                code = None
+            elif words[1] != "list" and len(words) == 3:
+                code, name = _ply_type(path, words[1]), words[2]
+            else:
+                raise CloudFileError(f"{path}: malformed PLY property line {line[:60]!r}")
+            if any(name == other for other, _ in element.props):
+                raise CloudFileError(f"{path}: PLY element {element.name!r} has property {name!r} twice")
+            element.props.append((name, code))
+        else:
+            raise CloudFileError(f"{path}: unexpected PLY header line {line[:60]!r}")
+    if fmt is None:
+        raise CloudFileError(f"{path}: the PLY header has no format line")
+    return fmt, elements, offset
+
+
+def _ply_type(path: Path, name: str) -> str:
+    try:
+        return _PLY_TYPES[name]
+    except KeyError:
+        raise CloudFileError(
+            f"{path}: unknown PLY property type {name[:40]!r}; use one of {sorted(set(_PLY_TYPES))}"
+        ) from None
+
+
+def _read_ply(path: Path, max_points: int) -> _Columns:
+    head, size = _read_head(path)
+    fmt, elements, offset = _parse_ply_header(path, head)
+    index = next((i for i, e in enumerate(elements) if e.name == "vertex"), None)
+    if index is None:
+        raise CloudFileError(f"{path}: the PLY header has no vertex element")
+    vertex = elements[index]
+    names = [name for name, _ in vertex.props]
+    missing = [axis for axis in "xyz" if axis not in names or axis in vertex.lists]
+    if missing:
+        raise CloudFileError(f"{path}: the PLY vertex element has no {'/'.join(missing)} property (has {names})")
+    _check_max(path, vertex.count, max_points)
+    order = _PLY_FORMATS[fmt]
+    if order is None:
+        table, types = _read_ply_ascii(path, size, offset, elements, index)
     else:
-        raise CloudFileError(f"{path}: cannot write format {suffix!r}")
+        table, types = _read_ply_binary(path, size, offset, elements, index, order)
+    return _columns_from(table, types, normals=("nx", "ny", "nz"), colors=_ply_color_names(names))
 
 
-def _read_open3d(path: Path) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
-    import open3d as o3d
+def _ply_color_names(names: list[str]) -> tuple[str, str, str]:
+    for prefix in ("", "diffuse_"):
+        triple = (f"{prefix}red", f"{prefix}green", f"{prefix}blue")
+        if all(name in names for name in triple):
+            return triple
+    return ("red", "green", "blue")
 
-    if path.stat().st_size == 0:
-        raise CloudFileError(f"{path}: the file is empty")
-    # open3d prints a warning and returns an empty cloud on garbage; we turn that into an error.
-    pcd = o3d.io.read_point_cloud(str(path), remove_nan_points=False, remove_infinite_points=False)
+
+def _read_ply_binary(
+    path: Path, size: int, offset: int, elements: list[_PlyElement], index: int, order: str
+) -> tuple[np.ndarray, dict[str, np.dtype]]:
+    for before in elements[:index]:
+        dtype = before.dtype(order)
+        if dtype is None:
+            raise CloudFileError(
+                f"{path}: cannot skip PLY element {before.name!r} (list properties) before the vertex element"
+            )
+        offset += before.count * dtype.itemsize
+    vertex = elements[index]
+    dtype = vertex.dtype(order)
+    if dtype is None:
+        raise CloudFileError(f"{path}: the PLY vertex element has list properties {sorted(vertex.lists)}; not supported")
+    _check_binary_size(path, size, offset, vertex.count, dtype.itemsize, "vertices")
+    end = offset + vertex.count * dtype.itemsize
+    after = [e.dtype(order) for e in elements[index + 1 :]]
+    if all(d is not None for d in after):
+        expected = end + sum(e.count * d.itemsize for e, d in zip(elements[index + 1 :], after, strict=True))  # type: ignore[union-attr]
+        if size != expected:
+            log.warning(
+                "%s: the header accounts for %d bytes but the file has %d; read the %d vertices only",
+                path, expected, size, vertex.count,
+            )  # fmt: skip
+    table = np.fromfile(path, dtype=dtype, count=vertex.count, offset=offset)
+    if len(table) != vertex.count:  # the file shrank since we measured it
+        raise CloudFileError(f"{path}: truncated: claims {vertex.count} vertices, read {len(table)}")
+    return table, {name: dtype.fields[name][0] for name in dtype.names}  # type: ignore[index]
+
+
+def _read_ply_ascii(
+    path: Path, size: int, offset: int, elements: list[_PlyElement], index: int
+) -> tuple[np.ndarray, dict[str, np.dtype]]:
+    vertex = elements[index]
+    if vertex.lists:
+        raise CloudFileError(f"{path}: the PLY vertex element has list properties {sorted(vertex.lists)}; not supported")
+    nprops = len(vertex.props)
+    skip = sum(e.count for e in elements[:index])
+    _check_text_size(path, size, offset, vertex.count, nprops, "vertices")
+    with path.open("rb") as fh:
+        fh.seek(offset)
+        body = fh.read()
+    rows = body.split(b"\n", skip + vertex.count)
+    lines = rows[skip : skip + vertex.count]
+    if len(lines) < vertex.count or (lines and not lines[-1].strip()):
+        present = sum(1 for line in lines if line.strip())
+        raise CloudFileError(f"{path}: truncated: the header claims {vertex.count} vertices but the file holds {present}")
+    values = _parse_numbers(b" ".join(lines))
+    if values.size != vertex.count * nprops:
+        raise CloudFileError(
+            f"{path}: the {vertex.count} vertex lines hold {values.size} values, not {vertex.count} x {nprops} "
+            "properties (truncated or malformed)"
+        )
+    if len(elements) == index + 1 and len(rows) > skip + vertex.count and rows[-1].strip():
+        log.warning("%s: text after the %d vertices the header claims; ignored", path, vertex.count)
+    table = values.reshape(vertex.count, nprops)
+    structured = {name: table[:, i] for i, (name, _) in enumerate(vertex.props)}
+    types = {name: np.dtype(code) for name, code in vertex.props}  # type: ignore[arg-type]
+    return structured, types  # type: ignore[return-value]
+
+
+def _columns_from(
+    table: np.ndarray | dict[str, np.ndarray],
+    types: dict[str, np.dtype],
+    *,
+    normals: tuple[str, str, str],
+    colors: tuple[str, str, str] | None,
+    sensor_origins: np.ndarray | None = None,
+) -> _Columns:
+    """Pick x y z, the normals and the colours out of a structured array (or a dict of columns)."""
+    n = len(table["x"])
+
+    def stack(names: tuple[str, str, str]) -> np.ndarray:
+        if isinstance(table, np.ndarray) and table.flags.c_contiguous:
+            (t0, o0), (t1, o1), (t2, o2) = (table.dtype.fields[name][:2] for name in names)  # type: ignore[index]
+            if t0 == t1 == t2 and o1 - o0 == o2 - o1 == t0.itemsize:
+                # Three adjacent fields of one type: one strided (n, 3) view, converted in one pass.
+                view = np.ndarray((n, 3), t0, table, o0, (table.dtype.itemsize, t0.itemsize))
+                return view.astype(np.float64)
+        out = np.empty((n, 3), dtype=np.float64)
+        for i, name in enumerate(names):
+            out[:, i] = table[name]  # converts any type and byte order to native float64
+        return out
+
+    points = stack(("x", "y", "z"))
+    nrm = stack(normals) if all(name in types for name in normals) else None
+    col = None
+    if colors is not None and all(name in types for name in colors):
+        col = stack(colors)
+        for i, name in enumerate(colors):
+            col[:, i] = _unit_colors(col[:, i], types[name])
+    return _Columns(points, nrm, col, sensor_origins)
+
+
+# --- PCD ---------------------------------------------------------------------------------------------
+
+
+def _read_pcd(path: Path, max_points: int) -> _Columns:
+    head, size = _read_head(path)
+    found = _header_lines(head, lambda line: line.upper().startswith("DATA"))
+    if found is None:
+        raise CloudFileError(f"{path}: not a PCD file (no DATA line in its header)")
+    lines, offset = found
+    header: dict[str, list[str]] = {}
+    for line in lines:
+        if not line or line.startswith("#"):
+            continue
+        words = line.split()
+        key = words[0].upper()
+        if key not in _PCD_KEYS:
+            raise CloudFileError(f"{path}: not a PCD file (unexpected header line {line[:60]!r})")
+        header[key] = words[1:]
+    for key in ("FIELDS", "SIZE", "TYPE"):
+        if key not in header:
+            raise CloudFileError(f"{path}: the PCD header has no {key} line")
+    fields = header["FIELDS"]
+    sizes = [_count(path, s, "SIZE") for s in header["SIZE"]]
+    kinds = [t.upper() for t in header["TYPE"]]
+    counts = [_count(path, c, "COUNT") for c in header.get("COUNT", ["1"] * len(fields))]
+    if not len(fields) == len(sizes) == len(kinds) == len(counts):
+        raise CloudFileError(
+            f"{path}: the PCD header lists {len(fields)} FIELDS but {len(sizes)} SIZE, {len(kinds)} TYPE and "
+            f"{len(counts)} COUNT entries"
+        )
+    n = _pcd_points(path, header)
+    _check_max(path, n, max_points)
+    names, codes = [], []
+    for i, (name, kind, nbytes) in enumerate(zip(fields, kinds, sizes, strict=True)):
+        code = _PCD_TYPES.get((kind, nbytes))
+        if code is None:
+            raise CloudFileError(f"{path}: unknown PCD field type {kind} of size {nbytes} for field {name!r}")
+        names.append(f"_pad{i}" if name == "_" else name)  # PCL names padding "_", possibly many times
+        codes.append(code)
+    if len(set(names)) != len(names):
+        raise CloudFileError(f"{path}: the PCD header names a field twice ({fields})")
+    for axis in "xyz":
+        if axis not in names or counts[names.index(axis)] != 1:
+            raise CloudFileError(f"{path}: the PCD file has no scalar {axis} field (has {fields})")
+    origins = _viewpoint(path, header.get("VIEWPOINT"))
+    dtype = np.dtype([(nm, "<" + c, (k,)) if k != 1 else (nm, "<" + c) for nm, c, k in zip(names, codes, counts, strict=True)])
+    data = header["DATA"][0].lower() if header["DATA"] else ""
+    if data == "ascii":
+        table = _read_pcd_ascii(path, size, offset, n, names, counts)
+    elif data == "binary":
+        _check_binary_size(path, size, offset, n, dtype.itemsize, "points")
+        if size != offset + n * dtype.itemsize:
+            log.warning("%s: %d bytes after the %d points the header claims; ignored", path, size - offset - n * dtype.itemsize, n)
+        table = np.fromfile(path, dtype=dtype, count=n, offset=offset)
+        if len(table) != n:
+            raise CloudFileError(f"{path}: truncated: claims {n} points, read {len(table)}")
+    elif data == "binary_compressed":
+        return _read_pcd_compressed(path, size, offset, n, dtype.itemsize, origins)
+    else:
+        raise CloudFileError(f"{path}: unknown PCD DATA kind {data[:40]!r}; use ascii, binary or binary_compressed")
+    types = {nm: np.dtype(c) for nm, c in zip(names, codes, strict=True)}
+    cols = _columns_from(table, types, normals=("normal_x", "normal_y", "normal_z"), colors=None, sensor_origins=origins)
+    colour_field = next((f for f in ("rgb", "rgba") if f in names and counts[names.index(f)] == 1), None)
+    if colour_field is not None:
+        cols = _Columns(cols.points, cols.normals, _pcd_colors(table[colour_field], types[colour_field]), origins)
+    return cols
+
+
+def _pcd_points(path: Path, header: dict[str, list[str]]) -> int:
+    width = _count(path, header["WIDTH"][0], "WIDTH") if header.get("WIDTH") else None
+    height = _count(path, header["HEIGHT"][0], "HEIGHT") if header.get("HEIGHT") else 1
+    if header.get("POINTS"):
+        n = _count(path, header["POINTS"][0], "POINTS")
+        if width is not None and width * height != n:
+            log.warning("%s: PCD WIDTH x HEIGHT is %d x %d but POINTS is %d; using POINTS", path, width, height, n)
+        return n
+    if width is None:
+        raise CloudFileError(f"{path}: the PCD header has neither POINTS nor WIDTH")
+    return width * height
+
+
+def _viewpoint(path: Path, words: list[str] | None) -> np.ndarray | None:
+    """The sensor origin from ``VIEWPOINT tx ty tz qw qx qy qz``; None for the format's default."""
+    if words is None:
+        return None
+    try:
+        values = tuple(float(w) for w in words)
+    except ValueError:
+        values = ()
+    if len(values) != 7 or not np.isfinite(values).all():
+        raise CloudFileError(f"{path}: VIEWPOINT needs 7 finite numbers (tx ty tz qw qx qy qz), got {' '.join(words)[:80]!r}")
+    if values == _DEFAULT_VIEWPOINT:
+        return None
+    return np.array(values[:3])
+
+
+def _read_pcd_ascii(
+    path: Path, size: int, offset: int, n: int, names: list[str], counts: list[int]
+) -> dict[str, np.ndarray]:
+    width = sum(counts)
+    _check_text_size(path, size, offset, n, width, "points")
+    with path.open("rb") as fh:
+        fh.seek(offset)
+        values = _parse_numbers(fh.read())
+    if values.size < n * width:
+        raise CloudFileError(
+            f"{path}: truncated: the header claims {n} points but the file holds {values.size // width}"
+        )
+    if values.size > n * width:
+        log.warning("%s: %d values after the %d points the header claims; ignored", path, values.size - n * width, n)
+    table = values[: n * width].reshape(n, width)
+    starts = np.cumsum([0, *counts])
+    return {name: table[:, starts[i]] for i, name in enumerate(names) if counts[i] == 1}
+
+
+def _pcd_colors(packed: np.ndarray, dtype: np.dtype) -> np.ndarray:
+    """PCL packs colour as 0x00RRGGBB (or AARRGGBB) in the bits of a float32 or uint32 field."""
+    if dtype.kind == "f":
+        bits = np.asarray(packed, dtype=np.float32).view(np.uint32)
+    else:
+        bits = np.asarray(packed).astype(np.uint32)
+    rgb = np.stack([(bits >> shift) & 0xFF for shift in (16, 8, 0)], axis=1)
+    return rgb / 255.0
+
+
+def _read_pcd_compressed(
+    path: Path, size: int, offset: int, n: int, itemsize: int, origins: np.ndarray | None
+) -> _Columns:
+    """LZF-compressed PCD: check the sizes it declares, then let open3d decompress (we carry no LZF)."""
+    with path.open("rb") as fh:
+        fh.seek(offset)
+        sizes = np.frombuffer(fh.read(8), dtype="<u4")
+    if len(sizes) != 2:
+        raise CloudFileError(f"{path}: truncated: no compressed-block sizes after the PCD header")
+    compressed, raw = (int(s) for s in sizes)
+    if raw != n * itemsize:
+        raise CloudFileError(f"{path}: the header claims {n} points ({n * itemsize} bytes) but the block unpacks to {raw}")
+    if offset + 8 + compressed > size:
+        raise CloudFileError(f"{path}: truncated: the compressed block is {compressed} bytes, {size - offset - 8} present")
+    import open3d as o3d  # only here: its import costs 0.7 s
+
+    with o3d.utility.VerbosityContextManager(o3d.utility.VerbosityLevel.Error):
+        pcd = o3d.io.read_point_cloud(str(path), format="pcd", remove_nan_points=False, remove_infinite_points=False)
     points = np.asarray(pcd.points)
-    if len(points) == 0:
-        raise CloudFileError(f"{path}: no points could be read (empty or not a {path.suffix} file)")
+    if len(points) != n:
+        raise CloudFileError(f"{path}: open3d read {len(points)} of the {n} points in the compressed block")
     normals = np.asarray(pcd.normals) if pcd.has_normals() else None
     colors = np.asarray(pcd.colors) if pcd.has_colors() else None
-    return points, normals, colors
+    return _Columns(points, normals, colors, origins)
 
 
-def _read_numpy(path: Path) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
-    data = np.load(path, allow_pickle=False)
-    if isinstance(data, np.lib.npyio.NpzFile):
-        with data:
-            if "points" not in data:
-                raise CloudFileError(f"{path}: an .npz cloud needs a 'points' array (has {list(data)})")
-            get = lambda k: data[k] if k in data else None  # noqa: E731
-            return data["points"], get("normals"), get("colors")
-    return _split_columns(data)
+# --- numpy and text ----------------------------------------------------------------------------------
+
+
+def _read_numpy(path: Path, max_points: int) -> _Columns:
+    if path.suffix.lower() == ".npy":
+        # Memory-mapping reads only the header and fails on a file shorter than its header claims.
+        table = np.load(path, mmap_mode="r", allow_pickle=False)
+        if table.ndim == 2:
+            _check_max(path, len(table), max_points)
+        return _Columns(*_split_columns(np.array(table)))
+    with zipfile.ZipFile(path) as archive:
+        members = {Path(name).stem: name for name in archive.namelist() if name.endswith(".npy")}
+        if "points" not in members:
+            raise CloudFileError(f"{path}: an .npz cloud needs a 'points' array (has {sorted(members)})")
+        for key in ("points", "normals", "colors", "sensor_origins"):
+            if key in members:
+                _check_npz_member(path, archive, members[key], max_points)
+    with np.load(path, allow_pickle=False) as data:
+        get = lambda k: data[k] if k in data else None  # noqa: E731
+        return _Columns(data["points"], get("normals"), get("colors"), get("sensor_origins"))
+
+
+def _check_npz_member(path: Path, archive: zipfile.ZipFile, name: str, max_points: int) -> None:
+    """Refuse a member whose header claims more rows than allowed or more bytes than it unpacks to."""
+    with archive.open(name) as fh:
+        version = np.lib.format.read_magic(fh)
+        reader = np.lib.format.read_array_header_1_0 if version == (1, 0) else np.lib.format.read_array_header_2_0
+        shape, _, dtype = reader(fh)
+    if shape and shape[0] > max_points:
+        _check_max(path, shape[0], max_points)
+    nbytes = int(np.prod(shape, dtype=object)) * dtype.itemsize
+    if nbytes > archive.getinfo(name).file_size:
+        raise CloudFileError(f"{path}: truncated: array {Path(name).stem!r} claims shape {shape}, more than its data")
+
+
+def _read_text(path: Path, max_points: int) -> _Columns:
+    suffix = path.suffix.lower()
+    text = path.read_bytes()
+    if text.count(b"\n") > max_points + 1:
+        raise CloudFileError(f"{path}: more than max_points={max_points} lines (pass a larger max_points if real)")
+    claimed = None
+    if suffix == ".pts":
+        first, _, rest = text.partition(b"\n")
+        if first.strip().isdigit():  # a Leica .pts starts with its point count
+            claimed, text = int(first), rest
+    delimiter = "," if b"," in text.split(b"\n", 1)[0] else None
+    table = np.loadtxt(text.decode("latin-1").splitlines(), delimiter=delimiter, ndmin=2)
+    if suffix in (".txt", ".csv", ".asc"):
+        return _Columns(*_split_columns(table))
+    if claimed is not None and claimed != len(table):
+        if claimed > len(table):
+            raise CloudFileError(f"{path}: truncated: the first line claims {claimed} points but the file holds {len(table)}")
+        log.warning("%s: the first line claims %d points but the file holds %d; reading all", path, claimed, len(table))
+    need = {".xyz": 3, ".xyzn": 6, ".xyzrgb": 6, ".pts": 3}[suffix]
+    if table.shape[1] < need:
+        raise CloudFileError(f"{path}: a {suffix} file needs at least {need} columns, got {table.shape[1]}")
+    points = table[:, :3]
+    if suffix == ".xyzn":
+        return _Columns(points, table[:, 3:6])
+    if suffix == ".xyzrgb":
+        return _Columns(points, None, table[:, 3:6])
+    if suffix == ".pts" and table.shape[1] in (6, 7):  # x y z [intensity] r g b, colours 0-255
+        return _Columns(points, None, table[:, -3:] / 255.0)
+    return _Columns(points)
 
 
 def _split_columns(table: np.ndarray) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
@@ -119,7 +691,101 @@ def _split_columns(table: np.ndarray) -> tuple[np.ndarray, np.ndarray | None, np
     return (points, rest, None) if is_normals else (points, None, rest)
 
 
-def _delimiter(path: Path) -> str | None:
-    with path.open() as fh:
-        head = fh.readline()
-    return "," if "," in head else None
+# --- writers -----------------------------------------------------------------------------------------
+
+
+def _byte_colors(cloud: PointCloud) -> np.ndarray:
+    assert cloud.colors is not None
+    return np.clip(np.rint(cloud.colors * 255.0), 0, 255).astype(np.uint8)
+
+
+def _write_ply(cloud: PointCloud, path: Path, *, ascii: bool) -> None:
+    fields = [("x", "f8"), ("y", "f8"), ("z", "f8")]
+    columns = [cloud.points]
+    if cloud.normals is not None:
+        fields += [("nx", "f8"), ("ny", "f8"), ("nz", "f8")]
+        columns.append(cloud.normals)
+    if cloud.colors is not None:
+        fields += [("red", "u1"), ("green", "u1"), ("blue", "u1")]
+        columns.append(_byte_colors(cloud))
+    ply_names = {"f8": "double", "u1": "uchar"}
+    header = [
+        "ply",
+        f"format {'ascii' if ascii else 'binary_little_endian'} 1.0",
+        "comment written by tactile-twin",
+        f"element vertex {len(cloud)}",
+        *(f"property {ply_names[code]} {name}" for name, code in fields),
+        "end_header",
+    ]
+    _write_table(path, header, fields, columns, ascii=ascii)
+
+
+def _write_pcd(cloud: PointCloud, path: Path, *, ascii: bool) -> None:
+    fields = [("x", "f4"), ("y", "f4"), ("z", "f4")]
+    columns: list[np.ndarray] = [cloud.points]
+    if cloud.normals is not None:
+        fields += [("normal_x", "f4"), ("normal_y", "f4"), ("normal_z", "f4")]
+        columns.append(cloud.normals)
+    if cloud.colors is not None:
+        rgb = _byte_colors(cloud).astype(np.uint32)
+        fields.append(("rgb", "f4"))
+        columns.append(((rgb[:, 0] << 16) | (rgb[:, 1] << 8) | rgb[:, 2]).view(np.float32)[:, None])
+    viewpoint = _DEFAULT_VIEWPOINT
+    origins = cloud.sensor_origins
+    if origins is not None and len(origins):
+        if is_single_origin(origins) or (origins == origins[0]).all():
+            viewpoint = (*(float(v) for v in origins[0]), 1.0, 0.0, 0.0, 0.0)
+        else:
+            log.warning("%s: per-point sensor origins do not fit a PCD VIEWPOINT; not written (use .npz)", path)
+    header = [
+        "# .PCD v0.7 - Point Cloud Data file format, written by tactile-twin",
+        "VERSION 0.7",
+        "FIELDS " + " ".join(name for name, _ in fields),
+        "SIZE " + " ".join("4" for _ in fields),
+        "TYPE " + " ".join("F" for _ in fields),
+        "COUNT " + " ".join("1" for _ in fields),
+        f"WIDTH {len(cloud)}",
+        "HEIGHT 1",
+        "VIEWPOINT " + " ".join(repr(v) for v in viewpoint),
+        f"POINTS {len(cloud)}",
+        f"DATA {'ascii' if ascii else 'binary'}",
+    ]
+    _write_table(path, header, fields, columns, ascii=ascii)
+
+
+def _write_table(
+    path: Path, header: list[str], fields: list[tuple[str, str]], columns: list[np.ndarray], *, ascii: bool
+) -> None:
+    """Write ``header`` lines then one record a point, as text or little-endian binary."""
+    n = len(columns[0])
+    table = np.empty(n, dtype=np.dtype([(name, "<" + code) for name, code in fields]))
+    names = iter(name for name, _ in fields)
+    for column in columns:
+        for j in range(column.shape[1]):
+            table[next(names)] = column[:, j]
+    with path.open("wb") as fh:
+        fh.write(("\n".join(header) + "\n").encode("ascii"))
+        if ascii:
+            # 17 digits round-trip a double, 9 a float32 (the bits of a packed PCD colour included).
+            fmt = {"f8": "%.17g", "f4": "%.9g", "u1": "%d"}
+            np.savetxt(fh, table, fmt=[fmt[code] for _, code in fields])
+        else:
+            table.tofile(fh)
+
+
+def _write_xyz(cloud: PointCloud, path: Path, suffix: str) -> None:
+    columns = [cloud.points]
+    header = ""
+    if suffix == ".xyzn":
+        if cloud.normals is None:
+            raise CloudFileError(f"{path}: the cloud has no normals for an .xyzn file")
+        columns.append(cloud.normals)
+    elif suffix == ".xyzrgb":
+        if cloud.colors is None:
+            raise CloudFileError(f"{path}: the cloud has no colours for an .xyzrgb file")
+        columns.append(cloud.colors)
+    elif suffix == ".pts":
+        header = str(len(cloud))
+        if cloud.colors is not None:
+            columns.append(_byte_colors(cloud).astype(np.float64))
+    np.savetxt(path, np.hstack(columns), fmt="%.17g", header=header, comments="")
