@@ -253,8 +253,8 @@ def _parse_numbers(text: bytes) -> np.ndarray:
         warnings.simplefilter("error", DeprecationWarning)
         try:
             return np.fromstring(text, dtype=np.float64, sep=" ")
-        except DeprecationWarning as exc:
-            raise ValueError(str(exc)) from None
+        except (DeprecationWarning, ValueError):
+            raise ValueError("text that is not a number among the values") from None
 
 
 def _unit_colors(values: np.ndarray, dtype: np.dtype) -> np.ndarray:

@@ -1,0 +1,449 @@
+"""Cloud files: our PLY/PCD readers read what writers write, and files that lie get one clear error."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import textwrap
+import tracemalloc
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from estimation import CloudError, CloudFileError, PointCloud, load_cloud, make_cloud, save_cloud
+from estimation.cloudfile import MAX_POINTS
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(scope="module")
+def cloud() -> PointCloud:
+    rng = np.random.default_rng(7)
+    points = rng.normal(size=(500, 3)) * 0.1
+    normals = points / np.linalg.norm(points, axis=1, keepdims=True)
+    colours = rng.integers(0, 256, size=(500, 3)) / 255.0  # exactly representable as bytes
+    return make_cloud(points, normals, colours)
+
+
+def write_ply(path: Path, columns: dict[str, np.ndarray], *, fmt: str = "binary_little_endian",
+              before: str = "", after: str = "", after_bytes: bytes = b"", count: int | None = None) -> Path:
+    """A PLY writer independent of the library's: any property names and types, extra elements."""
+    order = {"binary_little_endian": "<", "binary_big_endian": ">", "ascii": "<"}[fmt]
+    names = {"f4": "float", "f8": "double", "u1": "uchar", "u2": "ushort", "i4": "int", "i2": "short"}
+    dtype = np.dtype([(k, order + v.dtype.str[1:]) for k, v in columns.items()])
+    n = len(next(iter(columns.values())))
+    table = np.empty(n, dtype)
+    for k, v in columns.items():
+        table[k] = v
+    props = "".join(f"property {names[v.dtype.str[1:]]} {k}\n" for k, v in columns.items())
+    header = f"ply\nformat {fmt} 1.0\ncomment test\n{before}element vertex {n if count is None else count}\n{props}{after}end_header\n"
+    with path.open("wb") as fh:
+        fh.write(header.encode())
+        if fmt == "ascii":
+            np.savetxt(fh, table, fmt=["%.17g" if v.dtype.kind == "f" else "%d" for v in columns.values()])
+        else:
+            fh.write(table.tobytes())
+        fh.write(after_bytes)
+    return path
+
+
+def xyz_columns(points: np.ndarray, dtype: str = "f4") -> dict[str, np.ndarray]:
+    return {axis: points[:, i].astype(dtype) for i, axis in enumerate("xyz")}
+
+
+# --- round trips -------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("ascii", [False, True])
+@pytest.mark.parametrize("parts", ["points", "normals", "colours", "both"])
+@pytest.mark.parametrize("suffix", [".ply", ".pcd"])
+def test_save_load_round_trip(tmp_path, cloud, suffix, ascii, parts):
+    normals = cloud.normals if parts in ("normals", "both") else None
+    colours = cloud.colors if parts in ("colours", "both") else None
+    original = PointCloud(cloud.points, normals, colours)
+    save_cloud(original, tmp_path / f"c{suffix}", ascii=ascii)
+    back = load_cloud(tmp_path / f"c{suffix}")
+    # PLY stores doubles; PCD float32 (what PCL reads), good to ~1e-8 m at 0.1 m.
+    atol = 0 if suffix == ".ply" else 1e-7
+    np.testing.assert_allclose(back.points, original.points, rtol=0, atol=atol)
+    assert (back.normals is None) == (normals is None) and (back.colors is None) == (colours is None)
+    if normals is not None:
+        np.testing.assert_allclose(back.normals, normals, atol=1e-6)
+    if colours is not None:
+        np.testing.assert_allclose(back.colors, colours, atol=1e-12)
+    assert back.sensor_origins is None
+
+
+@pytest.mark.parametrize("fmt", ["binary_little_endian", "binary_big_endian", "ascii"])
+@pytest.mark.parametrize("dtype", ["f4", "f8"])
+def test_ply_variants(tmp_path, cloud, fmt, dtype):
+    """Any scalar types, either byte order, extra properties, colours by type, faces after the vertices."""
+    columns = {
+        "intensity": np.arange(len(cloud), dtype="u2"),  # an extra property before x is skipped
+        **xyz_columns(cloud.points, dtype),
+        "nx": cloud.normals[:, 0].astype(dtype), "ny": cloud.normals[:, 1].astype(dtype),
+        "nz": cloud.normals[:, 2].astype(dtype),
+        "red": np.rint(cloud.colors[:, 0] * 65535).astype("u2"),  # 16-bit colour spans 0-65535
+        "green": np.rint(cloud.colors[:, 1] * 65535).astype("u2"),
+        "blue": np.rint(cloud.colors[:, 2] * 65535).astype("u2"),
+        "alpha": np.full(len(cloud), 255, dtype="u1"),
+    }  # fmt: skip
+    # a face element with a list property after the vertices: read up to the vertices, then stop
+    faces = "3 0 1 2\n" if fmt == "ascii" else b"\x03" + np.array([0, 1, 2], ">i4" if "big" in fmt else "<i4").tobytes()
+    path = write_ply(tmp_path / "v.ply", columns, fmt=fmt, after="element face 1\nproperty list uchar int vertex_indices\n")
+    with path.open("ab") as fh:
+        fh.write(faces.encode() if isinstance(faces, str) else faces)
+    back = load_cloud(path)
+    atol = 1e-7 if dtype == "f4" else 0
+    np.testing.assert_allclose(back.points, cloud.points, atol=atol)
+    np.testing.assert_allclose(back.normals, cloud.normals, atol=1e-6)
+    np.testing.assert_allclose(back.colors, cloud.colors, atol=1e-9)
+
+
+def test_ply_fixed_element_before_vertices_and_crlf(tmp_path, cloud):
+    before = "element camera 2\nproperty float view_px\nproperty float view_py\n"
+    path = tmp_path / "b.ply"
+    body = write_ply(tmp_path / "tmp.ply", xyz_columns(cloud.points, "f8"), before=before).read_bytes()
+    head, _, data = body.partition(b"end_header\n")
+    path.write_bytes(head + b"end_header\n" + b"\x00" * 16 + data)  # 2 cameras x 2 floats
+    np.testing.assert_array_equal(load_cloud(path).points, cloud.points)
+
+    text = write_ply(tmp_path / "a.ply", xyz_columns(cloud.points, "f8"), fmt="ascii", before=before)
+    head, _, data = text.read_bytes().partition(b"end_header\n")
+    crlf = (head + b"end_header\n" + b"0 0\n1 1\n" + data).replace(b"\n", b"\r\n")
+    (tmp_path / "crlf.ply").write_bytes(crlf)
+    np.testing.assert_array_equal(load_cloud(tmp_path / "crlf.ply").points, cloud.points)
+
+
+def test_pcd_viewpoint_becomes_sensor_origin(tmp_path, cloud):
+    one = make_cloud(cloud.points, sensor_origins=[0.5, -0.25, 1.0])
+    for ascii in (False, True):
+        save_cloud(one, tmp_path / "v.pcd", ascii=ascii)
+        assert "VIEWPOINT 0.5 -0.25 1.0 1.0 0.0 0.0 0.0" in (tmp_path / "v.pcd").read_bytes().decode("latin-1")
+        back = load_cloud(tmp_path / "v.pcd", scale=2.0)
+        np.testing.assert_allclose(back.sensor_origins, np.tile([1.0, -0.5, 2.0], (len(cloud), 1)))
+
+
+def test_pcd_default_viewpoint_is_no_viewpoint(tmp_path, cloud):
+    save_cloud(PointCloud(cloud.points), tmp_path / "d.pcd")
+    assert "VIEWPOINT 0.0 0.0 0.0 1.0 0.0 0.0 0.0" in (tmp_path / "d.pcd").read_bytes().decode("latin-1")
+    assert load_cloud(tmp_path / "d.pcd").sensor_origins is None
+
+
+def test_pcd_rotated_viewpoint_at_zero_is_kept(tmp_path):
+    """Only the exact default means 'unknown'; a sensor at the origin with a rotation is real."""
+    path = tmp_path / "r.pcd"
+    path.write_text(
+        "VERSION .7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH 2\nHEIGHT 1\n"
+        "VIEWPOINT 0 0 0 0 1 0 0\nPOINTS 2\nDATA ascii\n1 2 3\n4 5 nan\n"
+    )
+    back = load_cloud(path)
+    assert len(back) == 1 and back.dropped_nonfinite == 1
+    np.testing.assert_array_equal(back.sensor_origins, [[0.0, 0.0, 0.0]])
+
+
+def test_pcd_hand_written_binary_with_padding_and_count(tmp_path):
+    """Fields of COUNT > 1, PCL's "_" padding, packed rgb as float, normals: the reader finds its columns."""
+    n = 4
+    dtype = np.dtype([("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("_", "<f4"), ("hist", "<f4", (3,)),
+                      ("normal_x", "<f4"), ("normal_y", "<f4"), ("normal_z", "<f4"), ("rgb", "<f4")])  # fmt: skip
+    table = np.zeros(n, dtype)
+    table["x"], table["y"], table["z"] = np.arange(n), 1.0, 2.0
+    table["normal_z"] = 1.0
+    table["rgb"] = np.array([0xFF8001] * n, "<u4").view("<f4")
+    head = (
+        "# .PCD v0.7\nVERSION 0.7\nFIELDS x y z _ hist normal_x normal_y normal_z rgb\nSIZE 4 4 4 4 4 4 4 4 4\n"
+        "TYPE F F F F F F F F F\nCOUNT 1 1 1 1 3 1 1 1 1\nWIDTH 4\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\n"
+        "POINTS 4\nDATA binary\n"
+    )
+    (tmp_path / "h.pcd").write_bytes(head.encode() + table.tobytes())
+    back = load_cloud(tmp_path / "h.pcd")
+    np.testing.assert_array_equal(back.points[:, 0], np.arange(n))
+    np.testing.assert_array_equal(back.normals, np.tile([0.0, 0.0, 1.0], (n, 1)))
+    np.testing.assert_allclose(back.colors, np.tile([1.0, 128 / 255, 1 / 255], (n, 1)))
+
+
+def test_npz_sensor_origins(tmp_path, cloud):
+    per_point = cloud.points + np.array([0.0, 0.0, 1.0])
+    for origins in ([0.1, 0.2, 0.3], per_point):
+        original = make_cloud(cloud.points, sensor_origins=origins)
+        save_cloud(original, tmp_path / "o.npz")
+        back = load_cloud(tmp_path / "o.npz")
+        np.testing.assert_array_equal(back.sensor_origins, original.sensor_origins)
+
+
+@pytest.mark.parametrize("suffix", [".xyz", ".xyzn", ".xyzrgb", ".pts"])
+def test_xyz_family_round_trip(tmp_path, cloud, suffix):
+    save_cloud(cloud, tmp_path / f"c{suffix}")
+    back = load_cloud(tmp_path / f"c{suffix}")
+    np.testing.assert_array_equal(back.points, cloud.points)
+    assert (back.normals is not None) == (suffix == ".xyzn")
+    assert (back.colors is not None) == (suffix in (".xyzrgb", ".pts"))
+
+
+def test_reader_agrees_with_open3d(tmp_path, cloud):
+    """A file open3d wrote (PLY, and PCD binary_compressed which we hand back to open3d) reads the same."""
+    import open3d as o3d
+
+    pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(cloud.points))
+    pcd.normals = o3d.utility.Vector3dVector(cloud.normals)
+    pcd.colors = o3d.utility.Vector3dVector(cloud.colors)
+    for name, compressed in (("o.ply", False), ("o.pcd", True)):
+        path = tmp_path / name
+        assert o3d.io.write_point_cloud(str(path), pcd, compressed=compressed)
+        theirs = o3d.io.read_point_cloud(str(path))
+        ours = load_cloud(path)
+        np.testing.assert_allclose(ours.points, np.asarray(theirs.points), rtol=0, atol=1e-12)
+        np.testing.assert_allclose(ours.normals, np.asarray(theirs.normals), atol=1e-6)
+        np.testing.assert_allclose(ours.colors, np.asarray(theirs.colors), atol=1e-12)
+
+
+def test_read_path_does_not_import_open3d(tmp_path, cloud):
+    save_cloud(cloud, tmp_path / "c.ply")
+    save_cloud(cloud, tmp_path / "c.pcd")
+    code = textwrap.dedent(f"""
+        import sys
+        from estimation import load_cloud
+        load_cloud({str(tmp_path / "c.ply")!r}); load_cloud({str(tmp_path / "c.pcd")!r})
+        assert "open3d" not in sys.modules, "open3d imported"
+    """)
+    run = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=120)
+    assert run.returncode == 0, run.stderr
+    assert run.stdout == ""
+
+
+# --- files that lie ----------------------------------------------------------------------------------
+
+XYZ_FLOAT = "property float x\nproperty float y\nproperty float z\n"
+
+
+def test_billion_vertex_header_allocates_nothing(tmp_path):
+    path = tmp_path / "huge.ply"
+    path.write_bytes(f"ply\nformat binary_little_endian 1.0\nelement vertex 1000000000\n{XYZ_FLOAT}end_header\n".encode())
+    assert path.stat().st_size < 200
+    with pytest.raises(CloudFileError, match=r"claims 1000000000 points, more than max_points=50000000"):
+        load_cloud(path)
+    tracemalloc.start()
+    try:
+        with pytest.raises(CloudFileError, match=r"huge\.ply: truncated: the header claims 1000000000 vertices but the file holds 0"):
+            load_cloud(path, max_points=10**10)
+        assert tracemalloc.get_traced_memory()[1] < 10 * 2**20  # peak: the header, not 12 GB
+    finally:
+        tracemalloc.stop()
+
+
+@pytest.mark.parametrize("fmt", ["binary_little_endian", "ascii"])
+def test_fewer_vertices_than_claimed(tmp_path, fmt):
+    points = np.random.default_rng(1).uniform(size=(50_000, 3))
+    path = write_ply(tmp_path / "short.ply", xyz_columns(points), fmt=fmt, count=60_000)
+    with pytest.raises(CloudFileError, match=r"short\.ply: truncated: the header claims 60000 vertices but the file holds 50000"):
+        load_cloud(path)
+
+
+def test_fewer_pcd_points_than_claimed(tmp_path, cloud):
+    save_cloud(PointCloud(cloud.points), tmp_path / "c.pcd")
+    data = (tmp_path / "c.pcd").read_bytes().replace(b"POINTS 500", b"POINTS 600")
+    (tmp_path / "c.pcd").write_bytes(data)
+    with pytest.raises(CloudFileError, match=r"claims 600 points but the file holds 500"):
+        load_cloud(tmp_path / "c.pcd")
+    save_cloud(PointCloud(cloud.points), tmp_path / "a.pcd", ascii=True)
+    data = (tmp_path / "a.pcd").read_bytes().replace(b"POINTS 500", b"POINTS 501")
+    (tmp_path / "a.pcd").write_bytes(data)
+    with pytest.raises(CloudFileError, match=r"claims 501 points but the file holds 500"):
+        load_cloud(tmp_path / "a.pcd")
+
+
+def test_compressed_pcd_that_lies_is_refused_before_open3d(tmp_path):
+    head = "VERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH 1000\nHEIGHT 1\nPOINTS 1000\nDATA binary_compressed\n"
+    path = tmp_path / "z.pcd"
+    path.write_bytes(head.encode() + np.array([100, 12_000], "<u4").tobytes() + b"\x00" * 10)
+    with pytest.raises(CloudFileError, match=r"truncated: the compressed block is 100 bytes, 10 present"):
+        load_cloud(path)
+    path.write_bytes(head.encode() + np.array([10, 999], "<u4").tobytes() + b"\x00" * 10)
+    with pytest.raises(CloudFileError, match=r"claims 1000 points \(12000 bytes\) but the block unpacks to 999"):
+        load_cloud(path)
+
+
+def test_max_points_keyword(tmp_path, cloud):
+    save_cloud(cloud, tmp_path / "c.ply")
+    assert MAX_POINTS == 50_000_000
+    with pytest.raises(CloudFileError, match=r"claims 500 points, more than max_points=499"):
+        load_cloud(tmp_path / "c.ply", max_points=499)
+    assert len(load_cloud(tmp_path / "c.ply", max_points=500)) == 500
+
+
+PLY_HEAD = "ply\nformat binary_little_endian 1.0\nelement vertex 1\n"
+
+
+@pytest.mark.parametrize(
+    ("content", "match"),
+    [
+        (PLY_HEAD + "property float128 x\nend_header\n", r"unknown PLY property type 'float128'"),
+        (PLY_HEAD + "property float x\nproperty float y\nend_header\n" + "\0" * 8, r"vertex element has no z property"),
+        (PLY_HEAD + XYZ_FLOAT + "\0" * 12, r"the PLY header has no end_header line"),
+        ("solid cube\nfacet normal 0 0 1\n", r"not a PLY file \(it starts with b'solid cube"),
+        ("", r"the file is empty \(0 bytes\)"),
+        ("ply\nformat binary_middle_endian 1.0\nend_header\n", r"unknown PLY format 'binary_middle_endian'"),
+        ("ply\nformat ascii 1.0\nelement vertex -3\n" + XYZ_FLOAT + "end_header\n", r"count is negative \(-3\)"),
+        ("ply\nformat ascii 1.0\nelement vertex many\nend_header\n", r"count 'many' is not an integer"),
+        (PLY_HEAD + XYZ_FLOAT + "property float x\nend_header\n", r"has property 'x' twice"),
+        (PLY_HEAD + "property list uchar float x\nproperty float y\nproperty float z\nend_header\n", r"no x property"),
+        (PLY_HEAD + XYZ_FLOAT + "property list uchar int idx\nend_header\n" + "\0" * 20, r"list properties \['idx'\]; not supported"),
+        ("ply\nformat binary_little_endian 1.0\nelement face 1\nproperty list uchar int vertex_indices\n"
+         "element vertex 1\n" + XYZ_FLOAT + "end_header\n", r"cannot skip PLY element 'face'"),
+        ("ply\nformat ascii 1.0\nelement vertex 2\n" + XYZ_FLOAT + "end_header\n1 2 3\n4 5 x\n", r"unreadable \(text that is not a number among the values\)"),
+        ("ply\nformat ascii 1.0\nelement vertex 2\n" + XYZ_FLOAT + "end_header\n1 2 3\n4 5 6 7\n", r"hold 7 values, not 2 x 3"),
+        ("ply\nformat ascii 1.0\nfrobnicate 3\nend_header\n", r"unexpected PLY header line 'frobnicate 3'"),
+        ("ply\nformat ascii 1.0\nelement edge 1\nproperty int a\nend_header\n", r"the PLY header has no vertex element"),
+    ],
+)
+def test_bad_ply_is_one_line_error(tmp_path, content, match):
+    path = tmp_path / "bad.ply"
+    path.write_bytes(content.encode("latin-1"))
+    with pytest.raises(CloudFileError, match=match) as info:
+        load_cloud(path)
+    message = str(info.value)
+    assert "\n" not in message and message.startswith(str(path))
+
+
+@pytest.mark.parametrize(
+    ("content", "match"),
+    [
+        ("FIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nPOINTS 1\nDATA ascii\n1 2 3\n", None),
+        ("FIELDS x y z\nSIZE 4 4 4\nTYPE F F Q\nPOINTS 1\nDATA ascii\n1 2 3\n", r"unknown PCD field type Q of size 4"),
+        ("FIELDS x y\nSIZE 4 4\nTYPE F F\nPOINTS 1\nDATA ascii\n1 2\n", r"no scalar z field"),
+        ("FIELDS x y z\nSIZE 4 4\nTYPE F F F\nPOINTS 1\nDATA ascii\n1 2 3\n", r"3 FIELDS but 2 SIZE"),
+        ("FIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nPOINTS 1\n", r"not a PCD file \(no DATA line"),
+        ("ply\nformat ascii 1.0\n", r"not a PCD file"),
+        ("FIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nVIEWPOINT 1 2\nPOINTS 1\nDATA ascii\n1 2 3\n", r"VIEWPOINT needs 7 finite numbers"),
+        ("FIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nPOINTS 1\nDATA lzma\n", r"unknown PCD DATA kind 'lzma'"),
+        ("FIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nPOINTS 2000000000\nDATA binary\n", r"more than max_points"),
+    ],
+)
+def test_bad_pcd_is_one_line_error(tmp_path, content, match):
+    path = tmp_path / "bad.pcd"
+    path.write_text(content)
+    if match is None:  # the minimal valid header, for contrast
+        np.testing.assert_array_equal(load_cloud(path).points, [[1, 2, 3]])
+        return
+    with pytest.raises(CloudFileError, match=match) as info:
+        load_cloud(path)
+    assert "\n" not in str(info.value)
+
+
+def test_directory_is_not_missing(tmp_path):
+    (tmp_path / "scan.ply").mkdir()
+    with pytest.raises(CloudFileError, match=r"scan\.ply: is a directory"):
+        load_cloud(tmp_path / "scan.ply")
+    with pytest.raises(CloudFileError, match=r"no such file"):
+        load_cloud(tmp_path / "none.ply")
+
+
+def test_npy_shorter_than_its_header(tmp_path, cloud):
+    np.save(tmp_path / "c.npy", cloud.points)
+    data = (tmp_path / "c.npy").read_bytes()
+    (tmp_path / "c.npy").write_bytes(data[:-100])
+    with pytest.raises(CloudFileError, match=r"c\.npy: unreadable"):
+        load_cloud(tmp_path / "c.npy")
+
+
+def test_warnings_go_to_the_log_not_stdout(tmp_path, cloud, capfd, caplog):
+    path = write_ply(tmp_path / "extra.ply", xyz_columns(cloud.points), after_bytes=b"\0" * 7)
+    assert len(load_cloud(path)) == len(cloud)
+    out, err = capfd.readouterr()
+    assert out == "" and err == ""
+    assert "the header accounts for" in caplog.text
+
+
+def test_writing_errors(tmp_path, cloud):
+    with pytest.raises(CloudFileError, match=r"no normals for an \.xyzn file"):
+        save_cloud(PointCloud(cloud.points), tmp_path / "c.xyzn")
+    with pytest.raises(CloudFileError, match=r"could not write"):
+        save_cloud(cloud, tmp_path / "missing_dir" / "c.ply")
+    with pytest.raises(CloudFileError, match=r"cannot write format '\.obj'"):
+        save_cloud(cloud, tmp_path / "c.obj")
+
+
+# --- sensor origins on the record --------------------------------------------------------------------
+
+
+def test_make_cloud_sensor_origins():
+    pts = np.array([[0.0, 0, 0], [1, 0, 0], [np.nan, 0, 0], [0, 1, 0]])
+    one = make_cloud(pts, sensor_origins=[0, 0, 1000], scale=0.001)
+    np.testing.assert_array_equal(one.sensor_origins, np.tile([0, 0, 1.0], (3, 1)))
+    assert one.sensor_origins.strides[0] == 0  # one origin is stored once
+    per = make_cloud(pts, sensor_origins=pts * 2 + 1)
+    np.testing.assert_array_equal(per.sensor_origins, per.points * 2 + 1)  # the NaN row dropped with its point
+    rot = np.array([[0.0, -1, 0], [1, 0, 0], [0, 0, 1]])
+    moved = one.transformed(rot, [1.0, 2, 3])
+    np.testing.assert_allclose(moved.sensor_origins, np.tile([1.0, 2, 4], (3, 1)))
+    np.testing.assert_allclose(per.transformed(rot, [1.0, 2, 3]).sensor_origins, (pts[[0, 1, 3]] * 2 + 1) @ rot.T + [1, 2, 3])
+    with pytest.raises(CloudError, match=r"sensor_origins: expected shape \(3,\) or \(4, 3\) to match points, got \(2, 3\)"):
+        make_cloud(pts, sensor_origins=np.zeros((2, 3)))
+    with pytest.raises(CloudError, match=r"sensor_origins: contains NaN or inf"):
+        make_cloud(pts, sensor_origins=[0, np.inf, 0])
+
+
+def test_make_cloud_does_not_alias_its_input():
+    pts = np.random.default_rng(0).uniform(size=(10, 3))
+    cloud = make_cloud(pts)
+    pts[0] = 99.0
+    assert cloud.points[0, 0] != 99.0
+
+
+# --- fuzzing -----------------------------------------------------------------------------------------
+
+
+def _seed_files() -> list[bytes]:
+    pts = np.random.default_rng(3).uniform(size=(6, 3)).astype("<f4")
+    binary = (f"ply\nformat binary_little_endian 1.0\nelement vertex 6\n{XYZ_FLOAT}"
+              "property uchar red\nproperty uchar green\nproperty uchar blue\nend_header\n").encode()
+    table = np.zeros(6, [("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("r", "u1"), ("g", "u1"), ("b", "u1")])
+    table["x"], table["y"], table["z"] = pts.T
+    ascii_ = f"ply\nformat ascii 1.0\nelement vertex 6\n{XYZ_FLOAT}end_header\n" + "".join(
+        f"{a} {b} {c}\n" for a, b, c in pts
+    )
+    pcd = ("VERSION 0.7\nFIELDS x y z rgb\nSIZE 4 4 4 4\nTYPE F F F U\nCOUNT 1 1 1 1\nWIDTH 6\nHEIGHT 1\n"
+           "VIEWPOINT 1 2 3 1 0 0 0\nPOINTS 6\nDATA {}\n")
+    pcd_table = np.zeros(6, [("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("rgb", "<u4")])
+    pcd_table["x"], pcd_table["y"], pcd_table["z"] = pts.T
+    pcd_ascii = pcd.format("ascii") + "".join(f"{a} {b} {c} 16711680\n" for a, b, c in pts)
+    return [binary + table.tobytes(), ascii_.encode(), pcd.format("binary").encode() + pcd_table.tobytes(),
+            pcd_ascii.encode()]
+
+
+SEEDS = _seed_files()
+
+
+@st.composite
+def mutated(draw) -> bytes:
+    data = bytearray(draw(st.sampled_from(SEEDS)))
+    for _ in range(draw(st.integers(1, 4))):
+        op = draw(st.sampled_from(["flip", "cut", "insert", "digit"]))
+        at = draw(st.integers(0, max(0, len(data) - 1)))
+        if op == "flip":
+            data[at] = draw(st.integers(0, 255))
+        elif op == "cut":
+            del data[at : at + draw(st.integers(1, 40))]
+        elif op == "insert":
+            data[at:at] = draw(st.binary(min_size=1, max_size=20))
+        elif data and chr(data[at]).isdigit():  # change a number in the header: counts that lie
+            data[at:at + 1] = str(draw(st.integers(0, 10**12))).encode()
+    return bytes(data)
+
+
+@settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(data=st.one_of(st.binary(max_size=300), mutated()))
+def test_random_bytes_raise_only_cloud_errors(tmp_path, data):
+    for suffix in (".ply", ".pcd"):
+        path = tmp_path / f"fuzz{suffix}"
+        path.write_bytes(data)
+        try:
+            cloud = load_cloud(path)
+        except CloudError as exc:  # CloudFileError included
+            assert "\n" not in str(exc)
+        else:
+            assert cloud.points.shape[1] == 3 and np.isfinite(cloud.points).all()
