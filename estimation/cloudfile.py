@@ -655,8 +655,15 @@ def _read_text(path: Path, max_points: int) -> _Columns:
         first, _, rest = text.partition(b"\n")
         if first.strip().isdigit():  # a Leica .pts starts with its point count
             claimed, text = int(first), rest
+    if not text.strip():
+        raise CloudFileError(f"{path}: holds no numbers, only whitespace")
     delimiter = "," if b"," in text.split(b"\n", 1)[0] else None
-    table = np.loadtxt(text.decode("latin-1").splitlines(), delimiter=delimiter, ndmin=2)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # loadtxt warns (to stderr) on a file of comments only; make it an error
+        try:
+            table = np.loadtxt(text.decode("latin-1").splitlines(), delimiter=delimiter, ndmin=2)
+        except UserWarning as exc:
+            raise CloudFileError(f"{path}: holds no numbers ({exc})") from None
     if suffix in (".txt", ".csv", ".asc"):
         return _Columns(*_split_columns(table))
     if claimed is not None and claimed != len(table):

@@ -342,6 +342,14 @@ def test_directory_is_not_missing(tmp_path):
         load_cloud(tmp_path / "none.ply")
 
 
+@pytest.mark.parametrize(("suffix", "content"), [(".xyz", "  \n\n"), (".txt", "# only a comment\n")])
+def test_text_without_numbers(tmp_path, capfd, suffix, content):
+    (tmp_path / f"c{suffix}").write_text(content)
+    with pytest.raises(CloudFileError, match=r"holds no numbers"):
+        load_cloud(tmp_path / f"c{suffix}")
+    assert capfd.readouterr() == ("", "")
+
+
 def test_npy_shorter_than_its_header(tmp_path, cloud):
     np.save(tmp_path / "c.npy", cloud.points)
     data = (tmp_path / "c.npy").read_bytes()
