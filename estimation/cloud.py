@@ -35,6 +35,13 @@ class PointCloud:
     dropped_nonfinite: int = field(default=0)
     sensor_origins: np.ndarray | None = None
 
+    def __post_init__(self) -> None:
+        # A subset of the points with the old origins would silently pair points with wrong sensors.
+        if self.sensor_origins is not None and self.sensor_origins.shape != self.points.shape:
+            raise CloudError(
+                f"sensor_origins: expected shape {self.points.shape} to match points, got {self.sensor_origins.shape}"
+            )
+
     def __len__(self) -> int:
         return len(self.points)
 

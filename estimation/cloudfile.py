@@ -397,7 +397,7 @@ def _read_ply_binary(
 
 def _read_ply_ascii(
     path: Path, size: int, offset: int, elements: list[_PlyElement], index: int
-) -> tuple[np.ndarray, dict[str, np.dtype]]:
+) -> tuple[dict[str, np.ndarray], dict[str, np.dtype]]:
     vertex = elements[index]
     if vertex.lists:
         raise CloudFileError(f"{path}: the PLY vertex element has list properties {sorted(vertex.lists)}; not supported")
@@ -423,7 +423,7 @@ def _read_ply_ascii(
     table = values.reshape(vertex.count, nprops)
     structured = {name: table[:, i] for i, (name, _) in enumerate(vertex.props)}
     types = {name: np.dtype(code) for name, code in vertex.props}  # type: ignore[arg-type]
-    return structured, types  # type: ignore[return-value]
+    return structured, types
 
 
 def _columns_from(

@@ -395,6 +395,11 @@ def test_make_cloud_sensor_origins():
         make_cloud(pts, sensor_origins=[0, np.inf, 0])
 
 
+def test_origins_must_match_points():
+    with pytest.raises(CloudError, match=r"sensor_origins: expected shape \(3, 3\) to match points, got \(2, 3\)"):
+        PointCloud(np.zeros((3, 3)), sensor_origins=np.zeros((2, 3)))
+
+
 def test_make_cloud_does_not_alias_its_input():
     pts = np.random.default_rng(0).uniform(size=(10, 3))
     cloud = make_cloud(pts)
