@@ -17,9 +17,9 @@ from rich.table import Table
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from twin.fidelity import compare
-from twin.objects import estimate_object, prepare_objects, reference_estimate
-from twin.scenefile import load_scene
+from scenes.fidelity import compare
+from scenes.scenefile import load_scene
+from scenes.sources import estimate_object, prepare_objects, reference_estimate
 
 
 def main() -> int:

@@ -28,11 +28,12 @@ from rich.table import Table
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from sync.hold import Hold
-from twin.build import build_scene
-from twin.demo import run_demo
-from twin.scenefile import load_scene
-from twin.sim import Twin, push_trajectory
+from cli.demo import run_demo
+from scenes.build import build_scene
+from scenes.scenefile import load_scene
+from twin.hold import Hold
+from twin.sim import Twin
+from twin.trajectory import push_trajectory
 
 
 def effect(duration: float, rounds: int) -> list[dict]:

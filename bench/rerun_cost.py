@@ -29,10 +29,12 @@ from rich.table import Table
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from twin.build import build_scene
-from twin.rerunlog import OFF, RerunLog, RerunTarget
-from twin.scenefile import load_scene
-from twin.sim import Twin, push_trajectory, run_paced
+from scenes.build import build_scene
+from scenes.scenefile import load_scene
+from twin.debuglog import OFF
+from twin.rerunlog import RerunLog, RerunTarget
+from twin.sim import Twin, run_paced
+from twin.trajectory import push_trajectory
 
 RATES = (None, 30.0, 100.0, 1000.0)  # None: rerun off
 

@@ -24,7 +24,6 @@ import json
 import multiprocessing as mp
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 import numpy as np
@@ -44,19 +43,20 @@ CIRCLE_RADIUS, CIRCLE_SPEED, HOVER = 0.10, 0.20, 0.05  # m, m/s, m above the tab
 
 
 def remote_main(endpoint: str, points: int, keyframe_s: float, ready, add, stop) -> None:  # type: ignore[no-untyped-def]
-    from sync.remote import Remote
-    from sync.session import make_config, open_session
-    from twin.scenefile import ObjectSpec, parse_scene
-    from twin.sim import Pacer
+    from scenes.remote import Remote
+    from scenes.scenefile import ObjectSpec, parse_scene
+    from sync.zenoh_transport import ZenohTransport, make_config, open_session
+    from twin.loop import run_loop
 
     session = open_session(make_config(listen=[endpoint]))
-    remote = Remote(parse_scene(SCENE), session, keyframe_s=keyframe_s)
+    remote = Remote(parse_scene(SCENE), ZenohTransport(session), keyframe_s=keyframe_s)
     centre = remote.twin.pose("crate")[0] + np.array([0.0, 0.0, HOVER])
     omega = CIRCLE_SPEED / CIRCLE_RADIUS
     ready.set()
-    pacer, added = Pacer(1000.0), False
-    while not stop.is_set():
-        pacer.begin()
+    added = False
+
+    def body() -> None:
+        nonlocal added
         t = remote.twin.time
         c, s = np.cos(omega * t), np.sin(omega * t)
         remote.twin.set_pose("crate", centre + CIRCLE_RADIUS * np.array([c, s, 0.0]), np.array([1.0, 0, 0, 0]),
@@ -67,19 +67,18 @@ def remote_main(endpoint: str, points: int, keyframe_s: float, ready, add, stop)
             added = True
             remote.add(ObjectSpec(id="torus", source="primitive", value={"type": "torus", "size": [0.08, 0.03]},
                                   material="ceramic", position=(0.25, 0.2), points=points))
-        left = pacer.end()
-        if left > 0:
-            time.sleep(left)
+
+    run_loop(body, rate=1000.0, duration=24 * 3600.0, until=stop.is_set)
     remote.close()
     session.close()
 
 
 def twin(endpoint: str, cache: Path):  # type: ignore[no-untyped-def]
-    from sync.local import Local, LocalSettings
-    from sync.session import make_config, open_session
+    from sync.zenoh_transport import ZenohTransport, make_config, open_session
+    from twin.runtime import Local, LocalSettings
 
     session = open_session(make_config(connect=[endpoint]))
-    local = Local(session, settings=LocalSettings(cache_dir=cache))
+    local = Local(ZenohTransport(session), settings=LocalSettings(cache_dir=cache))
     return local, session
 
 
@@ -90,7 +89,7 @@ def wait_for(local, object_id: str, timeout: float) -> None:  # type: ignore[no-
 
 
 def pose_latency(seconds: float, keyframe_s: float, points: int, cache: Path, *, add_object: bool) -> dict:
-    from sync.session import free_port
+    from sync.zenoh_transport import free_port
 
     ctx = mp.get_context("spawn")
     ready, add, stop = ctx.Event(), ctx.Event(), ctx.Event()

@@ -32,11 +32,13 @@ from rich.table import Table
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from estimation.inertia import signed_volumes
+from scenes.scenefile import SceneSpec, load_scene
+from scenes.sources import estimate_object, prepare_objects
 from twin.decompose import DEFAULT_SETTINGS, CoacdSettings
-from twin.model import DEFAULT_PHYSICS, PhysicsSettings, add_object, new_spec
-from twin.objects import TwinObject, estimate_object, prepare_objects
-from twin.scenefile import SceneSpec, load_scene
-from twin.sim import Twin, push_trajectory
+from twin.model import DEFAULT_PHYSICS, PhysicsSettings, add_object
+from twin.objects import TwinObject
+from twin.sim import Twin
+from twin.trajectory import push_trajectory
 
 PUSH_SECONDS = 3.0
 NAIVE_COACD = replace(DEFAULT_SETTINGS, threshold=0.05, max_convex_hull=-1, max_ch_vertex=256, convex_tolerance=0.0)
@@ -55,7 +57,7 @@ class Run:
 
 def measure(scene: SceneSpec, objects: list[TwinObject], physics: PhysicsSettings, seconds: float,
             maxhullvert: int | None = None) -> Run:
-    spec = new_spec(scene, physics)
+    spec = scene.empty_spec(physics)
     for obj in objects:
         add_object(spec, obj)
     if maxhullvert is not None:

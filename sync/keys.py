@@ -16,9 +16,15 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass
+from functools import cache
 
 PREFIX = "twin"
 _CHUNK = re.compile(r"^[A-Za-z0-9_-]{1,64}$")
+
+
+def valid_id(name: str) -> bool:
+    """Whether ``name`` may be a scene or object id: 1-64 of ``[A-Za-z0-9_-]`` (a safe key chunk)."""
+    return isinstance(name, str) and _CHUNK.match(name) is not None
 OBJECT_KINDS = ("cloud", "pose", "gone")
 
 
@@ -29,7 +35,7 @@ class Keys:
     scene: str
 
     def __post_init__(self) -> None:
-        if not _CHUNK.match(self.scene):
+        if not valid_id(self.scene):
             raise ValueError(f"scene name {self.scene!r} is not a valid key chunk ([A-Za-z0-9_-], 1-64)")
 
     @property
@@ -41,7 +47,7 @@ class Keys:
         return f"{self.root}/scene"
 
     def object(self, object_id: str, kind: str) -> str:
-        if kind not in OBJECT_KINDS or not _CHUNK.match(object_id):
+        if kind not in OBJECT_KINDS or not valid_id(object_id):
             raise ValueError(f"bad object key: {object_id!r}/{kind!r}")
         return f"{self.root}/objects/{object_id}/{kind}"
 
@@ -82,3 +88,34 @@ def scene_of(key: str) -> str:
     if len(parts) < 2 or parts[0] != PREFIX:
         raise ValueError(f"not a tactile-twin key: {key!r}")
     return parts[1]
+
+
+def object_of(key: str) -> str | None:
+    """The object id in an object key (``twin/<scene>/objects/<id>/<kind>``) of any scene, else None."""
+    parts = key.split("/")
+    if len(parts) == 5 and parts[0] == PREFIX and parts[2] == "objects" and parts[4] in OBJECT_KINDS:
+        return parts[3]
+    return None
+
+
+def intersects(a: str, b: str) -> bool:
+    """Whether two key expressions share at least one key, as Zenoh matches them.
+
+    ``*`` stands for exactly one chunk, ``**`` for any number of chunks (none included). Used by the
+    in-process transport; Zenoh does its own matching.
+    """
+    return _intersects(tuple(a.split("/")), tuple(b.split("/")))
+
+
+@cache
+def _intersects(a: tuple[str, ...], b: tuple[str, ...]) -> bool:
+    if not a or not b:
+        rest = a or b
+        return all(c == "**" for c in rest)
+    if a[0] == "**":
+        return _intersects(a[1:], b) or _intersects(a, b[1:])
+    if b[0] == "**":
+        return _intersects(a, b[1:]) or _intersects(a[1:], b)
+    if a[0] == b[0] or a[0] == "*" or b[0] == "*":
+        return _intersects(a[1:], b[1:])
+    return False

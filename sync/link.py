@@ -1,113 +1,108 @@
-"""One side's end of the link: publish encoded messages (counting bytes) and receive decoded ones.
+"""One side's end of the wire: publish encoded messages (counting bytes), receive checked ones.
 
-Receiving is where bad input from the network stops: anything :func:`~sync.messages.decode` rejects is
-dropped, counted and logged, never passed on and never raised into Zenoh's threads.
+Receiving is where bad input from the network stops: anything :func:`~sync.messages.decode` rejects, and
+an object message filed under another object's key, is dropped, counted per reason and logged (the first
+few at WARNING, the rest at DEBUG), never passed on and never raised into the transport's threads.
 """
 
 from __future__ import annotations
 
 import logging
 import threading
-import time
+from collections import Counter
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
+from sync.clock import REAL_CLOCK, Clock
+from sync.keys import object_of
 from sync.messages import Message, MessageError, decode, encode
+from sync.transport import Transport
 
 log = logging.getLogger(__name__)
 
 #: Malformed messages logged at WARNING before the rest go to DEBUG (a flood must not flood the log).
 _WARN_LIMIT = 10
 
+Handler = Callable[[str, Message], None]
+
 
 @dataclass
 class LinkCounters:
-    """What went over this side's link. Updated from Zenoh's threads; read them from anywhere."""
+    """What went over this side's link. Updated from the transport's threads; read them from anywhere."""
 
     messages_sent: int = 0
     bytes_sent: int = 0
     messages_received: int = 0
     bytes_received: int = 0
     dropped_malformed: int = 0
-    last_received: float = 0.0  # time.monotonic() of the last good message, 0 if none
+    dropped_by_reason: Counter = field(default_factory=Counter)
+    last_received: float | None = None  # clock.now() of the last good message
 
 
 class Link:
-    """Wraps a Zenoh session: :meth:`put` encodes and counts, :meth:`subscribe` decodes and filters."""
+    """Messages over a :class:`~sync.transport.Transport`: :meth:`put` encodes and counts,
+    :meth:`subscribe` and :meth:`query` decode, check and count."""
 
-    def __init__(self, session) -> None:  # type: ignore[no-untyped-def]
-        self.session = session
+    def __init__(self, transport: Transport, clock: Clock = REAL_CLOCK) -> None:
+        self.transport = transport
+        self.clock = clock
         self.counters = LinkCounters()
         self._lock = threading.Lock()
-        self._handles: list[object] = []
 
     def put(self, key: str, msg: Message) -> bytes:
         """Publish ``msg`` on ``key``; returns the encoded bytes (for caching replies)."""
         data = encode(msg)
-        self.put_bytes(key, data)
+        self.transport.put(key, data)
+        self._sent(data)
         return data
 
-    def put_bytes(self, key: str, data: bytes) -> None:
-        self.session.put(key, data)
-        with self._lock:
-            self.counters.messages_sent += 1
-            self.counters.bytes_sent += len(data)
-
-    def subscribe(self, key: str, handler: Callable[[str, Message], None]) -> None:
-        """Call ``handler(key, message)`` for each good message on ``key`` (from a Zenoh thread)."""
-        self._handles.append(self.session.declare_subscriber(key, lambda s: self.receive(str(s.key_expr),
-                                                                                          s.payload.to_bytes(),
-                                                                                          handler)))
+    def subscribe(self, key: str, handler: Handler) -> None:
+        """Call ``handler(key, message)`` for each good message on ``key`` (from the transport's thread)."""
+        self.transport.subscribe(key, lambda k, data: self.receive(k, data, handler))
 
     def queryable(self, key: str, answer: Callable[[str], list[tuple[str, bytes]]]) -> None:
-        """Answer queries on ``key`` with the (key, encoded bytes) pairs ``answer(selector key)`` returns."""
+        """Answer queries on ``key`` with the (key, encoded bytes) pairs ``answer(selector)`` returns."""
 
-        def on_query(query) -> None:  # type: ignore[no-untyped-def]
-            try:
-                for reply_key, data in answer(str(query.key_expr)):
-                    query.reply(reply_key, data)
-                    with self._lock:
-                        self.counters.messages_sent += 1
-                        self.counters.bytes_sent += len(data)
-            except Exception:  # a failing answer must not kill Zenoh's thread; the querier times out
-                log.exception("answering a query on %s failed", key)
+        def counted(selector: str) -> list[tuple[str, bytes]]:
+            replies = answer(selector)
+            for _, data in replies:
+                self._sent(data)
+            return replies
 
-        self._handles.append(self.session.declare_queryable(key, on_query))
+        self.transport.queryable(key, counted)
 
-    def query(self, selector: str, handler: Callable[[str, Message], None], timeout: float = 2.0) -> int:
+    def query(self, selector: str, handler: Handler, timeout: float = 2.0) -> int:
         """Ask ``selector``; each good reply goes to ``handler``. Returns the number of good replies."""
-        good = 0
-        for reply in self.session.get(selector, timeout=timeout):
-            if reply.ok is None:
-                continue
-            if self.receive(str(reply.ok.key_expr), reply.ok.payload.to_bytes(), handler):
-                good += 1
-        return good
+        return sum(self.receive(key, data, handler) for key, data in self.transport.get(selector, timeout))
 
-    def receive(self, key: str, data: bytes, handler: Callable[[str, Message], None]) -> bool:
-        """Decode and hand over one payload; malformed ones are dropped and counted. True if handled."""
+    def receive(self, key: str, data: bytes, handler: Handler) -> bool:
+        """Decode, check and hand over one payload; bad ones are dropped and counted. True if handled."""
         try:
             msg = decode(data)
+            named = getattr(msg, "object_id", None)
+            if named is not None and object_of(key) not in (None, named):
+                raise MessageError("wrong-key", f"a message about {named!r} on another object's key")
         except MessageError as exc:
             with self._lock:
                 self.counters.dropped_malformed += 1
+                self.counters.dropped_by_reason[exc.reason] += 1
                 n = self.counters.dropped_malformed
             (log.warning if n <= _WARN_LIMIT else log.debug)("dropped malformed message on %s: %s", key, exc)
             return False
         with self._lock:
             self.counters.messages_received += 1
             self.counters.bytes_received += len(data)
-            self.counters.last_received = time.monotonic()
+            self.counters.last_received = self.clock.now()
         try:
             handler(key, msg)
-        except Exception:  # the handler's bug must not become Zenoh's crash
+        except Exception:  # the handler's bug must not become the transport's crash
             log.exception("handling a message on %s failed", key)
         return True
 
     def close(self) -> None:
-        for h in self._handles:
-            try:
-                h.undeclare()  # type: ignore[attr-defined]
-            except Exception:  # already closed with the session
-                pass
-        self._handles.clear()
+        self.transport.close()
+
+    def _sent(self, data: bytes) -> None:
+        with self._lock:
+            self.counters.messages_sent += 1
+            self.counters.bytes_sent += len(data)

@@ -1,9 +1,15 @@
 """The wire format: versioned msgspec structs, msgpack-encoded; clouds quantised and zstd-compressed.
 
-Every message carries ``v`` (the format version) and a ``stamp_ns`` (sender's wall clock,
-``time.time_ns()``; latency across machines needs synchronised clocks). Decoding anything else (an
-unknown type or version, a bad array size, garbage) raises :class:`MessageError`: receivers drop such a
-message, count it and log it.
+Every message carries ``v`` (the format version) and a ``stamp_ns`` (the sender's clock,
+:meth:`sync.clock.Clock.stamp_ns`; latency across machines needs synchronised clocks). Messages that are
+ordered also carry the sender's ``epoch`` (fixed for one run of the sender, larger after a restart) and a
+``seq`` counting up within the epoch, so a restarted remote is told from a stale one.
+
+:func:`decode` rejects what no honest sender could mean, before anything is allocated for it: an unknown
+type or version, garbage, non-finite numbers, a quaternion that is not unit length, an id outside the
+key-expression alphabet, a cloud whose header and payload sizes disagree or that claims more than
+:data:`MAX_CLOUD_POINTS`. Each rejection is a :class:`MessageError` with a short ``reason``; receivers
+drop such a message, count it per reason and log it.
 
 Clouds are quantised on a grid of ``quantum`` metres relative to their minimum corner (16 bits per axis
 while the extent fits, else 32), sorted so neighbouring points have similar bytes, split into byte planes
@@ -12,12 +18,24 @@ and compressed with zstd. Point order carries no meaning for estimation.
 
 from __future__ import annotations
 
-import time
+import math
 
 import msgspec
 import numpy as np
 
-VERSION = 1
+from sync.keys import valid_id
+
+VERSION = 2
+
+#: The largest cloud a message may claim, points: 10 M is several depth frames of one object; a claim past
+#: it is refused before anything is decompressed or allocated (a 61 KB message once claimed 2 GB).
+MAX_CLOUD_POINTS = 10_000_000
+
+#: How far a quaternion's norm may be from 1: senders normalise; float32 round trips stay within 1e-6.
+QUAT_NORM_TOLERANCE = 1e-3
+
+#: Largest coordinate, metres, any message may carry: a scene is metres across, 1 km is no scene.
+MAX_COORDINATE = 1e3
 
 #: Default cloud quantisation step, metres: a tenth of a millimetre, well under a sensor's noise.
 CLOUD_QUANTUM = 1e-4
@@ -26,7 +44,11 @@ _ZSTD_LEVEL = 3
 
 
 class MessageError(ValueError):
-    """A message that cannot be used: unknown type or version, bad size, or garbage."""
+    """A message that cannot be used. ``reason`` is a short tag for counting (e.g. ``"non-finite"``)."""
+
+    def __init__(self, reason: str, detail: str) -> None:
+        super().__init__(detail)
+        self.reason = reason
 
 
 class _Msg(msgspec.Struct, array_like=True, tag_field="t", forbid_unknown_fields=True):
@@ -48,11 +70,13 @@ class SceneInfo(_Msg, tag="scene"):
 class Cloud(_Msg, tag="cloud"):
     """An object's point cloud in the world frame, with what is needed to estimate and place it.
 
-    ``body_position``/``body_quat`` (w x y z) is the remote body's pose when the cloud was taken: the twin
-    maps later remote poses onto its own body through it.
+    ``frame_position``/``frame_quat`` (w x y z) is the sensor's estimate of the object's frame when the
+    cloud was taken (the frame its later :class:`Pose` messages move): the twin maps those poses onto its
+    own body through it. A camera-based sensor fills it from tracking; the surface sensor from the truth.
     """
 
     object_id: str
+    epoch: int
     seq: int
     count: int
     bits: int
@@ -61,14 +85,16 @@ class Cloud(_Msg, tag="cloud"):
     data: bytes
     material: str | None
     density: float | None
-    body_position: tuple[float, float, float]
-    body_quat: tuple[float, float, float, float]
+    frame_position: tuple[float, float, float]
+    frame_quat: tuple[float, float, float, float]
 
 
 class Pose(_Msg, tag="pose"):
-    """A remote body's pose and velocity (world frame and axes; quaternion w x y z; m/s and rad/s)."""
+    """An object frame's pose and velocity as the remote senses it (world frame and axes; quaternion
+    w x y z; m/s and rad/s)."""
 
     object_id: str
+    epoch: int
     seq: int
     sim_time: float
     position: tuple[float, float, float]
@@ -79,10 +105,15 @@ class Pose(_Msg, tag="pose"):
 
 class Gone(_Msg, tag="gone"):
     object_id: str
+    epoch: int
     seq: int
 
 
 class Heartbeat(_Msg, tag="heartbeat"):
+    """The remote is alive; ``seq`` is its message counter now (no honest message of this epoch has a
+    larger one)."""
+
+    epoch: int
     seq: int
     sim_time: float
     objects: int
@@ -91,6 +122,7 @@ class Heartbeat(_Msg, tag="heartbeat"):
 class OperatorCommand(_Msg, tag="operator"):
     """The operator's end-effector target, world frame, metres."""
 
+    epoch: int
     seq: int
     position: tuple[float, float, float]
 
@@ -99,10 +131,6 @@ Message = SceneInfo | Cloud | Pose | Gone | Heartbeat | OperatorCommand
 
 _encoder = msgspec.msgpack.Encoder()
 _decoder = msgspec.msgpack.Decoder(Message)
-
-
-def now_ns() -> int:
-    return time.time_ns()
 
 
 def encode(msg: Message) -> bytes:
@@ -118,11 +146,10 @@ def decode(data: bytes) -> Message:
     try:
         msg = _decoder.decode(data)
     except (msgspec.DecodeError, msgspec.ValidationError) as exc:
-        raise MessageError(f"undecodable message ({exc})") from exc
+        raise MessageError("undecodable", f"undecodable message ({exc})") from exc
     if msg.v != VERSION:
-        raise MessageError(f"message version {msg.v}, expected {VERSION}")
-    if isinstance(msg, Cloud):
-        _check_cloud(msg)
+        raise MessageError("version", f"message version {msg.v}, expected {VERSION}")
+    _check(msg)
     return msg
 
 
@@ -150,28 +177,90 @@ def unpack_points(msg: Cloud) -> np.ndarray:
     try:
         raw = zstandard.ZstdDecompressor().decompress(msg.data, max_output_size=3 * width * msg.count)
     except zstandard.ZstdError as exc:
-        raise MessageError(f"cloud {msg.object_id!r}: corrupt compressed data ({exc})") from exc
+        raise MessageError("bad-payload", f"cloud {msg.object_id!r}: corrupt compressed data ({exc})") from exc
     if len(raw) != 3 * width * msg.count:
-        raise MessageError(f"cloud {msg.object_id!r}: {len(raw)} bytes for {msg.count} points")
+        raise MessageError("bad-payload", f"cloud {msg.object_id!r}: {len(raw)} bytes for {msg.count} points")
     planes = np.frombuffer(raw, np.uint8).reshape(3, width, msg.count).transpose(0, 2, 1)
     q = np.ascontiguousarray(planes).view(np.uint16 if width == 2 else np.uint32).reshape(3, msg.count).T
     return q.astype(np.float64) * msg.quantum + np.asarray(msg.origin)
 
 
-def cloud_message(object_id: str, seq: int, points: np.ndarray, *, material: str | None, density: float | None,
-                  body_position: np.ndarray, body_quat: np.ndarray, quantum: float = CLOUD_QUANTUM) -> Cloud:
+def cloud_message(object_id: str, points: np.ndarray, *, stamp_ns: int, epoch: int, seq: int,
+                  material: str | None, density: float | None, frame_position: np.ndarray,
+                  frame_quat: np.ndarray, quantum: float = CLOUD_QUANTUM) -> Cloud:
+    """A :class:`Cloud` of ``points`` ((n, 3) metres, world frame), quantised and compressed."""
     count, bits, origin, data = pack_points(points, quantum)
-    return Cloud(v=VERSION, stamp_ns=now_ns(), object_id=object_id, seq=seq, count=count, bits=bits,
+    return Cloud(v=VERSION, stamp_ns=stamp_ns, object_id=object_id, epoch=epoch, seq=seq, count=count, bits=bits,
                  quantum=quantum, origin=origin, data=data, material=material, density=density,
-                 body_position=_vec(body_position, 3), body_quat=_vec(body_quat, 4))
+                 frame_position=_vec(frame_position, 3), frame_quat=_vec(frame_quat, 4))
+
+
+def _check(msg: Message) -> None:
+    """Raise :class:`MessageError` for values no honest sender produces."""
+    name = msg.object_id if hasattr(msg, "object_id") else getattr(msg, "name", None)
+    if name is not None and not valid_id(name):
+        raise MessageError("bad-id", f"id {name[:80]!r} is not a key chunk ([A-Za-z0-9_-], 1-64)")
+    for field in ("epoch", "seq"):
+        if getattr(msg, field, 0) < 0:
+            raise MessageError("bad-seq", f"{type(msg).__name__}: negative {field}")
+    if isinstance(msg, Pose):
+        _finite(msg, msg.position, msg.linvel, msg.angvel, (msg.sim_time,))
+        _coordinates(msg, msg.position)
+        _unit(msg, msg.quat)
+    elif isinstance(msg, Cloud):
+        _check_cloud(msg)
+    elif isinstance(msg, OperatorCommand):
+        _finite(msg, msg.position)
+        _coordinates(msg, msg.position)
+    elif isinstance(msg, Heartbeat):
+        _finite(msg, (msg.sim_time,))
+        if msg.objects < 0:
+            raise MessageError("bad-size", "heartbeat: negative object count")
+    elif isinstance(msg, SceneInfo):
+        _finite(msg, msg.table_size or (), (msg.table_height, msg.ee_radius), msg.ee_position)
+        _coordinates(msg, msg.ee_position, msg.table_size or (), (msg.table_height,))
+        if (msg.table_size is not None and min(msg.table_size) <= 0) or msg.ee_radius < 0:
+            raise MessageError("bad-size", "scene: non-positive table size or negative end-effector radius")
 
 
 def _check_cloud(msg: Cloud) -> None:
-    if msg.bits not in (16, 32) or msg.count <= 0 or not (0 < msg.quantum < 1):
-        raise MessageError(f"cloud {msg.object_id!r}: bad header (bits {msg.bits}, count {msg.count}, "
-                           f"quantum {msg.quantum})")
-    if not np.all(np.isfinite(msg.origin)):
-        raise MessageError(f"cloud {msg.object_id!r}: non-finite origin")
+    if msg.bits not in (16, 32) or msg.count <= 0 or not (0 < msg.quantum < 1) or not math.isfinite(msg.quantum):
+        raise MessageError("bad-header", f"cloud {msg.object_id!r}: bad header (bits {msg.bits}, count "
+                                         f"{msg.count}, quantum {msg.quantum})")
+    if msg.count > MAX_CLOUD_POINTS:
+        raise MessageError("too-large", f"cloud {msg.object_id!r}: {msg.count:,} points claimed, more than "
+                                        f"{MAX_CLOUD_POINTS:,}")
+    _finite(msg, msg.origin, msg.frame_position)
+    _coordinates(msg, msg.origin, msg.frame_position)
+    _unit(msg, msg.frame_quat)
+    if (msg.density is not None and not (math.isfinite(msg.density) and msg.density > 0)):
+        raise MessageError("non-finite", f"cloud {msg.object_id!r}: density {msg.density}")
+    import zstandard
+
+    # The frame header states the decompressed size: check it against the point count without inflating.
+    try:
+        size = zstandard.frame_content_size(msg.data)
+    except zstandard.ZstdError as exc:
+        raise MessageError("bad-payload", f"cloud {msg.object_id!r}: not a zstd frame ({exc})") from exc
+    if size != 3 * (msg.bits // 8) * msg.count:
+        raise MessageError("bad-payload", f"cloud {msg.object_id!r}: payload holds {size} bytes, the header "
+                                          f"claims {msg.count} points of {msg.bits} bits")
+
+
+def _finite(msg: Message, *groups) -> None:  # type: ignore[no-untyped-def]
+    if not all(math.isfinite(x) for g in groups for x in g):
+        raise MessageError("non-finite", f"{type(msg).__name__}: NaN or infinite value")
+
+
+def _coordinates(msg: Message, *groups) -> None:  # type: ignore[no-untyped-def]
+    if any(abs(x) > MAX_COORDINATE for g in groups for x in g):
+        raise MessageError("out-of-range", f"{type(msg).__name__}: a coordinate beyond {MAX_COORDINATE:g} m")
+
+
+def _unit(msg: Message, quat: tuple[float, ...]) -> None:
+    norm = math.sqrt(sum(x * x for x in quat)) if all(math.isfinite(x) for x in quat) else math.nan
+    if not abs(norm - 1.0) <= QUAT_NORM_TOLERANCE:
+        raise MessageError("bad-quaternion", f"{type(msg).__name__}: quaternion of norm {norm:.6g}, not unit")
 
 
 def _vec(values, n: int) -> tuple:  # type: ignore[no-untyped-def]

@@ -7,11 +7,12 @@ import threading
 from collections.abc import Iterator
 from pathlib import Path
 
-from sync.local import Local, LocalSettings
-from sync.remote import Remote
-from sync.session import make_config, open_session
-from twin.rerunlog import OFF, RerunLog
-from twin.scenefile import parse_scene
+from scenes.remote import Remote
+from scenes.scenefile import parse_scene
+from sync.zenoh_transport import ZenohTransport, make_config, open_session
+from twin.debuglog import OFF
+from twin.rerunlog import RerunLog
+from twin.runtime import Local, LocalSettings
 
 SCENE = {
     "name": "synctest",
@@ -51,7 +52,7 @@ def running_remote(endpoint: str, cache_dir: Path, rlog: RerunLog = OFF,
     """The SCENE's remote (``remote``: more Remote arguments), listening on ``endpoint`` and stepping in a
     thread until the block ends."""
     session = open_session(make_config(listen=[endpoint]))
-    r = Remote(parse_scene(SCENE), session, cache_dir=cache_dir, rlog=rlog, **remote)
+    r = Remote(parse_scene(SCENE), ZenohTransport(session), cache_dir=cache_dir, rlog=rlog, **remote)
     runner = RemoteRunner(r)
     runner.start()
     try:
@@ -65,7 +66,7 @@ def running_remote(endpoint: str, cache_dir: Path, rlog: RerunLog = OFF,
 def open_local(endpoint: str, cache_dir: Path, rlog: RerunLog = OFF, **settings) -> Local:  # type: ignore[no-untyped-def]
     """A twin connected to ``endpoint``; close it with :func:`close_local`."""
     session = open_session(make_config(connect=[endpoint]))
-    local = Local(session, settings=LocalSettings(cache_dir=cache_dir, **settings), rlog=rlog)
+    local = Local(ZenohTransport(session), settings=LocalSettings(cache_dir=cache_dir, **settings), rlog=rlog)
     local._session = session  # type: ignore[attr-defined]  # closed with it
     return local
 

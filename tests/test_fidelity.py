@@ -10,9 +10,9 @@ from importlib import resources
 
 import pytest
 
-from twin.fidelity import Fidelity, compare
-from twin.objects import estimate_object, prepare_objects, reference_estimate
-from twin.scenefile import SceneError, load_scene, parse_scene
+from scenes.fidelity import Fidelity, compare
+from scenes.scenefile import SceneError, load_scene, parse_scene
+from scenes.sources import estimate_object, prepare_objects, reference_estimate
 
 SCENE = load_scene(str(resources.files("scenes").joinpath("data/paper_table.toml")))
 IDS = [o.id for o in SCENE.objects]

@@ -8,12 +8,13 @@ import mujoco
 import numpy as np
 import pytest
 
-from sync.hold import Hold, HoldSettings
-from twin.build import build_scene
+from scenes.build import build_scene
+from scenes.scenefile import load_scene
 from twin.contacts import contact_component
+from twin.hold import Hold, HoldSettings
 from twin.model import EE_BODY
-from twin.scenefile import load_scene
-from twin.sim import Twin, push_trajectory
+from twin.sim import Twin
+from twin.trajectory import push_trajectory
 
 SMALL = Path(__file__).parent / "data" / "small.toml"
 

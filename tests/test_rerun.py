@@ -11,11 +11,12 @@ import numpy as np
 import pytest
 import trimesh
 
+from cli.main import main
 from estimation.errors import TwinError
 from scenes.sampling import sample_surface
-from sync.session import free_port
-from twin.cli import main
-from twin.rerunlog import DISPLAY_POINTS, OFF, RerunLog, RerunTarget, parse_target
+from sync.zenoh_transport import free_port
+from twin.debuglog import DISPLAY_POINTS, OFF
+from twin.rerunlog import RerunLog, RerunTarget, parse_target
 
 from loopback import SCENE, close_local, open_local, running_remote, wait_objects
 
@@ -211,8 +212,8 @@ def test_run_on_a_built_directory_logs_the_compiled_geometry(tmp_path, capsys):
     assert main(["run", str(built), "--duration", "0.2", "--no-realtime", "--rerun", "save", str(out)]) == 0
     rec = Recording(out)
     assert rec.rows["world/table"] == 1
-    from twin.build import build_scene
-    from twin.scenefile import load_scene
+    from scenes.build import build_scene
+    from scenes.scenefile import load_scene
 
     objects = {o.id: o for o in build_scene(load_scene(scene), cache_dir=tmp_path / "coacd", progress=False).objects}
     for i, obj in objects.items():

@@ -11,11 +11,13 @@ import numpy as np
 import pytest
 import trimesh
 
-from twin.build import build_scene, write_scene
-from twin.cli import main
+from cli.main import main
+from scenes.build import build_scene, write_scene
+from scenes.scenefile import SceneError, load_scene, parse_scene
 from twin.decompose import CoacdSettings, decompose
-from twin.scenefile import SceneError, load_scene, parse_scene
-from twin.sim import Twin, push_trajectory, run_paced
+from twin.model import add_object
+from twin.sim import Twin, run_paced
+from twin.trajectory import push_trajectory
 
 SMALL = Path(__file__).parent / "data" / "small.toml"
 
@@ -89,8 +91,8 @@ def test_end_effector_push_moves_object_and_reads_force(built):
 
 
 def test_live_add_and_remove_keep_state(built):
-    from twin.objects import prepare_objects
-    from twin.scenefile import ObjectSpec
+    from scenes.scenefile import ObjectSpec
+    from scenes.sources import prepare_objects
 
     with Twin(built.spec.copy(), None) as twin:
         twin.step(300)
@@ -163,7 +165,7 @@ def test_scene_errors_name_the_problem(tmp_path, text, message):
 
 
 def test_estimation_error_names_object(tmp_path):
-    from twin.objects import estimate_object
+    from scenes.sources import estimate_object
 
     np.save(tmp_path / "tiny.npy", np.random.default_rng(0).uniform(size=(40, 3)))
     scene = parse_scene({"name": "x", "objects": [{"id": "pebble", "cloud": "tiny.npy"}]}, base=tmp_path)
@@ -180,6 +182,7 @@ def test_cli_build_and_run(small_scene, tmp_path, capsys):
     out = tmp_path / "built"
     assert main(["build", str(small_scene), "--out", str(out)]) == 0
     assert (out / "scene.xml").is_file()
+    assert main(["build", str(small_scene), "--out", str(out)]) == 0  # its own earlier output is replaced
     capsys.readouterr()
     assert main(["run", str(out), "--duration", "0.2", "--no-realtime", "--json"]) == 0
     record = json.loads(capsys.readouterr().out)
@@ -193,6 +196,27 @@ def test_cli_build_bad_scene_leaves_nothing(tmp_path, capsys):
     assert main(["build", str(bad), "--out", str(out)]) == 2
     assert "does not exist" in capsys.readouterr().err
     assert not out.exists() and not list(tmp_path.glob(".twin-build-*"))
+
+
+def test_cli_build_never_replaces_what_it_did_not_write(small_scene, tmp_path, monkeypatch, capsys):
+    mine = tmp_path / "notes"
+    mine.mkdir()
+    (mine / "keep.txt").write_text("precious")
+    assert main(["build", str(small_scene), "--out", str(mine)]) == 2
+    assert "not written by 'twin build'" in capsys.readouterr().err
+    assert (mine / "keep.txt").read_text() == "precious"
+    home = tmp_path / "project"
+    home.mkdir()
+    scene = home / "scene.toml"
+    scene.write_text(small_scene.read_text())
+    monkeypatch.chdir(home)
+    for out in (".", str(tmp_path)):  # the current folder, and a parent of it
+        assert main(["build", "scene.toml", "--out", out]) == 2
+        assert "current folder" in capsys.readouterr().err
+    monkeypatch.chdir(mine)
+    assert main(["build", str(scene), "--out", str(home)]) == 2  # the folder holding the scene
+    assert "holds" in capsys.readouterr().err
+    assert scene.read_text() == small_scene.read_text() and (mine / "keep.txt").is_file()
 
 
 def test_cli_viewer_without_display(small_scene, monkeypatch, capsys):
@@ -227,3 +251,28 @@ def test_cli_estimate_subprocess(tmp_path):
     res = subprocess.run([str(twin), "estimate", str(tmp_path / "missing.ply")], capture_output=True, text=True,
                          check=False)
     assert res.returncode == 2 and res.stderr.strip().count("\n") == 0 and "no such file" in res.stderr
+
+
+def test_a_live_edit_that_does_not_compile_is_rolled_back_and_the_twin_runs_on(built):
+    from dataclasses import replace
+
+    crate = built.objects[0]
+    flat = np.array([[0.0, 0, 0], [0.01, 0, 0], [0, 0.01, 0], [0.01, 0.01, 0]])  # a hull with no volume
+    bad = replace(crate, id="bad", hulls=((flat, np.array([[0, 1, 2], [1, 3, 2]])),),
+                  position=crate.position + np.array([0.0, 0.0, 0.3]))
+    good = replace(crate, id="good", position=crate.position + np.array([0.0, 0.0, 0.3]))
+    failures: list[Exception] = []
+    with Twin(built.spec.copy(), background=False) as twin:
+        model_before = twin.model
+        twin.step(10)
+        twin.edit_async(lambda spec: add_object(spec, bad), failed=failures.append)
+        assert twin.poll() == 0 and twin.failed_edits == 1 and len(failures) == 1
+        assert twin.model is model_before and sorted(twin.object_ids()) == ["can", "crate"]
+        twin.step(10)  # still steps
+        twin.edit_async(lambda spec: add_object(spec, good))
+        assert twin.poll() == 1
+        assert sorted(twin.object_ids()) == ["can", "crate", "good"]  # the failed edit left no trace
+        with pytest.raises(ValueError):
+            twin.add(bad)  # synchronous edits raise, and also leave the twin as it was
+        assert sorted(twin.object_ids()) == ["can", "crate", "good"]
+        twin.step(10)

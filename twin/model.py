@@ -13,7 +13,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from twin.objects import TwinObject
-from twin.scenefile import EndEffectorSpec, SceneSpec
 
 #: Physics step for the haptic loop: 1 kHz.
 TIMESTEP = 0.001
@@ -55,12 +54,30 @@ class PhysicsSettings:
 DEFAULT_PHYSICS = PhysicsSettings()
 
 
-def new_spec(scene: SceneSpec, physics: PhysicsSettings = DEFAULT_PHYSICS):  # type: ignore[no-untyped-def]
+@dataclass(frozen=True)
+class TableSpec:
+    """The support: a box of full ``size`` (m) whose top surface is ``height`` m above the floor."""
+
+    size: tuple[float, float, float] = (1.2, 0.8, 0.04)
+    height: float = 0.75
+    material: str = "wood_oak"
+
+
+@dataclass(frozen=True)
+class EndEffectorSpec:
+    """The operator's sphere: ``radius`` m, starting at ``position`` (world frame, m)."""
+
+    radius: float = 0.02
+    position: tuple[float, float, float] = (0.0, -0.5, 0.9)
+
+
+def new_spec(name: str, *, table: TableSpec | None = None, end_effector: EndEffectorSpec | None = None,  # type: ignore[no-untyped-def]
+             physics: PhysicsSettings = DEFAULT_PHYSICS):
     """An MjSpec with the floor, the table and the end effector, and no objects."""
     import mujoco
 
     spec = mujoco.MjSpec()
-    spec.modelname = scene.name
+    spec.modelname = name
     spec.option.timestep = physics.timestep
     spec.option.cone = mujoco.mjtCone.mjCONE_ELLIPTIC if physics.elliptic else mujoco.mjtCone.mjCONE_PYRAMIDAL
     spec.option.iterations = physics.iterations
@@ -73,8 +90,8 @@ def new_spec(scene: SceneSpec, physics: PhysicsSettings = DEFAULT_PHYSICS):  # t
     floor = spec.worldbody.add_geom(name="floor", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[5, 5, 0.1],
                                     rgba=[0.8, 0.8, 0.8, 1])
     floor.info = "floor"
-    if scene.table is not None:
-        t = scene.table
+    if table is not None:
+        t = table
         from estimation.materials import material
 
         top = spec.worldbody.add_geom(name="table", type=mujoco.mjtGeom.mjGEOM_BOX,
@@ -82,8 +99,8 @@ def new_spec(scene: SceneSpec, physics: PhysicsSettings = DEFAULT_PHYSICS):  # t
                                       pos=[0, 0, t.height - t.size[2] / 2], rgba=[0.55, 0.4, 0.3, 1],
                                       friction=[material(t.material).friction, 0.005, 0.0001])
         top.info = "table"
-    if scene.end_effector is not None:
-        add_end_effector(spec, scene.end_effector)
+    if end_effector is not None:
+        add_end_effector(spec, end_effector)
     return spec
 
 
@@ -170,6 +187,16 @@ def hull_colour(k: int) -> list[float]:
 
     r, g, b = colorsys.hsv_to_rgb((k * 0.618034) % 1.0, 0.7, 0.95)
     return [r, g, b, 0.5]
+
+
+def free_joint(model, object_id: str) -> int:  # type: ignore[no-untyped-def]
+    """The id of an object's free joint in ``model``, -1 if the model has no such object.
+
+    Objects are the bodies with a free joint named ``<id>/free`` (element info is not saved in XML).
+    """
+    import mujoco
+
+    return mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, f"{object_id}/free")
 
 
 def body_pose(model, data, object_id: str) -> tuple[np.ndarray, np.ndarray]:  # type: ignore[no-untyped-def]

@@ -1,25 +1,19 @@
-"""From a scene's object entry to what the twin needs: an estimate, a visual mesh and convex hulls.
+"""What the twin needs of one object: its estimate, a visual mesh and convex hulls, and where it is.
 
-Mesh, primitive and paper sources stand for the remote object: they are sampled into a cloud (seeded)
-and estimated like any scan, so the twin is always built from estimates, never from the truth.
+:class:`TwinObject` is the record every part of the twin reads; :func:`object_at_estimate` makes one from
+an estimate (decimating the reconstruction and decomposing it with CoACD).
 """
 
 from __future__ import annotations
 
 import logging
-import zlib
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-import trimesh
 
-from estimation import PhysicalEstimate, estimate, from_mesh, load_cloud
-from estimation.errors import TwinError
-from estimation.materials import resolve_density
-from estimation.units import unit_scale
-from twin.decompose import DEFAULT_SETTINGS, CoacdSettings, Hull, decompose_many
-from twin.scenefile import ObjectSpec, SceneError
+from estimation import PhysicalEstimate
+from twin.decompose import DEFAULT_SETTINGS, CoacdSettings, Hull, decompose
 
 log = logging.getLogger(__name__)
 
@@ -29,9 +23,6 @@ VISUAL_FACES = 3000
 #: fast-simplification's aggressiveness (0-10): 3 keeps the volume within 0.05 % on our test objects
 #: where its default 7 lost up to 2.5 % on thin rings.
 DECIMATION_AGGRESSION = 3.0
-
-#: Gap left between a resting object and the table when it is placed, metres.
-PLACEMENT_GAP = 0.001
 
 #: Friction for objects given by density only.
 DEFAULT_FRICTION = 0.5
@@ -62,80 +53,6 @@ class TwinObject:
     hull_cached: bool = False
 
 
-def source_mesh(spec: ObjectSpec) -> trimesh.Trimesh | None:
-    """The true mesh of a mesh/primitive/paper object, rotated as the scene says (metres); None for clouds."""
-    from scenes.paper_objects import paper_object
-
-    if spec.source == "cloud":
-        return None
-    if spec.source == "paper":
-        mesh = paper_object(str(spec.value))
-    elif spec.source == "primitive":
-        mesh = _primitive(spec.value)  # type: ignore[arg-type]
-    else:
-        try:
-            mesh = trimesh.load_mesh(spec.value, force="mesh")
-        except (OSError, ValueError) as exc:
-            raise SceneError(f"object {spec.id!r}: cannot read mesh {spec.value} ({exc})") from exc
-        mesh.apply_scale(unit_scale(spec.units))
-        if not mesh.is_watertight:
-            log.warning("object %r: mesh %s is not watertight", spec.id, spec.value)
-    if any(spec.rotation_deg):
-        from scipy.spatial.transform import Rotation
-
-        transform = np.eye(4)
-        # rotation_deg is [about Z, about local X, about local Y], the paper's order.
-        transform[:3, :3] = Rotation.from_euler("ZXY", spec.rotation_deg, degrees=True).as_matrix()
-        mesh.apply_transform(transform)
-    return mesh
-
-
-def estimate_object(spec: ObjectSpec) -> tuple[PhysicalEstimate, float]:
-    """Estimate one scene object from its cloud (sampled from its mesh when it has one).
-
-    Returns the estimate and the object's friction.
-
-    Raises:
-        SceneError: anything estimation rejects (unreadable cloud, too few points, no enclosed volume),
-            with the object's id in the message.
-    """
-    from scenes.sampling import sample_surface
-
-    try:
-        density, mat = resolve_density(spec.material, spec.density)
-        mesh = source_mesh(spec)
-        if mesh is None:
-            cloud = load_cloud(spec.value, scale=unit_scale(spec.units))  # type: ignore[arg-type]
-        else:
-            # Seeded by the id, so the same scene builds the same twin.
-            cloud = sample_surface(mesh, spec.points, seed=zlib.crc32(spec.id.encode()))
-        result = estimate(cloud, density, material=None if mat is None else mat.name)
-    except SceneError:
-        raise
-    except TwinError as exc:
-        raise SceneError(f"object {spec.id!r}: {exc}") from exc
-    return result, DEFAULT_FRICTION if mat is None else mat.friction
-
-
-def reference_estimate(spec: ObjectSpec) -> tuple[PhysicalEstimate, float]:
-    """The truth for a mesh, primitive or paper object: the exact record of its true mesh, no cloud.
-
-    A twin built from these is the reference the estimated twin is measured against.
-
-    Raises:
-        SceneError: a cloud object (its truth is unknown) or a mesh that encloses no volume.
-    """
-    mesh = source_mesh(spec)
-    if mesh is None:
-        raise SceneError(f"object {spec.id!r}: a cloud has no true mesh to build a reference from")
-    try:
-        density, mat = resolve_density(spec.material, spec.density)
-        result = from_mesh(mesh.vertices, mesh.faces, density, material=None if mat is None else mat.name)
-    except TwinError as exc:
-        raise SceneError(f"object {spec.id!r}: {exc}") from exc
-    return result, DEFAULT_FRICTION if mat is None else mat.friction
-
-
 def decimate(vertices: np.ndarray, faces: np.ndarray, target: int = VISUAL_FACES) -> Hull:
     """Quadric decimation to about ``target`` faces (no-op when already smaller).
 
@@ -160,62 +77,13 @@ def decimate(vertices: np.ndarray, faces: np.ndarray, target: int = VISUAL_FACES
     return v, f
 
 
-def prepare_objects(
-    specs: list[ObjectSpec] | tuple[ObjectSpec, ...], *, table_top: float | None, coacd: CoacdSettings = DEFAULT_SETTINGS,
-    cache_dir: Path | None = None, progress: bool = True,
-    estimates: list[tuple[PhysicalEstimate, float]] | None = None,
-) -> list[TwinObject]:
-    """Estimate, decimate and decompose every object; CoACD runs in parallel over the cache misses.
-
-    ``estimates`` (from :func:`estimate_object`, one per spec) skips the estimation step.
-    """
-    if estimates is None:
-        estimates = [estimate_object(s) for s in specs]
-    visuals = [decimate(est.vertices - est.mass.center_of_mass, est.faces) for est, _ in estimates]
-    hulls = decompose_many(visuals, coacd, cache_dir=cache_dir, progress=progress)
-    out = []
-    for s, (est, friction), visual, (parts, cached) in zip(specs, estimates, visuals, hulls, strict=True):
-        out.append(TwinObject(id=s.id, estimate=est, friction=friction, visual=visual, hulls=tuple(parts),
-                              position=placement(s, parts, table_top), quat=np.array([1.0, 0, 0, 0]),
-                              hull_cached=cached))
-    return out
-
-
 def object_at_estimate(object_id: str, est: PhysicalEstimate, friction: float, *,
                        coacd: CoacdSettings = DEFAULT_SETTINGS, cache_dir: Path | None = None) -> TwinObject:
     """A twin object where its cloud was: body at the estimated centre of mass, world axes.
 
     What the synchronised twin builds from a remote cloud (no placement: the cloud says where it is).
     """
-    from twin.decompose import decompose
-
     visual = decimate(est.vertices - est.mass.center_of_mass, est.faces)
     hulls, cached = decompose(*visual, coacd, cache_dir=cache_dir)
     return TwinObject(id=object_id, estimate=est, friction=friction, visual=visual, hulls=tuple(hulls),
                       position=est.mass.center_of_mass.copy(), quat=np.array([1.0, 0, 0, 0]), hull_cached=cached)
-
-
-def placement(spec: ObjectSpec, hulls: list[Hull], table_top: float | None) -> np.ndarray:
-    """World position of the centre of mass: [x, y] rests the object on the table (or floor).
-
-    Rests it by its collision hulls, not its visual mesh: contact is between hulls, and a hull reaching
-    below the visual mesh would start inside the table and be kicked out.
-    """
-    if len(spec.position) == 3:
-        return np.asarray(spec.position, dtype=np.float64)
-    lowest = float(min(v[:, 2].min() for v, _ in hulls))
-    base = table_top if table_top is not None else 0.0
-    return np.array([spec.position[0], spec.position[1], base - lowest + PLACEMENT_GAP])
-
-
-def _primitive(p: dict) -> trimesh.Trimesh:
-    kind, size = p["type"], p["size"]
-    if kind == "box":
-        return trimesh.creation.box(extents=size)
-    if kind == "cylinder":
-        return trimesh.creation.cylinder(radius=size[0], height=size[1], sections=64)
-    if kind == "sphere":
-        return trimesh.creation.icosphere(subdivisions=3, radius=size[0])
-    if kind == "capsule":
-        return trimesh.creation.capsule(height=size[1], radius=size[0], count=[32, 32])
-    return trimesh.creation.torus(major_radius=size[0], minor_radius=size[1], major_sections=64, minor_sections=32)

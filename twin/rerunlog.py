@@ -1,7 +1,7 @@
 """Visual debugging in rerun: the one module that imports rerun and knows its entity paths.
 
-Off by default: :data:`OFF` accepts every call and does nothing, so the rest of the code calls it
-unconditionally and needs no viewer. When on, a call only copies the arrays it needs into a queue; a
+The twin's loops take a :class:`twin.debuglog.DebugLog` and never import this module: commands pass a
+:class:`RerunLog` in when asked for rerun, :data:`twin.debuglog.OFF` otherwise. When on, a call only copies the arrays it needs into a queue; a
 child process builds rerun's archetypes and sends them, so the 1 kHz loop pays a queue put, not rerun's
 serialisation under its own GIL. Per-frame state (poses, divergence, force) is logged at ``rate_hz`` of
 simulated time (:meth:`RerunLog.due`) and sent as columns every BATCH_SECONDS; events and objects are
@@ -40,15 +40,13 @@ import numpy as np
 
 from estimation import PhysicalEstimate
 from estimation.errors import TwinError
+from twin.debuglog import display_subset
 from twin.model import COLLISION_GROUP, VISUAL_GROUP, hull_colour
 from twin.poses import rotation, to_xyzw
 
 log = logging.getLogger(__name__)
 
 APP_ID = "tactile-twin"
-
-#: Points of a cloud shown in the viewer: past this the viewer gets slow and the picture no denser.
-DISPLAY_POINTS = 20_000
 
 #: Normals drawn per object (every k-th of the points used): more is a hedgehog.
 DISPLAY_NORMALS = 400
@@ -117,14 +115,6 @@ def parse_target(words: list[str], rate_hz: float = DEFAULT_RATE_HZ) -> RerunTar
     raise TwinError(f"--rerun expects 'spawn', 'save FILE.rrd' or 'connect [HOST:PORT]', got {' '.join(words)!r}")
 
 
-def display_subset(points: np.ndarray, cap: int = DISPLAY_POINTS, *, seed: int = 0) -> np.ndarray:
-    """At most ``cap`` of ``points`` ((n, 3)), a seeded random choice, as float32 (for display only)."""
-    points = np.asarray(points)
-    if len(points) > cap:
-        points = points[np.random.default_rng(seed).choice(len(points), cap, replace=False)]
-    return points.astype(np.float32)
-
-
 def blueprint():  # type: ignore[no-untyped-def]
     """The default layout: the 3D scene on the left; divergence, force and the event log on the right."""
     import rerun.blueprint as rrb
@@ -145,7 +135,7 @@ def blueprint():  # type: ignore[no-untyped-def]
 
 
 class RerunLog:
-    """A rerun recording written by a child process. ``RerunLog()`` (or :data:`OFF`) logs nothing.
+    """A rerun recording written by a child process. ``RerunLog()`` logs nothing.
 
     The loop's process only copies what is to be shown into a queue; building rerun's archetypes and
     rerun's own encoding run in the child, so they do not hold this process's GIL while the loop waits
@@ -487,10 +477,6 @@ class _Writer:
         import rerun as rr
 
         self.stream.log("events", rr.TextLog(text, level=level))
-
-
-#: The log that logs nothing: the default everywhere.
-OFF = RerunLog()
 
 
 def _hull_rgba(k: int) -> tuple[int, int, int, int]:

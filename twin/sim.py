@@ -1,19 +1,20 @@
-"""The running twin: a MuJoCo model and its state, live edits, and the paced local loop."""
+"""The running twin: a MuJoCo model and its state, and live edits that never take it down."""
 
 from __future__ import annotations
 
 import logging
-import time
 from collections import deque
 from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor
-from dataclasses import dataclass
 
 import numpy as np
 
-from twin.model import EE_BODY, EE_TARGET, add_object, body_pose, remove_object
+from sync.clock import REAL_CLOCK, Clock
+from twin.debuglog import OFF, DebugLog
+from twin.loop import LoopStats, run_loop
+from twin.model import EE_BODY, EE_TARGET, add_object, body_pose, free_joint, remove_object
 from twin.objects import TwinObject
-from twin.rerunlog import OFF, RerunLog
+from twin.trajectory import Trajectory
 
 log = logging.getLogger(__name__)
 
@@ -21,25 +22,33 @@ log = logging.getLogger(__name__)
 class Twin:
     """The local simulation C'. The caller owns the loop: ``step()`` advances one physics step.
 
-    Use as a context manager. Live edits (:meth:`add`, :meth:`remove`, :meth:`replace`) recompile the
-    spec keeping every other body's state (MjSpec.recompile carries qpos/qvel over).
+    Use as a context manager. Live edits (:meth:`add`, :meth:`remove`, :meth:`replace`,
+    :meth:`edit_async`) change a copy of the spec and compile it; only a model that compiled is swapped
+    in, carrying every body's state over. An edit that fails (a bad hull, a name clash) is logged and
+    counted in :attr:`failed_edits`, and the twin runs on with the model and spec it had.
+
+    ``background``: compile asynchronous edits in a thread while the loop steps the old model (live
+    runs); without it they compile in the caller's thread, so a headless run is deterministic.
 
     Not thread-safe: MuJoCo releases the GIL inside ``mj_step``, so a ``set_pose`` (``mj_forward``) from a
     second thread runs on the same ``mjData`` at the same time and corrupts it (a segfault in practice).
     One thread steps and edits a twin; others hand it work (:meth:`edit_async`, or a queue drained by the
-    loop as :class:`sync.remote.Remote` and :class:`sync.local.Local` do).
+    loop as :class:`scenes.remote.Remote` and :class:`twin.runtime.Local` do).
     """
 
-    def __init__(self, spec, model=None) -> None:  # type: ignore[no-untyped-def]
+    def __init__(self, spec, model=None, *, background: bool = True) -> None:  # type: ignore[no-untyped-def]
         import mujoco
 
         self.spec = spec
         self.model = model if model is not None else spec.compile()
         self.data = mujoco.MjData(self.model)
         mujoco.mj_forward(self.model, self.data)
+        self.background = background
+        self.failed_edits = 0
         self._mocap = self._mocap_id()
         self._editor: ThreadPoolExecutor | None = None
-        self._pending: deque[tuple[Future, Callable[[], None] | None]] = deque()
+        self._head = spec  # the spec the next edit starts from: the last one that compiled, pending included
+        self._pending: deque[tuple[Future, Callable[[], None] | None, Callable[[Exception], None] | None]] = deque()
         self._ids_of, self._ids = None, []  # object_ids() of this model
 
     def __enter__(self) -> Twin:
@@ -104,7 +113,7 @@ class Twin:
     def object_ids(self) -> list[str]:
         """The objects in the running model (not in a spec edit still compiling)."""
         if self._ids_of is not self.model:
-            # Objects are the bodies with a free joint named "<id>/free" (element info is not saved in XML).
+            # Objects are the bodies with a free joint named "<id>/free" (twin.model.free_joint).
             import mujoco
 
             m = self.model
@@ -114,38 +123,57 @@ class Twin:
         return list(self._ids)
 
     def add(self, obj: TwinObject) -> None:
-        """Add an object without disturbing the others."""
-        add_object(self.spec, obj)
-        self._recompile()
+        """Add an object without disturbing the others.
+
+        Raises:
+            ValueError: MuJoCo refused the edited model (the twin is unchanged).
+        """
+        self.edit(lambda spec: add_object(spec, obj))
 
     def remove(self, object_id: str) -> None:
-        remove_object(self.spec, object_id)
-        self._recompile()
+        self.edit(lambda spec: remove_object(spec, object_id))
 
     def replace(self, obj: TwinObject) -> None:
         """Swap an object's geometry and inertia, keeping its current pose and velocity."""
         pos, quat = self.pose(obj.id)
-        remove_object(self.spec, obj.id)
-        add_object(self.spec, obj)
-        self._recompile()
+
+        def swap(spec) -> None:  # type: ignore[no-untyped-def]
+            remove_object(spec, obj.id)
+            add_object(spec, obj)
+
+        self.edit(swap)
         self.set_pose(obj.id, pos, quat)
 
-    def edit_async(self, edit: Callable[[object], None], then: Callable[[], None] | None = None) -> Future:
-        """Apply ``edit(spec)`` and compile in a background thread while the loop steps the old model.
+    def edit(self, edit: Callable[[object], None]) -> None:
+        """Apply ``edit(spec)`` and swap the compiled model in now. Do not call while edits are pending.
+
+        Raises:
+            whatever ``edit`` or the compiler raised; the twin keeps its model and spec.
+        """
+        spec, model = self._compile_edit(edit)
+        self.spec = spec
+        self._swap(model)
+
+    def edit_async(self, edit: Callable[[object], None], then: Callable[[], None] | None = None,
+                   failed: Callable[[Exception], None] | None = None) -> Future:
+        """Apply ``edit(spec)`` to a copy of the spec and compile it, off the loop when ``background``.
 
         :meth:`poll`, called from the loop, swaps the new model in between two steps, carrying over every
         body's state as it is at that moment; ``then()`` runs right after the swap (e.g. to set a pose).
-        Edits apply in submission order. Do not call the synchronous edits while one is pending.
+        If the edit or the compile fails, nothing is swapped, ``failed(exc)`` is called from :meth:`poll`,
+        and later edits start from the last spec that compiled. Edits apply in submission order.
         """
-        if self._editor is None:
-            self._editor = ThreadPoolExecutor(1, thread_name_prefix="twin-compile")
-
-        def work():  # type: ignore[no-untyped-def]
-            edit(self.spec)
-            return self.spec.compile()
-
-        future = self._editor.submit(work)
-        self._pending.append((future, then))
+        if not self.background:
+            future: Future = Future()
+            try:
+                future.set_result(self._compile_edit(edit))
+            except Exception as exc:
+                future.set_exception(exc)
+        else:
+            if self._editor is None:
+                self._editor = ThreadPoolExecutor(1, thread_name_prefix="twin-compile")
+            future = self._editor.submit(self._compile_edit, edit)
+        self._pending.append((future, then, failed))
         return future
 
     @property
@@ -153,18 +181,35 @@ class Twin:
         return len(self._pending)
 
     def poll(self) -> int:
-        """Swap in every finished background edit (in order); returns how many were applied.
+        """Swap in every finished edit (in order); returns how many were applied.
 
-        Raises: whatever the edit or the compiler raised (the spec may then hold the failed edit).
+        A failed edit is logged, counted in :attr:`failed_edits` and reported to its ``failed`` callback.
         """
         applied = 0
         while self._pending and self._pending[0][0].done():
-            future, then = self._pending.popleft()
-            self._swap(future.result())
+            future, then, failed = self._pending.popleft()
+            try:
+                spec, model = future.result()
+            except Exception as exc:
+                self.failed_edits += 1
+                log.error("a live edit of the twin failed; keeping the model it had: %s", exc)
+                if failed is not None:
+                    failed(exc)
+                continue
+            self.spec = spec
+            self._swap(model)
             if then is not None:
                 then()
             applied += 1
         return applied
+
+    def _compile_edit(self, edit: Callable[[object], None]):  # type: ignore[no-untyped-def]
+        """(spec, model) of ``edit`` applied to a copy of the newest good spec; that spec is left as it was."""
+        spec = self._head.copy()
+        edit(spec)
+        model = spec.compile()
+        self._head = spec
+        return spec, model
 
     def _swap(self, model) -> None:  # type: ignore[no-untyped-def]
         import mujoco
@@ -191,17 +236,13 @@ class Twin:
         self.data.qvel[adr + 3:adr + 6] = xmat.T @ np.asarray(angular)  # MuJoCo keeps it in body axes
 
     def _dof(self, object_id: str) -> tuple[int, np.ndarray]:
-        import mujoco
-
-        jid = mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_JOINT, f"{object_id}/free")
+        jid = free_joint(self.model, object_id)
         if jid < 0:
             raise KeyError(f"no object {object_id!r} in the model")
         return int(self.model.jnt_dofadr[jid]), self.data.xmat[self.model.jnt_bodyid[jid]].reshape(3, 3)
 
     def has(self, object_id: str) -> bool:
-        import mujoco
-
-        return mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_JOINT, f"{object_id}/free") >= 0
+        return free_joint(self.model, object_id) >= 0
 
     def set_pose(self, object_id: str, position: np.ndarray, quat: np.ndarray, *, forward: bool = True) -> None:
         """Teleport an object's free joint (world frame; quaternion w x y z).
@@ -210,7 +251,7 @@ class Twin:
         """
         import mujoco
 
-        jid = mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_JOINT, f"{object_id}/free")
+        jid = free_joint(self.model, object_id)
         if jid < 0:
             raise KeyError(f"no object {object_id!r} in the model")
         adr = self.model.jnt_qposadr[jid]
@@ -218,16 +259,6 @@ class Twin:
         self.data.qpos[adr + 3:adr + 7] = quat
         if forward:
             mujoco.mj_forward(self.model, self.data)
-
-    def _recompile(self) -> None:
-        import mujoco
-
-        mocap = self.data.mocap_pos.copy() if self._mocap is not None else None
-        self.model, self.data = self.spec.recompile(self.model, self.data)
-        self._mocap = self._mocap_id()
-        if mocap is not None and self._mocap is not None:
-            self.data.mocap_pos[:] = mocap
-        mujoco.mj_forward(self.model, self.data)
 
     def _mocap_id(self) -> int | None:
         import mujoco
@@ -255,80 +286,22 @@ def _copy_free_bodies(m_old, d_old, m_new, d_new) -> None:  # type: ignore[no-un
         d_new.qvel[vb:vb + 6] = d_old.qvel[va:va + 6]
 
 
-@dataclass(frozen=True)
-class LoopStats:
-    """Timing of a paced loop, seconds."""
-
-    steps: int
-    p50: float
-    p99: float
-    max: float
-    missed: int
-    wall: float
-
-
-class Pacer:
-    """Deadlines of a fixed-rate loop and the time each iteration's work took.
-
-    ``begin()`` before the work, ``end()`` after it; ``end`` returns the seconds left until the next
-    deadline (negative: the deadline was missed). The caller decides how to wait.
-    """
-
-    def __init__(self, rate: float) -> None:
-        self.period = 1.0 / rate
-        self.start = time.perf_counter()
-        self.iterations = 0
-        self.missed = 0
-        self.work: list[float] = []
-        self._t0 = self.start
-
-    def begin(self) -> None:
-        self._t0 = time.perf_counter()
-
-    def end(self) -> float:
-        t1 = time.perf_counter()
-        self.work.append(t1 - self._t0)
-        self.iterations += 1
-        left = self.start + self.iterations * self.period - t1
-        if left < 0:
-            self.missed += 1
-        return left
-
-    def stats(self) -> LoopStats:
-        w = np.asarray(self.work) if self.work else np.zeros(1)
-        return LoopStats(self.iterations, float(np.percentile(w, 50)), float(np.percentile(w, 99)), float(w.max()),
-                         self.missed, time.perf_counter() - self.start)
-
-
-def run_paced(twin: Twin, duration: float, rate: float, *, trajectory=None, realtime: bool = True,  # type: ignore[no-untyped-def]
-              rlog: RerunLog = OFF) -> LoopStats:
-    """Step ``twin`` at ``rate`` Hz for ``duration`` simulated seconds.
+def run_paced(twin: Twin, duration: float, rate: float, *, trajectory: Trajectory | None = None,
+              clock: Clock = REAL_CLOCK, realtime: bool = True, rlog: DebugLog = OFF) -> LoopStats:
+    """Step ``twin`` at ``rate`` Hz for ``duration`` simulated seconds (:func:`twin.loop.run_loop`).
 
     Each iteration moves the end effector along ``trajectory(t) -> (3,)`` (if given), steps the physics
-    enough to cover 1/rate of simulated time, and, when ``realtime``, sleeps to the next deadline. A step
+    enough to cover 1/rate of simulated time, and, when ``realtime``, waits for the next deadline. A step
     that ends after its deadline counts as missed. Poses and force go to ``rlog`` at its own rate.
     """
     substeps = max(1, round(1.0 / rate / twin.model.opt.timestep))
-    pacer = Pacer(rate)
-    for _ in range(round(duration * rate)):
-        pacer.begin()
+
+    def body() -> None:
         if trajectory is not None:
             twin.set_end_effector(trajectory(twin.time))
         twin.step(substeps)
         if rlog.due(twin.time):
             rlog.frame(twin)
-        left = pacer.end()
-        if realtime and left > 0:
-            time.sleep(left)
-    return pacer.stats()
 
-
-def push_trajectory(start: np.ndarray, end: np.ndarray, duration: float):  # type: ignore[no-untyped-def]
-    """A straight push from ``start`` to ``end`` over ``duration`` seconds, then hold."""
-    start, end = np.asarray(start, float), np.asarray(end, float)
-
-    def at(t: float) -> np.ndarray:
-        s = min(1.0, max(0.0, t / duration))
-        return start + s * (end - start)
-
-    return at
+    return run_loop(body, rate=rate, duration=duration, clock=clock,
+                    wait=None if realtime else (lambda _left: None))

@@ -31,6 +31,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from estimation.errors import TwinError
+from twin.model import DEFAULT_PHYSICS, EndEffectorSpec, PhysicsSettings, TableSpec, new_spec
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -63,25 +64,16 @@ class ObjectSpec:
 
 
 @dataclass(frozen=True)
-class TableSpec:
-    size: tuple[float, float, float] = (1.2, 0.8, 0.04)
-    height: float = 0.75
-    material: str = "wood_oak"
-
-
-@dataclass(frozen=True)
-class EndEffectorSpec:
-    radius: float = 0.02
-    position: tuple[float, float, float] = (0.0, -0.5, 0.9)
-
-
-@dataclass(frozen=True)
 class SceneSpec:
     name: str
     objects: tuple[ObjectSpec, ...]
     table: TableSpec | None = None
     end_effector: EndEffectorSpec | None = field(default_factory=EndEffectorSpec)
     path: Path | None = None
+
+    def empty_spec(self, physics: PhysicsSettings = DEFAULT_PHYSICS):  # type: ignore[no-untyped-def]
+        """An MjSpec of this scene's floor, table and end effector, with no objects yet."""
+        return new_spec(self.name, table=self.table, end_effector=self.end_effector, physics=physics)
 
 
 _TOP_KEYS = {"name", "table", "end_effector", "objects"}

@@ -1,10 +1,18 @@
-"""The local side C': the twin the operator touches, kept in step with the remote scene.
+"""The twin's runtime: C', the simulation the operator touches, kept in step with the remote over the wire.
 
-Nothing here blocks the loop: Zenoh's threads only queue decoded messages; estimation and CoACD run in a
-worker process; the new model compiles in a background thread (:meth:`twin.sim.Twin.edit_async`) and is
-swapped in between two steps. Pose corrections blend in over ``correction_tau`` unless they are large,
-in which case the object is moved at once. Between corrections, an object the remote reports at rest and
-the operator leaves alone is held at the remote's pose (:mod:`sync.hold`).
+It talks to the wire through a :class:`sync.link.Link` over any :class:`sync.transport.Transport`, and
+reads time only from its :class:`sync.clock.Clock`. Live (``workers >= 1``), nothing blocks the loop: the
+transport's threads only queue decoded messages; estimation and CoACD run in worker processes; the new
+model compiles in a background thread (:meth:`twin.sim.Twin.edit_async`) and is swapped in between two
+steps. Headless (``workers = 0``), the same work runs in the loop's thread, so a run on a simulated clock
+is deterministic. Pose corrections blend in over ``correction_tau`` unless they are large, in which case
+the object is moved at once. Between corrections, an object the remote reports at rest and the operator
+leaves alone is held at the remote's pose (:mod:`twin.hold`).
+
+Ordering: each ordered message carries the remote's ``(epoch, seq)``. Newer beats older per object; a
+restarted remote (larger epoch) is followed at once. A heartbeat states the remote's counter now, so
+a mark past it (a forged or corrupted sequence number) is pulled back to it at the next heartbeat: it
+cannot silence the real remote for longer than a heartbeat period.
 """
 
 from __future__ import annotations
@@ -12,37 +20,40 @@ from __future__ import annotations
 import logging
 import multiprocessing as mp
 import queue
-import time
 from concurrent.futures import Future, ProcessPoolExecutor
-from dataclasses import dataclass, field
+from concurrent.futures.process import BrokenProcessPool
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
 from estimation import estimate, make_cloud
 from estimation.materials import resolve_density
-from sync.hold import DEFAULT_HOLD, Hold, HoldSettings
+from sync.clock import REAL_CLOCK, Clock
 from sync.keys import Keys, any_scene_info
 from sync.link import Link
 from sync.messages import (
     VERSION,
     Cloud,
     Gone,
+    Heartbeat,
     OperatorCommand,
     Pose,
     SceneInfo,
     decode,
     encode,
-    now_ns,
     unpack_points,
 )
+from sync.transport import Transport
+from twin.debuglog import OFF, DebugLog, display_subset
 from twin.decompose import DEFAULT_SETTINGS, CoacdSettings
-from twin.model import add_object, new_spec, remove_object
+from twin.hold import DEFAULT_HOLD, Hold, HoldSettings
+from twin.loop import LoopStats, run_loop
+from twin.model import EndEffectorSpec, TableSpec, add_object, new_spec, remove_object
 from twin.objects import DEFAULT_FRICTION, TwinObject, object_at_estimate
 from twin.poses import angle_deg, nlerp, quat_conj, quat_mul, rotation
-from twin.rerunlog import OFF, RerunLog, display_subset
-from twin.scenefile import EndEffectorSpec, SceneSpec, TableSpec
-from twin.sim import LoopStats, Pacer, Twin
+from twin.sim import Twin
+from twin.trajectory import Trajectory
 
 log = logging.getLogger(__name__)
 
@@ -60,8 +71,9 @@ class LocalSettings:
         correction_tau: time constant of the blend towards a corrected pose, seconds.
         snap_distance, snap_angle_deg: a correction larger than this moves the object at once.
         operator_deadband: the operator's command is published when it moved more than this, metres.
-        workers: processes estimating clouds.
-        hold: when an undisturbed object is pinned to the remote's pose (:mod:`sync.hold`).
+        workers: processes estimating clouds; 0 estimates and compiles in the loop's own thread
+            (headless runs: slower per object, but deterministic).
+        hold: when an undisturbed object is pinned to the remote's pose (:mod:`twin.hold`).
     """
 
     stale_after: float = 1.0
@@ -73,6 +85,9 @@ class LocalSettings:
     hold: HoldSettings = DEFAULT_HOLD
     coacd: CoacdSettings = DEFAULT_SETTINGS
     cache_dir: Path | None = None
+
+
+DEFAULT_LOCAL = LocalSettings()
 
 
 @dataclass
@@ -89,6 +104,8 @@ class LocalReport:
     stale_events: int = 0
     recoveries: int = 0
     estimation_errors: int = 0
+    failed_edits: int = 0  # objects whose model did not compile: the twin went on without them
+    out_of_order: int = 0  # messages older than what the twin already had from the remote
     holds: int = 0  # times an object strayed from the remote's pose on its own and was pinned to it
     snaps: int = 0  # corrections too large to blend in: the object was moved at once
     # id -> |twin - remote| position, metres, every DIVERGENCE_EVERY seconds of twin time while both are known
@@ -108,7 +125,7 @@ def build_from_cloud(data: bytes, coacd: CoacdSettings, cache_dir: Path | None,
     """
     msg = decode(data)
     assert isinstance(msg, Cloud)
-    density, mat = resolve_density(msg.material, msg.density)
+    density, mat = resolve_density(msg.material, msg.density)  # an unknown material raises: no guess
     points = unpack_points(msg)
     est = estimate(make_cloud(points), density, material=None if mat is None else mat.name)
     friction = DEFAULT_FRICTION if mat is None else mat.friction
@@ -117,17 +134,18 @@ def build_from_cloud(data: bytes, coacd: CoacdSettings, cache_dir: Path | None,
 
 
 class Local:
-    """The twin C' on a Zenoh session. Call :meth:`run` (or :meth:`iterate` from your own loop)."""
+    """The twin C' on a transport. Call :meth:`run` (or :meth:`iterate` from your own loop)."""
 
-    def __init__(self, session, *, scene: str | None = None,  # type: ignore[no-untyped-def]
-                 settings: LocalSettings = LocalSettings(), wait: float = 10.0, rlog: RerunLog = OFF) -> None:
+    def __init__(self, transport: Transport, *, clock: Clock = REAL_CLOCK, scene: str | None = None,
+                 settings: LocalSettings = DEFAULT_LOCAL, wait: float = 10.0, rlog: DebugLog = OFF) -> None:
         self.settings = settings
         self.rlog = rlog
-        self.link = Link(session)
+        self.clock = clock
+        self.link = Link(transport, clock)
         self.report = LocalReport()
         info = self._find_scene(scene, wait)
         self.keys = Keys(info.name)
-        self.twin = Twin(new_spec(_scene_spec(info)))
+        self.twin = Twin(_empty_spec(info), background=settings.workers > 0)
         self._floor = info.table_height if info.table_size is not None else 0.0
         if info.table_size is not None:
             rlog.table(info.table_size, info.table_height)
@@ -135,50 +153,55 @@ class Local:
         self.inbox: queue.SimpleQueue = queue.SimpleQueue()
         self.stale = False
         self._jobs: dict[str, tuple[Future, Cloud, float]] = {}
-        self._clouds: dict[str, int] = {}  # id -> seq of the cloud in (or going into) the twin
+        self._clouds: dict[str, tuple[int, int]] = {}  # id -> (epoch, seq) of the cloud in (or going into) the twin
         self._offsets: dict[str, tuple[np.ndarray, np.ndarray]] = {}
         self._latest: dict[str, Pose] = {}
+        self._pose_mark: dict[str, tuple[int, int]] = {}  # id -> (epoch, seq) of the newest pose taken
         self._targets: dict[str, Pose] = {}
         self.hold = Hold(settings.hold, tau=settings.correction_tau)
         self._next_sample = 0.0
         self._sent_operator: np.ndarray | None = None
         self._seq = 0
-        self._pool = ProcessPoolExecutor(settings.workers, mp_context=mp.get_context("spawn"))
+        self._epoch = clock.stamp_ns()  # of the operator commands this twin sends
+        self._pool = self._new_pool()
         self.link.subscribe(self.keys.objects, self._enqueue)
         self.link.subscribe(self.keys.heartbeat, self._enqueue)
         # A late joiner asks for the current scene: every cloud and pose the remote last published.
         self.link.query(self.keys.state, self._enqueue, timeout=wait)
-        self._start = time.monotonic()
+        self._start = clock.now()
         self._drain()  # start estimating what the query brought before the loop runs
 
     # -- loop ----------------------------------------------------------------------------------------
 
-    def run(self, duration: float, *, rate: float = 1000.0, trajectory=None,  # type: ignore[no-untyped-def]
+    def run(self, duration: float, *, rate: float = 1000.0, trajectory: Trajectory | None = None,
             until=None) -> LoopStats:  # type: ignore[no-untyped-def]
-        """Run the twin in real time for ``duration`` seconds, or until ``until()`` is true.
+        """Run the twin for ``duration`` seconds of its clock, or until ``until()`` is true.
 
         ``trajectory(t) -> (3,)`` is the operator's end-effector target at twin time t (None: hold).
-        Between steps the loop waits on incoming messages, so a pose correction is applied when it
-        arrives, not at the next step.
+        On a real clock the loop waits on incoming messages between steps, so a pose correction is
+        applied when it arrives, not at the next step.
         """
-        pacer = Pacer(rate)
-        n = round(duration * rate)
-        while pacer.iterations < n and not (until is not None and until()):
-            pacer.begin()
-            busy = bool(self._jobs) or self.twin.edits_pending > 0
+
+        def body() -> None:
+            busy = self.adding
+            t0 = self.clock.now()
             self.iterate(trajectory)
-            left = pacer.end()
             if busy:
-                self.report.worst_step_while_adding = max(self.report.worst_step_while_adding, pacer.work[-1])
-            deadline = time.perf_counter() + left
-            while left > 0:
-                try:
-                    item = self.inbox.get(timeout=left)
-                except queue.Empty:
-                    break
-                self._handle(*item)
-                left = deadline - time.perf_counter()
-        return pacer.stats()
+                self.report.worst_step_while_adding = max(self.report.worst_step_while_adding, self.clock.now() - t0)
+
+        return run_loop(body, rate=rate, duration=duration, clock=self.clock, until=until,
+                        wait=self._wait if self.clock.realtime else None)
+
+    def _wait(self, left: float) -> None:
+        """Handle messages as they arrive until ``left`` seconds from now (a real clock's wait)."""
+        deadline = self.clock.now() + left
+        while left > 0:
+            try:
+                item = self.inbox.get(timeout=left)
+            except queue.Empty:
+                return
+            self._handle(*item)
+            left = deadline - self.clock.now()
 
     def iterate(self, trajectory=None) -> None:  # type: ignore[no-untyped-def]
         """One loop iteration: handle messages, take finished objects, correct poses, step once."""
@@ -212,7 +235,8 @@ class Local:
             self._handle(*item)
 
     def close(self) -> None:
-        self._pool.shutdown(wait=True, cancel_futures=True)
+        if self._pool is not None:
+            self._pool.shutdown(wait=True, cancel_futures=True)
         self.link.close()
         self.twin.close()
 
@@ -240,35 +264,58 @@ class Local:
     # -- messages ------------------------------------------------------------------------------------
 
     def _enqueue(self, key: str, msg) -> None:  # type: ignore[no-untyped-def]
-        self.inbox.put((time.monotonic(), key, msg))  # Zenoh thread: queue only, never touch the twin
+        self.inbox.put((self.clock.now(), key, msg))  # transport thread: queue only, never touch the twin
+
+    def _newer(self, marks: dict[str, tuple[int, int]], msg) -> bool:  # type: ignore[no-untyped-def]
+        """Take ``msg`` if it is newer than the mark for its object (and move the mark), else count it."""
+        mark = marks.get(msg.object_id)
+        if mark is not None and (msg.epoch, msg.seq) <= mark:
+            self.report.out_of_order += 1  # e.g. the late-join reply raced a newer live message
+            return False
+        marks[msg.object_id] = (msg.epoch, msg.seq)
+        return True
+
+    def _on_heartbeat(self, msg: Heartbeat) -> None:
+        """Pull back every mark past the remote's own counter: no honest message is newer than it."""
+        now = (msg.epoch, msg.seq)
+        for marks in (self._pose_mark, self._clouds):
+            for object_id, mark in marks.items():
+                if mark > now:
+                    log.warning("object %r: a message claimed sequence %s beyond the remote's %s; ignoring the claim",
+                                object_id, mark, now)
+                    marks[object_id] = now
 
     def _handle(self, received: float, key: str, msg) -> None:  # type: ignore[no-untyped-def]
-        if isinstance(msg, Pose):
-            last = self._latest.get(msg.object_id)
-            if last is not None and last.seq >= msg.seq:
-                return  # the late-join reply raced a newer live pose
+        if isinstance(msg, Heartbeat):
+            self._on_heartbeat(msg)
+        elif isinstance(msg, Pose):
+            if not self._newer(self._pose_mark, msg):
+                return
             self._latest[msg.object_id] = msg
             if msg.object_id in self._offsets and self.twin.has(msg.object_id):
                 self._targets[msg.object_id] = msg
                 self._hold_at(msg.object_id)
                 self._correct(msg.object_id)
                 self.report.pose_updates += 1
-                self.report.pose_latency.append((now_ns() - msg.stamp_ns) * 1e-9)
+                self.report.pose_latency.append((self.clock.stamp_ns() - msg.stamp_ns) * 1e-9)
                 if self.rlog.enabled:  # every pose passes here: no string building with rerun off
                     self.rlog.event(self.twin.time, f"{msg.object_id}: pose correction (seq {msg.seq})", "DEBUG")
         elif isinstance(msg, Cloud):
-            if self._clouds.get(msg.object_id, -1) >= msg.seq:
+            if not self._newer(self._clouds, msg):
                 return
-            self._clouds[msg.object_id] = msg.seq
-            future = self._pool.submit(build_from_cloud, encode(msg), self.settings.coacd, self.settings.cache_dir,
-                                       self.rlog.enabled)
-            self._jobs[msg.object_id] = (future, msg, received)
+            self._jobs[msg.object_id] = (self._submit(msg), msg, received)
             self.rlog.event(self.twin.time, f"{msg.object_id}: cloud received (seq {msg.seq}); estimating")
         elif isinstance(msg, Gone):
+            mark = self._clouds.get(msg.object_id)
+            if mark is not None and (msg.epoch, msg.seq) < mark:
+                self.report.out_of_order += 1  # older than the cloud the twin has: not about this object
+                return
             self._jobs.pop(msg.object_id, None)
             self._clouds.pop(msg.object_id, None)
             self._offsets.pop(msg.object_id, None)
             self._targets.pop(msg.object_id, None)
+            self._latest.pop(msg.object_id, None)
+            self._pose_mark.pop(msg.object_id, None)
             self.hold.forget(msg.object_id)
             if self.twin.has(msg.object_id):
                 self.twin.edit_async(lambda spec, i=msg.object_id: remove_object(spec, i))
@@ -283,6 +330,13 @@ class Local:
             del self._jobs[object_id]
             try:
                 obj, display = future.result()
+            except BrokenProcessPool as exc:  # a worker died (killed, out of memory): replace the pool
+                self.report.estimation_errors += 1
+                log.error("object %r: the estimation worker died (%s); starting a new one", object_id, exc)
+                self.rlog.event(self.twin.time, f"{object_id}: the estimation worker died", "ERROR")
+                self._pool = self._new_pool()
+                self._clouds.pop(object_id, None)  # the next cloud for it is taken again
+                continue
             except Exception as exc:  # a cloud the estimator rejects: the twin goes on without it
                 self.report.estimation_errors += 1
                 log.warning("object %r: could not estimate its cloud: %s", object_id, exc)
@@ -303,8 +357,9 @@ class Local:
                     self._targets[obj.id] = latest
                 self._hold_at(obj.id)
                 self.report.objects_synced += 1
-                self.report.add_latency.append(time.monotonic() - received)
-                self.report.touchable_after[obj.id] = ((now_ns() - msg.stamp_ns) * 1e-9, self.report.add_latency[-1])
+                self.report.add_latency.append(self.clock.now() - received)
+                self.report.touchable_after[obj.id] = ((self.clock.stamp_ns() - msg.stamp_ns) * 1e-9,
+                                                       self.report.add_latency[-1])
                 if self.rlog.enabled:
                     t, m = self.twin.time, obj.estimate.mass
                     self.rlog.object("twin", obj, sim_time=t, cloud=display, pose=self.twin.pose(obj.id))
@@ -312,7 +367,29 @@ class Local:
                     self.rlog.event(t, f"{obj.id}: added to the twin ({m.mass:.3g} kg, {len(obj.hulls)} hulls) "
                                        f"{self.report.add_latency[-1]:.2f} s after its cloud arrived")
 
-            self.twin.edit_async(edit, then=done)
+            def failed(exc: Exception, object_id=object_id) -> None:  # type: ignore[no-untyped-def]
+                self.report.failed_edits += 1
+                self._clouds.pop(object_id, None)  # a later cloud of it is tried again
+                self.rlog.event(self.twin.time, f"{object_id}: its model did not compile ({exc}); left out", "ERROR")
+
+            self.twin.edit_async(edit, then=done, failed=failed)
+
+    def _new_pool(self) -> ProcessPoolExecutor | None:
+        if self.settings.workers == 0:
+            return None
+        return ProcessPoolExecutor(self.settings.workers, mp_context=mp.get_context("spawn"))
+
+    def _submit(self, msg: Cloud) -> Future:
+        """Estimate a cloud: in a worker process, or here and now when there are no workers."""
+        args = (encode(msg), self.settings.coacd, self.settings.cache_dir, self.rlog.enabled)
+        if self._pool is not None:
+            return self._pool.submit(build_from_cloud, *args)
+        future: Future = Future()
+        try:
+            future.set_result(build_from_cloud(*args))
+        except Exception as exc:
+            future.set_exception(exc)
+        return future
 
     def _clear_of_support(self, obj: TwinObject) -> TwinObject:
         """Lift an object whose hulls reach into the table (or floor) out of it.
@@ -323,8 +400,6 @@ class Local:
         """
         lowest = obj.position[2] + min(float(v[:, 2].min()) for v, _ in obj.hulls)
         if obj.position[2] > self._floor > lowest - 0.01:
-            from dataclasses import replace
-
             lift = self._floor - lowest + 0.0005
             if lift > 0:
                 return replace(obj, position=obj.position + np.array([0.0, 0.0, lift]))
@@ -373,12 +448,12 @@ class Local:
             return
         self._sent_operator = target.copy()
         self._seq += 1
-        self.link.put(self.keys.operator, OperatorCommand(v=VERSION, stamp_ns=now_ns(), seq=self._seq,
-                                                          position=tuple(float(x) for x in target)))
+        self.link.put(self.keys.operator, OperatorCommand(v=VERSION, stamp_ns=self.clock.stamp_ns(), epoch=self._epoch,
+                                                          seq=self._seq, position=tuple(float(x) for x in target)))
 
     def _check_link(self) -> None:
-        last = self.link.counters.last_received or self._start
-        silent = time.monotonic() - last
+        last = self.link.counters.last_received
+        silent = self.clock.now() - (self._start if last is None else last)
         if not self.stale and silent > self.settings.stale_after:
             self.stale = True
             self.report.stale_events += 1
@@ -398,12 +473,12 @@ class Local:
     def _find_scene(self, scene: str | None, wait: float) -> SceneInfo:
         selector = Keys(scene).info if scene else any_scene_info()
         found: list[SceneInfo] = []
-        deadline = time.monotonic() + wait
-        while not found and time.monotonic() < deadline:
+        deadline = self.clock.now() + wait
+        while not found and self.clock.now() < deadline:
             self.link.query(selector, lambda _k, m: found.append(m) if isinstance(m, SceneInfo) else None,
                             timeout=min(1.0, wait))
             if not found:
-                time.sleep(0.1)
+                self.clock.sleep(0.1)
         if not found:
             raise SyncError(f"no remote scene answered on {selector} within {wait:g} s")
         names = sorted({f.name for f in found})
@@ -412,11 +487,12 @@ class Local:
         return found[0]
 
 
-def _scene_spec(info: SceneInfo) -> SceneSpec:
+def _empty_spec(info: SceneInfo):  # type: ignore[no-untyped-def]
+    """The twin's model before any object arrives: the table and end effector the remote described."""
     table = None if info.table_size is None else TableSpec(size=info.table_size, height=info.table_height,
                                                           material=info.table_material)
     ee = None if info.ee_radius <= 0 else EndEffectorSpec(radius=info.ee_radius, position=info.ee_position)
-    return SceneSpec(name=info.name, objects=(), table=table, end_effector=ee)
+    return new_spec(info.name, table=table, end_effector=ee)
 
 
 def _on_twin_body(pose: Pose, offset: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
@@ -426,7 +502,7 @@ def _on_twin_body(pose: Pose, offset: tuple[np.ndarray, np.ndarray]) -> tuple[np
 
 
 def _offset(obj: TwinObject, msg: Cloud) -> tuple[np.ndarray, np.ndarray]:
-    """The twin body's pose in the remote body's frame, at the moment the cloud was taken."""
-    q_r = np.asarray(msg.body_quat)
-    p = rotation(q_r).T @ (obj.position - np.asarray(msg.body_position))
+    """The twin body's pose in the sensed object frame, at the moment the cloud was taken."""
+    q_r = np.asarray(msg.frame_quat)
+    p = rotation(q_r).T @ (obj.position - np.asarray(msg.frame_position))
     return p, quat_mul(quat_conj(q_r), obj.quat)

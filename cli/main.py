@@ -218,12 +218,15 @@ def _coacd_settings(args: argparse.Namespace):  # type: ignore[no-untyped-def]
 
 
 def _cmd_build(args: argparse.Namespace) -> int:
-    from twin.build import build_scene, write_scene
-    from twin.scenefile import load_scene
+    from scenes.build import build_scene, check_output, write_scene
+    from scenes.scenefile import load_scene
 
+    scene = load_scene(args.scene)
+    keep = (args.scene, *(Path(str(o.value)) for o in scene.objects if o.source in ("mesh", "cloud")))
+    check_output(args.out, keep=keep)  # before the work: a refused folder should not cost a build
     with _open_rerun(args) as rlog:  # before the work: a bad --rerun should not cost a build
-        built = build_scene(load_scene(args.scene), coacd=_coacd_settings(args), cache_dir=args.cache_dir)
-        path = write_scene(built.spec, args.out)
+        built = build_scene(scene, coacd=_coacd_settings(args), cache_dir=args.cache_dir)
+        path = write_scene(built.spec, args.out, keep=keep)
         _log_built(rlog, built)
     _print_objects(built)
     print(f"wrote {path} ({built.seconds:.1f} s)")
@@ -259,8 +262,8 @@ def _load_twin(args: argparse.Namespace):  # type: ignore[no-untyped-def]
         except ValueError as exc:
             raise TwinError(f"{xml}: MuJoCo cannot load it ({exc})") from exc
         return Twin(spec), None
-    from twin.build import build_scene
-    from twin.scenefile import load_scene
+    from scenes.build import build_scene
+    from scenes.scenefile import load_scene
 
     built = build_scene(load_scene(path), coacd=_coacd_settings(args), cache_dir=args.cache_dir)
     return Twin(built.spec, built.model), built
@@ -269,7 +272,7 @@ def _load_twin(args: argparse.Namespace):  # type: ignore[no-untyped-def]
 def _trajectory(args: argparse.Namespace, twin):  # type: ignore[no-untyped-def]
     import numpy as np
 
-    from twin.sim import push_trajectory
+    from twin.trajectory import push_trajectory
 
     if args.script is None:
         start = twin.data.mocap_pos[0].copy() if twin.model.nmocap else np.zeros(3)
@@ -379,7 +382,7 @@ def _network_options(p: argparse.ArgumentParser, *, listen_default: str | None =
 
 
 def _session(args: argparse.Namespace):  # type: ignore[no-untyped-def]
-    from sync.session import make_config, open_session
+    from sync.zenoh_transport import make_config, open_session
 
     listen = args.listen or ([args.listen_default] if args.listen_default and not args.zenoh_config else None)
     connect = args.connect or ([args.connect_default] if args.connect_default and not args.zenoh_config else None)
@@ -387,7 +390,7 @@ def _session(args: argparse.Namespace):  # type: ignore[no-untyped-def]
 
 
 def _cmd_remote(args: argparse.Namespace) -> int:
-    from twin.scenefile import load_scene
+    from scenes.scenefile import load_scene
 
     scene = load_scene(args.scene)
     if args.deadband_mm < 0 or args.deadband_deg < 0:
@@ -398,11 +401,12 @@ def _cmd_remote(args: argparse.Namespace) -> int:
 
 
 def _run_remote(args: argparse.Namespace, scene, rlog) -> None:  # type: ignore[no-untyped-def]
-    from sync.remote import Deadband, Remote
+    from scenes.remote import Deadband, Remote
+    from sync.zenoh_transport import ZenohTransport
 
     session = _session(args)
     try:
-        remote = Remote(scene, session, deadband=Deadband(args.deadband_mm * 1e-3, args.deadband_deg),
+        remote = Remote(scene, ZenohTransport(session), deadband=Deadband(args.deadband_mm * 1e-3, args.deadband_deg),
                         points=args.points, progress=True, rlog=rlog)
         print(f"remote scene {scene.name!r}: {len(scene.objects)} objects published; running (Ctrl-C stops)")
         stats = remote.run(args.duration)
@@ -421,13 +425,14 @@ def _cmd_local(args: argparse.Namespace) -> int:
 
 
 def _run_local(args: argparse.Namespace, rlog) -> None:  # type: ignore[no-untyped-def]
-    from sync.hold import HoldSettings
-    from sync.local import Local, LocalSettings, SyncError
+    from sync.zenoh_transport import ZenohTransport
+    from twin.hold import HoldSettings
+    from twin.runtime import Local, LocalSettings, SyncError
 
     session = _session(args)
     try:
         try:
-            local = Local(session, scene=args.scene, settings=LocalSettings(stale_after=args.stale_after,
+            local = Local(ZenohTransport(session), scene=args.scene, settings=LocalSettings(stale_after=args.stale_after,
                                                                                hold=HoldSettings(enabled=args.hold)),
                           rlog=rlog)
         except (SyncError, ValueError) as exc:
@@ -445,12 +450,12 @@ def _run_local(args: argparse.Namespace, rlog) -> None:  # type: ignore[no-untyp
 
 
 def _cmd_demo(args: argparse.Namespace) -> int:
-    from twin.demo import run_demo
+    from cli.demo import run_demo
 
     if args.duration <= 0:
         raise TwinError("--duration must be > 0")
     if args.scene is not None:
-        from twin.scenefile import load_scene
+        from scenes.scenefile import load_scene
 
         load_scene(args.scene)  # a bad scene fails here with its own message, not in the remote process
     with _open_rerun(args) as rlog:

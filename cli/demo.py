@@ -17,7 +17,8 @@ from pathlib import Path
 import numpy as np
 from rich.console import Console
 
-from twin.rerunlog import OFF, RerunLog
+from twin.debuglog import OFF
+from twin.rerunlog import RerunLog
 
 #: What streaming raw clouds would cost: float32 x y z per point, at a depth camera's frame rate.
 RAW_BYTES_PER_POINT, RAW_STREAM_HZ = 12, 30.0
@@ -28,13 +29,13 @@ def default_scene() -> Path:
 
 
 def _remote_main(scene_path: str, endpoint: str, zenoh_config: str | None, ready, stop, results) -> None:  # type: ignore[no-untyped-def]
-    from sync.remote import Remote
-    from sync.session import make_config, open_session
-    from twin.scenefile import load_scene
+    from scenes.remote import Remote
+    from scenes.scenefile import load_scene
+    from sync.zenoh_transport import ZenohTransport, make_config, open_session
 
     session = open_session(make_config(listen=[endpoint], config_file=zenoh_config))
     try:
-        remote = Remote(load_scene(scene_path), session)
+        remote = Remote(load_scene(scene_path), ZenohTransport(session))
         ready.set()
         stats = remote.run(24 * 3600.0, stop=stop)
         c = remote.link.counters
@@ -50,15 +51,15 @@ def run_demo(*, duration: float = 5.0, scene_path: Path | None = None, zenoh_con
              progress: bool = True, rlog: RerunLog = OFF, hold: bool = True) -> dict:
     """Run both sides and return the summary (the ``--json`` record).
 
-    ``hold``: pin objects the remote reports at rest while the operator leaves them alone (:mod:`sync.hold`).
+    ``hold``: pin objects the remote reports at rest while the operator leaves them alone (:mod:`twin.hold`).
 
     ``rlog``: where the twin's side logs (its objects, its poses beside the remote poses it received,
     divergence, force, sync events). The remote process logs nothing.
     """
-    from sync.hold import HoldSettings
-    from sync.local import Local, LocalSettings
-    from sync.session import SessionError, free_port, make_config, open_session
-    from twin.sim import push_trajectory
+    from sync.zenoh_transport import SessionError, ZenohTransport, free_port, make_config, open_session
+    from twin.hold import HoldSettings
+    from twin.runtime import Local, LocalSettings
+    from twin.trajectory import push_trajectory
 
     console = Console(quiet=not progress, stderr=True)
     scene_path = scene_path or default_scene()
@@ -81,7 +82,7 @@ def run_demo(*, duration: float = 5.0, scene_path: Path | None = None, zenoh_con
     local = None
     try:
         t_join = time.perf_counter()
-        local = Local(session, settings=LocalSettings(workers=2, hold=HoldSettings(enabled=hold)), rlog=rlog)
+        local = Local(ZenohTransport(session), settings=LocalSettings(workers=2, hold=HoldSettings(enabled=hold)), rlog=rlog)
         expected = local.expected
         console.print(f"twin joined late and got {expected} clouds; estimating them while the loop runs at 1 kHz")
         local.run(600.0, until=lambda: len(local.objects) >= expected and not local.adding)

@@ -1,6 +1,6 @@
 """How faithful a twin object is to a reference: mass properties, and where it comes to rest when dropped.
 
-The reference is the same object built from its true mesh (:func:`twin.objects.reference_estimate`);
+The reference is the same object built from its true mesh (:func:`scenes.sources.reference_estimate`);
 both go through the same decimation, CoACD and MjSpec path, so what differs is the estimate alone.
 """
 
@@ -10,10 +10,10 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from twin.model import add_object, new_spec
+from scenes.scenefile import SceneSpec
+from twin.model import add_object
 from twin.objects import TwinObject
 from twin.poses import angle_deg
-from twin.scenefile import SceneSpec
 from twin.sim import Twin
 
 #: Drop height above the resting placement, metres, and how long to let it settle, seconds.
@@ -44,7 +44,7 @@ class Fidelity:
 def rest_pose(scene: SceneSpec, obj: TwinObject, *, height: float = DROP_HEIGHT,
               seconds: float = SETTLE_SECONDS) -> tuple[np.ndarray, np.ndarray]:
     """(position, quat w x y z) of ``obj`` after dropping it alone onto ``scene``'s table from ``height``."""
-    spec = new_spec(scene)
+    spec = scene.empty_spec()
     add_object(spec, replace(obj, position=obj.position + np.array([0.0, 0.0, height])))
     with Twin(spec) as twin:
         twin.step(round(seconds / twin.model.opt.timestep))

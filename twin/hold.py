@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from twin.contacts import contact_component, geom_roots
-from twin.model import EE_BODY
+from twin.model import EE_BODY, free_joint
 from twin.poses import nlerp
 
 
@@ -71,7 +71,7 @@ class _Arrays:
         import mujoco
 
         self.model = model
-        found = {i: mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, f"{i}/free") for i in targets}
+        found = {i: free_joint(model, i) for i in targets}
         self.ids = [i for i, j in found.items() if j >= 0]
         joints = [found[i] for i in self.ids]
         self.body = np.array([model.jnt_bodyid[j] for j in joints], dtype=int)

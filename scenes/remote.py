@@ -1,8 +1,10 @@
-"""The remote side C: the ground-truth simulation, its sensor, and what it publishes.
+"""The simulated remote scene C: the ground-truth simulation, its sensor, and what it publishes.
 
 The ground truth is built from the true meshes (exact mass properties, CoACD of the true surface), so the
-twin never sees it: it gets only point clouds sampled off the true surfaces at the bodies' current poses,
-and poses when they leave a deadband.
+twin never sees it: it gets only what the :class:`scenes.sensing.Sensor` reports (clouds, and the sensed
+object frames when they leave a deadband). The remote talks through any :class:`sync.transport.Transport`
+and reads time only from its :class:`sync.clock.Clock`, so it runs live over Zenoh or headless in one
+process with the twin.
 """
 
 from __future__ import annotations
@@ -10,8 +12,6 @@ from __future__ import annotations
 import logging
 import queue
 import threading
-import time
-import zlib
 from collections.abc import Callable
 from concurrent.futures import Future
 from dataclasses import dataclass, replace
@@ -19,16 +19,20 @@ from pathlib import Path
 
 import numpy as np
 
-from scenes.sampling import sample_surface
+from scenes.scenefile import ObjectSpec, SceneSpec
+from scenes.sensing import Sensor, SurfaceSensor
+from scenes.sources import prepare_objects, reference_estimate, source_mesh
+from sync.clock import REAL_CLOCK, Clock
 from sync.keys import Keys
 from sync.link import Link
-from sync.messages import VERSION, Gone, Heartbeat, OperatorCommand, Pose, SceneInfo, cloud_message, now_ns
-from twin.model import add_object, new_spec, remove_object
-from twin.objects import TwinObject, prepare_objects, reference_estimate, source_mesh
+from sync.messages import VERSION, Gone, Heartbeat, OperatorCommand, Pose, SceneInfo, cloud_message
+from sync.transport import Transport
+from twin.debuglog import OFF, DebugLog
+from twin.loop import LoopStats, run_loop
+from twin.model import add_object, remove_object
+from twin.objects import TwinObject
 from twin.poses import angle_deg, rotation
-from twin.rerunlog import OFF, RerunLog
-from twin.scenefile import ObjectSpec, SceneSpec
-from twin.sim import LoopStats, Pacer, Twin
+from twin.sim import Twin
 
 log = logging.getLogger(__name__)
 
@@ -56,25 +60,33 @@ SETTLED_SPEED = 1e-3
 
 
 class Remote:
-    """The remote scene C on a Zenoh session. ``run()`` steps it; everything else is message handling.
+    """The remote scene C on a transport. ``run()`` steps it; everything else is message handling.
 
     What happens to the scene (:meth:`add`, :meth:`remove`, :meth:`move`) may be called from any thread:
     it is queued and done by the loop between two steps, never during one.
+
+    ``epoch`` numbers this run of the remote on the wire (default: the clock's stamp at start, so a
+    restarted remote has a larger one). On a simulated clock, objects added later compile in the loop's
+    thread (deterministic); on a real one, in the background.
     """
 
-    def __init__(self, scene: SceneSpec, session, *, deadband: Deadband = Deadband(),  # type: ignore[no-untyped-def]
-                 points: int | None = None, heartbeat_s: float = 0.2, cache_dir: Path | None = None,
-                 progress: bool = False, publish: bool = True, keyframe_s: float = 1.0,
-                 settle_s: float = 3.0, rlog: RerunLog = OFF) -> None:
+    def __init__(self, scene: SceneSpec, transport: Transport, *, clock: Clock = REAL_CLOCK,
+                 sensor: Sensor | None = None, deadband: Deadband = Deadband(), points: int | None = None,
+                 heartbeat_s: float = 0.2, cache_dir: Path | None = None, progress: bool = False,
+                 publish: bool = True, keyframe_s: float = 1.0, settle_s: float = 3.0, epoch: int | None = None,
+                 rlog: DebugLog = OFF) -> None:
         self.scene = scene
         self.rlog = rlog
+        self.clock = clock
+        self.sensor: Sensor = sensor if sensor is not None else SurfaceSensor()
+        self.epoch = clock.stamp_ns() if epoch is None else epoch
         self.keys = Keys(scene.name)
         self.deadband = deadband
         self.points = points
         self.heartbeat_s = heartbeat_s
         self.keyframe_s = keyframe_s
-        self._last_keyframe = time.monotonic()
-        self.link = Link(session)
+        self._last_keyframe = clock.now()
+        self.link = Link(transport, clock)
         self._lock = threading.Lock()
         self._actions: queue.SimpleQueue[Callable[[], None]] = queue.SimpleQueue()  # run by step()
         self._replies: dict[str, bytes] = {}  # key -> last encoded message, for late joiners
@@ -87,11 +99,11 @@ class Remote:
         top = scene.table.height if scene.table else None
         truth = prepare_objects(scene.objects, table_top=top, cache_dir=cache_dir, progress=progress,
                                 estimates=[reference_estimate(s) for s in scene.objects])
-        spec = new_spec(scene)
+        spec = scene.empty_spec()
         for spec_obj, obj in zip(scene.objects, truth, strict=True):
             add_object(spec, obj)
             self._remember(spec_obj, obj)
-        self.twin = Twin(spec)
+        self.twin = Twin(spec, background=clock.realtime)
         self.settled_after = self._settle(settle_s)
         if scene.table is not None:
             rlog.table(scene.table.size, scene.table.height)
@@ -102,7 +114,7 @@ class Remote:
         if publish:
             for spec_obj in scene.objects:
                 self.publish_cloud(spec_obj.id)
-        self._last_heartbeat = 0.0
+        self._last_heartbeat = -np.inf
 
     # -- what the operator and the scene do ------------------------------------------------------
 
@@ -149,22 +161,19 @@ class Remote:
         """Points per object cloud this remote sends."""
         return {i: self.points or t.spec.points for i, t in self._objects.items()}
 
-    def sense(self, object_id: str, points: int | None = None) -> np.ndarray:
-        """A cloud of the object's true surface at its current pose, world frame (n, 3) metres."""
-        truth = self._objects[object_id]
-        n = points or self.points or truth.spec.points
-        cloud = sample_surface(truth.body_mesh, n, seed=zlib.crc32(object_id.encode()) + self._seq)
-        pos, quat = self.twin.pose(object_id)
-        return cloud.points @ rotation(quat).T + pos
+    def true_surface(self, object_id: str):  # type: ignore[no-untyped-def]
+        """The object's true mesh in its body frame (for sensors: :class:`scenes.sensing.GroundTruth`)."""
+        return self._objects[object_id].body_mesh
 
     def publish_cloud(self, object_id: str, points: int | None = None) -> int:
-        """Sense and publish one object's cloud (with its current pose); returns the bytes sent."""
+        """Sense and publish one object's cloud (with its sensed frame); returns the bytes sent."""
         truth = self._objects[object_id]
         spec = truth.spec
-        pos, quat = self.twin.pose(object_id)
-        cloud = self.sense(object_id, points)
-        msg = cloud_message(object_id, self._next(), cloud, material=spec.material,
-                            density=spec.density, body_position=pos, body_quat=quat)
+        seq = self._next()
+        seen = self.sensor.observe(self, object_id, points or self.points or spec.points, shot=seq)
+        cloud, pos, quat = seen.points, seen.frame_position, seen.frame_quat
+        msg = cloud_message(object_id, cloud, stamp_ns=self.clock.stamp_ns(), epoch=self.epoch, seq=seq,
+                            material=spec.material, density=spec.density, frame_position=pos, frame_quat=quat)
         data = self.link.put(self.keys.object(object_id, "cloud"), msg)
         if self.rlog.enabled:
             # The truth's estimate frame is the true mesh's: body frame + COM.
@@ -193,7 +202,7 @@ class Remote:
             self.rlog.frame(self.twin, side="remote")
         for object_id in self._objects:
             self._publish_pose(object_id)
-        now = time.monotonic()
+        now = self.clock.now()
         if self.keyframe_s > 0 and now - self._last_keyframe >= self.keyframe_s:
             # Every pose now and then, moved or not: a twin that drifted on its own (its estimated shape
             # is not the true one) is pulled back even when the remote object is still.
@@ -202,23 +211,20 @@ class Remote:
                 self._publish_pose(object_id, force=True)
         if now - self._last_heartbeat >= self.heartbeat_s:
             self._last_heartbeat = now
-            self.link.put(self.keys.heartbeat, Heartbeat(v=VERSION, stamp_ns=now_ns(), seq=self._next(),
-                                                         sim_time=self.twin.time, objects=len(self._objects)))
+            self.link.put(self.keys.heartbeat, Heartbeat(v=VERSION, stamp_ns=self.clock.stamp_ns(), epoch=self.epoch,
+                                                         seq=self._next(), sim_time=self.twin.time,
+                                                         objects=len(self._objects)))
 
     def run(self, duration: float, *, rate: float = 1000.0, stop: threading.Event | None = None) -> LoopStats:
-        """Step in real time for ``duration`` seconds (or until ``stop`` is set)."""
-        pacer = Pacer(rate)
+        """Step for ``duration`` seconds of the clock (or until ``stop`` is set), ``rate`` iterations a second."""
         substeps = max(1, round(1.0 / rate / self.twin.model.opt.timestep))
-        for _ in range(round(duration * rate)):
-            if stop is not None and stop.is_set():
-                break
-            pacer.begin()
+
+        def body() -> None:
             for _ in range(substeps):
                 self.step()
-            left = pacer.end()
-            if left > 0:
-                time.sleep(left)
-        return pacer.stats()
+
+        return run_loop(body, rate=rate, duration=duration, clock=self.clock,
+                        until=None if stop is None else stop.is_set)
 
     def close(self) -> None:
         self.link.close()
@@ -235,8 +241,8 @@ class Remote:
         with self._lock:  # the queryable reads these from Zenoh's threads
             for kind in ("cloud", "pose"):
                 self._replies.pop(self.keys.object(object_id, kind), None)
-        self.link.put(self.keys.object(object_id, "gone"), Gone(v=VERSION, stamp_ns=now_ns(), object_id=object_id,
-                                                               seq=self._next()))
+        self.link.put(self.keys.object(object_id, "gone"), Gone(v=VERSION, stamp_ns=self.clock.stamp_ns(),
+                                                               object_id=object_id, epoch=self.epoch, seq=self._next()))
 
     def _remember(self, spec: ObjectSpec, obj: TwinObject) -> None:
         mesh = source_mesh(spec)
@@ -258,7 +264,8 @@ class Remote:
         return self.twin.time
 
     def _publish_pose(self, object_id: str, *, force: bool = False) -> None:
-        pos, quat = self.twin.pose(object_id)
+        seen = self.sensor.track(self, object_id)
+        pos, quat = seen.position, seen.quat
         last = self._published.get(object_id)
         if not force and last is not None:
             moved = float(np.linalg.norm(pos - last[0]))
@@ -266,9 +273,9 @@ class Remote:
             if moved <= self.deadband.position and turned <= self.deadband.angle_deg:
                 return
         self._published[object_id] = (pos, quat)
-        lin, ang = self.twin.velocity(object_id)
-        msg = Pose(v=VERSION, stamp_ns=now_ns(), object_id=object_id, seq=self._next(), sim_time=self.twin.time,
-                   position=_floats(pos), quat=_floats(quat), linvel=_floats(lin), angvel=_floats(ang))
+        msg = Pose(v=VERSION, stamp_ns=self.clock.stamp_ns(), object_id=object_id, epoch=self.epoch, seq=self._next(),
+                   sim_time=self.twin.time, position=_floats(pos), quat=_floats(quat), linvel=_floats(seen.linvel),
+                   angvel=_floats(seen.angvel))
         data = self.link.put(self.keys.object(object_id, "pose"), msg)
         with self._lock:
             self._replies[self.keys.object(object_id, "pose")] = data
@@ -286,7 +293,7 @@ class Remote:
 
     def _scene_info(self) -> SceneInfo:
         t, ee = self.scene.table, self.scene.end_effector
-        return SceneInfo(v=VERSION, stamp_ns=now_ns(), name=self.scene.name,
+        return SceneInfo(v=VERSION, stamp_ns=self.clock.stamp_ns(), name=self.scene.name,
                          table_size=None if t is None else _floats(t.size), table_height=0.0 if t is None else t.height,
                          table_material="" if t is None else t.material,
                          ee_radius=0.0 if ee is None else ee.radius,

@@ -1,0 +1,111 @@
+"""The Zenoh transport: sessions (the embedded loopback default, ``--connect``, ``--zenoh-config`` files)
+and :class:`ZenohTransport`, the :class:`sync.transport.Transport` over one session.
+
+Defaults: peer mode, multicast and gossip scouting off, and listening on 127.0.0.1 only (Zenoh's own
+default listens on every interface), so nothing is reachable from another machine unless an endpoint
+says so. A config file (Zenoh's JSON5) is taken as it is, then ``listen``/``connect`` given here override
+its endpoints: that is where TLS, access control and routers are set (see README, "Beyond one machine").
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import socket
+from pathlib import Path
+
+from estimation.errors import TwinError
+from sync.transport import Answer, OnSample
+
+log = logging.getLogger(__name__)
+
+
+class SessionError(TwinError, RuntimeError):
+    """A Zenoh session could not be configured or opened."""
+
+
+#: Where a session listens when nothing says otherwise: loopback, a port the system picks.
+LOOPBACK_ANY_PORT = "tcp/127.0.0.1:0"
+
+
+def free_port() -> int:
+    """A TCP port on 127.0.0.1 that was free a moment ago."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def make_config(*, listen: list[str] | None = None, connect: list[str] | None = None,
+                config_file: str | Path | None = None, mode: str = "peer"):  # type: ignore[no-untyped-def]
+    """A ``zenoh.Config``: the file's settings (if any), then mode, scouting off, and the endpoints."""
+    import zenoh
+
+    if config_file is not None:
+        path = Path(config_file)
+        if not path.is_file():
+            raise SessionError(f"zenoh config {path}: no such file")
+        try:
+            conf = zenoh.Config.from_file(str(path))
+        except Exception as exc:  # zenoh raises its own ZError for JSON5 or schema problems
+            raise SessionError(f"zenoh config {path}: {exc}") from exc
+    else:
+        conf = zenoh.Config()
+        conf.insert_json5("mode", json.dumps(mode))
+        conf.insert_json5("scouting/multicast/enabled", "false")
+        conf.insert_json5("scouting/gossip/enabled", "false")
+        conf.insert_json5("listen/endpoints", json.dumps([LOOPBACK_ANY_PORT]))
+    if listen is not None:
+        conf.insert_json5("listen/endpoints", json.dumps(listen))
+    if connect is not None:
+        conf.insert_json5("connect/endpoints", json.dumps(connect))
+    return conf
+
+
+def open_session(conf):  # type: ignore[no-untyped-def]
+    import zenoh
+
+    try:
+        return zenoh.open(conf)
+    except Exception as exc:  # e.g. a listen endpoint already in use, or a bad certificate path
+        raise SessionError(f"could not open a Zenoh session: {exc}") from exc
+
+
+class ZenohTransport:
+    """:class:`sync.transport.Transport` over an open Zenoh session (which the caller owns and closes).
+
+    Zenoh calls subscriber and queryable callbacks on its own threads; a failing answer is logged and
+    dropped there (the querier times out) rather than raised into Zenoh.
+    """
+
+    def __init__(self, session) -> None:  # type: ignore[no-untyped-def]
+        self.session = session
+        self._handles: list[object] = []
+
+    def put(self, key: str, data: bytes) -> None:
+        self.session.put(key, data)
+
+    def subscribe(self, keyexpr: str, callback: OnSample) -> None:
+        self._handles.append(self.session.declare_subscriber(
+            keyexpr, lambda s: callback(str(s.key_expr), s.payload.to_bytes())))
+
+    def queryable(self, keyexpr: str, answer: Answer) -> None:
+        def on_query(query) -> None:  # type: ignore[no-untyped-def]
+            try:
+                for reply_key, data in answer(str(query.key_expr)):
+                    query.reply(reply_key, data)
+            except Exception:
+                log.exception("answering a query on %s failed", keyexpr)
+
+        self._handles.append(self.session.declare_queryable(keyexpr, on_query))
+
+    def get(self, selector: str, timeout: float) -> list[tuple[str, bytes]]:
+        return [(str(r.ok.key_expr), r.ok.payload.to_bytes())
+                for r in self.session.get(selector, timeout=timeout) if r.ok is not None]
+
+    def close(self) -> None:
+        for h in self._handles:
+            try:
+                h.undeclare()  # type: ignore[attr-defined]
+            except Exception:
+                pass
+        self._handles.clear()

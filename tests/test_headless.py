@@ -1,0 +1,95 @@
+"""Remote and twin in one process, on the in-process bus and a simulated clock: no sockets, no threads."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from scenes.headless import Headless
+from scenes.remote import Remote
+from scenes.scenefile import load_scene
+from sync.keys import Keys
+from sync.link import Link
+from sync.messages import VERSION, Pose
+from twin.runtime import LocalSettings
+from twin.trajectory import push_trajectory
+
+SMALL = Path(__file__).parent / "data" / "small.toml"
+
+
+@pytest.fixture(scope="module")
+def cache(tmp_path_factory) -> Path:
+    return tmp_path_factory.getbasetemp() / "coacd"
+
+
+def _push(session: Headless):  # type: ignore[no-untyped-def]
+    """Through the crate and on, over 5 s of twin time from now, then hold."""
+    start, t0 = session.local.twin.data.mocap_pos[0].copy(), session.local.twin.time
+    push = push_trajectory(start, start + np.array([0.6, 0.0, -0.03]), 5.0)
+    return lambda t: push(t - t0)
+
+
+def _session_poses(cache: Path, seconds: float) -> tuple[dict, dict, int]:
+    with Headless(load_scene(SMALL), cache_dir=cache) as session:
+        session.run(seconds, trajectory=_push(session))
+        twin = {i: np.concatenate(p) for i, p in session.poses().items()}
+        remote = {i: np.concatenate(session.remote.twin.pose(i)) for i in twin}
+        return twin, remote, session.local.report.pose_updates
+
+
+def test_a_headless_session_is_bit_identical_when_run_twice(cache):
+    first, remote, updates = _session_poses(cache, 10.0)
+    second, remote_again, updates_again = _session_poses(cache, 10.0)
+    assert sorted(first) == ["can", "crate"]
+    for object_id in first:
+        assert first[object_id].tobytes() == second[object_id].tobytes(), object_id
+        assert remote[object_id].tobytes() == remote_again[object_id].tobytes(), object_id
+    assert updates == updates_again > 0
+    # It was a real push, and the twin followed it: the crate moved tens of cm in C, C' is within 5 mm.
+    assert remote["crate"][0] > 0.3
+    assert np.linalg.norm(first["crate"][:3] - remote["crate"][:3]) < 0.005
+
+
+def _move_crate(remote: Remote, dx: float) -> np.ndarray:
+    pos, quat = remote.twin.pose("crate")
+    target = pos + np.array([dx, 0.0, 0.0])
+    remote.move("crate", target, quat)
+    return target
+
+
+def test_a_restarted_remote_is_followed_at_once(cache):
+    scene = load_scene(SMALL)
+    with Headless(scene, cache_dir=cache) as session:
+        session.run(0.5)
+        session.remote.close()  # the remote process dies; a new one starts with a later epoch
+        session.remote = Remote(scene, session.bus.transport(), clock=session.clock, cache_dir=cache,
+                                epoch=session.remote.epoch + 1)
+        session.run(0.5)
+        target = _move_crate(session.remote, 0.1)
+        session.run(0.5)
+        assert np.linalg.norm(session.local.twin.pose("crate")[0] - target) < 0.005
+
+
+def test_a_forged_sequence_number_silences_an_object_only_until_a_heartbeat_and_a_keyframe(cache):
+    with Headless(load_scene(SMALL), cache_dir=cache) as session:
+        session.run(0.5)
+        keys, remote = Keys("small"), session.remote
+        pos, quat = remote.twin.pose("crate")
+        forged = Pose(v=VERSION, stamp_ns=0, object_id="crate", epoch=remote.epoch, seq=10**7, sim_time=0.0,
+                      position=tuple(pos.tolist()), quat=tuple(quat.tolist()), linvel=(0.0,) * 3, angvel=(0.0,) * 3)
+        Link(session.bus.transport()).put(keys.object("crate", "pose"), forged)
+        target = _move_crate(remote, 0.1)
+        session.run(0.15)
+        assert np.linalg.norm(session.local.twin.pose("crate")[0] - target) > 0.05  # the forgery hides the move
+        # A heartbeat (every 0.2 s) pulls the forged mark back; the next keyframe (1 s) brings the real pose.
+        session.run(remote.keyframe_s + remote.heartbeat_s)
+        assert np.linalg.norm(session.local.twin.pose("crate")[0] - target) < 0.005
+
+
+def test_without_workers_the_twin_estimates_in_its_own_thread(cache):
+    with Headless(load_scene(SMALL), cache_dir=cache, settings=LocalSettings(workers=3)) as session:
+        assert session.local._pool is None and not session.local.twin.background  # forced headless
+        session.tick()
+        assert sorted(session.local.objects) == ["can", "crate"]  # touchable after one tick
