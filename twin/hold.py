@@ -21,7 +21,7 @@ import numpy as np
 
 from twin.contacts import contact_component, geom_roots
 from twin.model import EE_BODY, free_joint
-from twin.poses import nlerp
+from twin.poses import blend
 
 
 @dataclass(frozen=True)
@@ -171,7 +171,7 @@ class Hold:
         if len(k):
             # Drawn back over tau, one look's worth at a time, and held there until the next look.
             alpha = 1.0 - float(np.exp(-s.check_every / self.tau))
-            held = np.concatenate([pos[k] + alpha * (a.want_p[k] - pos[k]), nlerp(quat[k], a.want_q[k], alpha)], axis=1)
+            held = np.concatenate(blend(pos[k], quat[k], a.want_p[k], a.want_q[k], alpha), axis=1)
             a.hold_at = (a.qpos[k].ravel(), held.ravel(), a.qvel[k].ravel())
             data.qpos[a.hold_at[0]] = a.hold_at[1]
             data.qvel[a.hold_at[2]] = 0.0

@@ -44,6 +44,17 @@ def nlerp(a: np.ndarray, b: np.ndarray, t: float) -> np.ndarray:
     return out / np.sqrt(np.einsum("...i,...i->...", out, out))[..., None]
 
 
+def blend(position: np.ndarray, quat: np.ndarray, to_position: np.ndarray, to_quat: np.ndarray,
+          t: float) -> tuple[np.ndarray, np.ndarray]:
+    """A pose ``t`` of the way (0..1) from (``position``, ``quat``) to (``to_position``, ``to_quat``).
+
+    Positions (3,) or (n, 3) metres, quaternions w x y z (4,) or (n, 4): linear in position, :func:`nlerp`
+    in orientation. The twin's pull towards C's pose (corrections and the hold) goes through here.
+    """
+    position = np.asarray(position, dtype=np.float64)
+    return position + t * (np.asarray(to_position, dtype=np.float64) - position), nlerp(quat, to_quat, t)
+
+
 def to_xyzw(q: np.ndarray) -> np.ndarray:
     """MuJoCo's w x y z quaternion in the x y z w order that rerun and scipy use."""
     q = np.asarray(q, dtype=np.float64)

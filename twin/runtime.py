@@ -51,7 +51,7 @@ from twin.hold import DEFAULT_HOLD, Hold, HoldSettings
 from twin.loop import LoopStats, run_loop
 from twin.model import EndEffectorSpec, TableSpec, add_object, new_spec, remove_object
 from twin.objects import DEFAULT_FRICTION, TwinObject, object_at_estimate
-from twin.poses import angle_deg, nlerp, quat_conj, quat_mul, rotation
+from twin.poses import angle_deg, blend, quat_conj, quat_mul, rotation
 from twin.sim import Twin
 from twin.trajectory import Trajectory
 
@@ -417,8 +417,7 @@ class Local:
             alpha = 1.0
         else:
             alpha = 1.0 - float(np.exp(-self.twin.model.opt.timestep / s.correction_tau))
-        new_p = pos + alpha * (want_p - pos)
-        new_q = nlerp(quat, want_q, alpha)
+        new_p, new_q = blend(pos, quat, want_p, want_q, alpha)
         self.twin.set_pose(object_id, new_p, new_q, forward=False)
         lin, ang = self.twin.velocity(object_id)
         self.twin.set_velocity(object_id, lin + alpha * (np.asarray(target.linvel) - lin),
