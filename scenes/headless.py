@@ -1,7 +1,9 @@
 """A whole session in one process: the remote scene C and the twin C' on one bus, on a simulated clock.
 
-No sockets, no threads, no waiting: each tick steps the remote, lets the twin handle what arrived and step,
-and moves the clock on by one physics step. The same scene, trajectory and seed give the same poses, bit
+No sockets, no threads, no waiting: each tick delivers what the network has due, steps the remote, lets the
+twin handle what arrived and step, and moves the clock on by one physics step. With ``network=``
+(:class:`sync.netem.Network`), messages between the two sides are delayed, lost and queued as configured,
+from the network's seed. The same scene, trajectory and seed give the same poses, bit
 for bit, and the session runs as fast as the two simulations step.
 
     with Headless(load_scene("scene.toml")) as session:
@@ -21,6 +23,7 @@ from scenes.scenefile import SceneSpec
 from scenes.sensing import Sensor
 from sync.clock import SimClock
 from sync.inprocess import InProcessBus
+from sync.netem import LinkModel, Network
 from twin.runtime import DEFAULT_LOCAL, Local, LocalSettings
 from twin.trajectory import Trajectory
 
@@ -31,16 +34,28 @@ class Headless:
     The twin joins after the remote has settled and published its scene, estimates every cloud in this
     thread (``workers`` is forced to 0: worker processes would make arrival times depend on the machine),
     and compiles each object before the next tick. ``remote_options`` go to :class:`scenes.remote.Remote`.
+
+    ``network`` puts an emulated link between the sides (``downlink``: remote -> twin, ``uplink``: twin ->
+    remote); their counters are ``self.uplink.stats`` and ``self.downlink.stats`` (None: no link that way).
+    The twin's late-join query is answered at once (see :mod:`sync.inprocess`); what the remote published
+    before the twin joined still crosses the link and arrives as stale duplicates.
     """
 
     def __init__(self, scene: SceneSpec, *, settings: LocalSettings = DEFAULT_LOCAL,
-                 sensor: Sensor | None = None, cache_dir: Path | None = None, **remote_options: object) -> None:
+                 sensor: Sensor | None = None, cache_dir: Path | None = None, network: Network | None = None,
+                 **remote_options: object) -> None:
         self.clock = SimClock()
-        self.bus = InProcessBus()
-        self.remote = Remote(scene, self.bus.transport(), clock=self.clock, sensor=sensor, cache_dir=cache_dir,
-                             **remote_options)  # type: ignore[arg-type]
+        self.uplink, self.downlink = (None, None) if network is None else network.models()
+        links: dict[tuple[str, str], LinkModel] = {}
+        if self.uplink is not None:
+            links["twin", "remote"] = self.uplink
+        if self.downlink is not None:
+            links["remote", "twin"] = self.downlink
+        self.bus = InProcessBus(self.clock, links)
+        self.remote = Remote(scene, self.bus.transport("remote"), clock=self.clock, sensor=sensor,
+                             cache_dir=cache_dir, **remote_options)  # type: ignore[arg-type]
         self.dt = float(self.remote.twin.model.opt.timestep)
-        self.local = Local(self.bus.transport(), clock=self.clock, scene=scene.name,
+        self.local = Local(self.bus.transport("twin"), clock=self.clock, scene=scene.name,
                            settings=replace(settings, workers=0, cache_dir=cache_dir or settings.cache_dir))
         if self.local.twin.model.opt.timestep != self.dt:
             raise ValueError("remote and twin step at different rates")  # pragma: no cover
@@ -52,7 +67,12 @@ class Headless:
         self.close()
 
     def tick(self, trajectory: Trajectory | None = None) -> None:
-        """One physics step of both sides, then the clock moves on by one step."""
+        """Deliver what the network has due now, one physics step of both sides, then the clock moves on.
+
+        Delivering first means a message due at time t is handled by the steps taken at t, so a packet sent
+        at t0 over a 50 ms link is seen 50 ms later on the simulated clock (rounded up to a whole step).
+        """
+        self.bus.deliver_due()
         self.remote.step()
         self.local.iterate(trajectory)
         self.clock.advance(self.dt)
