@@ -2,11 +2,23 @@
 
 from __future__ import annotations
 
+import csv
+import math
 from collections.abc import Callable
+from pathlib import Path
 
 import numpy as np
 
+from estimation.errors import TwinError
+
 Trajectory = Callable[[float], np.ndarray]
+
+#: The header row a trajectory CSV may start with.
+TRAJECTORY_HEADER = ("t", "x", "y", "z")
+
+
+class TrajectoryError(TwinError, ValueError):
+    """A trajectory file that cannot be read or does not describe a trajectory."""
 
 
 def push_trajectory(start: np.ndarray, end: np.ndarray, duration: float) -> Trajectory:
@@ -16,5 +28,62 @@ def push_trajectory(start: np.ndarray, end: np.ndarray, duration: float) -> Traj
     def at(t: float) -> np.ndarray:
         s = min(1.0, max(0.0, t / duration))
         return start + s * (end - start)
+
+    return at
+
+
+def load_trajectory(path: str | Path) -> Trajectory:
+    """An end-effector trajectory from a CSV file.
+
+    Format: one row per waypoint, ``t,x,y,z``: time in seconds (strictly increasing) and the target
+    position in metres, world frame. An optional first row ``t,x,y,z`` names the columns; blank lines and
+    lines starting with ``#`` are skipped. Between waypoints the target moves linearly; before the first
+    it is the first, after the last it stays at the last. Example::
+
+        t,x,y,z
+        0.0,0.30,0.00,0.12
+        2.0,0.45,0.00,0.12
+
+    Args:
+        path: the CSV file.
+
+    Returns:
+        ``trajectory(t) -> (3,) float64``, metres, world frame.
+
+    Raises:
+        TrajectoryError: the file cannot be read, a row has other than four columns or a value that is
+            not a finite number, there are no waypoints, or the times do not increase.
+    """
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise TrajectoryError(f"{path}: cannot read trajectory ({exc.__class__.__name__}: {exc})") from None
+    rows: list[tuple[float, ...]] = []
+    for number, row in enumerate(csv.reader(text.splitlines()), start=1):
+        cells = [c.strip() for c in row]
+        if not cells or cells == [""] or cells[0].startswith("#"):
+            continue
+        if not rows and tuple(c.lower() for c in cells) == TRAJECTORY_HEADER:
+            continue
+        if len(cells) != 4:
+            raise TrajectoryError(f"{path}:{number}: expected 4 columns t,x,y,z, got {len(cells)}")
+        try:
+            values = tuple(float(c) for c in cells)
+        except ValueError:
+            raise TrajectoryError(f"{path}:{number}: not a number in {','.join(cells)!r}") from None
+        if not all(math.isfinite(v) for v in values):
+            raise TrajectoryError(f"{path}:{number}: non-finite value in {','.join(cells)!r}")
+        if rows and values[0] <= rows[-1][0]:
+            raise TrajectoryError(f"{path}:{number}: t = {values[0]:g} s does not increase "
+                                  f"(previous {rows[-1][0]:g} s)")
+        rows.append(values)
+    if not rows:
+        raise TrajectoryError(f"{path}: no waypoints (expected rows t,x,y,z)")
+    table = np.array(rows, dtype=np.float64)
+    times, points = table[:, 0].copy(), table[:, 1:].copy()
+
+    def at(t: float) -> np.ndarray:
+        return np.array([np.interp(t, times, points[:, i]) for i in range(3)])
 
     return at
