@@ -1,0 +1,60 @@
+"""The trajectory reader: the CSV format of --script, interpolation, and one-line errors for bad files."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from estimation.errors import TwinError
+from twin.trajectory import TrajectoryError, load_trajectory
+
+
+def _write(tmp_path, text: str, name: str = "path.csv"):  # type: ignore[no-untyped-def]
+    path = tmp_path / name
+    path.write_text(text)
+    return path
+
+
+@pytest.mark.parametrize("header", ["t,x,y,z\n", "", "# a push\nT, X, Y, Z\n\n"])
+def test_waypoints_are_interpolated_linearly_and_the_ends_held(tmp_path, header):
+    path = _write(tmp_path, header + "0.0,0.1,0.0,0.2\n1.0,0.3,-0.2,0.2\n3.0,0.3,-0.2,0.6\n")
+    at = load_trajectory(path)
+    assert at(0.5) == pytest.approx([0.2, -0.1, 0.2])
+    assert at(2.0) == pytest.approx([0.3, -0.2, 0.4])
+    assert at(-1.0) == pytest.approx([0.1, 0.0, 0.2])  # before the first waypoint: the first
+    assert at(10.0) == pytest.approx([0.3, -0.2, 0.6])  # after the last: held there
+    assert at(1.0).shape == (3,) and at(1.0).dtype == np.float64
+
+
+def test_one_waypoint_is_held_for_ever(tmp_path):
+    at = load_trajectory(_write(tmp_path, "t,x,y,z\n0,1,2,3\n"))
+    assert at(0.0) == pytest.approx([1, 2, 3]) and at(5.0) == pytest.approx([1, 2, 3])
+
+
+@pytest.mark.parametrize("text, match", [
+    ("t,x,y\n0,1,2\n", r"path.csv:1: expected 4 columns t,x,y,z, got 3$"),
+    ("t,x,y,z\n0,1,2,3\n1,1,2\n", r"path.csv:3: expected 4 columns"),
+    ("t,x,y,z\n0,1,two,3\n", r"path.csv:2: not a number in '0,1,two,3'$"),
+    ("0,1,2,3\n1,nan,2,3\n", r"path.csv:2: non-finite value"),
+    ("0,1,2,3\n1,1,2,inf\n", r"path.csv:2: non-finite value"),
+    ("0,1,2,3\n1,1,2,3\n1,1,2,3\n", r"path.csv:3: t = 1 s does not increase \(previous 1 s\)$"),
+    ("0,1,2,3\n2,1,2,3\n1,1,2,3\n", r"path.csv:3: t = 1 s does not increase"),
+    ("t,x,y,z\n", r"path.csv: no waypoints"),
+    ("", r"path.csv: no waypoints"),
+])
+def test_bad_files_are_one_line_errors_naming_file_and_line(tmp_path, text, match):
+    with pytest.raises(TrajectoryError, match=match) as err:
+        load_trajectory(_write(tmp_path, text))
+    assert isinstance(err.value, ValueError) and isinstance(err.value, TwinError)
+    assert "\n" not in str(err.value)
+
+
+def test_an_unreadable_file_is_a_trajectory_error(tmp_path):
+    with pytest.raises(TrajectoryError, match=r"missing.csv: cannot read trajectory \(FileNotFoundError"):
+        load_trajectory(tmp_path / "missing.csv")
+    binary = tmp_path / "binary.csv"
+    binary.write_bytes(b"\xff\xfe\x00\x01")
+    with pytest.raises(TrajectoryError, match=r"binary.csv: cannot read trajectory \(UnicodeDecodeError"):
+        load_trajectory(binary)
+    with pytest.raises(TrajectoryError, match="cannot read trajectory"):
+        load_trajectory(tmp_path)  # a directory
