@@ -137,9 +137,28 @@ def test_coacd_cache_and_determinism(tmp_path):
 
 def test_degenerate_mesh_falls_back_to_hull(tmp_path, caplog):
     v = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1.0]]) * 0.1
+    no_faces = np.zeros((0, 3), np.int64)  # CoACD gives no parts for it
+    with caplog.at_level("WARNING", logger="twin.decompose"):
+        hulls, _ = decompose(v, no_faces, CoacdSettings(), cache_dir=tmp_path)
+    assert "using the convex hull" in caplog.text
+    # The fallback is exactly one hull: the convex hull of the input, here the tetrahedron itself.
+    assert len(hulls) == 1
+    hv, hf = hulls[0]
+    assert sorted(map(tuple, hv)) == sorted(map(tuple, v))
+    assert trimesh.Trimesh(hv, hf).volume == pytest.approx(0.1**3 / 6, rel=1e-9)
+
+
+def test_open_mesh_gives_closed_hulls_inside_its_hull(tmp_path):
+    v = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1.0]]) * 0.1
     f = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
     hulls, _ = decompose(v, f[:2], CoacdSettings(), cache_dir=tmp_path)  # an open, two-face "mesh"
-    assert len(hulls) >= 1
+    # CoACD (with manifold preprocessing) thickens it; each part is a closed convex solid within ~1 mm of
+    # the input's hull (the preprocessing's voxel size at resolution 50 on a 0.1 m mesh is ~2 mm).
+    assert hulls
+    for hv, hf in hulls:
+        part = trimesh.Trimesh(hv, hf)
+        assert part.is_watertight and part.volume > 0
+        assert (hv.min(axis=0) > -0.002).all() and (hv.max(axis=0) < 0.1 + 0.002).all()
 
 
 @pytest.mark.parametrize(

@@ -2,7 +2,9 @@
 
 Collision in MuJoCo is between convex shapes; a concave object (a mug) needs several. CoACD is random
 by default, so its seed is part of the settings, and the settings are part of the cache key: the same
-mesh and settings always give the same hulls, and a second build runs no CoACD.
+mesh and settings always give the same hulls, and a second build runs no CoACD. Each entry carries a sha256
+of its hulls, checked on every read: a truncated, empty, corrupt or altered entry is logged, recomputed and
+replaced atomically. A cache folder that cannot be written means building without a cache (one warning).
 """
 
 from __future__ import annotations
@@ -78,18 +80,17 @@ def decompose(
 ) -> tuple[list[Hull], bool]:
     """Convex parts of one closed mesh; returns (hulls, from_cache).
 
-    A failed or empty decomposition falls back to the convex hull of the mesh, with a warning.
+    A failed or empty decomposition falls back to the convex hull of the mesh, with a warning. A cache entry
+    that does not verify is recomputed and replaced; a cache folder that cannot be used means no cache, with
+    a warning: the cache never fails a build.
+
+    Args:
+        vertices: (v, 3) float64, metres, object frame.
+        faces: (f, 3) int, indices into ``vertices``.
+        settings: CoACD's parameters, seed included.
+        cache_dir: the cache folder (default :func:`default_cache_dir`).
     """
-    cache = Path(cache_dir or default_cache_dir())
-    path = cache / f"{cache_key(vertices, faces, settings)}.npz"
-    if (cached := _load_cached(path)) is not None:
-        return cached, True
-    hulls = _run_coacd(vertices, faces, settings)
-    cache.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_suffix(f".{os.getpid()}.tmp.npz")
-    np.savez(tmp, **_pack(hulls))
-    os.replace(tmp, path)  # atomic: a reader never sees half a file
-    return hulls, False
+    return _decompose(vertices, faces, settings, usable_cache(Path(cache_dir or default_cache_dir())))
 
 
 def decompose_many(
@@ -97,11 +98,11 @@ def decompose_many(
     workers: int | None = None, progress: bool = True,
 ) -> list[tuple[list[Hull], bool]]:
     """:func:`decompose` for several meshes; cache misses run in parallel worker processes."""
-    cache = Path(cache_dir or default_cache_dir())
+    cache = usable_cache(Path(cache_dir or default_cache_dir()))
     results: list[tuple[list[Hull], bool] | None] = [None] * len(meshes)
     misses = []
     for i, (v, f) in enumerate(meshes):
-        cached = _load_cached(cache / f"{cache_key(v, f, settings)}.npz")
+        cached = None if cache is None else load_entry(cache / entry_name(cache_key(v, f, settings)))
         if cached is not None:
             results[i] = (cached, True)
         else:
@@ -111,14 +112,15 @@ def decompose_many(
         bar = _progress(progress, len(misses))
         if workers == 1 or len(misses) == 1:
             for i in misses:
-                results[i] = decompose(*meshes[i], settings, cache_dir=cache)
+                results[i] = _decompose(*meshes[i], settings, cache, verified_miss=True)
                 bar.advance()
         else:
             import multiprocessing as mp
 
             # spawn: CoACD and MuJoCo hold threads; forking them is not safe.
             with ProcessPoolExecutor(workers, mp_context=mp.get_context("spawn")) as pool:
-                futures = {pool.submit(decompose, *meshes[i], settings, cache_dir=cache): i for i in misses}
+                futures = {pool.submit(_decompose, *meshes[i], settings, cache, verified_miss=True): i
+                           for i in misses}
                 for future, i in futures.items():
                     results[i] = future.result()
                     bar.advance()
@@ -126,15 +128,123 @@ def decompose_many(
     return [r for r in results if r is not None]
 
 
-def _load_cached(path: Path) -> list[Hull] | None:
+def _decompose(vertices: np.ndarray, faces: np.ndarray, settings: CoacdSettings, cache: Path | None, *,
+               verified_miss: bool = False) -> tuple[list[Hull], bool]:
+    """:func:`decompose` with the cache folder already checked (None: no cache).
+
+    ``verified_miss``: the caller has just found no usable entry, so do not read (and warn about) it again.
+    """
+    key = cache_key(vertices, faces, settings)
+    if cache is not None and not verified_miss and (cached := load_entry(cache / entry_name(key))) is not None:
+        return cached, True
+    hulls = _run_coacd(vertices, faces, settings)
+    if cache is not None:
+        save_entry(cache / entry_name(key), hulls)
+    return hulls, False
+
+
+# --- the cache: one .npz per (mesh, settings) holding the hulls and a sha256 of their content ---------------
+
+#: Bumped when an entry's layout changes; an entry of another version is recomputed and replaced.
+CACHE_VERSION = 2
+_warned_folders: set[str] = set()
+
+
+def entry_name(key: str) -> str:
+    """The file name of the cache entry for ``key`` (a :func:`cache_key`)."""
+    return f"{key}.npz"
+
+
+def usable_cache(folder: Path) -> Path | None:
+    """``folder`` if cache entries can be written there (created if missing), else None with a warning.
+
+    The check creates and removes a probe file of its own: permission bits say nothing for root, nor about
+    read-only mounts.
+    """
+    import tempfile
+
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        with tempfile.NamedTemporaryFile(dir=folder, prefix=".probe-", suffix=".tmp"):
+            pass
+    except OSError as exc:
+        if str(folder) not in _warned_folders:  # once per folder and process, not once per object
+            _warned_folders.add(str(folder))
+            log.warning("CoACD cache folder %s is unusable (%s); building without a cache", folder,
+                        exc.strerror or exc)
+        return None
+    return folder
+
+
+def content_checksum(hulls: Sequence[Hull]) -> str:
+    """sha256 of the hulls' arrays (shapes and bytes, as float64 / int64), in order."""
+    h = hashlib.sha256(f"tactile-twin coacd cache v{CACHE_VERSION}".encode())
+    for v, f in hulls:
+        for a in (np.ascontiguousarray(v, dtype=np.float64), np.ascontiguousarray(f, dtype=np.int64)):
+            h.update(repr(a.shape).encode())
+            h.update(a.tobytes())
+    return h.hexdigest()
+
+
+def save_entry(path: Path, hulls: Sequence[Hull]) -> bool:
+    """Write an entry atomically (a temp file in the same folder, then ``os.replace``); False if that failed.
+
+    A failed write is a warning, never an error: CoACD has already run and the hulls are good.
+    """
+    import tempfile
+
+    arrays = _pack(list(hulls))
+    arrays["version"] = np.array(CACHE_VERSION)
+    arrays["checksum"] = np.array(content_checksum(hulls))
+    tmp = None
+    try:
+        with tempfile.NamedTemporaryFile(dir=path.parent, prefix=f".{path.stem[:16]}-", suffix=".tmp",
+                                         delete=False) as fh:
+            tmp = Path(fh.name)
+            np.savez(fh, **arrays)
+        os.replace(tmp, path)  # atomic: a reader sees the old entry or the new one, never half of one
+        return True
+    except OSError as exc:
+        log.warning("cannot write CoACD cache entry %s (%s); continuing without caching it", path, exc)
+        if tmp is not None:
+            tmp.unlink(missing_ok=True)  # our own temp file, nothing else
+        return False
+
+
+def load_entry(path: Path) -> list[Hull] | None:
+    """The hulls in a cache entry, or None if there is none or it does not verify (with a warning).
+
+    An entry verifies when it loads, its version is :data:`CACHE_VERSION`, every hull is a finite (v, 3)
+    float array with in-range (f, 3) integer faces, and the sha256 of that content equals the stored one.
+    """
+    import zipfile
+
     if not path.is_file():
         return None
     try:
-        with np.load(path) as data:
-            return _unpack(data)
-    except (OSError, ValueError, KeyError):
-        log.warning("corrupt CoACD cache entry %s; recomputing", path.name)
+        with np.load(path, allow_pickle=False) as data:
+            version = int(data["version"])
+            stored = str(data["checksum"])
+            hulls = _unpack(data)
+    except (OSError, ValueError, KeyError, TypeError, EOFError, zipfile.BadZipFile) as exc:
+        log.warning("unreadable CoACD cache entry %s (%s); recomputing", path.name, exc)
         return None
+    if version != CACHE_VERSION:
+        log.warning("CoACD cache entry %s is version %d, not %d; recomputing", path.name, version, CACHE_VERSION)
+        return None
+    if not hulls or not all(_valid_hull(v, f) for v, f in hulls):
+        log.warning("CoACD cache entry %s holds malformed hulls; recomputing", path.name)
+        return None
+    if content_checksum(hulls) != stored:
+        log.warning("CoACD cache entry %s fails its checksum; recomputing", path.name)
+        return None
+    return hulls
+
+
+def _valid_hull(v: np.ndarray, f: np.ndarray) -> bool:
+    return (v.ndim == 2 and v.shape[1] == 3 and len(v) >= 4 and v.dtype.kind == "f" and bool(np.isfinite(v).all())
+            and f.ndim == 2 and f.shape[1] == 3 and len(f) >= 4 and f.dtype.kind in "iu"
+            and int(f.min()) >= 0 and int(f.max()) < len(v))
 
 
 def _run_coacd(vertices: np.ndarray, faces: np.ndarray, settings: CoacdSettings) -> list[Hull]:
@@ -186,7 +296,7 @@ def _pack(hulls: list[Hull]) -> dict[str, np.ndarray]:
 
 
 def _unpack(data) -> list[Hull]:  # type: ignore[no-untyped-def]
-    n = len(data.files) // 2
+    n = sum(1 for name in data.files if name[0] == "v" and name[1:].isdigit())
     return [(data[f"v{i}"], data[f"f{i}"]) for i in range(n)]
 
 
