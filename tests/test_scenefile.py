@@ -1,0 +1,181 @@
+"""Scene files: every value type-checked; every wrong value is one SceneError naming the key."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from scenes.scenefile import SceneError, load_scene, parse_scene
+
+NAN, INF = float("nan"), float("inf")
+
+
+def _scene(**obj: object) -> dict:
+    """A valid one-object scene with ``obj``'s keys replacing the object's."""
+    o: dict = {"id": "mug", "primitive": {"type": "box", "size": [0.1, 0.1, 0.1]}, **obj}
+    return {"name": "x", "table": {"size": [1, 1, 0.04], "height": 0.5}, "objects": [o]}
+
+
+def _top(**top: object) -> dict:
+    return {"name": "x", "objects": [], **top}
+
+
+@pytest.mark.parametrize(
+    ("doc", "message"),
+    [
+        (_scene(points="many"), r"^object 'mug' points: expected a whole number, got 'many'$"),
+        (_scene(points=0), r"object 'mug' points: must be 100 to 10,000,000, got 0"),
+        (_scene(points=-5), r"object 'mug' points: must be 100 to .*, got -5"),
+        (_scene(points=10**12), r"object 'mug' points: must be 100 to 10,000,000"),
+        (_scene(points=True), r"object 'mug' points: expected a whole number, got True"),
+        (_scene(points=1e5), r"object 'mug' points: expected a whole number, got 100000.0"),
+        (_scene(position=["a", "b"]), r"object 'mug' position\[0\]: expected a number, got str 'a'"),
+        (_scene(position=[0.1, NAN]), r"object 'mug' position\[1\]: must be finite, got nan"),
+        (_scene(position=[0.1, 0.2, INF]), r"object 'mug' position\[2\]: must be finite, got inf"),
+        (_scene(position=[True, 0.0]), r"object 'mug' position\[0\]: expected a number, got bool True"),
+        (_scene(position=5), r"object 'mug' position: must be \[x, y\]"),
+        (_scene(rotation_deg=[0, NAN, 0]), r"object 'mug' rotation_deg\[1\]: must be finite, got nan"),
+        (_scene(rotation_deg=[0, 0, -INF]), r"object 'mug' rotation_deg\[2\]: must be finite, got -inf"),
+        (_scene(rotation_deg="30"), r"object 'mug' rotation_deg: expected 3 numbers, got str '30'"),
+        (_scene(density=NAN), r"object 'mug' density: must be finite, got nan"),
+        (_scene(density=INF), r"object 'mug' density: must be finite, got inf"),
+        (_scene(density=False), r"object 'mug' density: expected a number, got bool False"),
+        (_scene(density="heavy"), r"object 'mug' density: expected a number, got str 'heavy'"),
+        (_scene(material=7), r"object 'mug' material: expected a non-empty string, got int 7"),
+        (_scene(units=["m"]), r"object 'mug' units: must be m, cm or mm, got \['m'\]"),
+        (_scene(primitive={"type": "box", "size": [0.1, NAN, 0.1]}),
+         r"object 'mug' primitive.size\[1\]: must be finite, got nan"),
+        (_scene(primitive={"type": "box", "size": [0.1, INF, 0.1]}), r"primitive.size\[1\]: must be finite"),
+        (_scene(primitive={"type": ["box"]}), r"object 'mug': primitive needs type = one of box"),
+        (_scene(primitive="box"), r"object 'mug': primitive needs type = one of box"),
+        ({"name": "x", "objects": [{"id": "a", "paper": ["mug"]}]}, r"object 'a': unknown paper object \['mug'\]"),
+        ({"name": "x", "objects": [{"id": "a", "mesh": 3}]}, r"object 'a' mesh: expected a non-empty string"),
+        ({"name": "x", "objects": [{"id": "a", "cloud": "a\x00b.ply"}]}, r"object 'a': cloud path 'a\\x00b.ply'"),
+        (_top(table=5), r"^table: expected a table, got int 5$"),
+        (_top(table={"height": "high"}), r"^table.height: expected a number, got str 'high'$"),
+        (_top(table={"height": NAN}), r"^table.height: must be finite, got nan$"),
+        (_top(table={"height": INF}), r"^table.height: must be finite, got inf$"),
+        (_top(table={"height": 0}), r"^table.height: must be positive, got 0.0$"),
+        (_top(table={"height": True}), r"^table.height: expected a number, got bool True$"),
+        (_top(table={"size": [1, NAN, 0.04]}), r"^table.size\[1\]: must be finite, got nan$"),
+        (_top(table={"material": "cheese"}), r"^table.material: unknown material 'cheese'"),
+        (_top(end_effector=[]), r"^end_effector: expected a table, got list \[\]$"),
+        (_top(end_effector={"radius": INF}), r"^end_effector.radius: must be finite, got inf$"),
+        (_top(end_effector={"position": [0, 0, NAN]}), r"^end_effector.position\[2\]: must be finite"),
+        (_top(objects=5), r"^scene: 'objects' must be an array of tables \(\[\[objects\]\]\), got int 5$"),
+        (_top(objects={"id": "a"}), r"^scene: 'objects' must be an array of tables"),
+        (_top(objects=[5]), r"^object #0: expected a table \(\[\[objects\]\]\), got int 5$"),
+        (_top(name=5), r"^scene: name: expected a non-empty string, got int 5$"),
+        ({"name": "x", "objects": [{"id": 5, "paper": "mug"}]}, r"^object #0: 'id' must be 1-64 characters"),
+        (_scene(colour="red"), r"^object 'mug': unknown key 'colour'"),
+        (_scene(positon=[0, 0]), r"^object 'mug': unknown key 'positon' \(did you mean 'position'\?\)$"),
+    ],
+)
+def test_every_wrong_value_is_one_scene_error_naming_the_key(doc, message):
+    with pytest.raises(SceneError, match=message) as info:
+        parse_scene(doc)
+    assert "\n" not in str(info.value)
+
+
+def test_a_file_with_a_nan_position_never_reaches_the_model(tmp_path):
+    path = tmp_path / "s.toml"
+    path.write_text('name = "x"\n[[objects]]\nid = "mug"\npaper = "mug"\nposition = [nan, 0.1]\n')
+    with pytest.raises(SceneError, match=r"object 'mug' position\[0\]: must be finite, got nan"):
+        load_scene(path)
+    path.write_text('name = "x"\n[table]\nheight = inf\n')
+    with pytest.raises(SceneError, match=r"table.height: must be finite, got inf"):
+        load_scene(path)
+
+
+def test_good_values_still_parse():
+    spec = parse_scene(_scene(position=[1, 2], rotation_deg=[0, 0, 30], points=5000, density=800, units="cm"))
+    obj = spec.objects[0]
+    assert obj.position == (1.0, 2.0) and obj.rotation_deg == (0.0, 0.0, 30.0) and obj.points == 5000
+    assert obj.density == 800.0 and obj.units == "cm"
+    assert spec.table is not None and spec.table.height == 0.5
+    assert all(isinstance(x, float) for x in (*obj.position, *spec.table.size))
+
+
+def test_shipped_scenes_still_load():
+    shipped = sorted((Path(__file__).parents[1] / "scenes" / "data").glob("*.toml"))
+    assert shipped
+    for path in (*shipped, Path(__file__).parent / "data" / "small.toml"):
+        load_scene(path)
+
+
+# --- fuzzing: random TOML-like documents raise nothing but SceneError -----------------------------------
+
+_scalars = st.one_of(
+    st.integers(min_value=-(2**63), max_value=2**63 - 1), st.floats(allow_nan=True, allow_infinity=True),
+    st.booleans(), st.text(max_size=12), st.datetimes(), st.dates(), st.times(),
+)
+_values = st.recursive(
+    _scalars, lambda inner: st.one_of(st.lists(inner, max_size=4), st.dictionaries(st.text(max_size=6), inner,
+                                                                                   max_size=3)),
+    max_leaves=8,
+)
+
+
+def _or_noise(good: st.SearchStrategy) -> st.SearchStrategy:
+    """Mostly plausible values (so documents get past the first check), sometimes anything at all."""
+    return st.sampled_from([True] * 5 + [False]).flatmap(
+        lambda plausible: good if plausible else _values)
+
+
+_num = st.one_of(st.floats(-10, 10), st.integers(-10, 10), st.floats(allow_nan=True, allow_infinity=True),
+                 st.booleans(), st.integers(min_value=-(2**70), max_value=2**70))
+_vector = st.lists(_or_noise(_num), min_size=0, max_size=4)
+_extra = st.sampled_from([False] * 9 + [True]).flatmap(
+    lambda extra: st.dictionaries(st.text(max_size=8), _values, min_size=1, max_size=1) if extra else st.just({}))
+_sources = {
+    "paper": _or_noise(st.sampled_from(["mug", "cone", "sphere"])),
+    "mesh": _or_noise(st.sampled_from(["a.stl", "", "../", "/", "x\x00y"])),
+    "cloud": _or_noise(st.sampled_from(["c.ply", "."])),
+    "primitive": _or_noise(st.fixed_dictionaries(
+        {"type": _or_noise(st.sampled_from(["box", "sphere", "torus", "cone"]))},
+        optional={"size": st.lists(_or_noise(st.floats(0.01, 1)), min_size=1, max_size=3)})),
+}
+_objects = st.sampled_from(["paper", "primitive", "primitive", "primitive", "mesh", "cloud"]).flatmap(
+    lambda source: st.fixed_dictionaries(
+        {"id": _or_noise(st.sampled_from(["mug", "a", "b-2", "bad id", ""])), source: _sources[source]},
+        optional={
+            "units": _or_noise(st.sampled_from(["m", "cm", "mm", "km"])),
+            "material": _or_noise(st.sampled_from(["steel", "ceramic", "cheese"])),
+            "density": _or_noise(_num),
+            "position": _or_noise(st.lists(_num, min_size=2, max_size=3)),
+            "rotation_deg": _or_noise(st.lists(_num, min_size=3, max_size=3)),
+            "points": _or_noise(st.one_of(st.integers(-10, 10**8), st.floats())),
+        },
+    )
+).flatmap(lambda o: _extra.map(lambda e: {**o, **e}))
+_docs = st.fixed_dictionaries(
+    {"name": _or_noise(st.just("scene"))},
+    optional={
+        "table": _or_noise(st.fixed_dictionaries({}, optional={"size": st.lists(_num, min_size=3, max_size=3), "height": _num,
+                                                              "material": _or_noise(st.just("wood_oak"))})),
+        "end_effector": _or_noise(st.fixed_dictionaries({}, optional={"radius": _num,
+                                                                            "position": st.lists(_num, min_size=3, max_size=3)})),
+        "objects": _or_noise(st.lists(_or_noise(_objects), max_size=3)),
+    },
+).flatmap(lambda d: _extra.map(lambda e: {**d, **e}))
+
+
+@settings(max_examples=400, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(doc=_docs)
+def test_random_documents_raise_nothing_but_scene_error(doc, tmp_path_factory):
+    base = tmp_path_factory.getbasetemp()
+    try:
+        spec = parse_scene(doc, base=base)
+    except SceneError as exc:
+        assert "\n" not in str(exc)
+        return
+    # What parses is clean: finite floats everywhere the model will read them.
+    for obj in spec.objects:
+        assert all(math.isfinite(x) for x in (*obj.position, *obj.rotation_deg))
+        assert isinstance(obj.points, int) and not isinstance(obj.points, bool)
+    if spec.table is not None:
+        assert all(math.isfinite(x) and x > 0 for x in (*spec.table.size, spec.table.height))
