@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import math
 import sys
 import time
 from collections.abc import Callable
@@ -28,12 +29,88 @@ def main(argv: list[str] | None = None) -> int:
     )
     handler: Callable[[argparse.Namespace], int] = args.handler
     try:
+        check_args(args)  # before any work: a bad number should not cost a build
         return handler(args)
     except TwinError as exc:
         print(f"twin {args.command}: error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except KeyboardInterrupt:
         return 130
+
+
+#: The loop's ceiling: one step of the smallest scene takes ~10 us, so faster asks only queue work (1e9 Hz grew
+#: memory without bound).
+MAX_RATE_HZ = 100_000.0
+
+#: Numeric options: attribute -> (flag, lowest allowed, whether the lowest itself is allowed, highest).
+_NUMBERS: dict[str, tuple[str, float, bool, float]] = {
+    "duration": ("--duration", 0.0, False, math.inf),
+    "rate": ("--rate", 0.0, False, MAX_RATE_HZ),
+    "stale_after": ("--stale-after", 0.0, False, math.inf),
+    "deadband_mm": ("--deadband-mm", 0.0, True, math.inf),
+    "deadband_deg": ("--deadband-deg", 0.0, True, math.inf),
+    "rerun_rate": ("--rerun-rate", 0.0, False, math.inf),
+    "threshold": ("--threshold", 0.0, False, math.inf),
+    "density": ("--density", 0.0, False, math.inf),
+}
+
+
+def check_args(args: argparse.Namespace) -> None:
+    """Refuse option values no command can use, before the command does any work.
+
+    Raises:
+        TwinError: a non-finite or out-of-range number, a non-finite --viewpoint, or a --rerun save path
+            whose folder does not exist or cannot be written.
+    """
+    for attr, (flag, low, low_ok, high) in _NUMBERS.items():
+        value = getattr(args, attr, None)
+        if value is None:
+            continue
+        if not math.isfinite(value):
+            raise TwinError(f"{flag} must be a finite number, got {value}")
+        if value < low or (value == low and not low_ok) or value > high:
+            bounds = f"{'>=' if low_ok else '>'} {low:g}" + (f" and <= {high:g}" if math.isfinite(high) else "")
+            raise TwinError(f"{flag} must be {bounds}, got {value:g}")
+    if getattr(args, "viewpoint", None) is not None and not all(math.isfinite(x) for x in args.viewpoint):
+        raise TwinError(f"--viewpoint must be three finite numbers, got {args.viewpoint}")
+    if getattr(args, "points", None) is not None and args.points < 100:
+        raise TwinError(f"--points must be at least 100, got {args.points}")
+    rerun = getattr(args, "rerun", None)
+    if rerun and rerun[0] == "save" and len(rerun) == 2:
+        _check_writable_file(Path(rerun[1]), "--rerun save")
+
+
+def _check_writable_file(path: Path, flag: str) -> None:
+    """``path`` can be created: its folder exists and a probe file can be written there (and is removed)."""
+    import tempfile
+
+    if path.is_dir():
+        raise TwinError(f"{flag}: {path} is a folder, not a file")
+    folder = path.parent
+    if not folder.is_dir():
+        raise TwinError(f"{flag}: folder {folder} does not exist")
+    try:  # a real write: permission bits say nothing for root or read-only mounts
+        with tempfile.NamedTemporaryFile(dir=folder, prefix=".twin-probe-"):
+            pass
+    except OSError as exc:
+        raise TwinError(f"{flag}: cannot write in {folder} ({exc.strerror or exc})") from None
+
+
+def to_json(record: object) -> str:
+    """``record`` as strict JSON: NaN and infinities become null, never the invalid ``NaN`` token."""
+
+    def clean(x: object) -> object:
+        if isinstance(x, dict):
+            return {k: clean(v) for k, v in x.items()}
+        if isinstance(x, list | tuple):
+            return [clean(v) for v in x]
+        if hasattr(x, "item") and hasattr(x, "dtype") and getattr(x, "ndim", None) == 0:
+            x = x.item()  # numpy scalars
+        if isinstance(x, float) and not math.isfinite(x):
+            return None
+        return x
+
+    return json.dumps(clean(record), allow_nan=False)
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -131,7 +208,7 @@ def _cmd_estimate(args: argparse.Namespace) -> int:
         rlog.estimate(args.cloud.stem, result, cloud.points)
     record = estimate_to_json(result, seconds)
     if args.json:
-        print(json.dumps(record))
+        print(to_json(record))
     else:
         _print_estimate(record)
     return 0
@@ -313,7 +390,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
                       "wall_s": stats.wall, "objects": len(twin.object_ids()),
                       "ee_force_n": twin.end_effector_force().tolist() if twin.model.nmocap else None}
     if args.json:
-        print(json.dumps(record))
+        print(to_json(record))
     else:
         print(f"{record['steps']} loop iterations at {args.rate:g} Hz over {stats.wall:.2f} s wall: "
               f"step p50 {record['step_p50_ms']:.3f} ms, p99 {record['step_p99_ms']:.3f} ms, "
@@ -443,7 +520,7 @@ def _run_local(args: argparse.Namespace, rlog) -> None:  # type: ignore[no-untyp
                   "dropped_malformed": c.dropped_malformed, "stale_events": r.stale_events,
                   "snaps": r.snaps, "holds": r.holds,
                   "step_p99_ms": stats.p99 * 1e3, "missed_deadlines": stats.missed}
-        print(json.dumps(record) if args.json else "  ".join(f"{k} {v}" for k, v in record.items()))
+        print(to_json(record) if args.json else "  ".join(f"{k} {v}" for k, v in record.items()))
         local.close()
     finally:
         session.close()
@@ -463,7 +540,7 @@ def _cmd_demo(args: argparse.Namespace) -> int:
                           zenoh_config=None if args.zenoh_config is None else str(args.zenoh_config), rlog=rlog,
                           hold=args.hold)
     if args.json:
-        print(json.dumps(record))
+        print(to_json(record))
     return 0
 
 

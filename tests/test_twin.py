@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -204,8 +205,12 @@ def test_cli_build_and_run(small_scene, tmp_path, capsys):
     assert main(["build", str(small_scene), "--out", str(out)]) == 0  # its own earlier output is replaced
     capsys.readouterr()
     assert main(["run", str(out), "--duration", "0.2", "--no-realtime", "--json"]) == 0
-    record = json.loads(capsys.readouterr().out)
+    record = json.loads(capsys.readouterr().out, parse_constant=_no_constants)  # strict JSON: no NaN
     assert record["steps"] == 200 and record["objects"] == 2 and record["step_p99_ms"] > 0
+
+
+def _no_constants(name: str) -> None:
+    raise AssertionError(f"{name} in JSON output")
 
 
 def test_cli_build_bad_scene_leaves_nothing(tmp_path, capsys):
@@ -243,6 +248,59 @@ def test_cli_viewer_without_display(small_scene, monkeypatch, capsys):
     monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
     assert main(["run", str(small_scene), "--viewer", "--duration", "0.1"]) == 2
     assert "needs a display" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["run", str(SMALL), "--rate", "1e9"], r"--rate must be > 0 and <= 100000, got 1e\+09"),
+        (["run", str(SMALL), "--rate", "nan"], r"--rate must be a finite number, got nan"),
+        (["run", str(SMALL), "--rate", "0"], r"--rate must be > 0 and <= 100000, got 0"),
+        (["run", str(SMALL), "--rate=-inf"], r"--rate must be a finite number, got -inf"),
+        (["run", str(SMALL), "--duration", "nan"], r"--duration must be a finite number, got nan"),
+        (["run", str(SMALL), "--duration", "inf"], r"--duration must be a finite number, got inf"),
+        (["run", str(SMALL), "--duration", "-0.5"], r"--duration must be > 0, got -0.5"),
+        (["run", str(SMALL), "--threshold", "nan"], r"--threshold must be a finite number"),
+        (["demo", "--duration", "nan"], r"--duration must be a finite number, got nan"),
+        (["remote", str(SMALL), "--duration", "-1"], r"--duration must be > 0, got -1"),
+        (["remote", str(SMALL), "--deadband-mm", "nan"], r"--deadband-mm must be a finite number"),
+        (["remote", str(SMALL), "--points", "0"], r"--points must be at least 100, got 0"),
+        (["local", "--duration", "0"], r"--duration must be > 0, got 0"),
+        (["local", "--stale-after", "inf"], r"--stale-after must be a finite number, got inf"),
+        (["estimate", str(SMALL), "--density", "nan"], r"--density must be a finite number, got nan"),
+        (["estimate", str(SMALL), "--viewpoint", "0", "nan", "0"], r"--viewpoint must be three finite numbers"),
+        (["run", str(SMALL), "--rerun-rate", "0"], r"--rerun-rate must be > 0, got 0"),
+        (["run", str(SMALL), "--rerun", "save", "/proc/twin.rrd"], r"--rerun save: cannot write in /proc"),
+        (["run", str(SMALL), "--rerun", "save", "/no/such/dir/twin.rrd"],
+         r"--rerun save: folder /no/such/dir does not exist"),
+    ],
+)
+def test_cli_refuses_bad_numbers_and_paths_with_one_line(argv, message, capsys):
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith(f"twin {argv[0]}: error: ")
+    assert re.search(message, err), err
+
+
+def test_cli_rerun_save_to_an_unwritable_place_fails_before_any_work(small_scene, tmp_path, capsys):
+    out = tmp_path / "built"
+    folder = tmp_path / "a-folder.rrd"
+    folder.mkdir()
+    for target in ("/proc/twin.rrd", str(folder)):
+        assert main(["build", str(small_scene), "--out", str(out), "--cache-dir", str(tmp_path / "coacd"),
+                     "--rerun", "save", target]) == 2
+        assert "--rerun save" in capsys.readouterr().err
+    assert not out.exists() and not (tmp_path / "coacd").exists()  # nothing built, nothing cached
+    assert list(folder.iterdir()) == []  # the write probe cleans up after itself
+
+
+def test_cli_json_is_strict():
+    from cli.main import to_json
+
+    text = to_json({"a": float("nan"), "b": [float("inf"), 1.5, -float("inf")], "c": np.float64("nan"),
+                    "d": np.int64(3), "e": (np.float32(0.5),)})
+    assert json.loads(text) == {"a": None, "b": [None, 1.5, None], "c": None, "d": 3, "e": [0.5]}
+    assert "NaN" not in text and "Infinity" not in text
 
 
 def test_paced_loop_statistics(built):
