@@ -64,7 +64,7 @@ def main() -> None:
         table.add_row(name, str(a["objects"]), f"{a['setup_s']:.1f}", f"{a['run_s']:.2f}",
                       f"{a['sim_s'] / a['run_s']:.1f}", "yes" if same else "NO", f"{a['max_gap_mm']:.1f}",
                       f"{a['messages']:,}", f"{a['bytes']:,}")
-    Console().print(table)
+    Console(width=160).print(table)
 
 
 if __name__ == "__main__":

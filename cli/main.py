@@ -144,7 +144,10 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--duration", type=float, default=5.0, help="simulated seconds (default 5)")
     p.add_argument("--rate", type=float, default=1000.0, help="loop rate, Hz (default 1000)")
     p.add_argument("--viewer", action="store_true", help="open MuJoCo's passive viewer (needs a display)")
-    p.add_argument("--script", type=Path, help="end-effector trajectory CSV: t,x,y,z (s, m); default: a push")
+    p.add_argument("--script", type=Path, help="end-effector trajectory CSV: rows t,x,y,z (seconds, increasing; "
+                                               "metres, world frame), an optional header row t,x,y,z, '#' "
+                                               "comments; linear between rows, held after the last; "
+                                               "default: a push")
     p.add_argument("--no-realtime", action="store_true", help="run as fast as possible")
     p.add_argument("--json", action="store_true")
     _coacd_options(p)
@@ -349,22 +352,12 @@ def _load_twin(args: argparse.Namespace):  # type: ignore[no-untyped-def]
 def _trajectory(args: argparse.Namespace, twin):  # type: ignore[no-untyped-def]
     import numpy as np
 
-    from twin.trajectory import push_trajectory
+    from twin.trajectory import load_trajectory, push_trajectory
 
     if args.script is None:
         start = twin.data.mocap_pos[0].copy() if twin.model.nmocap else np.zeros(3)
         return push_trajectory(start, start + np.array([1.0, 0.0, -0.15]), max(args.duration, 1e-3))
-    try:
-        table = np.loadtxt(args.script, delimiter=",", ndmin=2)
-    except (OSError, ValueError) as exc:
-        raise TwinError(f"{args.script}: cannot read trajectory ({exc})") from exc
-    if table.shape[1] != 4 or not np.isfinite(table).all() or np.any(np.diff(table[:, 0]) <= 0):
-        raise TwinError(f"{args.script}: expected finite rows t,x,y,z with increasing t")
-
-    def at(t: float):  # type: ignore[no-untyped-def]
-        return np.array([np.interp(t, table[:, 0], table[:, i]) for i in (1, 2, 3)])
-
-    return at
+    return load_trajectory(args.script)
 
 
 def _cmd_run(args: argparse.Namespace) -> int:

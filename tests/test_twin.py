@@ -355,3 +355,15 @@ def test_a_live_edit_that_does_not_compile_is_rolled_back_and_the_twin_runs_on(b
             twin.add(bad)  # synchronous edits raise, and also leave the twin as it was
         assert sorted(twin.object_ids()) == ["can", "crate", "good"]
         twin.step(10)
+
+
+def test_cli_run_script_takes_the_csv_its_help_describes(built, small_scene, tmp_path, capsys):
+    script = tmp_path / "push.csv"
+    script.write_text("t,x,y,z\n0.0,-0.3,0.0,0.53\n0.2,-0.1,0.0,0.53\n")
+    out = tmp_path / "built"
+    assert main(["build", str(small_scene), "--out", str(out)]) == 0
+    assert main(["run", str(out), "--duration", "0.3", "--no-realtime", "--json", "--script", str(script)]) == 0
+    capsys.readouterr()
+    script.write_text("t,x,y,z\n0.0,-0.3,0.0,0.53\n0.0,-0.1,0.0,0.53\n")
+    assert main(["run", str(out), "--duration", "0.3", "--no-realtime", "--script", str(script)]) == 2
+    assert "increas" in capsys.readouterr().err
