@@ -264,6 +264,24 @@ def test_objects_appearing_and_vanishing_remotely_follow_in_the_twin(remote, end
         close_local(local)
 
 
+def test_a_killed_estimation_worker_is_replaced_and_the_twin_runs_on(remote, endpoint, tmp_path_factory):
+    from scenes.scenefile import ObjectSpec
+
+    local = _local(endpoint, tmp_path_factory)
+    try:
+        wait_objects(local, 2)
+        for proc in list(local._pool._processes.values()):  # out of memory, or killed by hand
+            proc.kill()
+            proc.join(timeout=10)
+        r = remote.remote
+        r.add(ObjectSpec(id="ball", source="primitive", value={"type": "sphere", "size": [0.03]},
+                         material="rubber", position=(-0.2, -0.15), points=6000)).result(timeout=60)
+        wait_objects(local, 3)
+        assert sorted(local.objects) == ["ball", "can", "crate"]
+    finally:
+        close_local(local)
+
+
 def test_the_scene_can_be_moved_from_another_thread_while_the_remote_steps(remote):
     # MuJoCo releases the GIL inside mj_step: a set_pose from this thread used to run mj_forward on the
     # remote's mjData during a step of its loop thread, and crashed the process within seconds.

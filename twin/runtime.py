@@ -383,7 +383,12 @@ class Local:
         """Estimate a cloud: in a worker process, or here and now when there are no workers."""
         args = (encode(msg), self.settings.coacd, self.settings.cache_dir, self.rlog.enabled)
         if self._pool is not None:
-            return self._pool.submit(build_from_cloud, *args)
+            try:
+                return self._pool.submit(build_from_cloud, *args)
+            except BrokenProcessPool:  # a worker died while idle: the pool refuses work until replaced
+                log.error("the estimation worker pool broke; starting a new one")
+                self._pool = self._new_pool()
+                return self._pool.submit(build_from_cloud, *args)
         future: Future = Future()
         try:
             future.set_result(build_from_cloud(*args))
