@@ -32,7 +32,9 @@ def _remote_main(scene_path: str, endpoint: str, zenoh_config: str | None, ready
     from scenes.remote import Remote
     from scenes.scenefile import load_scene
     from sync.zenoh_transport import ZenohTransport, make_config, open_session
+    from twin.workers import die_with_parent
 
+    die_with_parent()  # a killed demo must not leave its remote listening
     session = open_session(make_config(listen=[endpoint], config_file=zenoh_config))
     try:
         remote = Remote(load_scene(scene_path), ZenohTransport(session))

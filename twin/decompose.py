@@ -20,6 +20,8 @@ from pathlib import Path
 
 import numpy as np
 
+from twin.workers import die_with_parent
+
 log = logging.getLogger(__name__)
 
 Hull = tuple[np.ndarray, np.ndarray]  # vertices (v, 3) metres, faces (f, 3) int
@@ -118,7 +120,8 @@ def decompose_many(
             import multiprocessing as mp
 
             # spawn: CoACD and MuJoCo hold threads; forking them is not safe.
-            with ProcessPoolExecutor(workers, mp_context=mp.get_context("spawn")) as pool:
+            with ProcessPoolExecutor(workers, mp_context=mp.get_context("spawn"),
+                                     initializer=die_with_parent) as pool:
                 futures = {pool.submit(_decompose, *meshes[i], settings, cache, verified_miss=True): i
                            for i in misses}
                 for future, i in futures.items():

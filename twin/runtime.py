@@ -54,6 +54,7 @@ from twin.objects import DEFAULT_FRICTION, TwinObject, object_at_estimate
 from twin.poses import angle_deg, blend, quat_conj, quat_mul, rotation
 from twin.sim import Twin
 from twin.trajectory import Trajectory
+from twin.workers import die_with_parent
 
 log = logging.getLogger(__name__)
 
@@ -74,6 +75,8 @@ class LocalSettings:
         workers: processes estimating clouds; 0 estimates and compiles in the loop's own thread
             (headless runs: slower per object, but deterministic).
         hold: when an undisturbed object is pinned to the remote's pose (:mod:`twin.hold`).
+        mass_scale: every estimate's density is multiplied by this, so mass and inertia scale together
+            (the experiments' stand-in for a wrong mass estimate; 1: the estimate as it is).
     """
 
     stale_after: float = 1.0
@@ -85,6 +88,7 @@ class LocalSettings:
     hold: HoldSettings = DEFAULT_HOLD
     coacd: CoacdSettings = DEFAULT_SETTINGS
     cache_dir: Path | None = None
+    mass_scale: float = 1.0
 
 
 DEFAULT_LOCAL = LocalSettings()
@@ -117,7 +121,7 @@ DIVERGENCE_EVERY = 0.01
 
 
 def build_from_cloud(data: bytes, coacd: CoacdSettings, cache_dir: Path | None,
-                     display: bool = False) -> tuple[TwinObject, np.ndarray | None]:
+                     display: bool = False, mass_scale: float = 1.0) -> tuple[TwinObject, np.ndarray | None]:
     """Worker-process job: a cloud message's bytes -> a twin object at the estimated place.
 
     With ``display``, also a subset of the cloud (world frame at capture) for the rerun view, so the
@@ -126,6 +130,7 @@ def build_from_cloud(data: bytes, coacd: CoacdSettings, cache_dir: Path | None,
     msg = decode(data)
     assert isinstance(msg, Cloud)
     density, mat = resolve_density(msg.material, msg.density)  # an unknown material raises: no guess
+    density *= mass_scale  # uniform density: mass and inertia scale together
     points = unpack_points(msg)
     est = estimate(make_cloud(points), density, material=None if mat is None else mat.name)
     friction = DEFAULT_FRICTION if mat is None else mat.friction
@@ -377,11 +382,13 @@ class Local:
     def _new_pool(self) -> ProcessPoolExecutor | None:
         if self.settings.workers == 0:
             return None
-        return ProcessPoolExecutor(self.settings.workers, mp_context=mp.get_context("spawn"))
+        return ProcessPoolExecutor(self.settings.workers, mp_context=mp.get_context("spawn"),
+                                   initializer=die_with_parent)
 
     def _submit(self, msg: Cloud) -> Future:
         """Estimate a cloud: in a worker process, or here and now when there are no workers."""
-        args = (encode(msg), self.settings.coacd, self.settings.cache_dir, self.rlog.enabled)
+        args = (encode(msg), self.settings.coacd, self.settings.cache_dir, self.rlog.enabled,
+                self.settings.mass_scale)
         if self._pool is not None:
             try:
                 return self._pool.submit(build_from_cloud, *args)
