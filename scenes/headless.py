@@ -13,6 +13,7 @@ for bit, and the session runs as fast as the two simulations step.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import replace
 from pathlib import Path
 
@@ -24,6 +25,7 @@ from scenes.sensing import Sensor
 from sync.clock import SimClock
 from sync.inprocess import InProcessBus
 from sync.netem import LinkModel, Network
+from sync.recording import Recorder, RecordingTransport
 from twin.runtime import DEFAULT_LOCAL, Local, LocalSettings
 from twin.trajectory import Trajectory
 
@@ -39,12 +41,21 @@ class Headless:
     remote); their counters are ``self.uplink.stats`` and ``self.downlink.stats`` (None: no link that way).
     The twin's late-join query is answered at once (see :mod:`sync.inprocess`); what the remote published
     before the twin joined still crosses the link and arrives as stale duplicates.
+
+    ``record`` (an ``.mcap`` path) records the session (:mod:`sync.recording`): both sides' wire
+    messages, the operator's targets and force, and the remote's true poses, on the simulated clock;
+    the file is finished by :meth:`close`. ``record_metadata`` adds entries to its session metadata.
     """
 
     def __init__(self, scene: SceneSpec, *, settings: LocalSettings = DEFAULT_LOCAL,
                  sensor: Sensor | None = None, cache_dir: Path | None = None, network: Network | None = None,
+                 record: str | Path | None = None, record_metadata: dict[str, object] | None = None,
                  **remote_options: object) -> None:
         self.clock = SimClock()
+        self.recorder = None if record is None else Recorder(record, clock=self.clock, metadata={
+            **scene_metadata(scene), "side": "both", "command": "headless",
+            "network": None if network is None else dataclasses.asdict(network),
+            "seeds": {"network": None if network is None else network.seed}, **(record_metadata or {})})
         self.uplink, self.downlink = (None, None) if network is None else network.models()
         links: dict[tuple[str, str], LinkModel] = {}
         if self.uplink is not None:
@@ -52,10 +63,14 @@ class Headless:
         if self.downlink is not None:
             links["remote", "twin"] = self.downlink
         self.bus = InProcessBus(self.clock, links)
-        self.remote = Remote(scene, self.bus.transport("remote"), clock=self.clock, sensor=sensor,
-                             cache_dir=cache_dir, **remote_options)  # type: ignore[arg-type]
+        remote_side, twin_side = self.bus.transport("remote"), self.bus.transport("twin")
+        if self.recorder is not None:
+            remote_side = RecordingTransport(remote_side, self.recorder, "remote")  # type: ignore[assignment]
+            twin_side = RecordingTransport(twin_side, self.recorder, "twin")  # type: ignore[assignment]
+        self.remote = Remote(scene, remote_side, clock=self.clock, sensor=sensor, cache_dir=cache_dir,
+                             recorder=self.recorder, **remote_options)  # type: ignore[arg-type]
         self.dt = float(self.remote.twin.model.opt.timestep)
-        self.local = Local(self.bus.transport("twin"), clock=self.clock, scene=scene.name,
+        self.local = Local(twin_side, clock=self.clock, scene=scene.name, recorder=self.recorder,
                            settings=replace(settings, workers=0, cache_dir=cache_dir or settings.cache_dir))
         if self.local.twin.model.opt.timestep != self.dt:
             raise ValueError("remote and twin step at different rates")  # pragma: no cover
@@ -89,3 +104,13 @@ class Headless:
     def close(self) -> None:
         self.local.close()
         self.remote.close()
+        if self.recorder is not None:
+            self.recorder.close(twin_time_s=self.local.twin.time)
+
+
+def scene_metadata(scene: SceneSpec) -> dict[str, object]:
+    """What a recording needs to rebuild ``scene``: its name, its file's text and folder (mesh and cloud
+    paths in it are relative to that folder); an in-memory scene has no text (replay it with a file)."""
+    text = "" if scene.path is None else Path(scene.path).read_text(encoding="utf-8")
+    folder = "" if scene.path is None else str(Path(scene.path).resolve().parent)
+    return {"scene_name": scene.name, "scene_toml": text, "scene_dir": folder}

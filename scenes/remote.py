@@ -26,6 +26,7 @@ from sync.clock import REAL_CLOCK, Clock
 from sync.keys import Keys
 from sync.link import Link
 from sync.messages import VERSION, Gone, Heartbeat, OperatorCommand, Pose, SceneInfo, cloud_message
+from sync.recording import Recorder
 from sync.transport import Transport
 from twin.debuglog import OFF, DebugLog
 from twin.loop import LoopStats, run_loop
@@ -74,8 +75,9 @@ class Remote:
                  sensor: Sensor | None = None, deadband: Deadband = Deadband(), points: int | None = None,
                  heartbeat_s: float = 0.2, cache_dir: Path | None = None, progress: bool = False,
                  publish: bool = True, keyframe_s: float = 1.0, settle_s: float = 3.0, epoch: int | None = None,
-                 rlog: DebugLog = OFF) -> None:
+                 rlog: DebugLog = OFF, recorder: Recorder | None = None) -> None:
         self.scene = scene
+        self.recorder = recorder  # gets the true poses at its truth rate (wrap the transport to log the wire)
         self.rlog = rlog
         self.clock = clock
         self.sensor: Sensor = sensor if sensor is not None else SurfaceSensor()
@@ -198,6 +200,8 @@ class Remote:
         if self._operator is not None:
             self.twin.set_end_effector(self._operator)
         self.twin.step()
+        if self.recorder is not None and self.recorder.truth_due(self.twin.time):
+            self.recorder.truth(self.twin.time, {i: self.twin.pose(i) for i in self._objects if self.twin.has(i)})
         if self.rlog.due(self.twin.time):
             self.rlog.frame(self.twin, side="remote")
         for object_id in self._objects:

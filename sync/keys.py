@@ -8,6 +8,15 @@ Layout, under ``twin/<scene>/``::
     objects/<id>/gone           Gone: the object left the scene
     remote/heartbeat            Heartbeat: a few times a second, so silence can be told from stillness
     operator/command            OperatorCommand: the operator's end-effector target, local -> remote
+    operator/target             OperatorTarget: a device driver's end-effector target, device -> local twin
+                                (``twin local --operator-topic``)
+    operator/force              OperatorForce: the force the operator should feel, local twin -> device
+                                (newtons, world axes, at the loop rate or ``--force-rate``)
+
+A device driver (a haptic device, a joystick, a script) needs only these two keys and the two message
+types of :mod:`sync.messages`: it publishes ``OperatorTarget`` on ``twin/<scene>/operator/target`` and
+subscribes to ``twin/<scene>/operator/force``. The twin checks every target like any other message
+(finite, within 1 km, then within the scene's workspace) and drops the rest.
 
 Object ids are restricted to ``[A-Za-z0-9_-]`` by the scene format, so they are safe key chunks.
 """
@@ -68,6 +77,16 @@ class Keys:
     @property
     def operator(self) -> str:
         return f"{self.root}/operator/command"
+
+    @property
+    def operator_target(self) -> str:
+        """Where a device driver publishes :class:`sync.messages.OperatorTarget` for the twin to follow."""
+        return f"{self.root}/operator/target"
+
+    @property
+    def operator_force(self) -> str:
+        """Where the twin publishes :class:`sync.messages.OperatorForce`, the force to render."""
+        return f"{self.root}/operator/force"
 
     def parse_object(self, key: str) -> tuple[str, str] | None:
         """(object id, kind) of an object key of this scene, else None."""

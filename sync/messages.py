@@ -127,10 +127,68 @@ class OperatorCommand(_Msg, tag="operator"):
     position: tuple[float, float, float]
 
 
-Message = SceneInfo | Cloud | Pose | Gone | Heartbeat | OperatorCommand
+class OperatorTarget(_Msg, tag="target"):
+    """Where a device driver wants the end effector: published on ``twin/<scene>/operator/target``.
+
+    Fields (msgpack array, in this order, after the tag ``"target"``): ``v`` (:data:`VERSION`),
+    ``stamp_ns`` (the driver's clock), ``device`` (the driver's id, ``[A-Za-z0-9_-]{1,64}``), ``epoch``
+    (fixed for one run of the driver, e.g. its start time in ns), ``seq`` (counting up within the epoch),
+    ``position`` (x, y, z: metres, world frame of the scene). Example, in Python::
+
+        encode(OperatorTarget(v=VERSION, stamp_ns=time.time_ns(), device="haptic0", epoch=t0, seq=n,
+                              position=(0.1, 0.0, 0.55)))
+
+    The twin takes the newest ``(epoch, seq)`` of each device and drops older ones; a target that is not
+    finite, beyond :data:`MAX_COORDINATE`, or outside the scene's workspace is dropped and counted.
+    """
+
+    device: str
+    epoch: int
+    seq: int
+    position: tuple[float, float, float]
+
+
+class OperatorForce(_Msg, tag="force"):
+    """The force the operator should feel, from the twin: published on ``twin/<scene>/operator/force``.
+
+    ``force`` is the net contact force the scene exerts on the end effector (newtons, world axes; zero in
+    free space), ``position`` where the twin's end effector is (metres, world frame), ``sim_time`` the
+    twin's time (seconds); ``epoch``/``seq`` order them as for every ordered message.
+    """
+
+    epoch: int
+    seq: int
+    sim_time: float
+    force: tuple[float, float, float]
+    position: tuple[float, float, float]
+
+
+Message = SceneInfo | Cloud | Pose | Gone | Heartbeat | OperatorCommand | OperatorTarget | OperatorForce
 
 _encoder = msgspec.msgpack.Encoder()
 _decoder = msgspec.msgpack.Decoder(Message)
+
+
+class _Head(msgspec.Struct, array_like=True):
+    """The leading fields every message shares (tag, version, stamp); the rest is skipped unread."""
+
+    t: str
+    v: int
+    stamp_ns: int
+
+
+_head_decoder = msgspec.msgpack.Decoder(_Head)
+
+
+def peek_stamp(data: bytes) -> int | None:
+    """The sender's ``stamp_ns`` of an encoded message, without checking the rest; None if unreadable.
+
+    For recordings: the send time of a received message, whatever else is wrong with it.
+    """
+    try:
+        return _head_decoder.decode(data).stamp_ns
+    except (msgspec.DecodeError, msgspec.ValidationError):
+        return None
 
 
 def encode(msg: Message) -> bytes:
@@ -209,8 +267,13 @@ def _check(msg: Message) -> None:
         _unit(msg, msg.quat)
     elif isinstance(msg, Cloud):
         _check_cloud(msg)
-    elif isinstance(msg, OperatorCommand):
+    elif isinstance(msg, OperatorCommand | OperatorTarget):
+        if isinstance(msg, OperatorTarget) and not valid_id(msg.device):
+            raise MessageError("bad-id", f"device {msg.device[:80]!r} is not a key chunk ([A-Za-z0-9_-], 1-64)")
         _finite(msg, msg.position)
+        _coordinates(msg, msg.position)
+    elif isinstance(msg, OperatorForce):
+        _finite(msg, msg.force, msg.position, (msg.sim_time,))
         _coordinates(msg, msg.position)
     elif isinstance(msg, Heartbeat):
         _finite(msg, (msg.sim_time,))

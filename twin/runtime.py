@@ -20,6 +20,7 @@ from __future__ import annotations
 import logging
 import multiprocessing as mp
 import queue
+from collections import Counter
 from concurrent.futures import Future, ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass, field, replace
@@ -38,12 +39,15 @@ from sync.messages import (
     Gone,
     Heartbeat,
     OperatorCommand,
+    OperatorForce,
+    OperatorTarget,
     Pose,
     SceneInfo,
     decode,
     encode,
     unpack_points,
 )
+from sync.recording import Recorder
 from sync.transport import Transport
 from twin.debuglog import OFF, DebugLog, display_subset
 from twin.decompose import DEFAULT_SETTINGS, CoacdSettings
@@ -94,6 +98,31 @@ class LocalSettings:
 DEFAULT_LOCAL = LocalSettings()
 
 
+@dataclass(frozen=True)
+class OperatorSettings:
+    """The operator's device on the wire: targets in, force out (keys in :mod:`sync.keys`).
+
+    Attributes:
+        listen: follow :class:`sync.messages.OperatorTarget` messages on ``operator/target`` (a device
+            driver) whenever :meth:`Local.iterate` is given no trajectory; newest ``(epoch, seq)`` per
+            device wins, the latest of any device is applied.
+        force_rate: :class:`sync.messages.OperatorForce` messages per second of twin time on
+            ``operator/force``; 0 publishes none. At or above the loop rate: one per step.
+        reach: how far beyond the table's edges (and above its top) a target may be, metres; without a
+            table, around the end effector's start. Targets outside are dropped and counted.
+    """
+
+    listen: bool = False
+    force_rate: float = 0.0
+    reach: float = 2.0
+
+
+NO_OPERATOR_IO = OperatorSettings()
+
+#: Slack when comparing twin time with the next force publication: step times are float sums.
+_TIME_SLACK = 1e-6
+
+
 @dataclass
 class LocalReport:
     """What the local side saw. Latencies in seconds."""
@@ -112,6 +141,10 @@ class LocalReport:
     out_of_order: int = 0  # messages older than what the twin already had from the remote
     holds: int = 0  # times an object strayed from the remote's pose on its own and was pinned to it
     snaps: int = 0  # corrections too large to blend in: the object was moved at once
+    operator_targets: int = 0  # device targets taken (OperatorSettings.listen)
+    # reason -> device targets dropped after decoding: "out-of-workspace", "out-of-order", "wrong-type"
+    operator_dropped: Counter = field(default_factory=Counter)
+    forces_sent: int = 0  # OperatorForce messages published
     # id -> |twin - remote| position, metres, every DIVERGENCE_EVERY seconds of twin time while both are known
     divergence: dict[str, list[float]] = field(default_factory=dict)
 
@@ -142,8 +175,11 @@ class Local:
     """The twin C' on a transport. Call :meth:`run` (or :meth:`iterate` from your own loop)."""
 
     def __init__(self, transport: Transport, *, clock: Clock = REAL_CLOCK, scene: str | None = None,
-                 settings: LocalSettings = DEFAULT_LOCAL, wait: float = 10.0, rlog: DebugLog = OFF) -> None:
+                 settings: LocalSettings = DEFAULT_LOCAL, wait: float = 10.0, rlog: DebugLog = OFF,
+                 operator: OperatorSettings = NO_OPERATOR_IO, recorder: Recorder | None = None) -> None:
         self.settings = settings
+        self.operator = operator
+        self.recorder = recorder  # logs the targets applied and the force felt (the transport logs the wire)
         self.rlog = rlog
         self.clock = clock
         self.link = Link(transport, clock)
@@ -152,6 +188,7 @@ class Local:
         self.keys = Keys(info.name)
         self.twin = Twin(_empty_spec(info), background=settings.workers > 0)
         self._floor = info.table_height if info.table_size is not None else 0.0
+        self.workspace = _workspace(info, operator.reach)
         if info.table_size is not None:
             rlog.table(info.table_size, info.table_height)
         self._dropped_seen = 0
@@ -168,9 +205,16 @@ class Local:
         self._sent_operator: np.ndarray | None = None
         self._seq = 0
         self._epoch = clock.stamp_ns()  # of the operator commands this twin sends
+        self.device_target: np.ndarray | None = None  # the latest device target taken (OperatorSettings.listen)
+        self._device_marks: dict[str, tuple[int, int]] = {}
+        self._force_every = None if operator.force_rate <= 0 else 1.0 / operator.force_rate
+        self._next_force = 0.0
+        self._force_seq = 0
         self._pool = self._new_pool()
         self.link.subscribe(self.keys.objects, self._enqueue)
         self.link.subscribe(self.keys.heartbeat, self._enqueue)
+        if operator.listen:
+            self.link.subscribe(self.keys.operator_target, self._enqueue)
         # A late joiner asks for the current scene: every cloud and pose the remote last published.
         self.link.query(self.keys.state, self._enqueue, timeout=wait)
         self._start = clock.now()
@@ -209,21 +253,29 @@ class Local:
             left = deadline - self.clock.now()
 
     def iterate(self, trajectory=None) -> None:  # type: ignore[no-untyped-def]
-        """One loop iteration: handle messages, take finished objects, correct poses, step once."""
+        """One loop iteration: handle messages, take finished objects, correct poses, step once.
+
+        The operator's target is ``trajectory(twin time)`` (None from it: no new target), else with
+        :attr:`OperatorSettings.listen` the latest device target; the end effector stays where it is
+        without either. After the step, the force is published when due (:attr:`OperatorSettings.force_rate`).
+        """
         self._drain()
         self._collect()
         self.twin.poll()
         for object_id in list(self._targets):
             self._correct(object_id)
-        if trajectory is not None and self.twin.has_end_effector:
-            target = np.asarray(trajectory(self.twin.time), dtype=float)
+        target = self._operator_target(trajectory)
+        if target is not None:
             self.twin.set_end_effector(target)
             self._publish_operator(target)
+            if self.recorder is not None:
+                self.recorder.target(self.twin.time, target)
         for object_id in self.hold.apply(self.twin):
             self.report.holds += 1
             if self.rlog.enabled:
                 self.rlog.event(self.twin.time, f"{object_id}: strayed from the remote's pose on its own; held there")
         self.twin.step()
+        self._feedback()
         if self.twin.time >= self._next_sample:
             self._next_sample = self.twin.time + DIVERGENCE_EVERY
             self._sample_divergence()
@@ -290,8 +342,62 @@ class Local:
                                 object_id, mark, now)
                     marks[object_id] = now
 
+    def _operator_target(self, trajectory) -> np.ndarray | None:  # type: ignore[no-untyped-def]
+        if not self.twin.has_end_effector:
+            return None
+        if trajectory is not None:
+            value = trajectory(self.twin.time)
+            return None if value is None else np.asarray(value, dtype=float)
+        return self.device_target
+
+    def _feedback(self) -> None:
+        """Publish (and record) the force the operator should feel, when due."""
+        if not self.twin.has_end_effector:
+            return
+        t = self.twin.time
+        publish = self._force_every is not None and t + _TIME_SLACK >= self._next_force
+        record = self.recorder is not None and self.recorder.force_due(t)
+        if not (publish or record):
+            return
+        force = self.twin.end_effector_force()
+        if record:
+            self.recorder.force(t, force)  # type: ignore[union-attr]
+        if publish:
+            assert self._force_every is not None
+            self._next_force += self._force_every
+            if self._next_force <= t:  # behind (the first publication, or a rate above the loop's): from now
+                self._next_force = t + self._force_every
+            self._force_seq += 1
+            self.report.forces_sent += 1
+            self.link.put(self.keys.operator_force, OperatorForce(
+                v=VERSION, stamp_ns=self.clock.stamp_ns(), epoch=self._epoch, seq=self._force_seq, sim_time=t,
+                force=_float3(force), position=_float3(self.twin.data.mocap_pos[0])))
+
+    def _on_device_target(self, msg) -> None:  # type: ignore[no-untyped-def]
+        """Take a device driver's target if it is one, newer than the last of its device, in the workspace."""
+        dropped = self.report.operator_dropped
+        if not isinstance(msg, OperatorTarget):
+            dropped["wrong-type"] += 1  # e.g. a pose published on the operator key
+            return
+        mark = self._device_marks.get(msg.device)
+        if mark is not None and (msg.epoch, msg.seq) <= mark:
+            dropped["out-of-order"] += 1
+            return
+        position = np.asarray(msg.position, dtype=float)
+        low, high = self.workspace
+        if not (np.all(position >= low) and np.all(position <= high)):
+            dropped["out-of-workspace"] += 1
+            if sum(dropped.values()) <= 10:
+                log.warning("dropped an operator target outside the workspace: %s", position.tolist())
+            return
+        self._device_marks[msg.device] = (msg.epoch, msg.seq)
+        self.device_target = position
+        self.report.operator_targets += 1
+
     def _handle(self, received: float, key: str, msg) -> None:  # type: ignore[no-untyped-def]
-        if isinstance(msg, Heartbeat):
+        if key == self.keys.operator_target:
+            self._on_device_target(msg)
+        elif isinstance(msg, Heartbeat):
             self._on_heartbeat(msg)
         elif isinstance(msg, Pose):
             if not self._newer(self._pose_mark, msg):
@@ -496,6 +602,22 @@ class Local:
         if len(names) > 1:
             raise SyncError(f"several remote scenes answer ({', '.join(names)}); choose one with --scene")
         return found[0]
+
+
+def _workspace(info: SceneInfo, reach: float) -> tuple[np.ndarray, np.ndarray]:
+    """(low, high) corners of the box operator targets must lie in, metres, world frame: ``reach`` beyond
+    the table's edges and above its top, down to the floor; without a table, ``reach`` around the end
+    effector's start."""
+    if info.table_size is None:
+        centre = np.asarray(info.ee_position, dtype=float)
+        return centre - reach, centre + reach
+    half = np.array([info.table_size[0] / 2 + reach, info.table_size[1] / 2 + reach])
+    return np.array([-half[0], -half[1], 0.0]), np.array([half[0], half[1], info.table_height + reach])
+
+
+def _float3(v: np.ndarray) -> tuple[float, float, float]:
+    x, y, z = (float(a) for a in v)
+    return x, y, z
 
 
 def _empty_spec(info: SceneInfo):  # type: ignore[no-untyped-def]

@@ -1,0 +1,461 @@
+"""Recordings of sessions: MCAP files any MCAP tool (Foxglove, ``mcap`` CLI) can open. Not a pickle.
+
+What a recording holds, one MCAP channel per topic:
+
+``/wire/<side>/<sent|received>/<key>``
+    Every wire message one side (``remote`` or ``twin``) put or received on a Zenoh key (or the in-process
+    bus), its bytes as they crossed the wire (message encoding ``msgpack``, no MCAP schema: the layout is
+    :mod:`sync.messages`, format version ``v`` in each message; the channel's metadata names it
+    ``tactile_twin.wire`` with ``side``, ``direction`` and ``key``). ``log_time`` is when this side sent
+    or received it, ``publish_time`` the sender's ``stamp_ns`` inside the message (the send time; for a
+    received message that cannot be parsed, the receive time). Query replies count as sent by the side
+    that answered and received by the side that asked.
+``/operator/target``
+    The end-effector target the twin applied at each loop iteration (JSON, schema
+    ``tactile_twin.OperatorTarget``: ``sim_time`` s of the twin, ``position`` {x, y, z} m, world frame).
+``/operator/force``
+    The force the operator should feel (JSON, ``tactile_twin.OperatorForce``: ``sim_time``, ``force``
+    {x, y, z} N, world axes), decimated to ``truth_rate``.
+``/truth/transforms``
+    Ground truth where the process has it (the remote's true poses), decimated to ``truth_rate`` (JSON,
+    ``foxglove.FrameTransforms``, so Foxglove's 3D panel draws them: frame ``truth/<id>`` in ``world``,
+    origin at the centre of mass; plus ``sim_time``, the remote's time, s).
+
+Plus one MCAP metadata record ``tactile_twin.session`` at the start (``schema_version``, ``tool_version``,
+``clock`` ``real``/``sim``, ``scene_name``, ``scene_toml`` (the scene file's text, "" when the process
+has none), ``scene_dir``, ``seeds`` and ``network`` (JSON), ``side``, ``command``, ``dt``) and
+``tactile_twin.end`` when the recording is closed properly (``messages``, ``duration_s``).
+
+Times are the recording process's clock (:meth:`sync.clock.Clock.stamp_ns`: wall nanoseconds live,
+simulated nanoseconds headless), taken under one lock as each record is queued and never allowed to go
+back, so ``log_time`` is monotonic per channel and across the file. Records are written by one
+background thread (a Zenoh callback only queues); :meth:`Recorder.close` drains and finishes the file.
+
+:func:`read_recording` checks the schema version and reads as far as the file is intact: a torn tail (a
+killed process, a truncated copy) is reported in ``Recording.damage`` with how many records were read,
+and what came before it is kept.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+import queue
+import struct
+import threading
+import zlib
+from collections import Counter
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from estimation.errors import TwinError
+from sync.clock import Clock
+from sync.messages import peek_stamp
+from sync.transport import Answer, OnSample, Transport
+
+log = logging.getLogger(__name__)
+
+#: The layout of recordings this module writes and reads (channels, schemas, metadata keys).
+SCHEMA_VERSION = 1
+
+#: MCAP profile string in the file header.
+PROFILE = "tactile-twin"
+
+#: Ground truth and force samples per simulated (or real) second: 100 Hz shows a push's motion and keeps
+#: a 20-object scene under ~10 KB/s compressed.
+DEFAULT_TRUTH_RATE_HZ = 100.0
+
+#: Uncompressed bytes per MCAP chunk: a torn tail loses at most the chunk being written (the default
+#: 1 MiB would lose seconds of a session).
+CHUNK_BYTES = 64 * 1024
+
+#: Slack when comparing a sampled side's time with the next sample time: step times are float sums
+#: (0.001 added a thousand times is not 1.0), and a microsecond is far below any physics step.
+_TIME_SLACK = 1e-6
+
+WIRE_SCHEMA = "tactile_twin.wire"
+TARGET_TOPIC = "/operator/target"
+FORCE_TOPIC = "/operator/force"
+TRUTH_TOPIC = "/truth/transforms"
+WIRE_PREFIX = "/wire/"
+
+_VEC3 = {"type": "object", "properties": {a: {"type": "number"} for a in "xyz"}, "required": list("xyz")}
+_TIME = {"type": "object", "properties": {"sec": {"type": "integer"}, "nsec": {"type": "integer"}}}
+_SCHEMAS: dict[str, tuple[str, dict]] = {
+    TARGET_TOPIC: ("tactile_twin.OperatorTarget", {
+        "type": "object", "title": "end-effector target applied by the twin (metres, world frame)",
+        "properties": {"sim_time": {"type": "number", "description": "twin time, s"}, "position": _VEC3},
+        "required": ["sim_time", "position"]}),
+    FORCE_TOPIC: ("tactile_twin.OperatorForce", {
+        "type": "object", "title": "net contact force on the end effector (newtons, world axes)",
+        "properties": {"sim_time": {"type": "number"}, "force": _VEC3}, "required": ["sim_time", "force"]}),
+    TRUTH_TOPIC: ("foxglove.FrameTransforms", {
+        "type": "object", "title": "foxglove.FrameTransforms (ground truth, centre of mass frames)",
+        "properties": {
+            "sim_time": {"type": "number", "description": "the remote's time, s"},
+            "transforms": {"type": "array", "items": {
+                "type": "object",
+                "properties": {
+                    "timestamp": _TIME, "parent_frame_id": {"type": "string"}, "child_frame_id": {"type": "string"},
+                    "translation": _VEC3,
+                    "rotation": {"type": "object", "properties": {a: {"type": "number"} for a in "xyzw"}},
+                }}}},
+        "required": ["transforms"]}),
+}
+
+
+class RecordingError(TwinError, ValueError):
+    """A recording that cannot be written or read: missing, not MCAP, corrupt, or of another schema."""
+
+
+# -- writing -----------------------------------------------------------------------------------------
+
+
+class Recorder:
+    """Writes one session to an MCAP file. Thread-safe: any thread may log; one thread writes.
+
+    Args:
+        path: the ``.mcap`` file (created or replaced).
+        clock: the session's clock (its ``stamp_ns`` times every record; ``realtime`` names the clock kind).
+        metadata: more ``tactile_twin.session`` entries (``scene_name``, ``scene_toml``, ``seeds``, ...);
+            values are strings, or JSON-encoded when they are not.
+        truth_rate: ground-truth and force samples per second of the sampled side's time.
+
+    Raises:
+        RecordingError: the file cannot be created.
+    """
+
+    def __init__(self, path: str | Path, *, clock: Clock, metadata: Mapping[str, object] | None = None,
+                 truth_rate: float = DEFAULT_TRUTH_RATE_HZ) -> None:
+        from mcap.writer import Writer
+
+        self.path = Path(path)
+        self.clock = clock
+        if not (math.isfinite(truth_rate) and truth_rate > 0):
+            raise RecordingError(f"truth rate must be a positive number of samples per second, got {truth_rate}")
+        self.truth_every = 1.0 / truth_rate
+        try:
+            self._file = open(self.path, "wb")  # closed by close()
+        except OSError as exc:
+            raise RecordingError(f"{self.path}: cannot write a recording ({exc.strerror or exc})") from None
+        self._writer = Writer(self._file, chunk_size=CHUNK_BYTES)
+        self._writer.start(profile=PROFILE, library="tactile-twin")
+        meta = {"schema_version": str(SCHEMA_VERSION), "tool_version": tool_version(),
+                "clock": "real" if clock.realtime else "sim"}
+        meta.update({k: v if isinstance(v, str) else json.dumps(v) for k, v in (metadata or {}).items()})
+        self._writer.add_metadata("tactile_twin.session", meta)
+        self._channels: dict[str, int] = {}
+        self._lock = threading.Lock()
+        self._last_ns = -1
+        self._first_ns: int | None = None
+        self.messages = 0
+        self._next_truth: float | None = None
+        self._next_force: float | None = None
+        self._queue: queue.SimpleQueue = queue.SimpleQueue()
+        self._thread = threading.Thread(target=self._drain, name="recorder", daemon=True)
+        self._thread.start()
+        self._closed = False
+
+    def __enter__(self) -> Recorder:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # what the session logs
+
+    def wire(self, side: str, direction: str, key: str, data: bytes) -> None:
+        """One wire message ``side`` sent or received (``direction``: ``"sent"`` or ``"received"``) on ``key``."""
+        self._log(f"{WIRE_PREFIX}{side}/{direction}/{key}", bytes(data), peek_stamp(data),
+                  {"side": side, "direction": direction, "key": key})
+
+    def target(self, sim_time: float, position: np.ndarray) -> None:
+        """The end-effector target the twin applied at ``sim_time`` (metres, world frame)."""
+        self._json(TARGET_TOPIC, {"sim_time": float(sim_time), "position": _xyz(position)})
+
+    def force_due(self, sim_time: float) -> bool:
+        """Whether a force sample is due at ``sim_time`` (so the caller computes the force only then)."""
+        return self._next_force is None or sim_time + _TIME_SLACK >= self._next_force
+
+    def force(self, sim_time: float, force: np.ndarray) -> None:
+        """The operator's force at ``sim_time`` (newtons, world axes); kept at ``truth_rate``."""
+        if not self.force_due(sim_time):
+            return
+        self._next_force = _next_sample(self._next_force, sim_time, self.truth_every)
+        self._json(FORCE_TOPIC, {"sim_time": float(sim_time), "force": _xyz(force)})
+
+    def truth_due(self, sim_time: float) -> bool:
+        """Whether a ground-truth sample is due at ``sim_time`` (call :meth:`truth` if so)."""
+        return self._next_truth is None or sim_time + _TIME_SLACK >= self._next_truth
+
+    def truth(self, sim_time: float, poses: Mapping[str, tuple[np.ndarray, np.ndarray]]) -> None:
+        """True poses at ``sim_time``: ``{id: (position (3,) m, quaternion (4,) w x y z)}``, world frame."""
+        self._next_truth = _next_sample(self._next_truth, sim_time, self.truth_every)
+        sec, nsec = divmod(round(sim_time * 1e9), 1_000_000_000)
+        self._json(TRUTH_TOPIC, {"sim_time": float(sim_time), "transforms": [
+            {"timestamp": {"sec": sec, "nsec": nsec}, "parent_frame_id": "world", "child_frame_id": f"truth/{i}",
+             "translation": _xyz(p), "rotation": _foxglove_quat(q)} for i, (p, q) in poses.items()]})
+
+    def close(self, **end: object) -> None:
+        """Drain the queue and finish the file (idempotent); ``end`` goes into ``tactile_twin.end``."""
+        if self._closed:
+            return
+        self._closed = True
+        self._queue.put(None)
+        self._thread.join()
+        duration = 0.0 if self._first_ns is None else (self._last_ns - self._first_ns) * 1e-9
+        self._writer.add_metadata("tactile_twin.end", {"messages": str(self.messages), "duration_s": repr(duration),
+                                                       **{k: str(v) for k, v in end.items()}})
+        self._writer.finish()
+        self._file.close()
+
+    # internals
+
+    def _json(self, topic: str, record: dict) -> None:
+        self._log(topic, json.dumps(record, allow_nan=False).encode(), None, None)
+
+    def _log(self, topic: str, data: bytes, publish_ns: int | None, meta: dict[str, str] | None) -> None:
+        if self._closed:
+            return
+        with self._lock:  # the stamp and the queue position are taken together: log_time never goes back
+            now = max(self.clock.stamp_ns(), self._last_ns)
+            self._last_ns = now
+            if self._first_ns is None:
+                self._first_ns = now
+            self.messages += 1
+            self._queue.put((topic, data, now, now if publish_ns is None else publish_ns, meta))
+
+    def _drain(self) -> None:
+        while True:
+            item = self._queue.get()
+            if item is None:
+                return
+            topic, data, log_ns, publish_ns, meta = item
+            try:
+                channel = self._channels.get(topic)
+                if channel is None:
+                    channel = self._channels[topic] = self._register(topic, meta)
+                self._writer.add_message(channel, log_time=log_ns, data=data, publish_time=max(0, publish_ns))
+            except Exception:  # a write error must not kill the thread and leave close() waiting
+                log.exception("writing %s to %s failed", topic, self.path)
+
+    def _register(self, topic: str, meta: dict[str, str] | None) -> int:
+        if topic.startswith(WIRE_PREFIX):
+            return self._writer.register_channel(topic, "msgpack", 0, {"schema": WIRE_SCHEMA, **(meta or {})})
+        name, schema = _SCHEMAS[topic]
+        sid = self._writer.register_schema(name, "jsonschema", json.dumps(schema).encode())
+        return self._writer.register_channel(topic, "json", sid)
+
+
+class RecordingTransport:
+    """A :class:`sync.transport.Transport` that logs what crosses it to a :class:`Recorder`, then passes it on.
+
+    Wraps any transport (Zenoh, in-process); ``side`` names this end in the channel names. The receive
+    callback logs and calls through on the inner transport's thread (logging only queues).
+    """
+
+    def __init__(self, inner: Transport, recorder: Recorder, side: str) -> None:
+        self.inner = inner
+        self.recorder = recorder
+        self.side = side
+
+    def put(self, key: str, data: bytes) -> None:
+        self.recorder.wire(self.side, "sent", key, data)  # first: an in-process put delivers synchronously
+        self.inner.put(key, data)
+
+    def subscribe(self, keyexpr: str, callback: OnSample) -> None:
+        def received(key: str, data: bytes) -> None:
+            self.recorder.wire(self.side, "received", key, data)
+            callback(key, data)
+
+        self.inner.subscribe(keyexpr, received)
+
+    def queryable(self, keyexpr: str, answer: Answer) -> None:
+        def answered(selector: str) -> list[tuple[str, bytes]]:
+            replies = answer(selector)
+            for key, data in replies:
+                self.recorder.wire(self.side, "sent", key, data)
+            return replies
+
+        self.inner.queryable(keyexpr, answered)
+
+    def get(self, selector: str, timeout: float) -> list[tuple[str, bytes]]:
+        replies = self.inner.get(selector, timeout)
+        for key, data in replies:
+            self.recorder.wire(self.side, "received", key, data)
+        return replies
+
+    def close(self) -> None:
+        self.inner.close()
+
+
+# -- reading -----------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Record:
+    """One message of a recording: its channel's topic, times (ns of the recording's clock), bytes."""
+
+    topic: str
+    log_time: int
+    publish_time: int
+    data: bytes
+
+    def json(self) -> dict:
+        return json.loads(self.data)
+
+
+@dataclass(frozen=True)
+class WireRecord:
+    """One wire message: which side, ``sent`` or ``received``, on which key, when (ns), its bytes."""
+
+    side: str
+    direction: str
+    key: str
+    log_time: int
+    publish_time: int
+    data: bytes
+
+
+@dataclass
+class Recording:
+    """What :func:`read_recording` found. ``damage`` is None for a whole file, else what stopped the read."""
+
+    path: Path
+    metadata: dict[str, str]
+    records: list[Record]
+    end: dict[str, str] | None = None
+    damage: str | None = None
+    counts: Counter = field(default_factory=Counter)
+
+    @property
+    def schema_version(self) -> int:
+        return int(self.metadata["schema_version"])
+
+    def topic(self, topic: str) -> list[Record]:
+        return [r for r in self.records if r.topic == topic]
+
+    def wire(self) -> list[WireRecord]:
+        out = []
+        for r in self.records:
+            if r.topic.startswith(WIRE_PREFIX):
+                side, direction, key = r.topic[len(WIRE_PREFIX):].split("/", 2)
+                out.append(WireRecord(side, direction, key, r.log_time, r.publish_time, r.data))
+        return out
+
+    def targets(self) -> tuple[np.ndarray, np.ndarray]:
+        """The operator's targets: (times (n,) float64 s of the twin, positions (n, 3) float64 m, world)."""
+        rows = [r.json() for r in self.topic(TARGET_TOPIC)]
+        times = np.array([row["sim_time"] for row in rows], dtype=np.float64)
+        points = np.array([[row["position"][a] for a in "xyz"] for row in rows], dtype=np.float64).reshape(-1, 3)
+        return times, points
+
+    def truth(self) -> dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]]:
+        """Ground truth per object: (times (n,) s, positions (n, 3) m, quaternions (n, 4) w x y z), world."""
+        rows: dict[str, list[tuple[float, list[float], list[float]]]] = {}
+        for r in self.topic(TRUTH_TOPIC):
+            msg = r.json()
+            for tf in msg["transforms"]:
+                object_id = tf["child_frame_id"].removeprefix("truth/")
+                q = tf["rotation"]
+                rows.setdefault(object_id, []).append(
+                    (msg["sim_time"], [tf["translation"][a] for a in "xyz"], [q["w"], q["x"], q["y"], q["z"]]))
+        return {i: (np.array([t for t, _, _ in v]), np.array([p for _, p, _ in v]), np.array([q for _, _, q in v]))
+                for i, v in rows.items()}
+
+
+def read_recording(path: str | Path) -> Recording:
+    """Read a recording as far as it is intact.
+
+    Args:
+        path: an ``.mcap`` file written by :class:`Recorder`.
+
+    Returns:
+        The recording; ``damage`` says what ended the read early (a torn or corrupt tail: the records
+        before it are kept and ``counts`` says how many of each topic).
+
+    Raises:
+        RecordingError: no such file, not an MCAP file, no ``tactile_twin.session`` metadata before the
+            damage, or a schema version this code does not read.
+    """
+    from mcap.exceptions import McapError
+    from mcap.records import Channel, Message, Metadata
+    from mcap.stream_reader import StreamReader
+
+    path = Path(path)
+    if not path.is_file():
+        raise RecordingError(f"{path}: no such recording")
+    metadata: dict[str, str] | None = None
+    end: dict[str, str] | None = None
+    topics: dict[int, str] = {}
+    records: list[Record] = []
+    damage: str | None = None
+    with open(path, "rb") as f:
+        reader = StreamReader(f, validate_crcs=True, record_size_limit=1 << 30)
+        try:
+            for rec in reader.records:
+                if isinstance(rec, Metadata):
+                    if rec.name == "tactile_twin.session":
+                        metadata = dict(rec.metadata)
+                        _check_version(path, metadata)
+                    elif rec.name == "tactile_twin.end":
+                        end = dict(rec.metadata)
+                elif isinstance(rec, Channel):
+                    topics[rec.id] = rec.topic
+                elif isinstance(rec, Message):
+                    topic = topics.get(rec.channel_id)
+                    if topic is None:
+                        raise McapError(f"message on unknown channel {rec.channel_id}")
+                    records.append(Record(topic, rec.log_time, rec.publish_time, rec.data))
+        except RecordingError:
+            raise
+        except (McapError, ValueError, struct.error, zlib.error, EOFError, MemoryError, UnicodeDecodeError) as exc:
+            # ValueError covers the reader's CRC mismatch and zstd's own errors (a ZstdError is one).
+            what = type(exc).__name__ + (f": {exc}" if str(exc) else "")
+            if metadata is None:
+                raise RecordingError(f"{path}: not a readable tactile-twin recording ({what})") from None
+            damage = f"{path}: the recording is damaged after {len(records)} messages ({what}); using those"
+    if metadata is None:
+        raise RecordingError(f"{path}: no tactile_twin.session metadata: not a tactile-twin recording")
+    return Recording(path, metadata, records, end, damage, Counter(r.topic for r in records))
+
+
+def _check_version(path: Path, metadata: dict[str, str]) -> None:
+    raw = metadata.get("schema_version", "")
+    try:
+        version = int(raw)
+    except ValueError:
+        raise RecordingError(f"{path}: schema version {raw!r} is not a number") from None
+    if version != SCHEMA_VERSION:
+        raise RecordingError(f"{path}: recording schema version {version}; this tool reads version {SCHEMA_VERSION}")
+
+
+def _next_sample(previous: float | None, now: float, every: float) -> float:
+    """The next sample time on a fixed grid from the first one (a late sample does not shift the grid)."""
+    if previous is None:
+        return now + every
+    return previous + every * max(1, math.floor((now + _TIME_SLACK - previous) / every) + 1)
+
+
+def tool_version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("tactile-twin")
+    except PackageNotFoundError:  # run from a source tree that was never installed
+        return "unknown"
+
+
+def _xyz(v: np.ndarray) -> dict[str, float]:
+    x, y, z = (float(a) for a in np.asarray(v, dtype=np.float64).ravel()[:3])
+    return {"x": x, "y": y, "z": z}
+
+
+def _foxglove_quat(q: np.ndarray) -> dict[str, float]:
+    """MuJoCo's w x y z quaternion as Foxglove's named {x, y, z, w} (names, not positions, carry the order)."""
+    w, x, y, z = (float(a) for a in np.asarray(q, dtype=np.float64).ravel())
+    return {"x": x, "y": y, "z": z, "w": w}
