@@ -367,3 +367,25 @@ def test_cli_run_script_takes_the_csv_its_help_describes(built, small_scene, tmp
     script.write_text("t,x,y,z\n0.0,-0.3,0.0,0.53\n0.0,-0.1,0.0,0.53\n")
     assert main(["run", str(out), "--duration", "0.3", "--no-realtime", "--script", str(script)]) == 2
     assert "increas" in capsys.readouterr().err
+
+
+def test_a_non_finite_object_is_put_back_and_the_rest_of_the_twin_runs_on(built):
+    with Twin(built.spec.copy(), background=False) as twin:
+        twin.set_velocity("can", np.array([0.0, 0.3, 0.0]), np.zeros(3))
+        twin.step(50)
+        crate_before, can_before = twin.pose("crate"), twin.pose("can")
+        adr, _ = twin._dof("crate")
+        twin.data.qvel[adr] = np.nan  # what a corrupt write or a solver blow-up leaves behind
+        twin.step()
+        assert twin.recovered == 1
+        assert np.allclose(twin.pose("crate")[0], crate_before[0], atol=1e-4)  # back where it was good, one step on
+        assert np.isfinite(twin.data.qpos).all() and twin.time > 0.05  # no whole-model reset to t = 0
+        assert twin.pose("can")[0][1] > can_before[0][1]  # the other object kept moving
+        twin.step(10)
+        assert np.isfinite(twin.data.qpos).all()
+        with pytest.raises(ValueError, match="finite"):
+            twin.set_pose("crate", np.array([np.nan, 0, 0]), np.array([1.0, 0, 0, 0]))
+        with pytest.raises(ValueError, match="non-zero quaternion"):
+            twin.set_pose("crate", np.zeros(3), np.zeros(4))
+        with pytest.raises(ValueError, match="finite"):
+            twin.set_end_effector(np.array([0.0, np.inf, 0.0]))

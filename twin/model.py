@@ -85,6 +85,8 @@ def new_spec(name: str, *, table: TableSpec | None = None, end_effector: EndEffe
         spec.option.enableflags |= mujoco.mjtEnableBit.mjENBL_SLEEP
     if not physics.multiccd:
         spec.option.disableflags |= mujoco.mjtDisableBit.mjDSBL_MULTICCD
+    # A non-finite state would make MuJoCo reset the whole model; Twin.step puts back only the bad object.
+    spec.option.disableflags |= mujoco.mjtDisableBit.mjDSBL_AUTORESET
     spec.compiler.autolimits = True
     spec.worldbody.add_light(pos=[0, 0, 3], dir=[0, 0, -1], type=mujoco.mjtLightType.mjLIGHT_DIRECTIONAL)
     floor = spec.worldbody.add_geom(name="floor", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[5, 5, 0.1],

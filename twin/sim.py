@@ -45,6 +45,8 @@ class Twin:
         mujoco.mj_forward(self.model, self.data)
         self.background = background
         self.failed_edits = 0
+        self.recovered = 0  # objects put back after their state became non-finite
+        self._good: tuple[np.ndarray, np.ndarray] | None = None  # last finite (qpos, qvel)
         self._mocap = self._mocap_id()
         self._editor: ThreadPoolExecutor | None = None
         self._head = spec  # the spec the next edit starts from: the last one that compiled, pending included
@@ -68,18 +70,67 @@ class Twin:
         return float(self.data.time)
 
     def step(self, n: int = 1) -> None:
+        """Advance ``n`` physics steps; an object whose state became NaN or infinite is put back.
+
+        MuJoCo's own answer to a non-finite state is to reset the whole model (its auto-reset, which the
+        twin's models disable): every object would jump to its start. Here only the objects with bad
+        values return to their last good pose, at rest, and are counted in :attr:`recovered` and logged.
+        """
         import mujoco
 
-        mujoco.mj_step(self.model, self.data, n)
+        d = self.data
+        if not self._finite():  # a bad write since the last step: catch it before the solver spreads it
+            self._recover()
+        mujoco.mj_step(self.model, d, n)
+        if not self._finite():  # the step itself blew up: put back what it touched
+            self._recover()
+        elif self._good is None:
+            self._good = (d.qpos.copy(), d.qvel.copy())
+        else:
+            self._good[0][:] = d.qpos
+            self._good[1][:] = d.qvel
+
+    def _finite(self) -> bool:
+        return bool(np.isfinite(self.data.qpos).all() and np.isfinite(self.data.qvel).all())
+
+    def _recover(self) -> None:
+        """Put every free body with a non-finite coordinate back where it last was finite, at rest."""
+        import mujoco
+
+        m, d = self.model, self.data
+        good_q, _ = self._good if self._good is not None else (m.qpos0, None)
+        bad = []
+        for j in range(m.njnt):
+            if m.jnt_type[j] != mujoco.mjtJoint.mjJNT_FREE:
+                continue
+            q, v = m.jnt_qposadr[j], m.jnt_dofadr[j]
+            if np.isfinite(d.qpos[q:q + 7]).all() and np.isfinite(d.qvel[v:v + 6]).all():
+                continue
+            d.qpos[q:q + 7] = good_q[q:q + 7]
+            d.qvel[v:v + 6] = 0.0
+            bad.append((mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_JOINT, j) or f"joint {j}").removesuffix("/free"))
+        rest = ~np.isfinite(d.qvel)  # anything else (not a free body): stop it
+        d.qvel[rest] = 0.0
+        d.qacc_warmstart[:] = 0.0
+        self.recovered += len(bad)
+        log.error("non-finite state in %s; put back to the last good pose", ", ".join(bad) or "the model")
+        mujoco.mj_forward(m, d)
 
     @property
     def has_end_effector(self) -> bool:
         return self._mocap is not None
 
     def set_end_effector(self, position: np.ndarray) -> None:
-        """Move the operator's mocap target (world frame, metres)."""
+        """Move the operator's mocap target (world frame, metres).
+
+        Raises:
+            LookupError: the scene has no end effector. ValueError: a non-finite position.
+        """
         if self._mocap is None:
             raise LookupError("this scene has no end effector")
+        position = np.asarray(position, dtype=np.float64)
+        if position.shape != (3,) or not np.isfinite(position).all():
+            raise ValueError(f"end-effector target must be 3 finite numbers, got {position!r}")
         self.data.mocap_pos[self._mocap] = position
 
     def end_effector_force(self) -> np.ndarray:
@@ -216,6 +267,7 @@ class Twin:
 
         data = mujoco.MjData(model)
         data.time = self.data.time
+        self._good = None  # indices change with the model; the next finite step records it again
         _copy_free_bodies(self.model, self.data, model, data)
         old_mocap = self.data.mocap_pos.copy()
         self.model, self.data = model, data
@@ -254,6 +306,8 @@ class Twin:
         jid = free_joint(self.model, object_id)
         if jid < 0:
             raise KeyError(f"no object {object_id!r} in the model")
+        if not (np.isfinite(position).all() and np.isfinite(quat).all() and np.linalg.norm(quat) > 0):
+            raise ValueError(f"object {object_id!r}: pose must be finite with a non-zero quaternion")
         adr = self.model.jnt_qposadr[jid]
         self.data.qpos[adr:adr + 3] = position
         self.data.qpos[adr + 3:adr + 7] = quat
