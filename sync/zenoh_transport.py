@@ -35,6 +35,22 @@ def free_port() -> int:
         return int(s.getsockname()[1])
 
 
+def exposed_without_tls(endpoints: list[str]) -> list[str]:
+    """The ``endpoints`` another machine could reach in plain text: not loopback, and not ``tls/``/``quic/``.
+
+    ``tcp/127.0.0.1:7447``, ``tcp/localhost:7447`` and ``tcp/[::1]:7447`` stay on this machine; ``tcp/0.0.0.0``,
+    ``tcp/[::]`` or an interface's address do not.
+    """
+    exposed = []
+    for endpoint in endpoints:
+        proto, _, rest = endpoint.partition("/")
+        host = rest.split("#")[0].rsplit(":", 1)[0].strip("[]").lower()
+        if proto in ("tls", "quic") or host == "localhost" or host == "::1" or host.startswith("127."):
+            continue
+        exposed.append(endpoint)
+    return exposed
+
+
 def make_config(*, listen: list[str] | None = None, connect: list[str] | None = None,
                 config_file: str | Path | None = None, mode: str = "peer"):  # type: ignore[no-untyped-def]
     """A ``zenoh.Config``: the file's settings (if any), then mode, scouting off, and the endpoints."""
