@@ -1,0 +1,542 @@
+"""Latency experiments: what delay, jitter, loss and a wrong mass do to direct teleoperation and to the twin.
+
+One headless session (:class:`scenes.headless.Headless`, simulated clock, seeded network) per condition
+yields both modes, because in both the remote scene C is driven by the operator's commands as they arrive
+over the uplink:
+
+- **direct** teleoperation: the operator feels C's end-effector contact force as it arrives over the
+  downlink. Each physics step's force sample goes through its own :class:`sync.netem.LinkModel` with the
+  downlink's conditions (its own generator, spawned from the seed after the session's two, so it does not
+  change the poses' draws); the operator feels the newest sample that has arrived, so a lost sample holds
+  the previous one.
+- **twin**: the operator feels the twin C' 's force at once; C' is corrected by C's poses as they arrive.
+
+Ground truth is the same task with no delay, no loss and the true mass: C's force ``F_truth(t)``. Direct
+teleoperation at zero delay *is* the truth (error exactly 0); the twin at zero delay is not (its shape and
+mass are estimates).
+
+Perceived feedback delay counts whole physics steps on the simulated clock, from the step the operator's
+target is set to the step its force is felt, plus the one step both modes need to compute a force: the
+twin's is one step; the direct one adds the uplink's transit (at least one step: the remote steps before
+the operator's command of the same tick) and the force sample's downlink transit (means of the measured
+per-packet delays).
+
+Runs go to worker processes (``spawn``) or any :class:`concurrent.futures.Executor` (a Dask
+``Client.get_executor()`` works); rows are sorted, so the result does not depend on the number of workers.
+"""
+
+from __future__ import annotations
+
+import math
+import multiprocessing as mp
+from collections.abc import Callable, Sequence
+from concurrent.futures import Executor, ProcessPoolExecutor, as_completed
+from dataclasses import asdict, dataclass, fields
+from pathlib import Path
+
+import numpy as np
+
+from estimation.errors import TwinError
+from scenes.scenefile import SceneSpec
+from sync.netem import Conditions, LinkModel, Network
+from twin.runtime import LocalSettings
+
+#: Tasks :func:`run_experiment` knows.
+TASKS = ("push", "press")
+
+#: Modes of each run, in the order rows are written.
+MODES = ("direct", "twin")
+
+#: Simulated seconds from the session's start to the task's start: the twin has every object after the
+#: first tick (the late-join query is answered at once); the rest lets C' settle on its estimated shapes.
+SETUP_S = 0.5
+
+#: How often C'-C divergence is sampled, simulated seconds (as :data:`twin.runtime.DIVERGENCE_EVERY`).
+DIVERGENCE_EVERY = 0.01
+
+#: Blow-up: a contact force above this (newtons) or an end-effector or object speed above this (m/s) is
+#: not a simulation of a hand pushing things on a table. A 2 kg arm pushing at 1 g is 20 N.
+ABSURD_FORCE_N = 1e4
+ABSURD_SPEED = 20.0
+
+#: The truth is "in contact" where its force is above this fraction of its peak: the steps over which the
+#: mean felt force is compared with the truth's (a sustained force, what discrimination thresholds are about).
+CONTACT_FRACTION = 0.05
+
+#: Gap kept between the end effector and an object's surface at the end of an approach, metres.
+APPROACH_GAP = 0.005
+
+
+class ExperimentError(TwinError, ValueError):
+    """A sweep that cannot be run: an unknown task, impossible network conditions, a bad mass scale."""
+
+
+@dataclass(frozen=True)
+class Condition:
+    """One run. Delay and jitter in seconds (one way, each direction), loss as a fraction in [0, 1].
+
+    ``speed`` scales the task's timing (2: everything happens twice as fast; tests use it to stay short).
+    """
+
+    task: str
+    delay: float = 0.0
+    jitter: float = 0.0
+    loss: float = 0.0
+    mass_scale: float = 1.0
+    seed: int = 0
+    speed: float = 1.0
+
+    def conditions(self) -> Conditions:
+        """This run's link, each direction."""
+        return Conditions(delay=self.delay, jitter=self.jitter, loss=self.loss)
+
+    def truth(self) -> Condition:
+        """The ground truth for this run: same task and timing, no delay, no loss, true mass."""
+        return Condition(task=self.task, speed=self.speed)
+
+
+@dataclass(frozen=True)
+class Trace:
+    """What one session recorded, from the task's start. ``n`` physics steps of ``dt`` seconds.
+
+    Forces are the scene's contact force on the end effector, (n, 3) newtons, world axes; ``felt_direct``
+    is C's force as it arrives over the downlink. Energies are joules put into the scene by the end
+    effector (integral of -F . dx of the end effector). Object positions are displacements since the task's
+    start (metres), so the static offset between an estimated and the true centre of mass does not count.
+    Divergence is sampled every :data:`DIVERGENCE_EVERY`: the largest |C' - C| displacement per sample.
+    """
+
+    condition: Condition
+    dt: float
+    force_c: np.ndarray
+    force_twin: np.ndarray
+    felt_direct: np.ndarray
+    energy_c: float
+    energy_twin: float
+    blowup_c: bool
+    blowup_twin: bool
+    divergence: np.ndarray
+    end_c: dict[str, np.ndarray]
+    end_twin: dict[str, np.ndarray]
+    uplink_delay: float
+    force_delay: float
+    messages: dict[str, int]
+    bytes: dict[str, int]
+
+
+#: Columns of ``results.csv``, in order (units in the names).
+COLUMNS = (
+    "mode", "task", "delay_ms", "jitter_ms", "loss_pct", "mass_scale", "seed",
+    "perceived_delay_ms", "force_rms_n", "force_peak_n", "force_rms_pct", "force_peak_pct", "truth_peak_n",
+    "contact_force_err_pct",
+    "end_err_twin_c_mm", "end_err_c_truth_mm", "end_err_felt_truth_mm",
+    "div_p50_mm", "div_p99_mm", "div_max_mm",
+    "messages", "bytes", "bytes_per_s", "energy_j", "blowup",
+)
+
+
+@dataclass(frozen=True)
+class Row:
+    """One line of ``results.csv``: one mode of one run. See :data:`COLUMNS`; NaN: not defined for this mode."""
+
+    mode: str
+    task: str
+    delay_ms: float
+    jitter_ms: float
+    loss_pct: float
+    mass_scale: float
+    seed: int
+    perceived_delay_ms: float
+    force_rms_n: float
+    force_peak_n: float
+    force_rms_pct: float
+    force_peak_pct: float
+    truth_peak_n: float
+    contact_force_err_pct: float
+    end_err_twin_c_mm: float
+    end_err_c_truth_mm: float
+    end_err_felt_truth_mm: float
+    div_p50_mm: float
+    div_p99_mm: float
+    div_max_mm: float
+    messages: int
+    bytes: int
+    bytes_per_s: float
+    energy_j: float
+    blowup: bool
+
+    def key(self) -> tuple:
+        return (self.task, self.delay_ms, self.jitter_ms, self.loss_pct, self.mass_scale, self.seed,
+                MODES.index(self.mode))
+
+
+assert tuple(f.name for f in fields(Row)) == COLUMNS
+
+
+def check_condition(c: Condition) -> None:
+    """Refuse a condition before any work.
+
+    Raises:
+        ExperimentError: an unknown task, a mass scale or speed that is not a finite positive number, or
+            network conditions :class:`sync.netem.Conditions` refuses (the message names the delay).
+    """
+    if c.task not in TASKS:
+        raise ExperimentError(f"unknown task {c.task!r} (known: {', '.join(TASKS)})")
+    for name, value in (("mass scale", c.mass_scale), ("speed", c.speed)):
+        if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
+            raise ExperimentError(f"{name} must be a finite number > 0, got {value!r}")
+    try:
+        c.conditions()
+    except TwinError as exc:
+        raise ExperimentError(f"delay {c.delay * 1e3:g} ms: {exc}") from None
+
+
+# -- tasks -----------------------------------------------------------------------------------------------
+
+
+def _ray(model, data, start: np.ndarray, direction: np.ndarray) -> float:  # type: ignore[no-untyped-def]
+    """Distance (metres) from ``start`` along the unit ``direction`` to the first movable geom, or inf."""
+    import mujoco
+
+    from twin.model import EE_BODY
+
+    ee = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, EE_BODY)
+    geom = np.zeros(1, dtype=np.int32)
+    dist = mujoco.mj_ray(model, data, np.asarray(start, float), np.asarray(direction, float), None, 0, ee, geom)
+    return math.inf if dist < 0 else float(dist)
+
+
+def _piecewise(times: Sequence[float], points: Sequence[np.ndarray]) -> Callable[[float], np.ndarray]:
+    t, p = np.asarray(times, float), np.asarray(points, float)
+
+    def at(s: float) -> np.ndarray:
+        return np.array([np.interp(s, t, p[:, i]) for i in range(3)])
+
+    return at
+
+
+def plan_task(task: str, scene: SceneSpec, model, data, *, speed: float = 1.0):  # type: ignore[no-untyped-def]
+    """The operator's trajectory for ``task`` in C's model at rest: ``(trajectory(t), duration)``.
+
+    The object is the one nearest the end effector (in the horizontal plane). ``push``: rise or sink to its
+    centre of mass's height, approach to 5 mm from its surface, push it 10 cm, let go (back off 5 cm).
+    ``press``: move above it, press 1 cm into its top for 1.5 s, drag 3 cm along while pressing, lift.
+    Distances are found by casting rays in C (the operator sees the scene); times are divided by ``speed``.
+
+    Raises:
+        ExperimentError: the scene has no end effector or no object, or the rays miss the object.
+    """
+    import mujoco
+
+    from twin.model import EE_TARGET, body_pose
+
+    if scene.end_effector is None or not scene.objects:
+        raise ExperimentError(f"scene {scene.name!r} needs an end effector and an object for the {task} task")
+    radius = scene.end_effector.radius
+    mocap = model.body_mocapid[mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, EE_TARGET)]
+    start = data.mocap_pos[mocap].copy()
+    centres = {o.id: body_pose(model, data, o.id)[0] for o in scene.objects}
+    target = min(sorted(centres), key=lambda i: float(np.linalg.norm((centres[i] - start)[:2])))
+    c = centres[target]
+    floor = scene.table.height if scene.table is not None else 0.0
+    flat = (c - start) * np.array([1.0, 1.0, 0.0])
+    d = flat / max(float(np.linalg.norm(flat)), 1e-9)
+    times, points = [0.0], [start]
+
+    def go(point: np.ndarray, seconds: float) -> None:
+        times.append(times[-1] + seconds / speed)
+        points.append(np.asarray(point, float))
+
+    if task == "push":
+        h = max(float(c[2]), floor + radius + 0.003)
+        a = np.array([start[0], start[1], h])
+        reach = _ray(model, data, a, d)
+        if not math.isfinite(reach):
+            raise ExperimentError(f"push: nothing in the way of the end effector towards {target!r}")
+        touch = reach - radius
+        go(a, 0.4)
+        go(a + d * (touch - APPROACH_GAP), max(0.3, (touch - APPROACH_GAP) / 0.15))
+        go(a + d * (touch + 0.10), 1.0)  # 10 cm at 0.1 m/s
+        go(points[-1], 0.3)
+        go(points[-1] - d * 0.05, 0.3)  # let go
+        go(points[-1], 0.5)
+    elif task == "press":
+        above = np.array([c[0], c[1], c[2] + 0.5])
+        top = above[2] - _ray(model, data, above, np.array([0.0, 0.0, -1.0]))
+        if not math.isfinite(top):
+            raise ExperimentError(f"press: no top surface found on {target!r}")
+        clear = top + radius + 0.02
+        go(np.array([start[0], start[1], max(clear, start[2])]), 0.3)
+        go(np.array([c[0], c[1], max(clear, start[2])]), max(0.3, float(np.linalg.norm(flat)) / 0.2))
+        go(np.array([c[0], c[1], top + radius + APPROACH_GAP]), 0.3)
+        go(np.array([c[0], c[1], top + radius - 0.01]), 0.5)  # 1 cm into the top
+        go(points[-1], 1.5)
+        go(points[-1] + d * 0.03, 1.0)  # drag along while pressing
+        go(points[-1], 0.3)
+        go(points[-1] + np.array([0.0, 0.0, 0.04]), 0.3)
+        go(points[-1], 0.3)
+    else:
+        raise ExperimentError(f"unknown task {task!r} (known: {', '.join(TASKS)})")
+    return _piecewise(times, points), times[-1]
+
+
+# -- one session -----------------------------------------------------------------------------------------
+
+
+class _EndEffector:
+    """Reads the end effector's position in a twin whose model may be swapped (objects added)."""
+
+    def __init__(self, twin) -> None:  # type: ignore[no-untyped-def]
+        self.twin, self._model, self._id = twin, None, -1
+
+    def position(self) -> np.ndarray:
+        import mujoco
+
+        from twin.model import EE_BODY
+
+        if self.twin.model is not self._model:
+            self._model = self.twin.model
+            self._id = mujoco.mj_name2id(self._model, mujoco.mjtObj.mjOBJ_BODY, EE_BODY)
+        return self.twin.data.xpos[self._id].copy()
+
+
+def _absurd(twin, force: np.ndarray) -> bool:  # type: ignore[no-untyped-def]
+    qvel = twin.data.qvel
+    return not (np.isfinite(force).all() and np.isfinite(qvel).all()
+                and float(np.abs(force).max(initial=0.0)) < ABSURD_FORCE_N
+                and float(np.abs(qvel).max(initial=0.0)) < ABSURD_SPEED)
+
+
+def force_sample_bytes() -> int:
+    """Bytes of one force sample on the wire: sized as an operator command (stamp, order, three floats)."""
+    from sync.messages import VERSION, OperatorCommand, encode
+
+    return len(encode(OperatorCommand(v=VERSION, stamp_ns=2**62, epoch=2**62, seq=2**31,
+                                      position=(-1.2345678, 2.3456789, -3.4567891))))
+
+
+def run_session(scene: SceneSpec, condition: Condition, *, cache_dir: Path | None = None) -> Trace:
+    """One deterministic headless session of ``condition``; see the module docstring.
+
+    Raises:
+        ExperimentError: as :func:`check_condition` and :func:`plan_task`.
+    """
+    from scenes.headless import Headless
+
+    check_condition(condition)
+    link = condition.conditions()
+    network = Network(uplink=link, downlink=link, seed=condition.seed)
+    settings = LocalSettings(mass_scale=condition.mass_scale)
+    with Headless(scene, settings=settings, network=network, cache_dir=cache_dir) as session:
+        remote, local = session.remote, session.local
+        dt = session.dt
+        session.run(SETUP_S)
+        trajectory, duration = plan_task(condition.task, scene, remote.twin.model, remote.twin.data,
+                                         speed=condition.speed)
+        t0 = local.twin.time
+        steps = round(duration / dt)
+        # The force samples' own downlink: a third generator from the seed (the session's are the first two).
+        force_link = LinkModel(link, np.random.default_rng(np.random.SeedSequence(condition.seed).spawn(3)[2]))
+        sample_bytes = force_sample_bytes()
+        up0, down0 = _counts(session.uplink), _counts(session.downlink)
+        ee_c, ee_twin = _EndEffector(remote.twin), _EndEffector(local.twin)
+        x_c, x_twin = ee_c.position(), ee_twin.position()
+        force_c, force_twin, felt = (np.zeros((steps, 3)) for _ in range(3))
+        arrivals: list[tuple[float, int]] = []  # (arrival time, step) of force samples in flight, FIFO
+        newest = -1  # the newest force sample the operator has
+        energy_c = energy_twin = 0.0
+        blowup_c = blowup_twin = False
+        divergence: list[float] = []
+        next_sample = 0.0
+        objects = [o.id for o in scene.objects if local.twin.has(o.id)]
+        # Displacements from the task's start: C' 's body origin is its estimated centre of mass, C's the true
+        # one, a static offset of a millimetre or two that is the estimate's, not a divergence.
+        start_c = {i: remote.twin.pose(i)[0] for i in objects}
+        start_twin = {i: local.twin.pose(i)[0] for i in objects}
+
+        def op(t: float) -> np.ndarray:
+            return trajectory(t - t0)
+
+        for k in range(steps):
+            now = session.clock.now()
+            session.tick(op)
+            f_c, f_twin = remote.twin.end_effector_force(), local.twin.end_effector_force()
+            force_c[k], force_twin[k] = f_c, f_twin
+            y_c, y_twin = ee_c.position(), ee_twin.position()
+            energy_c -= float(f_c @ (y_c - x_c))
+            energy_twin -= float(f_twin @ (y_twin - x_twin))
+            x_c, x_twin = y_c, y_twin
+            blowup_c = blowup_c or _absurd(remote.twin, f_c)
+            blowup_twin = blowup_twin or _absurd(local.twin, f_twin)
+            arrival = force_link.send(now, sample_bytes)
+            if arrival is not None:
+                arrivals.append((arrival, k))
+            while arrivals and arrivals[0][0] <= now + 1e-9:  # felt in the step it arrives (as the bus does)
+                newest = max(newest, arrivals.pop(0)[1])
+            felt[k] = force_c[newest] if newest >= 0 else 0.0
+            if k * dt >= next_sample:
+                next_sample += DIVERGENCE_EVERY
+                gaps = [float(np.linalg.norm(local.twin.pose(i)[0] - start_twin[i] - remote.twin.pose(i)[0]
+                                             + start_c[i])) for i in objects if local.twin.has(i)]
+                divergence.append(max(gaps, default=math.nan))
+        up1, down1 = _counts(session.uplink), _counts(session.downlink)
+        uplink_delay = _mean_delay(up0, up1)
+        return Trace(
+            condition=condition, dt=dt, force_c=force_c, force_twin=force_twin, felt_direct=felt,
+            energy_c=energy_c, energy_twin=energy_twin, blowup_c=blowup_c, blowup_twin=blowup_twin,
+            divergence=np.asarray(divergence),
+            end_c={i: remote.twin.pose(i)[0] - start_c[i] for i in objects},
+            end_twin={i: local.twin.pose(i)[0] - start_twin[i] for i in objects if local.twin.has(i)},
+            uplink_delay=uplink_delay, force_delay=force_link.stats.mean_delay if force_link.stats.delivered else 0.0,
+            messages={"uplink": up1[0] - up0[0], "downlink": down1[0] - down0[0], "force": force_link.stats.sent},
+            bytes={"uplink": up1[1] - up0[1], "downlink": down1[1] - down0[1], "force": force_link.stats.bytes_sent},
+        )
+
+
+def _counts(model: LinkModel | None) -> tuple[int, int, int, float]:
+    """(packets sent, bytes sent, packets delivered, total delay) so far on one direction."""
+    if model is None:
+        return 0, 0, 0, 0.0
+    s = model.stats
+    return s.sent, s.bytes_sent, s.delivered, s.delay_total
+
+
+def _mean_delay(before: tuple[int, int, int, float], after: tuple[int, int, int, float]) -> float:
+    n = after[2] - before[2]
+    return (after[3] - before[3]) / n if n else 0.0
+
+
+# -- rows ------------------------------------------------------------------------------------------------
+
+
+def _steps(seconds: float, dt: float) -> float:
+    """Whole physics steps a packet of this delay waits (the bus delivers at the first step not before it)."""
+    return math.ceil(seconds / dt - 1e-6)
+
+
+def rows_for(trace: Trace, truth: Trace) -> list[Row]:
+    """The direct and the twin row of one session, against the ground-truth session of its task."""
+    c, dt = trace.condition, trace.dt
+    n = min(len(trace.force_c), len(truth.force_c))
+    f_truth = truth.force_c[:n]
+    peak_truth = float(np.linalg.norm(f_truth, axis=1).max(initial=0.0))
+    duration = n * dt
+    common = {"task": c.task, "delay_ms": c.delay * 1e3, "jitter_ms": c.jitter * 1e3, "loss_pct": c.loss * 100,
+              "mass_scale": c.mass_scale, "seed": c.seed, "truth_peak_n": peak_truth,
+              "end_err_c_truth_mm": _end_error(trace.end_c, truth.end_c)}
+    rows = []
+    for mode in MODES:
+        felt = (trace.felt_direct if mode == "direct" else trace.force_twin)[:n]
+        err = np.linalg.norm(felt - f_truth, axis=1)
+        rms, peak = float(np.sqrt(np.mean(err**2))) if n else 0.0, float(err.max(initial=0.0))
+        if mode == "direct":
+            perceived = dt * (1 + max(1, _steps(trace.uplink_delay, dt)) + _steps(trace.force_delay, dt))
+            messages = trace.messages["uplink"] + trace.messages["force"]
+            sent = trace.bytes["uplink"] + trace.bytes["force"]
+            div = (math.nan,) * 3
+            end_felt, end_twin_c = common["end_err_c_truth_mm"], math.nan
+            energy, blowup = trace.energy_c, trace.blowup_c
+        else:
+            perceived = dt
+            messages = trace.messages["uplink"] + trace.messages["downlink"]
+            sent = trace.bytes["uplink"] + trace.bytes["downlink"]
+            d = trace.divergence[np.isfinite(trace.divergence)] * 1e3
+            div = tuple(float(x) for x in np.percentile(d, [50, 99, 100])) if len(d) else (math.nan,) * 3
+            end_felt, end_twin_c = _end_error(trace.end_twin, truth.end_c), _end_error(trace.end_twin, trace.end_c)
+            energy, blowup = trace.energy_twin, trace.blowup_twin
+        pct = 100.0 / peak_truth if peak_truth > 0 else math.nan
+        touching = np.linalg.norm(f_truth, axis=1) > CONTACT_FRACTION * peak_truth
+        held = float(np.linalg.norm(f_truth[touching], axis=1).mean()) if touching.any() else math.nan
+        felt_held = float(np.linalg.norm(felt[touching], axis=1).mean()) if touching.any() else math.nan
+        rows.append(Row(mode=mode, perceived_delay_ms=perceived * 1e3, force_rms_n=rms, force_peak_n=peak,
+                        contact_force_err_pct=100.0 * (felt_held - held) / held,
+                        force_rms_pct=rms * pct, force_peak_pct=peak * pct, end_err_twin_c_mm=end_twin_c,
+                        end_err_felt_truth_mm=end_felt, div_p50_mm=div[0], div_p99_mm=div[1], div_max_mm=div[2],
+                        messages=messages, bytes=sent, bytes_per_s=sent / duration if duration else math.nan,
+                        energy_j=energy, blowup=blowup, **common))
+    return rows
+
+
+def _end_error(a: dict[str, np.ndarray], b: dict[str, np.ndarray]) -> float:
+    """Largest position difference (mm) over the objects both have; NaN if none."""
+    gaps = [float(np.linalg.norm(a[i] - b[i])) for i in sorted(a) if i in b]
+    return max(gaps) * 1e3 if gaps else math.nan
+
+
+# -- sweeps ----------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Sweep:
+    """A grid of conditions: every combination of the lists. Seconds, fractions."""
+
+    tasks: tuple[str, ...] = TASKS
+    delays: tuple[float, ...] = (0.0, 0.01, 0.025, 0.05, 0.1, 0.2)
+    jitter: float = 0.0
+    loss: float = 0.0
+    mass_scales: tuple[float, ...] = (1.0,)
+    seeds: int = 1
+    speed: float = 1.0
+
+    def conditions(self) -> list[Condition]:
+        """Every run, checked (see :func:`check_condition`). Jitter the distribution cannot take at some delay
+        (normal jitter needs ``jitter <= delay / 3``, so any jitter at zero delay) is refused, not clipped.
+
+        Raises:
+            ExperimentError: an empty list, fewer than one seed, or a condition :func:`check_condition` refuses.
+        """
+        if not self.tasks or not self.delays or not self.mass_scales:
+            raise ExperimentError("tasks, delays and mass scales must each have at least one value")
+        if not isinstance(self.seeds, int) or self.seeds < 1:
+            raise ExperimentError(f"seeds must be a whole number >= 1, got {self.seeds!r}")
+        runs = [Condition(task=t, delay=d, jitter=self.jitter, loss=self.loss, mass_scale=m, seed=s, speed=self.speed)
+                for t in self.tasks for d in self.delays for m in self.mass_scales for s in range(self.seeds)]
+        for r in runs:
+            check_condition(r)
+        return runs
+
+
+def _job(scene: SceneSpec, condition: Condition, cache_dir: Path | None) -> Trace:
+    return run_session(scene, condition, cache_dir=cache_dir)
+
+
+def run_experiment(scene: SceneSpec, sweep: Sweep, *, workers: int = 1, executor: Executor | None = None,
+                   cache_dir: Path | None = None,
+                   progress: Callable[[int, int], None] | None = None) -> tuple[list[Row], dict[Condition, Trace]]:
+    """Run every condition of ``sweep`` and its tasks' ground truths; one session per worker job.
+
+    Args:
+        scene: the scene (objects, table, end effector).
+        sweep: the conditions.
+        workers: processes (spawned) when no ``executor`` is given; 0 runs everything in this process.
+        executor: where to run the sessions instead (e.g. a Dask client's ``get_executor()``).
+        cache_dir: CoACD cache for both sides (default: the usual one).
+        progress: called as ``progress(done, total)`` after each session.
+
+    Returns:
+        The rows, sorted (task, delay, jitter, loss, mass scale, seed, mode), and every session's trace.
+
+    Raises:
+        ExperimentError: a condition :func:`check_condition` refuses (before any session runs).
+    """
+    runs = sweep.conditions()
+    todo = sorted(set(runs) | {r.truth() for r in runs}, key=lambda c: tuple(asdict(c).values()))
+    traces: dict[Condition, Trace] = {}
+    if executor is None and workers == 0:
+        for i, c in enumerate(todo):
+            traces[c] = run_session(scene, c, cache_dir=cache_dir)
+            if progress is not None:
+                progress(i + 1, len(todo))
+    else:
+        pool = executor or ProcessPoolExecutor(workers, mp_context=mp.get_context("spawn"))
+        try:
+            futures = {pool.submit(_job, scene, c, cache_dir): c for c in todo}
+            for i, future in enumerate(as_completed(futures)):
+                traces[futures[future]] = future.result()
+                if progress is not None:
+                    progress(i + 1, len(todo))
+        finally:
+            if executor is None:
+                pool.shutdown(wait=True, cancel_futures=True)
+    rows = [row for c in runs for row in rows_for(traces[c], traces[c.truth()])]
+    return sorted(rows, key=Row.key), traces
