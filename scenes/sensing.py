@@ -11,6 +11,7 @@ no noise) and the simulator's own poses. Camera-based sensors plug in here.
 
 from __future__ import annotations
 
+import logging
 import zlib
 from dataclasses import dataclass
 from typing import Protocol
@@ -19,6 +20,8 @@ import numpy as np
 
 from scenes.sampling import sample_surface
 from twin.poses import rotation
+
+log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -31,12 +34,18 @@ class Observation:
             sensor has no viewpoint (the surface sensor sees everything).
         frame_position: (3,) metres and ``frame_quat`` (4,) w x y z: the sensor's estimate of the object's
             frame at capture, the frame that later :class:`Track` poses move.
+        normals: (n, 3) float64 unit outward normals (cameras: oriented towards the camera that saw each
+            point), or None.
+        completed: (n,) bool, True for points no sensor saw (added by completion, e.g. the base on the
+            support plane), or None (all observed).
     """
 
     points: np.ndarray
     sensor_origins: np.ndarray | None
     frame_position: np.ndarray
     frame_quat: np.ndarray
+    normals: np.ndarray | None = None
+    completed: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -85,3 +94,177 @@ class SurfaceSensor:
         pos, quat = truth.twin.pose(object_id)  # type: ignore[attr-defined]
         lin, ang = truth.twin.velocity(object_id)  # type: ignore[attr-defined]
         return Track(pos, quat, lin, ang)
+
+
+class CameraSensor:
+    """Sensing with depth cameras: partial noisy views, segmentation, completion, ICP tracking.
+
+    Every :meth:`observe` and every due :meth:`track` scans the scene with the rig
+    (:class:`scenes.cameras.CameraFeed`: ray-cast depth with the Kinect noise model, support plane removed,
+    the rest clustered). An object is the segment nearest its last known position; the first time, the
+    simulator's position labels which segment is which object (a real site would label it once, by hand
+    or by recognition), and is never used again. :meth:`observe` fuses the segment's views with per-point
+    sensor origins, orients normals towards each point's camera, closes the base on the support plane
+    (``estimation.completion``) and reports the segment's centroid with the world's axes as the object
+    frame. :meth:`track` registers the object's first fused cloud to the current segment (point-to-plane
+    ICP) and reports that motion applied to the frame, with zero velocity. Scans happen at most every
+    ``track_period`` simulated seconds; in between, the last track is reported.
+
+    Nothing the cameras see raises: an object in no segment, two objects in one segment, a lost ICP are
+    logged and counted in ``self.feed.stats``; the last good observation or track is returned.
+    """
+
+    def __init__(self, feed, *, track_period: float = 0.5, seed: int = 0) -> None:  # type: ignore[no-untyped-def]
+        self.feed = feed
+        self.track_period = track_period
+        self.seed = seed
+        self._scan = None
+        self._claims: dict[int, set[str]] = {}
+        self._last: dict[str, np.ndarray] = {}  # object id -> last known position (world, m)
+        self._model: dict[str, tuple[np.ndarray, np.ndarray]] = {}  # id -> (ICP model points, frame centre)
+        self._motion: dict[str, np.ndarray] = {}  # id -> (4, 4) motion since the model's capture
+        self._observed: dict[str, Observation] = {}
+        self._tracked: dict[str, tuple[float, Track]] = {}
+
+    @classmethod
+    def for_scene(cls, scene, *, cameras: int = 3, seed: int = 0, track_period: float = 0.5,  # type: ignore[no-untyped-def]
+                  **camera: object) -> CameraSensor:
+        """The default rig for a scene file: ``cameras`` around its table, the table's workspace."""
+        from scenes.cameras import CameraFeed, table_ring, table_workspace
+
+        size = None if scene.table is None else scene.table.size
+        height = None if scene.table is None else scene.table.height
+        rig = table_ring(size, height, count=cameras, **camera)
+        return cls(CameraFeed(rig, table_workspace(size, height), seed=seed), track_period=track_period, seed=seed)
+
+    # -- the Sensor seam -------------------------------------------------------------------------
+
+    def observe(self, truth: GroundTruth, object_id: str, points: int, *, shot: int) -> Observation:
+        scan = self._current(truth, force=object_id not in self._observed)
+        k = self._associate(truth, scan, object_id)
+        if k is None:
+            last = self._observed.get(object_id)
+            if last is not None:
+                return last
+            empty = np.zeros((0, 3))
+            return Observation(empty, empty, self._last.get(object_id, np.zeros(3)), np.array([1.0, 0, 0, 0]))
+        seen = self._fuse(scan, scan.segments[k], points, shot)
+        observed = seen.points[~seen.completed]  # type: ignore[index]
+        model = observed[np.random.default_rng([self.seed, shot]).permutation(len(observed))[:MODEL_POINTS_CAP]]
+        self._model[object_id] = (model, seen.frame_position)
+        self._motion[object_id] = np.eye(4)
+        self._observed[object_id] = seen
+        self._tracked[object_id] = (scan.time, Track(seen.frame_position, seen.frame_quat, np.zeros(3), np.zeros(3)))
+        return seen
+
+    def track(self, truth: GroundTruth, object_id: str) -> Track:
+        if object_id not in self._model:
+            self.observe(truth, object_id, 0, shot=0)
+        scan = self._current(truth)
+        done = self._tracked.get(object_id)
+        if done is not None and done[0] == scan.time:
+            return done[1]
+        k = self._associate(truth, scan, object_id)
+        model, centre = self._model.get(object_id, (np.zeros((0, 3)), self._last.get(object_id, np.zeros(3))))
+        result = None
+        if k is not None and len(model) >= 3:
+            from estimation.fusion import register
+
+            target = scan.segments[k].points
+            reg = register(model, target, init=self._motion[object_id], max_distance=max(3 * scan.cell, 0.01))
+            if reg.fitness >= MIN_FITNESS:
+                result = reg.transform
+            else:
+                self.feed.stats.lost_tracks += 1
+                log.warning("%s: ICP lost the object (fitness %.2f); keeping the last pose", object_id, reg.fitness)
+        if result is None:
+            last = self._tracked.get(object_id)
+            track = last[1] if last is not None else Track(centre, np.array([1.0, 0, 0, 0]), np.zeros(3), np.zeros(3))
+        else:
+            self._motion[object_id] = result
+            position = result[:3, :3] @ centre + result[:3, 3]
+            track = Track(position, _quat(result[:3, :3]), np.zeros(3), np.zeros(3))
+            self._last[object_id] = position
+        self._tracked[object_id] = (scan.time, track)
+        return track
+
+    # -- internals -------------------------------------------------------------------------------
+
+    def _current(self, truth: GroundTruth, *, force: bool = False):  # type: ignore[no-untyped-def]
+        """The scan of now, or the last one if younger than ``track_period`` (unless ``force``)."""
+        twin = truth.twin
+        now = float(twin.time)  # type: ignore[attr-defined]
+        if self._scan is not None and (now - self._scan.time < self.track_period or now == self._scan.time) \
+                and not (force and now != self._scan.time):
+            return self._scan
+        import mujoco
+
+        model = twin.model  # type: ignore[attr-defined]
+        expected = [g for i in twin.object_ids()  # type: ignore[attr-defined]
+                    if (g := mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, f"{i}/visual")) >= 0]
+        self._scan = self.feed.scan(model, twin.data, time=now, expected=expected)  # type: ignore[attr-defined]
+        self._claims = {}
+        return self._scan
+
+    def _associate(self, truth: GroundTruth, scan, object_id: str) -> int | None:  # type: ignore[no-untyped-def]
+        """Index of the segment that is ``object_id`` in ``scan``, or None (logged and counted)."""
+        if object_id not in self._last:
+            # Labelling, once: which segment is this object. See the class docstring.
+            self._last[object_id] = np.asarray(truth.twin.pose(object_id)[0], float)  # type: ignore[attr-defined]
+        if not scan.segments:
+            self.feed.stats.unseen += 1
+            log.warning("%s: the scan at t=%.3f has no segments", object_id, scan.time)
+            return None
+        centroids = np.array([s.centroid for s in scan.segments])
+        dist = np.linalg.norm(centroids - self._last[object_id], axis=1)
+        k = int(np.argmin(dist))
+        if dist[k] > ASSOCIATION_RADIUS:
+            self.feed.stats.unseen += 1
+            log.warning("%s: no segment within %.0f mm of its last position (nearest %.0f mm); not seen",
+                        object_id, 1000 * ASSOCIATION_RADIUS, 1000 * dist[k])
+            return None
+        owners = self._claims.setdefault(k, set())
+        owners.add(object_id)
+        if len(owners) == 2:
+            self.feed.stats.merged += 1
+            log.warning("segment %d of the scan at t=%.3f holds %s: merged", k, scan.time, ", ".join(sorted(owners)))
+        return k
+
+    def _fuse(self, scan, seg, points: int, shot: int) -> Observation:  # type: ignore[no-untyped-def]
+        """The segment's views as one cloud: normals towards each point's camera, the base closed."""
+        from estimation.completion import close_bottom
+        from estimation.fusion import oriented_normals
+
+        pts, origins = seg.points, seg.origins
+        normals = oriented_normals(pts, origins)
+        extra = close_bottom(pts, normals, scan.plane, cell=scan.cell / 3, cut=scan.margin)
+        allp = np.concatenate([pts, extra.points])
+        alln = np.concatenate([normals, extra.normals])
+        # A completed point's "sensor" is a virtual one outside the object along its outward normal.
+        allo = np.concatenate([origins, extra.points + extra.normals])
+        completed = np.concatenate([np.zeros(len(pts), bool), np.ones(len(extra.points), bool)])
+        if points and len(allp) > points:
+            keep = np.sort(np.random.default_rng([self.seed, shot]).permutation(len(allp))[:points])
+            allp, alln, allo, completed = allp[keep], alln[keep], allo[keep], completed[keep]
+        centre = allp.mean(axis=0)
+        return Observation(allp, allo, centre, np.array([1.0, 0.0, 0.0, 0.0]), alln, completed)
+
+
+#: Points of an object's first fused cloud kept as its ICP model.
+MODEL_POINTS_CAP = 4000
+
+#: A segment further than this from an object's last position is not that object, metres: more than an
+#: object at rest moves between scans, less than the gaps in the clutter scene.
+ASSOCIATION_RADIUS = 0.08
+
+#: ICP matching fewer of the model's points than this share has lost the object.
+MIN_FITNESS = 0.3
+
+
+def _quat(matrix: np.ndarray) -> np.ndarray:
+    """w x y z quaternion of a rotation matrix (MuJoCo's order)."""
+    import mujoco
+
+    q = np.empty(4)
+    mujoco.mju_mat2Quat(q, np.ascontiguousarray(matrix, dtype=np.float64).ravel())
+    return q

@@ -1,0 +1,107 @@
+"""Closing what no camera saw: an object's bottom on its support plane.
+
+An object at rest on a table hides its base. Where its walls come down to the plane upright (a box, a
+can, a cone), the base is the plane itself inside the object's outline: we add points there, marked as
+completed, plus a skirt up the wall through the band the plane removal cut away. Where the walls curve
+in towards the plane (a ball, a lying capsule, a torus), the base is not flat and nothing is added: the
+estimator closes that hole itself, and the result rests on less evidence (reported as less coverage).
+
+The outline is the object's own top-down shadow (its points projected on the plane), so a ring's hole
+stays open and a box seen from one side still gets its whole base (its top face casts the full shadow).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from estimation.contracts import as_points
+from estimation.segmentation import Plane
+
+#: Points in the lowest band above the cut whose normal is within this cosine of horizontal are upright
+#: wall (|cos| to the plane normal below 0.3: within ~17 degrees of vertical, a box's or can's side; a
+#: ball's, a lying capsule's or a torus's underside near the table points ~30-60 degrees down).
+WALL_COSINE = 0.45
+
+#: The band above the removal cut where wall evidence is looked for, metres: thin, so that the side of
+#: a lying cylinder or torus a centimetre up (upright there) does not count.
+WALL_BAND_M = 0.006
+
+#: The base is closed only when at least this share of the band's points are upright wall...
+WALL_SHARE = 0.4
+
+#: ...and at least this many.
+MIN_WALL_POINTS = 20
+
+#: Shadow raster cells fill gaps of up to this many cells (morphological closing): dropouts and the
+#: sparse far side of a one-camera view.
+CLOSING_CELLS = 2
+
+
+@dataclass(frozen=True)
+class Completion:
+    """Points added where the object meets its support plane.
+
+    Attributes:
+        points: (m, 3) float64 metres, world frame (m may be 0).
+        normals: (m, 3) float64 unit, outward (down for the base, out for the skirt).
+        base_area: m^2, area of the closed base (0: the walls do not meet the plane upright).
+    """
+
+    points: np.ndarray
+    normals: np.ndarray
+    base_area: float
+
+
+def close_bottom(points: np.ndarray, normals: np.ndarray, plane: Plane, *, cell: float,
+                 cut: float) -> Completion:
+    """The base and skirt of an object resting on ``plane`` (see the module docstring).
+
+    Args:
+        points: (n, 3) float64 metres, world frame: the object's observed points (all above ``cut``).
+        normals: (n, 3) float64 unit outward normals of ``points`` (oriented to their sensors).
+        plane: the support plane, normal pointing up into the object's side.
+        cell: spacing of the added points and of the shadow raster, metres (about the point spacing).
+        cut: height above the plane below which observed points were removed with the plane, metres.
+    """
+    pts = as_points(points, "points")
+    nrm = as_points(normals, "normals")
+    empty = Completion(np.zeros((0, 3)), np.zeros((0, 3)), 0.0)
+    up = plane.normal
+    h = pts @ up + plane.offset
+    band = h < cut + WALL_BAND_M
+    wall = band & (np.abs(nrm @ up) < WALL_COSINE)
+    if wall.sum() < max(MIN_WALL_POINTS, WALL_SHARE * band.sum()):
+        return empty
+    # A 2D basis of the plane.
+    e1 = np.cross(up, [1.0, 0.0, 0.0] if abs(up[0]) < 0.9 else [0.0, 1.0, 0.0])
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(up, e1)
+    uv = np.stack([pts @ e1, pts @ e2], axis=1)
+    lo = uv.min(axis=0) - (CLOSING_CELLS + 1) * cell
+    ij = np.floor((uv - lo) / cell).astype(np.int64)
+    shape = tuple(ij.max(axis=0) + CLOSING_CELLS + 2)
+    shadow = np.zeros(shape, dtype=bool)
+    shadow[ij[:, 0], ij[:, 1]] = True
+    from scipy import ndimage
+
+    shadow = ndimage.binary_closing(shadow, iterations=CLOSING_CELLS)
+    ci, cj = np.nonzero(shadow)
+    centres = lo + (np.stack([ci, cj], axis=1) + 0.5) * cell
+    origin = -plane.offset * up  # the plane's point nearest the world origin
+    base = origin + centres[:, :1] * e1 + centres[:, 1:] * e2
+    out_pts, out_nrm = [base], [np.broadcast_to(-up, base.shape)]
+    rim = shadow & ~ndimage.binary_erosion(shadow)
+    ri, rj = np.nonzero(rim)
+    if len(ri) and cut > 0:
+        rim_uv = lo + (np.stack([ri, rj], axis=1) + 0.5) * cell
+        centre_uv = centres.mean(axis=0)
+        out2 = rim_uv - centre_uv
+        out2 /= np.maximum(np.linalg.norm(out2, axis=1, keepdims=True), 1e-12)
+        outward = out2[:, :1] * e1 + out2[:, 1:] * e2
+        rim_base = origin + rim_uv[:, :1] * e1 + rim_uv[:, 1:] * e2
+        for z in np.arange(cell, cut, cell):
+            out_pts.append(rim_base + z * up)
+            out_nrm.append(outward)
+    return Completion(np.concatenate(out_pts), np.concatenate(out_nrm), float(shadow.sum() * cell**2))

@@ -1,0 +1,230 @@
+"""From depth images to one object's cloud: back-projection, flying-pixel rejection, fused views, normals.
+
+Pure numpy/scipy (no simulator): a depth image from a real camera goes through the same functions as one
+from ``scenes/cameras.py``. Conventions: pinhole camera, OpenCV axes (x right, y down, z forward), depth
+is the z coordinate in the camera frame (what RGB-D cameras report), NaN where there was no return.
+
+Why per-point sensor origins: a fused cloud's points were seen from different places. A normal is
+oriented towards the camera that saw its point (the point was on the camera's side of the surface); one
+viewpoint for all (``estimate(viewpoint=...)``) flips every normal on the far side of a two-view cloud.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from estimation import tolerances as tol
+from estimation.cloud import PointCloud, make_cloud
+from estimation.contracts import as_points
+from estimation.errors import CloudError
+
+log = logging.getLogger(__name__)
+
+#: A pixel whose 3x3 neighbourhood spans more depth than this many times its own axial noise (and at
+#: least ``MIN_EDGE_JUMP_M``) sits on a depth edge. Edge pixels are where structured-light and ToF
+#: sensors return "flying pixels" (a mix of foreground and background depth, Sabov & Krueger 2008), so
+#: they are dropped: a 1-pixel erosion of each silhouette, which other views cover.
+EDGE_SIGMAS = 6.0
+
+#: Smallest depth jump that counts as an edge, metres: a tilted plane's neighbouring pixels differ by up
+#: to a few millimetres at 1-2 m and grazing angles; a smaller threshold would eat tilted faces.
+MIN_EDGE_JUMP_M = 0.01
+
+
+@dataclass(frozen=True)
+class Intrinsics:
+    """A pinhole camera's intrinsics: focal lengths and principal point in pixels, image size.
+
+    Attributes:
+        fx, fy: focal lengths, pixels.
+        cx, cy: principal point, pixels (pixel centres at integer + 0.5).
+        width, height: image size, pixels.
+    """
+
+    fx: float
+    fy: float
+    cx: float
+    cy: float
+    width: int
+    height: int
+
+    @classmethod
+    def from_fov(cls, width: int, height: int, fov_y_deg: float) -> Intrinsics:
+        """Square pixels, centred principal point, vertical field of view ``fov_y_deg`` degrees."""
+        f = 0.5 * height / np.tan(np.radians(fov_y_deg) / 2)
+        return cls(f, f, width / 2, height / 2, int(width), int(height))
+
+    def rays(self) -> np.ndarray:
+        """(height * width, 3) float64 camera-frame directions with z = 1, row-major pixel order."""
+        u, v = np.meshgrid(np.arange(self.width) + 0.5, np.arange(self.height) + 0.5)
+        return np.stack([(u - self.cx) / self.fx, (v - self.cy) / self.fy, np.ones_like(u)], -1).reshape(-1, 3)
+
+
+def depth_to_points(depth: np.ndarray, intrinsics: Intrinsics, rotation: np.ndarray,
+                    position: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Back-project a depth image into the world.
+
+    Args:
+        depth: (height, width) float64, metres along the camera's z; NaN (or <= 0) where no return.
+        intrinsics: the camera's.
+        rotation: (3, 3) camera-to-world rotation (columns: the camera's x, y, z axes in the world).
+        position: (3,) metres, world frame: the camera centre.
+
+    Returns:
+        points (n, 3) float64 metres, world frame, and their flat pixel indices (n,) int64.
+
+    Raises:
+        CloudError: the depth image's shape does not match the intrinsics.
+    """
+    depth = np.asarray(depth, dtype=np.float64)
+    if depth.shape != (intrinsics.height, intrinsics.width):
+        raise CloudError(f"depth: expected shape ({intrinsics.height}, {intrinsics.width}), got {depth.shape}")
+    flat = depth.ravel()
+    with np.errstate(invalid="ignore"):
+        index = np.flatnonzero(np.isfinite(flat) & (flat > 0))
+    rays = intrinsics.rays()[index] * flat[index, None]
+    return rays @ np.asarray(rotation, dtype=np.float64).T + np.asarray(position, dtype=np.float64), index
+
+
+def edge_mask(depth: np.ndarray, sigma: np.ndarray | float, *, sigmas: float = EDGE_SIGMAS,
+              min_jump: float = MIN_EDGE_JUMP_M) -> np.ndarray:
+    """(height, width) bool: pixels on a depth edge (likely flying pixels), to drop before fusing.
+
+    Args:
+        depth: (height, width) float64 metres, NaN where no return (a NaN neighbour is not an edge:
+            dropouts are random, and an edge against nothing is a silhouette against the far range).
+        sigma: the axial noise at each pixel, metres, (height, width) or a scalar.
+        sigmas, min_jump: the jump threshold is ``max(sigmas * sigma, min_jump)``.
+    """
+    from scipy import ndimage
+
+    filled_hi = np.where(np.isfinite(depth), depth, -np.inf)
+    filled_lo = np.where(np.isfinite(depth), depth, np.inf)
+    hi = ndimage.maximum_filter(filled_hi, size=3, mode="nearest")
+    lo = ndimage.minimum_filter(filled_lo, size=3, mode="nearest")
+    with np.errstate(invalid="ignore"):
+        jump = np.maximum(hi - depth, depth - lo)
+        return np.isfinite(depth) & (jump > np.maximum(sigmas * np.asarray(sigma), min_jump))
+
+
+def fuse_views(views: list[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray, np.ndarray]:
+    """Concatenate views into one cloud with per-point sensor origins.
+
+    Args:
+        views: (points (n_i, 3) float64 metres world frame, origin (3,) metres world frame) per view;
+            views with no points are skipped.
+
+    Returns:
+        points (n, 3) and sensor_origins (n, 3), float64 metres, world frame.
+
+    Raises:
+        CloudError: no view has any point.
+    """
+    kept = [(as_points(p, "points"), np.asarray(o, dtype=np.float64)) for p, o in views if len(p)]
+    if not kept:
+        raise CloudError("no view saw any point of the object")
+    points = np.concatenate([p for p, _ in kept])
+    origins = np.concatenate([np.broadcast_to(o, p.shape) for p, o in kept])
+    return points, origins
+
+
+def oriented_normals(points: np.ndarray, sensor_origins: np.ndarray, *, k: int = tol.NORMAL_NEIGHBOURS,
+                     fixed: np.ndarray | None = None) -> np.ndarray:
+    """PCA normals (n, 3), each flipped towards the sensor that saw its point.
+
+    Args:
+        points: (n, 3) float64 metres.
+        sensor_origins: (n, 3) float64 metres, same frame: where each point was seen from.
+        k: neighbours per point (itself included).
+        fixed: (n, 3) unit normals to keep where finite (completed points whose outward side is known,
+            such as a support plane's bottom); NaN rows are estimated. None: estimate all.
+
+    Raises:
+        CloudError: shapes disagree or fewer than 3 points.
+    """
+    pts = as_points(points, "points")
+    org = as_points(sensor_origins, "sensor_origins")
+    if org.shape != pts.shape:
+        raise CloudError(f"sensor_origins: expected shape {pts.shape} to match points, got {org.shape}")
+    if len(pts) < 3:
+        raise CloudError(f"too few points for normals: {len(pts)}")
+    k = min(k, len(pts))
+    _, nb = cKDTree(pts).query(pts, k=k)
+    local = pts[nb] - pts[nb].mean(axis=1, keepdims=True)
+    cov = np.einsum("nki,nkj->nij", local, local)
+    _, vecs = np.linalg.eigh(cov)  # ascending eigenvalues: column 0 is the normal
+    normals = vecs[:, :, 0]
+    flip = np.einsum("ij,ij->i", normals, org - pts) < 0
+    normals[flip] *= -1
+    if fixed is not None:
+        given = np.isfinite(fixed).all(axis=1)
+        normals[given] = fixed[given]
+    return normals
+
+
+def fused_cloud(points: np.ndarray, sensor_origins: np.ndarray, *, completed: np.ndarray | None = None,
+                completed_normals: np.ndarray | None = None) -> PointCloud:
+    """A :class:`PointCloud` with normals oriented per point, ready for ``estimate`` (no viewpoint needed).
+
+    Args:
+        points: (n, 3) float64 metres, world frame, observed and completed points.
+        sensor_origins: (n, 3) float64 metres: each observed point's camera; completed rows are ignored.
+        completed: (n,) bool, True for points no camera saw (e.g. the closed bottom), or None.
+        completed_normals: (n, 3) unit outward normals for the completed rows (others ignored), or None.
+    """
+    pts = as_points(points, "points")
+    fixed = None
+    if completed is not None and completed.any():
+        fixed = np.full_like(pts, np.nan)
+        if completed_normals is not None:
+            fixed[completed] = completed_normals[completed]
+    normals = oriented_normals(pts, sensor_origins, fixed=fixed)
+    return make_cloud(pts, normals, sensor_origins=sensor_origins)
+
+
+@dataclass(frozen=True)
+class Registration:
+    """A rigid motion found by ICP: ``x -> transform[:3, :3] x + transform[:3, 3]``, world frame.
+
+    Attributes:
+        transform: (4, 4) float64.
+        fitness: share of source points with a correspondence within the distance (0-1).
+        rmse: metres, RMS distance of those correspondences.
+    """
+
+    transform: np.ndarray
+    fitness: float
+    rmse: float
+
+
+def register(source: np.ndarray, target: np.ndarray, *, init: np.ndarray, max_distance: float,
+             iterations: int = 50) -> Registration:
+    """Point-to-plane ICP (Open3D) moving ``source`` onto ``target``.
+
+    Args:
+        source, target: (n, 3), (m, 3) float64 metres, same frame.
+        init: (4, 4) float64, the starting motion (the last tracked one).
+        max_distance: metres, the largest correspondence distance (a few noise sigmas plus the motion
+            expected between two registrations).
+        iterations: ICP iterations at most.
+
+    Raises:
+        CloudError: fewer than 3 points on either side.
+    """
+    import open3d as o3d
+
+    src, tgt = as_points(source, "source"), as_points(target, "target")
+    if len(src) < 3 or len(tgt) < 3:
+        raise CloudError(f"register: need 3 points on each side, got {len(src)} and {len(tgt)}")
+    reg = o3d.pipelines.registration
+    a = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(src))
+    b = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(tgt))
+    b.estimate_normals(o3d.geometry.KDTreeSearchParamKNN(knn=min(tol.NORMAL_NEIGHBOURS, len(tgt))))
+    out = reg.registration_icp(a, b, max_distance, np.asarray(init, dtype=np.float64),
+                               reg.TransformationEstimationPointToPlane(),
+                               reg.ICPConvergenceCriteria(max_iteration=iterations))
+    return Registration(np.asarray(out.transformation).copy(), float(out.fitness), float(out.inlier_rmse))
