@@ -1,2 +1,34 @@
 """The ``twin`` command line: the top of the stack. It wires estimation, the wire, the twin and the scenes
-together; nothing below imports it."""
+together; nothing below imports it.
+
+The entry point is ``cli.main:main``. It is deliberately not re-exported here: ``cli.main`` is the module,
+and a function of the same name on the package would hide it (``import cli.main as m`` would give the
+function). The names below load on first use (PEP 562).
+"""
+
+from __future__ import annotations
+
+import importlib
+
+#: public name -> the module that defines it.
+_EXPORTS = {
+    "EXIT_BAD_INPUT": "cli.main",
+    "to_json": "cli.main",
+    "estimate_to_json": "cli.main",
+    "run_demo": "cli.demo",
+}
+
+__all__ = sorted(_EXPORTS)
+
+
+def __getattr__(name: str) -> object:
+    module = _EXPORTS.get(name)
+    if module is None:
+        raise AttributeError(f"module 'cli' has no attribute {name!r}")
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value  # once: later lookups do not come back here
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted({*globals(), *_EXPORTS})

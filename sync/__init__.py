@@ -3,4 +3,49 @@
 ``keys`` owns the key expressions, ``messages`` the wire format and its checks, ``link`` the counted,
 checked send and receive over a ``transport`` (``zenoh_transport`` for live runs, ``inprocess`` for
 headless ones), and ``clock`` the time every loop reads. Nothing here knows MuJoCo or the scene.
+
+The public names below load on first use (PEP 562): ``import sync`` imports neither Zenoh nor msgspec.
 """
+
+from __future__ import annotations
+
+import importlib
+
+#: public name -> the module that defines it.
+_EXPORTS = {
+    "Clock": "sync.clock",
+    "RealClock": "sync.clock",
+    "REAL_CLOCK": "sync.clock",
+    "SimClock": "sync.clock",
+    "Transport": "sync.transport",
+    "Link": "sync.link",
+    "LinkCounters": "sync.link",
+    "Keys": "sync.keys",
+    "InProcessBus": "sync.inprocess",
+    "InProcessTransport": "sync.inprocess",
+    "ZenohTransport": "sync.zenoh_transport",
+    "SessionError": "sync.zenoh_transport",
+    "make_config": "sync.zenoh_transport",
+    "open_session": "sync.zenoh_transport",
+    "free_port": "sync.zenoh_transport",
+    "MessageError": "sync.messages",
+    "encode": "sync.messages",
+    "decode": "sync.messages",
+    "Network": "sync.netem",
+    "Conditions": "sync.netem",
+}
+
+__all__ = sorted(_EXPORTS)
+
+
+def __getattr__(name: str) -> object:
+    module = _EXPORTS.get(name)
+    if module is None:
+        raise AttributeError(f"module 'sync' has no attribute {name!r}")
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value  # once: later lookups do not come back here
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted({*globals(), *_EXPORTS})

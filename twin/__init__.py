@@ -1,1 +1,53 @@
-"""The local twin C': estimates become MuJoCo bodies, and the simulation loop runs at haptic rate."""
+"""The local twin C': estimates become MuJoCo bodies, and the simulation loop runs at haptic rate.
+
+The public names below load on first use (PEP 562), so ``import twin`` imports neither MuJoCo nor numpy::
+
+    from twin import Twin, run_paced
+    from twin import Local, LocalSettings          # the twin following a remote over a transport
+
+The rest (CoACD caching, the hold, rerun logging) stays in its modules.
+"""
+
+from __future__ import annotations
+
+import importlib
+
+#: public name -> the module that defines it.
+_EXPORTS = {
+    "Twin": "twin.sim",
+    "run_paced": "twin.sim",
+    "TwinObject": "twin.objects",
+    "object_at_estimate": "twin.objects",
+    "PhysicsSettings": "twin.model",
+    "DEFAULT_PHYSICS": "twin.model",
+    "TableSpec": "twin.model",
+    "EndEffectorSpec": "twin.model",
+    "add_object": "twin.model",
+    "new_spec": "twin.model",
+    "CoacdSettings": "twin.decompose",
+    "Local": "twin.runtime",
+    "LocalSettings": "twin.runtime",
+    "LocalReport": "twin.runtime",
+    "OperatorSettings": "twin.runtime",
+    "SyncError": "twin.runtime",
+    "HoldSettings": "twin.hold",
+    "LoopStats": "twin.loop",
+    "load_trajectory": "twin.trajectory",
+    "push_trajectory": "twin.trajectory",
+    "TrajectoryError": "twin.trajectory",
+}
+
+__all__ = sorted(_EXPORTS)
+
+
+def __getattr__(name: str) -> object:
+    module = _EXPORTS.get(name)
+    if module is None:
+        raise AttributeError(f"module 'twin' has no attribute {name!r}")
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value  # once: later lookups do not come back here
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted({*globals(), *_EXPORTS})
