@@ -38,13 +38,22 @@ class Material:
     solimp: tuple[float, ...] | None = None
 
 
+#: The table in ``materials.toml`` that maps other names to table keys (not a material).
+_ALIASES = "aliases"
+
+
+@cache
+def _table() -> dict:
+    return tomllib.loads(resources.files("estimation").joinpath("materials.toml").read_text())
+
+
 @cache
 def materials() -> dict[str, Material]:
-    """All materials in the table, by name."""
-    text = resources.files("estimation").joinpath("materials.toml").read_text()
-    table = tomllib.loads(text)
+    """All materials in the table, by name (aliases not included: see :func:`aliases`)."""
     out = {}
-    for name, row in table.items():
+    for name, row in _table().items():
+        if name == _ALIASES:
+            continue
         out[name] = Material(
             name=name,
             density=float(row["density"]),
@@ -56,18 +65,42 @@ def materials() -> dict[str, Material]:
     return out
 
 
-def material(name: str) -> Material:
-    """Look a material up by name (case and '-'/' ' insensitive).
+@cache
+def aliases() -> dict[str, str]:
+    """Other names for table materials (``'pla'`` -> ``'pla_plastic'``, ``'aluminum'`` -> ``'aluminium'``).
 
     Raises:
-        MaterialError: unknown name; the message lists close matches.
+        MaterialError: an alias in ``materials.toml`` names no material (a packaging mistake).
     """
     table = materials()
-    key = name.strip().lower().replace("-", "_").replace(" ", "_")
+    out = {}
+    for alias, target in _table().get(_ALIASES, {}).items():
+        if target not in table:
+            raise MaterialError(f"materials.toml: alias {alias!r} names no material ({target!r})")
+        out[_normalise(alias)] = target
+    return out
+
+
+def _normalise(name: str) -> str:
+    return name.strip().lower().replace("-", "_").replace(" ", "_")
+
+
+def material(name: str) -> Material:
+    """Look a material up by name or alias (case and '-'/' ' insensitive): ``material("PLA")`` is
+    ``pla_plastic``.
+
+    Raises:
+        MaterialError: unknown name; the message lists close matches among names and aliases.
+    """
+    table, other = materials(), aliases()
+    key = _normalise(name)
     if key in table:
         return table[key]
-    close = difflib.get_close_matches(key, list(table), n=3, cutoff=0.5)
-    hint = f"; did you mean {', '.join(close)}?" if close else f"; known: {', '.join(sorted(table))}"
+    if key in other:
+        return table[other[key]]
+    close = difflib.get_close_matches(key, [*table, *other], n=3, cutoff=0.5)
+    named = [f"{c} (= {other[c]})" if c in other else c for c in close]
+    hint = f"; did you mean {', '.join(named)}?" if close else f"; known: {', '.join(sorted(table))}"
     raise MaterialError(f"unknown material {name!r}{hint}")
 
 
