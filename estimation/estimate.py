@@ -63,6 +63,10 @@ class PhysicalEstimate:
         points: (points_used, 3) float32, metres, cloud frame: the downsampled points the surface was
             built from (None for 'obb', 'hull' and 'mesh'). For display and debugging.
         normals: (points_used, 3) float32, unit, cloud frame: their outward normals (given or estimated).
+        volume_bounds_m3: (low, high) m^3, the volumes the cloud cannot tell apart from the estimate
+            ('auto' only, else None): surface the points did not measure (holes closed by the shell)
+            could lie anywhere across the shell, and walls thinner than a cell anywhere from nothing
+            to a cell thick. Equal to the volume up to rounding when the cloud pins everything down.
     """
 
     method: str
@@ -79,6 +83,7 @@ class PhysicalEstimate:
     warnings: tuple[str, ...] = field(default=())
     points: np.ndarray | None = field(default=None, repr=False)
     normals: np.ndarray | None = field(default=None, repr=False)
+    volume_bounds_m3: tuple[float, float] | None = None
 
     @property
     def volume(self) -> float:
@@ -104,7 +109,8 @@ def estimate(
         material: name recorded with the estimate (the density is what counts).
         viewpoint: (3,) metres; when normals must be estimated, orient them towards it instead of by
             the flood fill (for single-view scans).
-        resolution: grid cells along the object's longest side ('auto' and the downsampling of all).
+        resolution: grid cells along the object's longest side for 'obb' and 'surface'. 'auto' takes
+            its cell from the point spacing (``tolerances.FINE_CELL_SPACINGS``).
         read_seconds: time spent reading the file, carried into ``timings``.
 
     Raises:
@@ -145,7 +151,98 @@ def estimate(
         return _finish(method, cloud, len(cloud), box, vertices, faces, True, 0.0, density, material,
                        warnings, stages, time.perf_counter())
 
+    if method == "auto":
+        return _estimate_auto(cloud, box, density, material, viewpoint, warnings, stages)
     return _estimate_from_surface(cloud, box, density, method, material, viewpoint, resolution, warnings, stages)
+
+
+def _estimate_auto(
+    cloud: PointCloud,
+    box: OrientedBox,
+    density: float,
+    material: str | None,
+    viewpoint: np.ndarray | None,
+    warnings: list[str],
+    stages: dict[str, float],
+) -> PhysicalEstimate:
+    """'auto': narrow band at the point spacing, flood-filled sign, dual contouring on the points' planes."""
+    from scipy.spatial import cKDTree
+
+    from estimation.dualcontour import contour
+    from estimation.grid import grid_around, occupancy
+    from estimation.implicit import band_field
+    from estimation.normals import estimate_normals, orient_outward, orient_to_viewpoint
+    from estimation.spacing import point_spacing, surface_noise
+    from estimation.sparsegrid import narrow_band
+
+    # The principal frame: the grid, and so the result, does not depend on the cloud's rotation.
+    t0 = time.perf_counter()
+    frame = box.rotation
+    points = (cloud.points - box.center) @ frame
+    normals = None if cloud.normals is None else cloud.normals @ frame
+    spacing = point_spacing(points)
+    if len(points) > tol.POINT_BUDGET:
+        # Averaging within voxels of the budget's spacing keeps about POINT_BUDGET points.
+        voxel = spacing * np.sqrt(len(points) / tol.POINT_BUDGET)
+        points, normals, _ = voxel_downsample(points, voxel, normals)
+        spacing = point_spacing(points)
+    noise = surface_noise(points)
+    h = max(tol.FINE_CELL_SPACINGS * spacing, tol.FINE_CELL_NOISE * noise)
+    ratio = max(2, int(np.ceil(float(box.extents.max()) / (h * tol.COARSE_RESOLUTION))))
+    coarse = grid_around(points, ratio * h)
+    stages["downsample"] = time.perf_counter() - t0
+
+    t0 = time.perf_counter()
+    occ = occupancy(points, coarse)
+    if normals is None:
+        # Fit normals over about a cell of surface: where noise sets the cell, a wider patch than the
+        # default neighbours span (voxel-averaging the points instead biases noisy curved surfaces
+        # outward by a good fraction of sigma).
+        k = int(np.clip(tol.NORMAL_NEIGHBOURS * (h / spacing) ** 2, tol.NORMAL_NEIGHBOURS, tol.MAX_NORMAL_NEIGHBOURS))
+        normals = estimate_normals(points, k)
+        if viewpoint is not None:
+            view_local = (np.asarray(viewpoint, dtype=np.float64) - box.center) @ frame
+            normals = orient_to_viewpoint(points, normals, view_local)
+        else:
+            normals = orient_outward(points, normals, coarse, occ, cKDTree(points), noise)
+    stages["normals"] = time.perf_counter() - t0
+
+    t0 = time.perf_counter()
+    band = narrow_band(coarse, occ, ratio)
+    values, measured = band_field(points, normals, band)
+    surface = contour(points, normals, band, values, measured, noise=noise)
+    stages["reconstruct"] = time.perf_counter() - t0
+
+    t0 = time.perf_counter()
+    props = mass_properties(surface.vertices, surface.faces, density)
+    # What the cloud leaves open: unmeasured surface anywhere across the closing shell's half width,
+    # and cells holding both faces of a wall anywhere from none to a whole cell of material.
+    hole = surface.unmeasured_area * (occ.closing + 0.5) * coarse.cell
+    thin = surface.opposed_cells * h**3 / 2
+    bounds = (max(0.0, props.volume - hole - thin), props.volume + hole + thin)
+    if hole > tol.VOLUME_DOUBT_FRACTION * props.volume:
+        warnings.append(f"{100 * surface.unmeasured_area / max(_area(surface), 1e-30):.1f} % of the surface "
+                        f"was not measured (holes closed by a {occ.closing}-cell shell): the volume is "
+                        f"only known to {bounds[0]:.4g}..{bounds[1]:.4g} m^3")
+    if thin > tol.VOLUME_DOUBT_FRACTION * props.volume:
+        warnings.append(f"parts thinner than the point spacing ({1000 * h:.2g} mm cells hold both faces of a "
+                        f"wall in {surface.opposed_cells} places): the volume is only known to "
+                        f"{bounds[0]:.4g}..{bounds[1]:.4g} m^3")
+    props = _rotate_properties(props, frame, box.center)
+    vertices = surface.vertices @ frame.T + box.center
+    stages["mass_properties"] = time.perf_counter() - t0
+    return PhysicalEstimate(
+        method="auto", mass=props, obb=box, vertices=vertices, faces=surface.faces,
+        watertight=True, points_in=len(cloud), points_used=len(points), cell=h,
+        timings=Timings(**stages), material=material, warnings=tuple(warnings),
+        points=(points @ frame.T + box.center).astype(np.float32), normals=(normals @ frame.T).astype(np.float32),
+        volume_bounds_m3=bounds,
+    )
+
+
+def _area(surface) -> float:  # type: ignore[no-untyped-def]
+    tri = surface.vertices[surface.faces]
+    return float(np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1).sum() / 2)
 
 
 def _estimate_from_surface(

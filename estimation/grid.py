@@ -101,7 +101,9 @@ def occupancy(points: np.ndarray, grid: Grid) -> Occupancy:
             jump = int((~after.outside).sum()) - int((~before.outside).sum())
             if before.inside.sum() > surface_nodes and jump <= LEAK_JUMP_LAYERS * surface_nodes:
                 return before
-    enclosing = [r for r in results if r.inside.any()]
+    # Nothing closed for good: a thin-walled object (or a very open one). Crumbs enclosed by a wide
+    # shell are not the object's inside; keep the thinnest shell and let the band decide.
+    enclosing = [r for r in results if r.inside.sum() > surface_nodes]
     return enclosing[-1] if enclosing else results[0]
 
 

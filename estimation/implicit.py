@@ -1,117 +1,94 @@
-"""Watertight reconstruction from oriented points: implicit moving least squares, then marching cubes.
+"""Inside/outside on the narrow band: implicit moving least squares near the points, flood fill beyond.
 
-Near the surface (the occupancy shell), the signed distance of a node is the weighted mean of its
-nearest points' plane distances ``n_i . (x - p_i)`` (Kolluri's IMLS). Far from it, the sign comes from
-the flood fill and the value is clamped. Marching cubes over that field gives a closed, consistently
-oriented surface by construction; tiny spurious pieces are dropped.
+Near the points, a band node's value is the Gaussian-weighted mean of its nearest points' plane
+distances ``n_i . (x - p_i)`` (Kolluri's IMLS), scattered from each point to the 27 fine nodes around
+it. The kernel is one fine cell wide and the fine cell is about one point spacing, so a wall two
+spacings thick keeps nodes of the right sign on both faces: the far face's points weigh
+``exp(-(2 h)^2 / h^2) ~ 2 %`` against the near face's. (The old fixed 128-cell grid made cells
+wider than thin walls, and then the far face's planes outvoted the near face's: walls thickened.)
+
+Band nodes no point reached take the sign of their neighbours, spreading in from the reached nodes
+and from the coarse flood fill, so every node has a sign and the zero level is closed. Only the sign
+is used downstream: the surface's position comes from the points' own planes
+(``estimation.dualcontour``), not from interpolating this field.
 """
 
 from __future__ import annotations
 
 import numpy as np
-import trimesh
-from scipy.spatial import cKDTree
 
-from estimation.errors import ReconstructionError
-from estimation.grid import Grid, Occupancy
-from estimation.inertia import signed_volumes
+from estimation.sparsegrid import Band
 
-#: Gaussian width of the IMLS weights, in cells. Small keeps edges sharp (the nearest face dominates);
-#: large averages noise. One cell is both: the downsampled spacing is half a cell.
+#: Gaussian width of the IMLS weights, fine cells (one cell ~ one point spacing; see module doc).
 KERNEL_CELLS = 1.0
 
-#: Far-field magnitude of the distance field, cells. Anything over one cell lets marching cubes place
-#: the surface only inside the band.
-CLAMP_CELLS = 2.0
+#: Magnitude (fine cells) given to nodes signed by spreading rather than measured; also the clamp on
+#: measured values. Beyond 1.5 cells no edge crossing can be interpolated anyway.
+FAR_CELLS = 1.5
 
-#: Nearest points averaged at shell nodes that no point's scatter reached.
-FALLBACK_NEIGHBOURS = 8
-
-#: How far (cells) node values are kept from the zero level.
-NUDGE_CELLS = 1e-3
-
-#: Closed pieces smaller than this fraction of the largest are noise, not object.
-MIN_PIECE_FRACTION = 1e-3
+#: Neighbour offsets of a node (the 27 around it, itself included), a cell's 8 corners from its lowest,
+#: and a node's 6 face neighbours.
+NEIGHBOURS_27 = np.array([(i, j, k) for i in (-1, 0, 1) for j in (-1, 0, 1) for k in (-1, 0, 1)])
+CORNERS_8 = np.array([(i, j, k) for i in (0, 1) for j in (0, 1) for k in (0, 1)])
+FACES_6 = np.array([(1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0), (0, 0, 1), (0, 0, -1)])
 
 
-def signed_distance(
-    points: np.ndarray, normals: np.ndarray, grid: Grid, occ: Occupancy, tree: cKDTree
-) -> np.ndarray:
-    """Signed distance (metres, positive outside) on every grid node, float32 of ``grid.shape``.
-
-    Each point adds its Gaussian-weighted plane distance to the 27 nodes around it (a scatter with
-    ``bincount``, several times faster than a neighbour query per node). Shell nodes farther than a
-    cell from every point (the shell is wider where it had to close holes) take the same average over
-    their nearest points instead.
+def band_field(points: np.ndarray, normals: np.ndarray, band: Band) -> tuple[np.ndarray, np.ndarray]:
+    """Signed values (metres, negative inside) on every band node, and which were measured.
 
     Args:
-        points: (n, 3) metres; normals: (n, 3) unit, outward; tree: KD-tree over ``points``.
+        points: (n, 3) float64, metres, band frame. normals: (n, 3) unit, outward.
+        band: the narrow band around ``points``.
+
+    Returns:
+        values (band.size,) float32, and measured (band.size,) bool: True where points were within
+        reach (the value is an IMLS distance), False where the sign was spread from neighbours.
     """
-    clamp = CLAMP_CELLS * grid.cell
-    field = np.where(occ.outside, clamp, -clamp).astype(np.float32)
-    h = KERNEL_CELLS * grid.cell
-    size = int(np.prod(grid.shape))
-    # For node offset o from a point's nearest node, d = r + cell * o with r = node - point, so the
-    # (points x 27) distances and plane values are two small matrix products, then one bincount.
-    base = grid.index_of(points)
-    r = grid.position(base) - points
-    offsets = _NEIGHBOUR_OFFSETS * grid.cell
+    h = band.h
+    # Each point reaches the 8 corners of its cell: every node within a cell of a point (per axis).
+    base = np.floor((points - band.origin) / h).astype(np.int64)
+    r = band.position(base) - points
+    offsets = CORNERS_8 * h
+    # For node offset o from a point's nearest node, d = r + h o: distances and plane values are two
+    # small matrix products, then one bincount over band positions.
     dist2 = (r * r).sum(axis=1)[:, None] + 2 * (r @ offsets.T) + (offsets * offsets).sum(axis=1)[None]
-    w = np.exp(-dist2 / h**2).ravel()
+    weight = np.exp(-dist2 / (KERNEL_CELLS * h) ** 2).ravel()
     plane = ((normals * r).sum(axis=1)[:, None] + normals @ offsets.T).ravel()
-    strides = np.array([grid.shape[1] * grid.shape[2], grid.shape[2], 1])
-    linear = (base @ strides)[:, None] + (_NEIGHBOUR_OFFSETS @ strides)[None]
-    weight_sum = np.bincount(linear.ravel(), weights=w, minlength=size)
-    value_sum = np.bincount(linear.ravel(), weights=w * plane, minlength=size)
-    shell = occ.shell.ravel()
-    band = shell & (weight_sum > 0)
-    flat = field.ravel()
-    flat[band] = np.clip(value_sum[band] / weight_sum[band], -clamp, clamp)
-    uncovered = np.flatnonzero(shell & (weight_sum == 0))
-    if len(uncovered):
-        x = grid.position(np.stack(np.unravel_index(uncovered, grid.shape), axis=1))
-        k = min(FALLBACK_NEIGHBOURS, len(points))
-        dist, nbr = tree.query(x, k=k, workers=-1)
-        dist, nbr = dist.reshape(len(x), k), nbr.reshape(len(x), k)
-        # Weights relative to the nearest point: the same kernel, without underflow far from the data.
-        w = np.exp(-(dist**2 - dist[:, :1] ** 2) / h**2)
-        plane = np.einsum("nkj,nkj->nk", normals[nbr], x[:, None, :] - points[nbr])
-        flat[uncovered] = np.clip((w * plane).sum(axis=1) / w.sum(axis=1), -clamp, clamp)
-    # The border is outside by construction; pinning it keeps every level set closed.
-    for axis in range(3):
-        field.swapaxes(0, axis)[[0, -1]] = clamp
-    return field
+    target = band.locate((base[:, None, :] + CORNERS_8[None]).reshape(-1, 3))
+    ok = target >= 0
+    weight_sum = np.bincount(target[ok], weights=weight[ok], minlength=band.size)
+    value_sum = np.bincount(target[ok], weights=(weight * plane)[ok], minlength=band.size)
+    measured = weight_sum > 0
+    far = FAR_CELLS * h
+    values = np.zeros(band.size, dtype=np.float32)
+    values[measured] = np.clip(value_sum[measured] / weight_sum[measured], -far, far)
+    _spread_signs(values, measured, band, far)
+    return values, measured
 
 
-_NEIGHBOUR_OFFSETS = np.array([(i, j, k) for i in (-1, 0, 1) for j in (-1, 0, 1) for k in (-1, 0, 1)])
+def _spread_signs(values: np.ndarray, measured: np.ndarray, band: Band, far: float) -> None:
+    """Give unmeasured band nodes (in place) the majority sign of their signed face neighbours.
 
-
-def surface_from_field(field: np.ndarray, grid: Grid) -> trimesh.Trimesh:
-    """Zero level set of ``field`` as a watertight mesh with outward faces, metres.
-
-    Raises:
-        ReconstructionError: the field has no zero crossing or no closed piece of any size.
+    Nodes outside the band count with the coarse flood fill's answer. Repeats until nothing changes;
+    a node with no signed neighbour at the end (an island of the band no point reached) is outside.
     """
-    from skimage.measure import marching_cubes
-
-    if field.min() >= 0 or field.max() <= 0:
-        raise ReconstructionError("the reconstructed field has no surface (no inside found)")
-    # A node at ~0 makes marching cubes put several vertices on it; merged, they become degenerate
-    # slivers (and deleting those opens the surface). Moving such nodes off the level by a
-    # thousandth of a cell changes the surface by no more than that.
-    nudge = NUDGE_CELLS * grid.cell
-    field = np.where(np.abs(field) < nudge, np.float32(nudge), field)
-    verts, faces, _, _ = marching_cubes(field, level=0.0, spacing=(grid.cell,) * 3)
-    mesh = trimesh.Trimesh(verts + grid.origin, faces, process=True)
-    if mesh.body_count > 1:
-        pieces = mesh.split(only_watertight=False)
-        volumes = np.array([signed_volumes(p.triangles).sum() for p in pieces])
-        # Inward-facing closed pieces would be cavities no sensor could see: noise, like tiny pieces.
-        keep = [p for p, v in zip(pieces, volumes, strict=True) if v > MIN_PIECE_FRACTION * volumes.max()]
-        mesh = keep[0] if len(keep) == 1 else trimesh.util.concatenate(keep)
-    if signed_volumes(mesh.triangles).sum() <= 0:
-        raise ReconstructionError("reconstruction produced no closed solid")
-    if not mesh.is_watertight:
-        raise ReconstructionError("reconstruction is not watertight")
-    return mesh
-
+    pending = np.flatnonzero(~measured)
+    known = measured.copy()
+    # The six neighbours of every pending node, once: (position or -1, coarse inside where -1).
+    steps = [band.step(pending, axis, direction) for axis in range(3) for direction in (1, -1)]
+    while len(pending):
+        votes = np.zeros(len(pending))
+        for at, far_inside in steps:
+            in_band = at >= 0
+            vote = np.where(in_band, 0.0, np.where(far_inside, -1.0, 1.0))
+            nbr = at[in_band]
+            vote[in_band] = np.where(known[nbr], np.where(values[nbr] < 0, -1.0, 1.0), 0.0)
+            votes += vote
+        decided = votes != 0
+        if not decided.any():
+            values[pending] = far
+            break
+        values[pending[decided]] = np.where(votes[decided] < 0, -far, far)
+        known[pending[decided]] = True
+        pending = pending[~decided]
+        steps = [(at[~decided], far_inside[~decided]) for at, far_inside in steps]

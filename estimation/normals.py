@@ -25,6 +25,30 @@ OUTSIDE_BLUR_CELLS = 1.5
 CONFIDENT_DIFFERENCE = 0.05
 
 
+#: Neighbours looked at for a wall's other face: enough to reach ~3 spacings, where a wall two or
+#: three spacings thick has its other face.
+THIN_WALL_NEIGHBOURS = 32
+
+#: The nearest neighbours that place a point's own sheet (closer than a wall two spacings thick).
+OWN_SHEET_NEIGHBOURS = 8
+
+#: Neighbours whose unoriented normals are within ~25 degrees of the point's count as sheets parallel
+#: to it (the same face, or the wall's other face); crossing faces at a crease do not.
+PARALLEL_COSINE = 0.9
+
+#: The other face's pull on the mean offset must be this many standard errors from zero...
+THIN_WALL_T = 6.0
+
+#: ...and at least this fraction of the neighbourhood radius (curvature alone gives ~1/10 of it at a
+#: radius of curvature of ~5 neighbourhood radii; a wall face holding a third of the neighbours at one
+#: radius gives ~1/3).
+THIN_WALL_OFFSET = 0.2
+
+#: ...and at least this many noise sigmas: a noisy sheet averaged into cells can split into two
+#: layers about a sigma apart, which must not read as a wall (walls under ~6 sigma are not resolvable).
+THIN_WALL_NOISE = 2.0
+
+
 def estimate_normals(points: np.ndarray, k: int = tol.NORMAL_NEIGHBOURS) -> np.ndarray:
     """Unoriented unit normals (n, 3): smallest principal direction of each point's ``k`` neighbours.
 
@@ -40,9 +64,17 @@ def estimate_normals(points: np.ndarray, k: int = tol.NORMAL_NEIGHBOURS) -> np.n
 
 
 def orient_outward(
-    points: np.ndarray, normals: np.ndarray, grid: Grid, occ: Occupancy, tree: cKDTree
+    points: np.ndarray, normals: np.ndarray, grid: Grid, occ: Occupancy, tree: cKDTree,
+    noise: float | None = None,
 ) -> np.ndarray:
-    """Flip ``normals`` ((n, 3), unit) so that each points out of the solid bounded by ``points``."""
+    """Flip ``normals`` ((n, 3), unit) so that each points out of the solid bounded by ``points``.
+
+    Where a second sheet of points runs parallel within a few ``spacing`` (metres) of a point, that
+    point is on a wall thinner than the flood fill's shell, which cannot see into it: the probe below
+    would read the same outside on both faces (or, worse, a cavity the shell closed). There the
+    material is on the side of the other sheet (``thin_wall_side``). ``noise`` (metres, the points'
+    standard deviation about their surface) enables that test; sheets closer than a few sigma are noise.
+    """
     outside = ndimage.gaussian_filter(occ.outside.astype(np.float32), OUTSIDE_BLUR_CELLS)
     # The shell reaches ``closing`` cells from the points; the outside starts just beyond.
     step = (occ.closing + PROBE_CELLS) * grid.cell * normals
@@ -58,7 +90,39 @@ def orient_outward(
         weight = (~unsure[nbr]).astype(float)
         votes = np.einsum("nk,nkj,nj->n", weight, oriented[nbr], normals[unsure])
         sign[unsure] = np.where(votes < 0, -1.0, 1.0)
+    if noise is not None:
+        side = thin_wall_side(points, normals, tree, min_offset=THIN_WALL_NOISE * noise)
+        sign = np.where(side != 0, side, sign)
     return normals * sign[:, None]
+
+
+def thin_wall_side(points: np.ndarray, normals: np.ndarray, tree: cKDTree,
+                   k: int = THIN_WALL_NEIGHBOURS, min_offset: float = 0.0) -> np.ndarray:
+    """+1 or -1 where the point lies on a thin wall (its normal should be flipped by that), 0 elsewhere.
+
+    Among a point's ``k`` neighbours, those with (unoriented) normals parallel to its own are on its
+    sheet or on the wall's other face. On one sheet their offsets along the normal average to about
+    zero (noise cancels, curvature leaves a small fraction of the spacing); with the other face of a
+    wall within reach, the average sits clearly on that face's side. Material is there, so the
+    outward normal points away from it. A t-test on the offsets keeps noise from deciding.
+    """
+    k = min(k, len(points))
+    _, nbr = tree.query(points, k=k, workers=-1)
+    offsets = np.einsum("nkj,nj->nk", points[nbr] - points[:, None, :], normals)
+    # Offsets from the point's own sheet, as its nearest neighbours place it: measured from the
+    # point itself, its own noise would read as a second sheet.
+    offsets -= offsets[:, :OWN_SHEET_NEIGHBOURS].mean(axis=1, keepdims=True)
+    parallel = np.abs(np.einsum("nkj,nj->nk", normals[nbr], normals)) > PARALLEL_COSINE
+    count = parallel.sum(axis=1)
+    mean = (offsets * parallel).sum(axis=1) / np.maximum(count, 1)
+    var = ((offsets - mean[:, None]) ** 2 * parallel).sum(axis=1) / np.maximum(count - 1, 1)
+    t = mean / np.sqrt(var / np.maximum(count, 1) + np.finfo(float).tiny)
+    # The other face must be a real share of the neighbourhood, not a stray point: its mean offset
+    # must be a good part of the neighbourhood's reach.
+    reach = np.linalg.norm(points[nbr[:, -1]] - points, axis=1)
+    wall = ((np.abs(t) > THIN_WALL_T) & (np.abs(mean) > np.maximum(THIN_WALL_OFFSET * reach, min_offset))
+            & (count >= k // 2))
+    return np.where(wall, -np.sign(mean), 0.0)
 
 
 def orient_to_viewpoint(points: np.ndarray, normals: np.ndarray, viewpoint: np.ndarray) -> np.ndarray:

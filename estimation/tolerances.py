@@ -14,10 +14,29 @@ MIN_POINTS = 100
 #: line-like: it encloses no volume. 1e-3 is a 1 mm thick sheet at 1 m, far below any real object.
 FLATNESS_RATIO = 1e-3
 
-#: Grid cells along the object's longest OBB side for the implicit reconstruction. 128 puts the
-#: marching-cubes chord error below 0.05 % of volume on the paper's curved shapes (bench/paper_table.py)
-#: while keeping a 1M-point estimate under a second on two cores.
+#: Grid cells along the object's longest OBB side for the 'obb' downsampling and the 'surface'
+#: method's grid. 'auto' takes its fine cell from the point spacing instead (``FINE_CELL_SPACINGS``).
 GRID_RESOLUTION = 128
+
+#: 'auto': fine cell as a multiple of the point spacing (square root of the surface area per point).
+#: One spacing is the finest the points support: with about one point per cell every node near the
+#: surface is within a cell of a point, and a wall two spacings thick has nodes inside it.
+FINE_CELL_SPACINGS = 1.0
+
+#: 'auto': fine cell at least this many noise standard deviations (``spacing.surface_noise``). Node
+#: values average the plane distances of a cell's few points; with cells much finer than the noise
+#: their scatter crosses zero and becomes bubbles and ripples of surface. Three sigma keeps the
+#: nodes next to the surface (half a cell away) several standard errors from zero.
+FINE_CELL_NOISE = 3.0
+
+#: 'auto': most points the reconstruction works from. Denser clouds are voxel-averaged down to about
+#: this many (averaging also lowers noise), which keeps a 1M-point estimate well under half a second;
+#: the spacing, and so the finest wall resolved, is then that of this many points.
+POINT_BUDGET = 250_000
+
+#: 'auto': coarse cells along the longest side, at most, for the flood fill that decides inside and
+#: outside away from the points (and closes holes). The fine band lives inside its shell.
+COARSE_RESOLUTION = 128
 
 #: When the points are sparser than the grid (median spacing after downsampling over one cell; a dense
 #: cloud sits at ~0.9), the cell grows to this many spacings: finer, cells hold no points and the shell
@@ -33,5 +52,14 @@ DOWNSAMPLE_CELL_FRACTION = 1.0
 #: staying inside one face near edges at the downsampled spacing.
 NORMAL_NEIGHBOURS = 16
 
+#: At most this many neighbours when noise widens the normal fit (``estimate`` scales
+#: ``NORMAL_NEIGHBOURS`` by the cell's area in point spacings): enough for 0.5 mm noise at 100k points
+#: on a 10 cm object, and bounded in time.
+MAX_NORMAL_NEIGHBOURS = 96
+
 #: Extents outside this range (metres) probably mean the file is not in the units the caller said.
 PLAUSIBLE_EXTENT_M = (0.002, 5.0)
+
+#: A part of the volume the cloud cannot pin down (see ``PhysicalEstimate.volume_bounds_m3``) above
+#: this fraction of the volume earns a warning: below it, it is within the method's own accuracy.
+VOLUME_DOUBT_FRACTION = 0.005

@@ -1,0 +1,212 @@
+"""Dual contouring on the narrow band: one vertex per surface cell, placed on the points' own planes.
+
+Marching cubes puts vertices on grid edges by interpolating a field, and any smooth field rounds a
+crease by about a cell: low-poly objects shrank 1-3 %. Here every grid edge whose ends have opposite
+signs gives one quad, joining the vertices of the four cells around it, so the surface is the boundary
+of the set of inside nodes: closed and consistently oriented by construction. Each cell's vertex
+minimises the squared distances to the tangent planes ``n_i . (x - p_i) = 0`` of the points near the
+cell (a quadric error function, Ju et al. 2002). On a flat face the planes agree and the vertex lands
+on the face; where two faces meet the vertex lands on their crease, where three meet on the corner.
+Small eigenvalues of the quadric (one direction poorly constrained, i.e. a smooth or flat patch) are
+dropped and the vertex stays at the mean edge crossing along those directions.
+
+Only planes that pass through the cell count: the far face of a wall two cells thick does not, so the
+vertex is not pulled into the wall.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from estimation.implicit import CORNERS_8, FAR_CELLS
+from estimation.sparsegrid import Band
+
+#: Eigenvalues of the quadric below this fraction of the largest are dropped. A crease of 25 degrees
+#: or more keeps its second direction (sin^2(25 deg) / 2 ~ 0.09 of the weight on each side); estimated
+#: normals on a flat face wobble by a few degrees (~0.005) and are dropped.
+QEF_RELATIVE_EIGENVALUE = 0.05
+
+#: A plane counts for a cell when it passes within this margin (cells) of the cell: a little slack for
+#: noise and for curvature between the point and the cell.
+PLANE_MARGIN_CELLS = 0.25
+
+#: Planes within this many noise sigmas beyond the cell also count (see ``_place_vertices``).
+NOISE_MARGIN_SIGMAS = 3.0
+
+#: Gaussian width (cells) of the weight of a point's plane by its distance from the cell centre.
+WEIGHT_CELLS = 1.0
+
+#: A vertex may leave its cell by this much (cells) before it falls back to the mean crossing.
+VERTEX_SLACK_CELLS = 0.5
+
+#: A cell whose plane normals cancel to below this fraction of their weight holds both faces of a wall
+#: thinner than the cell: the vertex cannot be right, and the estimate says so.
+OPPOSED_NORMALS = 0.5
+
+
+@dataclass(frozen=True)
+class DualSurface:
+    """The contoured surface and what it says about the data.
+
+    Attributes:
+        vertices: (v, 3) float64 metres; faces: (f, 3) int64, outward.
+        opposed_cells: cells holding opposite faces of a wall thinner than a cell.
+        unmeasured_area: m^2 of surface between band nodes no point reached (holes closed by the shell).
+    """
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    cells: int
+    opposed_cells: int
+    unmeasured_area: float
+
+
+def contour(points: np.ndarray, normals: np.ndarray, band: Band, values: np.ndarray,
+            measured: np.ndarray, *, noise: float = 0.0) -> DualSurface:
+    """Dual-contour the sign of ``values`` on ``band`` with vertices from the oriented points' planes.
+
+    Args:
+        points: (n, 3) float64 metres (band frame); normals: (n, 3) unit, outward.
+        band: the narrow band; values: (band.size,) float32, negative inside; measured: (band.size,) bool.
+        noise: standard deviation of the points about the surface, metres.
+    """
+    h = band.h
+    far = FAR_CELLS * h
+    dims = band.dims
+    stored = np.arange(band.size)
+    inside = values < 0
+
+    # Sign-changing edges (u, u + e_axis). Each edge is found from its band end; an edge with both ends
+    # in the band is taken from its lower end only.
+    edge_lo, edge_axis, edge_in_lo, edge_t = [], [], [], []
+    for axis in range(3):
+        for direction in (1, -1):
+            at, far_inside = band.step(stored, axis, direction)
+            in_band = at >= 0
+            other_inside = np.where(in_band, inside[np.maximum(at, 0)], far_inside)
+            change = other_inside != inside
+            if direction == -1:
+                change &= ~in_band  # band-band edges were taken from their lower end
+            here = np.flatnonzero(change)
+            there = at[here]
+            v_here = values[here]
+            v_other = np.where(there >= 0, values[np.maximum(there, 0)], np.where(other_inside[here], -far, far))
+            lo_index = band.index_of(here)
+            if direction == -1:
+                lo_index[:, axis] -= 1
+            v_lo, v_hi = (v_here, v_other) if direction == 1 else (v_other, v_here)
+            edge_lo.append(lo_index)
+            edge_axis.append(np.full(len(here), axis))
+            edge_in_lo.append(inside[here] if direction == 1 else other_inside[here])
+            edge_t.append(np.clip(v_lo / np.where(v_lo == v_hi, 1.0, v_lo - v_hi), 0.0, 1.0))
+    lo = np.concatenate(edge_lo)
+    axis = np.concatenate(edge_axis)
+    in_lo = np.concatenate(edge_in_lo)
+    t = np.concatenate(edge_t)
+    if len(lo) == 0:
+        from estimation.errors import ReconstructionError
+
+        raise ReconstructionError("the reconstructed field has no surface (no inside found)")
+
+    # The four cells (by their lowest corner) around each edge, counter-clockwise seen from +axis.
+    b_axis, c_axis = (axis + 1) % 3, (axis + 2) % 3
+    eb, ec = np.eye(3, dtype=np.int64)[b_axis], np.eye(3, dtype=np.int64)[c_axis]
+    corners = np.stack([lo, lo - eb, lo - eb - ec, lo - ec], axis=1)  # (e, 4, 3)
+    # Outward normal is +axis when the low end is inside; else reverse the loop.
+    corners[~in_lo] = corners[~in_lo][:, ::-1]
+    keys = (corners[..., 0] * dims[1] + corners[..., 1]) * dims[2] + corners[..., 2]
+    cell_keys, quads = np.unique(keys.ravel(), return_inverse=True)
+    quads = quads.reshape(-1, 4)
+    n_cells = len(cell_keys)
+
+    # Mean edge crossing per cell: the vertex where the planes leave it free.
+    crossing = band.position(lo) + (t * h)[:, None] * np.eye(3)[axis]
+    count = np.bincount(quads.ravel(), minlength=n_cells)
+    mean = np.stack([np.bincount(quads.ravel(), weights=np.repeat(crossing[:, i], 4), minlength=n_cells)
+                     for i in range(3)], axis=1) / count[:, None]
+
+    vertices, opposed, supported = _place_vertices(points, normals, band, cell_keys, mean, noise)
+
+    tri = np.concatenate([quads[:, [0, 1, 2]], quads[:, [0, 2, 3]]])
+    # Split each quad along its shorter diagonal: the longer one would fold across a crease.
+    d02 = np.linalg.norm(vertices[quads[:, 0]] - vertices[quads[:, 2]], axis=1)
+    d13 = np.linalg.norm(vertices[quads[:, 1]] - vertices[quads[:, 3]], axis=1)
+    alt = d13 < d02
+    tri = np.concatenate([np.where(alt[:, None], quads[:, [0, 1, 3]], quads[:, [0, 1, 2]]),
+                          np.where(alt[:, None], quads[:, [1, 2, 3]], quads[:, [0, 2, 3]])])
+    area = np.linalg.norm(np.cross(vertices[quads[:, 1]] - vertices[quads[:, 0]],
+                                   vertices[quads[:, 3]] - vertices[quads[:, 0]]), axis=1)
+    # A quad none of whose cells any point's plane passes through is surface the cloud did not see.
+    unseen = ~supported[quads].any(axis=1)
+    return DualSurface(vertices=vertices, faces=tri.astype(np.int64), cells=n_cells,
+                       opposed_cells=int(opposed.sum()), unmeasured_area=float(area[unseen].sum()))
+
+
+def _place_vertices(points: np.ndarray, normals: np.ndarray, band: Band, cell_keys: np.ndarray,
+                    mean: np.ndarray, noise: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Each cell's vertex: the quadric minimiser of the planes through it, else the mean crossing."""
+    h = band.h
+    dims = band.dims
+    n_cells = len(cell_keys)
+    # The 8 cells around each point's nearest node: every cell whose centre is within a cell of it.
+    base = np.rint((points - band.origin) / h).astype(np.int64)
+    near = (base[:, None, :] - CORNERS_8[None]).reshape(-1, 3)
+    key = (near[:, 0] * dims[1] + near[:, 1]) * dims[2] + near[:, 2]
+    pos = np.minimum(np.searchsorted(cell_keys, key), n_cells - 1)
+    hit = cell_keys[pos] == key
+    cell = pos[hit]
+    src = np.repeat(np.arange(len(points)), len(CORNERS_8))[hit]
+    centre = band.position(near[hit]) + h / 2
+    p, n = points[src], normals[src]
+    offset = np.einsum("ij,ij->i", n, centre - p)
+    # A plane meets the cube of side h around ``centre`` iff |n . (centre - p)| <= h/2 * sum |n_k|.
+    # Noise moves planes off the surface both ways; a window no wider than the cell would keep the
+    # ones that moved towards it and bias every vertex towards its cell.
+    reach = h * (0.5 * np.abs(n).sum(axis=1) + PLANE_MARGIN_CELLS) + NOISE_MARGIN_SIGMAS * noise
+    ok = np.abs(offset) <= reach
+    cell, p, n, centre, offset = cell[ok], p[ok], n[ok], centre[ok], offset[ok]
+    # Weight by the distance along the plane only: along the normal it is noise, and weighting it would
+    # favour points that the noise moved towards the cell, again a bias.
+    w = np.exp(-(((p - centre) ** 2).sum(axis=1) - offset**2) / (WEIGHT_CELLS * h) ** 2)
+    d = np.einsum("ij,ij->i", n, p)
+
+    def acc(values: np.ndarray) -> np.ndarray:
+        return np.bincount(cell, weights=values, minlength=n_cells)
+
+    a = np.empty((n_cells, 3, 3))
+    for i in range(3):
+        for j in range(i, 3):
+            a[:, i, j] = a[:, j, i] = acc(w * n[:, i] * n[:, j])
+    rhs = np.stack([acc(w * n[:, i] * d) for i in range(3)], axis=1)
+    weight = acc(w)
+    normal_sum = np.stack([acc(w * n[:, i]) for i in range(3)], axis=1)
+    opposed = (weight > 0) & (np.linalg.norm(normal_sum, axis=1) < OPPOSED_NORMALS * weight)
+
+    # Minimise |A x - b|-type quadric about the mean crossing: x = m + A^+ (b - A m), small eigenvalues
+    # dropped (the directions the planes do not pin down keep the mean).
+    lam, vec = np.linalg.eigh(a)
+    keep = lam > QEF_RELATIVE_EIGENVALUE * lam[:, -1:]
+    inv = np.where(keep & (lam > 0), 1.0 / np.where(lam > 0, lam, 1.0), 0.0)
+    resid = rhs - np.einsum("nij,nj->ni", a, mean)
+    along = np.einsum("nji,nj->ni", vec, resid)  # residual in the eigenbasis
+    vertex = mean + np.einsum("nij,nj->ni", vec, inv * along)
+    # The same with only the dominant direction: the fallback where a crease solution leaves the cell.
+    inv1 = np.zeros_like(inv)
+    inv1[:, -1] = np.where(lam[:, -1] > 0, 1.0 / np.where(lam[:, -1] > 0, lam[:, -1], 1.0), 0.0)
+    plane_only = mean + np.einsum("nij,nj->ni", vec, inv1 * along)
+
+    low = band.origin + h * _unravel(cell_keys, dims) - VERTEX_SLACK_CELLS * h
+    high = low + h * (1 + 2 * VERTEX_SLACK_CELLS)
+    inside_full = ((vertex >= low) & (vertex <= high)).all(axis=1)
+    inside_plane = ((plane_only >= low) & (plane_only <= high)).all(axis=1)
+    out = np.where(inside_full[:, None], vertex, np.where(inside_plane[:, None], plane_only, mean))
+    out[weight == 0] = mean[weight == 0]
+    return out, opposed, weight > 0
+
+
+def _unravel(keys: np.ndarray, dims: np.ndarray) -> np.ndarray:
+    rest, z = np.divmod(keys, dims[2])
+    x, y = np.divmod(rest, dims[1])
+    return np.stack([x, y, z], axis=1)

@@ -1,0 +1,76 @@
+"""What a cloud can resolve: its point spacing and its noise, both measured from the points.
+
+The reconstruction cell follows from these two numbers instead of a constant: finer than the spacing
+leaves cells without points, finer than the noise turns noise into surface.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+#: Points sampled for the statistics: medians over 5000 are stable to about 1 %.
+SAMPLE = 5000
+
+#: Neighbours for the spacing: the 8th neighbour's distance is well past the nearest-neighbour
+#: randomness of a random sample and still local.
+SPACING_NEIGHBOURS = 8
+
+#: Neighbours for the noise: a patch several sigma wide, or the ball around a noisy point cuts the
+#: noise slab and the plane fit follows the noise (24 neighbours read 0.3-0.45 mm for 0.5 mm).
+NOISE_NEIGHBOURS = 64
+
+#: The noise patch must be this many sigma in radius (the slab it samples is +-2 sigma thick).
+NOISE_PATCH_SIGMAS = 5.0
+
+#: Widening steps for the noise patch (the second is already within a few % of the truth).
+NOISE_ITERATIONS = 3
+
+
+def point_spacing(points: np.ndarray, tree=None) -> float:  # type: ignore[no-untyped-def]
+    """Typical distance between neighbouring surface points, metres: the square root of area per point.
+
+    ``k`` neighbours within ``r`` cover ``pi r^2`` of surface, so ``sqrt(pi / k) * r_k`` (median
+    over a sample).
+
+    Args:
+        points: (n, 3) float64, metres. tree: a ``cKDTree`` over ``points`` (built when None).
+    """
+    from scipy.spatial import cKDTree
+
+    tree = cKDTree(points) if tree is None else tree
+    k = min(SPACING_NEIGHBOURS, len(points) - 1)
+    sample = points[:: max(1, len(points) // SAMPLE)]
+    r = tree.query(sample, k=k + 1, workers=-1)[0][:, -1]
+    return float(np.sqrt(np.pi / k) * np.median(r))
+
+
+def surface_noise(points: np.ndarray, tree=None) -> float:  # type: ignore[no-untyped-def]
+    """Standard deviation (metres) of the points about their local tangent planes: sensor noise.
+
+    The median over a sample of the plane-fit residual of each point's neighbours (the smallest
+    principal spread), corrected for the fit's degrees of freedom. Creases and curvature add to a
+    minority of neighbourhoods, which the median ignores. A neighbourhood no wider than the noise
+    slab is cut by it and reads low, so the patch is widened (on a thinned reference set, to keep the
+    neighbour count bounded) until it spans ``NOISE_PATCH_SIGMAS`` of the estimate.
+
+    Args:
+        points: (n, 3) float64, metres. tree: unused (kept for symmetry with ``point_spacing``).
+    """
+    from scipy.spatial import cKDTree
+
+    sample = points[:: max(1, len(points) // SAMPLE)]
+    reference, k = points, min(NOISE_NEIGHBOURS, len(points))
+    sigma = 0.0
+    for _ in range(NOISE_ITERATIONS):
+        tree = cKDTree(reference)
+        dist, nbr = tree.query(sample, k=k, workers=-1)
+        local = reference[nbr] - reference[nbr].mean(axis=1, keepdims=True)
+        smallest = np.linalg.eigvalsh(np.einsum("nki,nkj->nij", local, local))[:, 0]
+        sigma = float(np.sqrt(np.median(smallest) / max(k - 3, 1)))
+        radius = float(np.median(dist[:, -1]))
+        if radius >= NOISE_PATCH_SIGMAS * sigma:
+            break
+        # Thin the reference so that k neighbours reach NOISE_PATCH_SIGMAS sigma.
+        keep = max(k + 1, int(len(reference) * (radius / (NOISE_PATCH_SIGMAS * sigma)) ** 2))
+        reference = reference[np.linspace(0, len(reference) - 1, keep).astype(np.int64)]
+    return sigma
