@@ -28,16 +28,22 @@ def default_scene() -> Path:
     return Path(str(resources.files("scenes").joinpath("data/paper_table.toml")))
 
 
-def _remote_main(scene_path: str, endpoint: str, zenoh_config: str | None, ready, stop, results) -> None:  # type: ignore[no-untyped-def]
+def _remote_main(scene_path: str, endpoint: str, zenoh_config: str | None, ready, stop, results,  # type: ignore[no-untyped-def]
+                 record: str | None = None) -> None:
+    from cli.record import open_recorder, recording_transport
     from scenes.remote import Remote
     from scenes.scenefile import load_scene
+    from sync.clock import REAL_CLOCK
     from sync.zenoh_transport import ZenohTransport, make_config, open_session
     from twin.workers import die_with_parent
 
     die_with_parent()  # a killed demo must not leave its remote listening
     session = open_session(make_config(listen=[endpoint], config_file=zenoh_config))
+    recorder = open_recorder(None if record is None else Path(record), clock=REAL_CLOCK, command="demo",
+                             side="remote", scene_path=Path(scene_path))
     try:
-        remote = Remote(load_scene(scene_path), ZenohTransport(session))
+        remote = Remote(load_scene(scene_path), recording_transport(ZenohTransport(session), recorder, "remote"),
+                        recorder=recorder)
         ready.set()
         stats = remote.run(24 * 3600.0, stop=stop)
         c = remote.link.counters
@@ -47,17 +53,25 @@ def _remote_main(scene_path: str, endpoint: str, zenoh_config: str | None, ready
         remote.close()
     finally:
         session.close()
+        if recorder is not None:
+            recorder.close()
 
 
 def run_demo(*, duration: float = 5.0, scene_path: Path | None = None, zenoh_config: str | None = None,
-             progress: bool = True, rlog: RerunLog = OFF, hold: bool = True) -> dict:
+             progress: bool = True, rlog: RerunLog = OFF, hold: bool = True, record: Path | None = None) -> dict:
     """Run both sides and return the summary (the ``--json`` record).
+
+    ``record``: an ``.mcap`` file for the twin's side (its wire messages both ways, the operator's targets
+    and force, the scene file); the remote process writes its side, with the ground truth, beside it as
+    ``<name>.remote.mcap``. Either replays with ``twin replay``.
 
     ``hold``: pin objects the remote reports at rest while the operator leaves them alone (:mod:`twin.hold`).
 
     ``rlog``: where the twin's side logs (its objects, its poses beside the remote poses it received,
     divergence, force, sync events). The remote process logs nothing.
     """
+    from cli.record import open_recorder, recording_transport
+    from sync.clock import REAL_CLOCK
     from sync.zenoh_transport import SessionError, ZenohTransport, free_port, make_config, open_session
     from twin.hold import HoldSettings
     from twin.runtime import Local, LocalSettings
@@ -68,7 +82,9 @@ def run_demo(*, duration: float = 5.0, scene_path: Path | None = None, zenoh_con
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     ctx = mp.get_context("spawn")
     ready, stop, results = ctx.Event(), ctx.Event(), ctx.Queue()
-    remote = ctx.Process(target=_remote_main, args=(str(scene_path), endpoint, zenoh_config, ready, stop, results))
+    remote_record = None if record is None else str(Path(record).with_suffix(".remote.mcap"))
+    remote = ctx.Process(target=_remote_main, args=(str(scene_path), endpoint, zenoh_config, ready, stop, results,
+                                                    remote_record))
     console.print(f"[bold]tactile-twin demo[/bold]: remote scene {scene_path.name} on {endpoint} (peer mode)")
     t0 = time.perf_counter()
     remote.start()
@@ -81,10 +97,12 @@ def run_demo(*, duration: float = 5.0, scene_path: Path | None = None, zenoh_con
         raise
     console.print(f"remote ready in {time.perf_counter() - t0:.1f} s (ground truth built, clouds published)")
     session = open_session(make_config(connect=[endpoint], config_file=zenoh_config))
+    recorder = open_recorder(record, clock=REAL_CLOCK, command="demo", side="twin", scene_path=scene_path)
     local = None
     try:
         t_join = time.perf_counter()
-        local = Local(ZenohTransport(session), settings=LocalSettings(workers=2, hold=HoldSettings(enabled=hold)), rlog=rlog)
+        local = Local(recording_transport(ZenohTransport(session), recorder, "twin"),
+                      settings=LocalSettings(workers=2, hold=HoldSettings(enabled=hold)), rlog=rlog, recorder=recorder)
         expected = local.expected
         console.print(f"twin joined late and got {expected} clouds; estimating them while the loop runs at 1 kHz")
         local.run(600.0, until=lambda: len(local.objects) >= expected and not local.adding)
@@ -103,6 +121,8 @@ def run_demo(*, duration: float = 5.0, scene_path: Path | None = None, zenoh_con
         if local is not None:
             local.close()
         session.close()
+        if recorder is not None:
+            recorder.close(twin_time_s=None if local is None else local.twin.time)
     remote_stats = results.get(timeout=60)
     remote.join(timeout=10)
     if remote.is_alive():

@@ -52,6 +52,11 @@ _NUMBERS: dict[str, tuple[str, float, bool, float]] = {
     "rerun_rate": ("--rerun-rate", 0.0, False, math.inf),
     "threshold": ("--threshold", 0.0, False, math.inf),
     "density": ("--density", 0.0, False, math.inf),
+    "force_rate": ("--force-rate", 0.0, True, MAX_RATE_HZ),
+    "delay_ms": ("--delay", 0.0, True, math.inf),
+    "jitter_ms": ("--jitter", 0.0, True, math.inf),
+    "loss_pct": ("--loss", 0.0, True, 100.0),
+    "replay_duration": ("--duration", 0.0, False, math.inf),
 }
 
 
@@ -75,6 +80,8 @@ def check_args(args: argparse.Namespace) -> None:
         raise TwinError(f"--viewpoint must be three finite numbers, got {args.viewpoint}")
     if getattr(args, "points", None) is not None and args.points < 100:
         raise TwinError(f"--points must be at least 100, got {args.points}")
+    if getattr(args, "record", None) is not None:
+        _check_writable_file(Path(args.record), "--record")
     rerun = getattr(args, "rerun", None)
     if rerun and rerun[0] == "save" and len(rerun) == 2:
         _check_writable_file(Path(rerun[1]), "--rerun save")
@@ -161,6 +168,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     _hold_option(p)
     _rerun_option(p)
+    _record_option(p)
     p.set_defaults(handler=_cmd_demo)
 
     p = sub.add_parser("remote", help="the remote scene C: ground truth, sensor, publishes clouds and poses")
@@ -171,6 +179,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--deadband-deg", type=float, default=0.5, help="pose deadband, angle (default 0.5 deg)")
     _network_options(p, listen_default="tcp/127.0.0.1:7447")
     _rerun_option(p)
+    _record_option(p)
     p.set_defaults(handler=_cmd_remote)
 
     p = sub.add_parser("local", help="the local twin C': follows a remote scene over Zenoh")
@@ -181,7 +190,35 @@ def _parser() -> argparse.ArgumentParser:
     _hold_option(p)
     _network_options(p, connect_default="tcp/127.0.0.1:7447")
     _rerun_option(p)
+    _record_option(p)
+    operator = p.add_mutually_exclusive_group()
+    operator.add_argument("--script", type=Path, help="operator targets from a trajectory CSV: rows t,x,y,z "
+                                                      "(seconds of twin time, increasing; metres, world frame), an "
+                                                      "optional header row t,x,y,z, '#' comments; linear between "
+                                                      "rows, held after the last")
+    operator.add_argument("--replay-operator", type=Path, metavar="RECORDING",
+                          help="operator targets from a recording (.mcap), on the twin's time")
+    operator.add_argument("--operator-topic", action="store_true",
+                          help="follow a device driver's OperatorTarget messages on twin/<scene>/operator/target")
+    p.add_argument("--force-rate", type=float, default=1000.0,
+                   help="OperatorForce messages per second on twin/<scene>/operator/force (default 1000, the "
+                        "loop rate; 0: none)")
     p.set_defaults(handler=_cmd_local)
+
+    p = sub.add_parser("replay", help="re-run a recorded session headless on the simulated clock")
+    p.add_argument("recording", type=Path, help="a .mcap file written by --record")
+    p.add_argument("--script", type=Path, help="operator targets from this trajectory CSV (t,x,y,z) instead")
+    p.add_argument("--scene", type=Path, help="scene TOML (default: the one in the recording)")
+    p.add_argument("--delay", dest="delay_ms", type=float, help="one-way delay each way, ms")
+    p.add_argument("--jitter", dest="jitter_ms", type=float, help="delay standard deviation, ms (at most delay/3)")
+    p.add_argument("--loss", dest="loss_pct", type=float, help="independent packet loss each way, percent")
+    p.add_argument("--seed", type=int, help="seed of the emulated network (default: the recording's, else 0)")
+    p.add_argument("--duration", dest="replay_duration", type=float,
+                   help="twin seconds to run (default: as long as the recording)")
+    p.add_argument("--out", type=Path, help="folder for summary.json and replay.mcap")
+    p.add_argument("--cache-dir", type=Path, help="CoACD cache (default $TWIN_CACHE_DIR or ~/.cache/tactile-twin)")
+    p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
+    p.set_defaults(handler=_cmd_replay)
 
     from cli.experiment import add_parser as add_experiment
 
@@ -444,6 +481,31 @@ def _log_built(rlog, built) -> None:  # type: ignore[no-untyped-def]
         rlog.object("twin", obj)
 
 
+def _record_option(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--record", type=Path, metavar="FILE.mcap",
+                   help="record the session (wire messages both ways, operator targets and force, ground truth "
+                        "where this process has it) to an MCAP file; replay it with 'twin replay'")
+
+
+def _cmd_replay(args: argparse.Namespace) -> int:
+    from cli.record import check_replay_inputs, network_from_options, print_summary, replay
+
+    check_replay_inputs(args.recording)
+    if args.seed is not None and args.seed < 0:
+        raise TwinError(f"--seed must be >= 0, got {args.seed}")
+    network = network_from_options(delay_ms=args.delay_ms, jitter_ms=args.jitter_ms, loss_pct=args.loss_pct,
+                                   seed=args.seed or 0)
+    result = replay(args.recording, script=args.script, scene=args.scene, network=network, seed=args.seed,
+                    duration=args.replay_duration, out=args.out, cache_dir=args.cache_dir)
+    if result.summary["damage"]:
+        print(f"twin replay: warning: {result.summary['damage']}", file=sys.stderr)
+    if args.json:
+        print(to_json(result.summary))
+    else:
+        print_summary(result.summary)
+    return 0
+
+
 def _network_options(p: argparse.ArgumentParser, *, listen_default: str | None = None,
                      connect_default: str | None = None) -> None:
     p.add_argument("--connect", action="append", metavar="ENDPOINT",
@@ -475,13 +537,17 @@ def _cmd_remote(args: argparse.Namespace) -> int:
 
 
 def _run_remote(args: argparse.Namespace, scene, rlog) -> None:  # type: ignore[no-untyped-def]
+    from cli.record import open_recorder, recording_transport
     from scenes.remote import Deadband, Remote
+    from sync.clock import REAL_CLOCK
     from sync.zenoh_transport import ZenohTransport
 
     session = _session(args)
+    recorder = open_recorder(args.record, clock=REAL_CLOCK, command="remote", side="remote", scene_path=args.scene)
     try:
-        remote = Remote(scene, ZenohTransport(session), deadband=Deadband(args.deadband_mm * 1e-3, args.deadband_deg),
-                        points=args.points, progress=True, rlog=rlog)
+        remote = Remote(scene, recording_transport(ZenohTransport(session), recorder, "remote"),
+                        deadband=Deadband(args.deadband_mm * 1e-3, args.deadband_deg),
+                        points=args.points, progress=True, rlog=rlog, recorder=recorder)
         print(f"remote scene {scene.name!r}: {len(scene.objects)} objects published; running (Ctrl-C stops)")
         stats = remote.run(args.duration)
         c = remote.link.counters
@@ -490,6 +556,8 @@ def _run_remote(args: argparse.Namespace, scene, rlog) -> None:  # type: ignore[
         remote.close()
     finally:
         session.close()
+        if recorder is not None:
+            recorder.close()
 
 
 def _cmd_local(args: argparse.Namespace) -> int:
@@ -499,28 +567,46 @@ def _cmd_local(args: argparse.Namespace) -> int:
 
 
 def _run_local(args: argparse.Namespace, rlog) -> None:  # type: ignore[no-untyped-def]
+    from cli.record import open_recorder, recorded_trajectory, recording_transport
+    from sync.clock import REAL_CLOCK
+    from sync.recording import read_recording
     from sync.zenoh_transport import ZenohTransport
     from twin.hold import HoldSettings
-    from twin.runtime import Local, LocalSettings, SyncError
+    from twin.runtime import Local, LocalSettings, OperatorSettings, SyncError
+    from twin.trajectory import load_trajectory
 
+    trajectory = None  # before any session: a bad script or recording costs nothing
+    if args.script is not None:
+        trajectory = load_trajectory(args.script)
+    elif args.replay_operator is not None:
+        trajectory = recorded_trajectory(read_recording(args.replay_operator))
+        if trajectory is None:
+            raise TwinError(f"{args.replay_operator}: the recording has no operator targets")
     session = _session(args)
+    recorder = open_recorder(args.record, clock=REAL_CLOCK, command="local", side="twin", scene_name=args.scene or "")
     try:
         try:
-            local = Local(ZenohTransport(session), scene=args.scene, settings=LocalSettings(stale_after=args.stale_after,
-                                                                               hold=HoldSettings(enabled=args.hold)),
-                          rlog=rlog)
+            local = Local(recording_transport(ZenohTransport(session), recorder, "twin"), scene=args.scene,
+                          settings=LocalSettings(stale_after=args.stale_after, hold=HoldSettings(enabled=args.hold)),
+                          operator=OperatorSettings(listen=args.operator_topic, force_rate=args.force_rate),
+                          rlog=rlog, recorder=recorder)
         except (SyncError, ValueError) as exc:
             raise TwinError(str(exc)) from exc
-        stats = local.run(args.duration)
+        stats = local.run(args.duration, trajectory=trajectory)
         r, c = local.report, local.link.counters
         record = {"objects_synced": r.objects_synced, "pose_updates": r.pose_updates,
                   "dropped_malformed": c.dropped_malformed, "stale_events": r.stale_events,
-                  "snaps": r.snaps, "holds": r.holds,
+                  "snaps": r.snaps, "holds": r.holds, "operator_targets": r.operator_targets,
+                  "operator_dropped": dict(r.operator_dropped), "forces_sent": r.forces_sent,
                   "step_p99_ms": stats.p99 * 1e3, "missed_deadlines": stats.missed}
         print(to_json(record) if args.json else "  ".join(f"{k} {v}" for k, v in record.items()))
         local.close()
+        if recorder is not None:
+            recorder.close(twin_time_s=local.twin.time)
     finally:
         session.close()
+        if recorder is not None:
+            recorder.close()
 
 
 def _cmd_demo(args: argparse.Namespace) -> int:
@@ -535,7 +621,7 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     with _open_rerun(args) as rlog:
         record = run_demo(duration=args.duration, scene_path=args.scene, progress=not args.json,
                           zenoh_config=None if args.zenoh_config is None else str(args.zenoh_config), rlog=rlog,
-                          hold=args.hold)
+                          hold=args.hold, record=args.record)
     if args.json:
         print(to_json(record))
     return 0

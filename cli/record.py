@@ -1,0 +1,290 @@
+"""``--record`` on the live commands and ``twin replay``: sessions to MCAP files and back.
+
+Recording (:mod:`sync.recording`) wraps a side's transport so every wire message is logged with its send
+and receive times, and gives the runtimes a recorder for the operator's targets and force and the remote's
+ground truth. Replay re-runs a recording headless (:class:`scenes.headless.Headless`) on the simulated
+clock: the scene from the recording's metadata, the operator's targets from the recording (zero-order
+hold on the twin's time) unless a script replaces them, network conditions from the recording or the
+command line. Same recording and seed, same poses, bit for bit.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from estimation.errors import TwinError
+from sync.clock import Clock
+from sync.netem import Conditions, GilbertElliott, Network
+from sync.recording import Recorder, Recording, RecordingError, RecordingTransport, read_recording
+from sync.transport import Transport
+from twin.trajectory import Trajectory
+
+log = logging.getLogger(__name__)
+
+#: When two step times are the same time: step times are float sums (a microsecond is far below a step).
+_SAME_TIME = 1e-6
+
+
+def open_recorder(path: Path | None, *, clock: Clock, command: str, side: str,
+                  scene_path: Path | None = None, scene_name: str = "") -> Recorder | None:
+    """A recorder for a live command (None without ``path``), with the session metadata it can know."""
+    if path is None:
+        return None
+    from scenes.headless import scene_metadata
+    from scenes.scenefile import load_scene
+
+    meta: dict[str, object] = {"scene_name": scene_name, "scene_toml": "", "scene_dir": ""}
+    if scene_path is not None:
+        meta.update(scene_metadata(load_scene(scene_path)))
+    meta.update({"command": command, "side": side, "seeds": {}, "network": None})
+    return Recorder(path, clock=clock, metadata=meta)
+
+
+def recording_transport(transport: Transport, recorder: Recorder | None, side: str) -> Transport:
+    """``transport``, logged to ``recorder`` if there is one."""
+    return transport if recorder is None else RecordingTransport(transport, recorder, side)
+
+
+def recorded_trajectory(recording: Recording) -> Trajectory | None:
+    """The operator's recorded targets as a trajectory of twin time (None if the recording has none).
+
+    A zero-order hold: at time t, the last target applied at or before t (half a millisecond of slack,
+    since step times are float sums); before the first, None (the end effector stays where it starts).
+    """
+    times, points = recording.targets()
+    if len(times) == 0:
+        return None
+    slack = 5e-4  # half the smallest step the CLI runs: a target recorded at t is found at t
+
+    def at(t: float) -> np.ndarray | None:
+        i = int(np.searchsorted(times, t + slack, side="right")) - 1
+        return None if i < 0 else points[i]
+
+    return at
+
+
+def recorded_scene(recording: Recording):  # type: ignore[no-untyped-def]
+    """The recording's scene, rebuilt from the scene file text in its metadata.
+
+    Raises:
+        RecordingError: the recording carries no scene (``twin local`` records none: pass ``--scene``).
+        SceneError: the text is not a valid scene here (e.g. a mesh path missing on this machine).
+    """
+    from scenes.scenefile import parse_scene, tomllib
+
+    text = recording.metadata.get("scene_toml", "")
+    if not text:
+        raise RecordingError(f"{recording.path}: the recording carries no scene file; give one with --scene")
+    try:
+        doc = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise RecordingError(f"{recording.path}: the recorded scene is not valid TOML ({exc})") from None
+    base = Path(recording.metadata.get("scene_dir") or recording.path.parent)
+    return parse_scene(doc, base=base)
+
+
+def recorded_network(recording: Recording) -> Network | None:
+    """The emulated network a headless recording ran with (None: none, or a live recording)."""
+    raw = recording.metadata.get("network", "null")
+    try:
+        doc = json.loads(raw)
+        if not doc:
+            return None
+        sides = {}
+        for side in ("uplink", "downlink"):
+            c = doc.get(side)
+            if c is not None and c.get("burst") is not None:
+                c = {**c, "burst": GilbertElliott(**c["burst"])}
+            sides[side] = None if c is None else Conditions(**c)
+        return Network(**sides, seed=int(doc.get("seed", 0)))
+    except (ValueError, TypeError, AttributeError) as exc:
+        raise RecordingError(f"{recording.path}: unreadable network metadata ({exc})") from None
+
+
+def network_from_options(*, delay_ms: float | None, jitter_ms: float | None, loss_pct: float | None,
+                         seed: int) -> Network | None:
+    """Both directions under the same conditions (None when no option is given)."""
+    if delay_ms is None and jitter_ms is None and loss_pct is None:
+        return None
+    c = Conditions(delay=(delay_ms or 0.0) * 1e-3, jitter=(jitter_ms or 0.0) * 1e-3, loss=(loss_pct or 0.0) / 100)
+    return Network(uplink=c, downlink=c, seed=seed)
+
+
+@dataclass(frozen=True)
+class ReplayResult:
+    """What :func:`replay` returns: the summary (the ``--json`` record) and the final poses as arrays."""
+
+    summary: dict
+    twin_poses: dict[str, np.ndarray]  # id -> (7,) position m and quaternion w x y z, world frame
+    remote_poses: dict[str, np.ndarray]
+
+
+def replay(path: str | Path, *, script: Path | None = None, scene: Path | None = None,
+           network: Network | None = None, seed: int | None = None, duration: float | None = None,
+           out: Path | None = None, cache_dir: Path | None = None) -> ReplayResult:
+    """Re-run a recorded session headless on the simulated clock.
+
+    Args:
+        path: the recording.
+        script: a trajectory CSV to use instead of the recorded targets.
+        scene: a scene file to use instead of the recorded one.
+        network: conditions to use; None: the recording's (headless recordings), else none.
+        seed: the network's seed (default: the recording's, else 0).
+        duration: twin seconds to run (default: as long as the recorded session).
+        out: a folder for ``summary.json`` and ``replay.mcap`` (the replay recorded).
+        cache_dir: the CoACD cache.
+
+    Returns:
+        The summary and the final poses.
+
+    Raises:
+        RecordingError: a missing, corrupt or unknown-version recording, or one without a scene.
+        TwinError: a bad script, scene or network conditions.
+    """
+    from dataclasses import replace
+
+    from scenes.headless import Headless
+    from scenes.scenefile import load_scene
+    from twin.trajectory import load_trajectory
+
+    recording = read_recording(path)
+    if recording.damage:
+        log.warning("%s", recording.damage)
+    spec = load_scene(scene) if scene is not None else recorded_scene(recording)
+    trajectory = load_trajectory(script) if script is not None else recorded_trajectory(recording)
+    if network is None:
+        network = recorded_network(recording)
+    if network is not None and seed is not None:
+        network = replace(network, seed=seed)
+    duration = _recorded_duration(recording) if duration is None else duration
+    if not duration > 0:
+        raise RecordingError(f"{recording.path}: nothing to replay (the recorded session lasted {duration:g} s)")
+    truth = recording.truth()
+    record = None
+    if out is not None:
+        out.mkdir(parents=True, exist_ok=True)
+        record = out / "replay.mcap"
+    wall0 = time.perf_counter()
+    with Headless(spec, network=network, cache_dir=cache_dir, record=record,
+                  record_metadata={"command": "replay", "replayed": str(recording.path)}) as session:
+        built = time.perf_counter() - wall0
+        gaps: dict[str, list[float]] = {i: [] for i in truth}
+        last: dict[str, tuple[float, np.ndarray, np.ndarray]] = {}  # id -> (t, replayed, recorded) at the last sample
+        checks = np.unique(np.concatenate([t for t, _, _ in truth.values()] or [np.zeros(0)]))
+        k = 0
+        run0 = time.perf_counter()
+        for _ in range(round(duration / session.dt)):
+            session.tick(trajectory)
+            t = session.remote.twin.time
+            while k < len(checks) and checks[k] < t - _SAME_TIME:
+                k += 1  # a sample time this replay stepped past (another scene, another step)
+            if k < len(checks) and abs(checks[k] - t) <= _SAME_TIME:
+                k += 1
+                _truth_gaps(session, truth, t, gaps, last)
+        run_s = time.perf_counter() - run0
+        twin = {i: np.concatenate(p) for i, p in session.poses().items()}
+        remote = {i: np.concatenate(session.remote.twin.pose(i)) for i in session.remote._objects}
+        report = session.local.report
+    summary = _summary(recording, spec, duration, built, run_s, twin, remote, last, gaps, report, network, script)
+    if out is not None:
+        from cli.main import to_json
+
+        (out / "summary.json").write_text(to_json(summary) + "\n")
+    return ReplayResult(summary, twin, remote)
+
+
+def _recorded_duration(recording: Recording) -> float:
+    """Twin seconds the recorded session ran: from its end record, else its last target, else its truth."""
+    end = recording.end or {}
+    if "twin_time_s" in end:
+        return float(end["twin_time_s"])
+    times, _ = recording.targets()
+    if len(times):
+        return float(times[-1]) + 1e-3
+    spans = [t[-1] - t[0] for t, _, _ in recording.truth().values() if len(t)]
+    return float(max(spans, default=0.0))
+
+
+def _truth_gaps(session, truth, t: float, gaps: dict[str, list[float]], last: dict) -> None:  # type: ignore[no-untyped-def]
+    """|replayed remote - recorded truth| of each object recorded at the remote's time ``t``."""
+    for object_id, (times, positions, _) in truth.items():
+        i = int(np.searchsorted(times, t - _SAME_TIME))
+        if i < len(times) and abs(times[i] - t) <= _SAME_TIME and session.remote.twin.has(object_id):
+            here = session.remote.twin.pose(object_id)[0].copy()
+            gaps[object_id].append(float(np.linalg.norm(here - positions[i])))
+            last[object_id] = (t, here, positions[i])
+
+
+def _summary(recording, spec, duration, built, run_s, twin, remote, last, gaps, report,  # type: ignore[no-untyped-def]
+             network, script) -> dict:
+    div = np.concatenate([np.asarray(g) for g in report.divergence.values()] or [np.zeros(0)]) * 1e3
+    truth_gap = np.concatenate([np.asarray(g) for g in gaps.values()] or [np.zeros(0)]) * 1e3
+    final_vs_truth = {  # at the last ground-truth sample this replay reached (the remote's time)
+        object_id: {"time_s": t, "recorded_truth_m": recorded.tolist(), "replayed_m": replayed.tolist(),
+                    "difference_mm": float(np.linalg.norm(replayed - recorded) * 1e3)}
+        for object_id, (t, replayed, recorded) in sorted(last.items())}
+
+    def stats(x: np.ndarray) -> dict:
+        if len(x) == 0:
+            return {"p50": None, "p99": None, "max": None}
+        return {"p50": float(np.percentile(x, 50)), "p99": float(np.percentile(x, 99)), "max": float(x.max())}
+
+    return {
+        "recording": str(recording.path),
+        "damage": recording.damage,
+        "scene": spec.name,
+        "operator": "script" if script is not None else ("recorded" if recording.targets()[0].size else "none"),
+        "network": None if network is None else {"uplink": _conditions(network.uplink),
+                                                 "downlink": _conditions(network.downlink), "seed": network.seed},
+        "duration_s": duration,
+        "build_s": built,
+        "run_s": run_s,
+        "speed_x_realtime": duration / run_s if run_s > 0 else None,
+        "objects": sorted(twin),
+        "twin_final": {i: p.tolist() for i, p in sorted(twin.items())},
+        "remote_final": {i: p.tolist() for i, p in sorted(remote.items())},
+        "final_vs_recorded_truth": final_vs_truth,
+        "remote_vs_recorded_truth_mm": stats(truth_gap),
+        "twin_vs_remote_mm": stats(div),
+        "pose_updates": report.pose_updates,
+        "snaps": report.snaps,
+        "holds": report.holds,
+    }
+
+
+def _conditions(c: Conditions | None) -> dict | None:
+    if c is None:
+        return None
+    return {"delay_ms": c.delay * 1e3, "jitter_ms": c.jitter * 1e3, "loss_pct": c.loss * 100,
+            "distribution": c.distribution}
+
+
+def print_summary(summary: dict) -> None:
+    """The human-readable form of a replay summary."""
+    lines = [f"replayed {summary['recording']} ({summary['scene']}, operator {summary['operator']}): "
+             f"{summary['duration_s']:.2f} s simulated in {summary['run_s']:.2f} s "
+             f"({summary['speed_x_realtime']:.1f}x real time; build {summary['build_s']:.1f} s)",
+             f"objects {', '.join(summary['objects'])}; pose updates {summary['pose_updates']}, "
+             f"snaps {summary['snaps']}, holds {summary['holds']}"]
+    d = summary["twin_vs_remote_mm"]
+    if d["max"] is not None:
+        lines.append(f"twin - remote: p50 {d['p50']:.2f} mm, p99 {d['p99']:.2f} mm, max {d['max']:.2f} mm")
+    g = summary["remote_vs_recorded_truth_mm"]
+    if g["max"] is not None:
+        lines.append(f"replayed remote - recorded truth: p50 {g['p50']:.3f} mm, p99 {g['p99']:.3f} mm, "
+                     f"max {g['max']:.3f} mm")
+    for object_id, f in summary["final_vs_recorded_truth"].items():
+        lines.append(f"  {object_id}: final {f['difference_mm']:.3f} mm from the recorded truth")
+    print("\n".join(lines))
+
+
+def check_replay_inputs(path: Path) -> None:
+    """Refuse a missing file before any work (the full read happens in :func:`replay`)."""
+    if not path.is_file():
+        raise TwinError(f"{path}: no such recording")

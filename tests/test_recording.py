@@ -1,0 +1,176 @@
+"""Recordings (MCAP) of headless sessions, read back and replayed: bit for bit, with other inputs, torn."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cli.main import main
+from cli.record import replay
+from scenes.headless import Headless
+from scenes.scenefile import load_scene
+from sync.clock import SimClock
+from sync.messages import decode
+from sync.recording import (
+    FORCE_TOPIC,
+    SCHEMA_VERSION,
+    TARGET_TOPIC,
+    TRUTH_TOPIC,
+    Recorder,
+    RecordingError,
+    read_recording,
+)
+from twin.trajectory import push_trajectory
+
+SMALL = Path(__file__).parent / "data" / "small.toml"
+ROOT = Path(__file__).resolve().parent.parent
+SECONDS = 3.0
+
+
+@pytest.fixture(scope="module")
+def cache(tmp_path_factory) -> Path:
+    return tmp_path_factory.getbasetemp() / "coacd"
+
+
+@pytest.fixture(scope="module")
+def recorded(tmp_path_factory, cache):  # type: ignore[no-untyped-def]
+    """A 3 s headless session pushing the crate, recorded; (path, final twin poses, final remote poses)."""
+    path = tmp_path_factory.mktemp("rec") / "session.mcap"
+    with Headless(load_scene(SMALL), cache_dir=cache, record=path) as session:
+        start = session.local.twin.data.mocap_pos[0].copy()
+        session.run(SECONDS, trajectory=push_trajectory(start, start + np.array([0.6, 0.0, -0.03]), SECONDS))
+        twin = {i: np.concatenate(p) for i, p in session.poses().items()}
+        remote = {i: np.concatenate(session.remote.twin.pose(i)) for i in twin}
+    return path, twin, remote
+
+
+def test_a_recording_reads_back_with_every_channel_in_order(recorded):
+    path, _, _ = recorded
+    rec = read_recording(path)
+    assert rec.damage is None and rec.end is not None
+    assert rec.schema_version == SCHEMA_VERSION
+    assert rec.metadata["clock"] == "sim" and rec.metadata["scene_name"] == "small"
+    assert rec.metadata["scene_toml"] == SMALL.read_text()
+    steps = round(SECONDS / 0.001)
+    assert rec.counts[TARGET_TOPIC] == steps  # one target per twin step
+    assert rec.counts[TRUTH_TOPIC] == rec.counts[FORCE_TOPIC] == steps // 10  # 100 Hz
+    assert int(rec.end["messages"]) == len(rec.records)
+    wire = rec.wire()
+    by = {(w.side, w.direction, w.key.rsplit("/", 1)[-1]) for w in wire}
+    for expected in [("remote", "sent", "pose"), ("twin", "received", "pose"), ("remote", "sent", "cloud"),
+                     ("twin", "received", "cloud"), ("twin", "sent", "command"), ("remote", "received", "command"),
+                     ("remote", "sent", "heartbeat"), ("twin", "received", "heartbeat")]:
+        assert expected in by, expected
+    # No emulated network: each command the twin sent, the remote received, at the same simulated time.
+    sent = [w for w in wire if w.side == "twin" and w.direction == "sent"]
+    got = [w for w in wire if w.side == "remote" and w.direction == "received"]
+    assert [w.data for w in sent] == [w.data for w in got] and len(sent) > 100
+    assert all(a.log_time == b.log_time for a, b in zip(sent, got, strict=True))
+    for w in wire:  # every message is a wire message, sent at its stamp, received no earlier
+        msg = decode(w.data)
+        assert w.publish_time == msg.stamp_ns <= w.log_time
+    for topic in rec.counts:
+        times = [r.log_time for r in rec.topic(topic)]
+        assert times == sorted(times), topic
+    times, targets = rec.targets()
+    assert np.all(np.diff(times) > 0) and targets.shape == (steps, 3)
+    truth = rec.truth()
+    assert sorted(truth) == ["can", "crate"]
+    assert truth["crate"][1][-1][0] > truth["crate"][1][0][0] + 0.1  # the crate was pushed in +x
+    assert np.allclose(np.linalg.norm(truth["crate"][2], axis=1), 1.0)
+
+
+def test_a_replay_is_bit_identical_twice_and_to_the_recorded_session(recorded, cache):
+    path, twin, remote = recorded
+    first = replay(path, cache_dir=cache)
+    second = replay(path, cache_dir=cache)
+    assert sorted(first.twin_poses) == ["can", "crate"]
+    for object_id in first.twin_poses:
+        assert first.twin_poses[object_id].tobytes() == second.twin_poses[object_id].tobytes()
+        assert first.remote_poses[object_id].tobytes() == second.remote_poses[object_id].tobytes()
+        # The recorded targets drive the same session: the recorded poses come back exactly.
+        assert first.twin_poses[object_id].tobytes() == twin[object_id].tobytes()
+        assert first.remote_poses[object_id].tobytes() == remote[object_id].tobytes()
+    s = first.summary
+    assert s["operator"] == "recorded" and s["remote_vs_recorded_truth_mm"]["max"] == 0.0
+    assert all(f["difference_mm"] == 0.0 for f in s["final_vs_recorded_truth"].values())
+    assert s["speed_x_realtime"] > 1.0  # faster than real time (no wall-time bound beyond that)
+
+
+def test_a_replay_with_another_trajectory_or_network_differs(recorded, cache, tmp_path):
+    path, _, remote = recorded
+    script = tmp_path / "aside.csv"
+    script.write_text("t,x,y,z\n0,-0.3,0.0,0.56\n3,-0.3,0.25,0.56\n")  # moves sideways, never touches the crate
+    other = replay(path, script=script, cache_dir=cache)
+    assert other.summary["operator"] == "script"
+    assert np.linalg.norm(other.remote_poses["crate"][:3] - remote["crate"][:3]) > 0.05
+    assert other.summary["final_vs_recorded_truth"]["crate"]["difference_mm"] > 50
+    out = tmp_path / "delayed"
+    assert main(["replay", str(path), "--delay", "30", "--seed", "3", "--json", "--out", str(out),
+                 "--cache-dir", str(cache)]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["network"]["downlink"]["delay_ms"] == 30.0 and summary["network"]["seed"] == 3
+    assert summary["twin_vs_remote_mm"]["max"] > 0
+    assert read_recording(out / "replay.mcap").metadata["command"] == "replay"
+
+
+def test_a_torn_tail_is_reported_and_the_intact_part_replays(recorded, cache, tmp_path, capsys):
+    path, _, _ = recorded
+    data = path.read_bytes()
+    torn = tmp_path / "torn.mcap"
+    torn.write_bytes(data[: int(len(data) * 0.7)])
+    rec = read_recording(torn)
+    whole = read_recording(path)
+    assert rec.damage is not None and "damaged after" in rec.damage and rec.end is None
+    assert 0 < len(rec.records) < len(whole.records)
+    assert [r.data for r in rec.records] == [r.data for r in whole.records[: len(rec.records)]]
+    assert main(["replay", str(torn), "--json", "--cache-dir", str(cache)]) == 0
+    captured = capsys.readouterr()
+    summary = json.loads(captured.out)
+    assert f"after {len(rec.records)} messages" in captured.err and "warning" in captured.err
+    assert summary["damage"] == rec.damage and summary["duration_s"] < SECONDS
+
+
+def test_bad_recordings_are_one_line_errors(tmp_path, capsys):
+    old = tmp_path / "future.mcap"
+    with Recorder(old, clock=SimClock(), metadata={"schema_version": "99"}) as r:
+        r.target(0.0, np.zeros(3))
+    with pytest.raises(RecordingError, match=rf"schema version 99; this tool reads version {SCHEMA_VERSION}"):
+        read_recording(old)
+    garbage = tmp_path / "garbage.mcap"
+    garbage.write_bytes(b"not an mcap file at all" * 10)
+    stub = tmp_path / "stub.mcap"
+    stub.write_bytes(old.read_bytes()[:20])  # the header only: no metadata survives
+    for bad, words in [(old, "schema version 99"), (garbage, "not a readable tactile-twin recording"),
+                       (stub, "not a readable tactile-twin recording"), (tmp_path / "missing.mcap", "no such recording")]:
+        assert main(["replay", str(bad)]) == 2
+        err = capsys.readouterr().err
+        assert words in err and err.count("\n") == 1, err
+    assert main(["replay", str(old), "--delay", "-5"]) == 2
+    assert "--delay must be >= 0" in capsys.readouterr().err
+    assert main(["replay", str(old), "--loss", "150"]) == 2
+    assert "--loss must be" in capsys.readouterr().err
+
+
+def test_impossible_conditions_and_a_recording_without_a_scene_exit_2(recorded, tmp_path, capsys):
+    path, _, _ = recorded
+    assert main(["replay", str(path), "--delay", "10", "--jitter", "9"]) == 2  # normal jitter <= delay / 3
+    assert "jitter" in capsys.readouterr().err
+    bare = tmp_path / "bare.mcap"
+    with Recorder(bare, clock=SimClock(), metadata={"scene_name": "x", "scene_toml": ""}) as r:
+        r.target(0.5, np.zeros(3))
+    assert main(["replay", str(bare)]) == 2
+    assert "carries no scene file; give one with --scene" in capsys.readouterr().err
+
+
+def test_twin_replay_runs_as_a_command(recorded, cache):
+    path, _, _ = recorded
+    done = subprocess.run([sys.executable, "-m", "cli.main", "replay", str(path), "--duration", "0.5",
+                           "--cache-dir", str(cache)], cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    assert "replayed" in done.stdout and "x real time" in done.stdout
