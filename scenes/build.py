@@ -1,18 +1,25 @@
-"""Building a scene into a MuJoCo model, and writing it as scene.xml plus mesh assets."""
+"""Building a scene into a MuJoCo model, and writing it out.
+
+A build folder holds ``scene.xml`` (the whole scene), ``assets/*.stl`` (its meshes), ``objects/<id>.xml``
+(each object alone, to ``<include>`` or attach into another MJCF model), and ``estimates.json`` (every
+object's estimate and the transform from its cloud's or mesh's frame to its body frame).
+"""
 
 from __future__ import annotations
 
+import json
 import shutil
 import tempfile
 import time
-from dataclasses import dataclass
+from collections.abc import Callable
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from estimation.errors import TwinError
-from scenes.scenefile import SceneSpec
-from scenes.sources import prepare_objects
+from scenes.scenefile import ObjectSpec, SceneSpec
+from scenes.sources import estimate_object, prepare_objects
 from twin.decompose import DEFAULT_SETTINGS, CoacdSettings
 from twin.model import DEFAULT_PHYSICS, PhysicsSettings, add_object
 from twin.objects import TwinObject
@@ -28,13 +35,26 @@ MARKER = ".tactile-twin-build"
 
 @dataclass(frozen=True)
 class BuiltScene:
-    """A compiled scene: the spec (for live edits), the model, and the objects that went into it."""
+    """A compiled scene: the spec (for live edits), the model, and the objects that went into it.
+
+    Attributes:
+        seconds: the whole build, wall time.
+        estimate_seconds: object id -> seconds its estimate took (sampling included).
+        decompose_seconds: CoACD for every object together (they run in parallel), cache reads included.
+    """
 
     scene: SceneSpec
     spec: object
     model: object
     objects: tuple[TwinObject, ...]
     seconds: float
+    estimate_seconds: dict[str, float] = field(default_factory=dict)
+    decompose_seconds: float = 0.0
+
+
+#: ``on_estimate(index, total, object id, seconds, estimate)``: called by :func:`build_scene` after each
+#: object's estimate, so a command can show progress (the library itself prints nothing).
+OnEstimate = Callable[[int, int, str, float, object], None]
 
 
 def table_top(scene: SceneSpec) -> float | None:
@@ -42,20 +62,32 @@ def table_top(scene: SceneSpec) -> float | None:
 
 
 def build_scene(scene: SceneSpec, *, coacd: CoacdSettings = DEFAULT_SETTINGS, cache_dir: Path | None = None,
-                progress: bool = True, physics: PhysicsSettings = DEFAULT_PHYSICS) -> BuiltScene:
+                progress: bool = True, physics: PhysicsSettings = DEFAULT_PHYSICS,
+                on_estimate: OnEstimate | None = None) -> BuiltScene:
     """Estimate every object, decompose it, and compile the whole scene.
+
+    ``progress``: CoACD's progress bar (stderr). ``on_estimate``: see :data:`OnEstimate`.
 
     Raises:
         SceneError: bad objects. BuildError: MuJoCo rejected the model.
     """
     t0 = time.perf_counter()
+    estimates, seconds = [], {}
+    for k, spec_obj in enumerate(scene.objects):
+        t = time.perf_counter()
+        estimates.append(estimate_object(spec_obj))
+        seconds[spec_obj.id] = time.perf_counter() - t
+        if on_estimate is not None:
+            on_estimate(k, len(scene.objects), spec_obj.id, seconds[spec_obj.id], estimates[-1][0])
+    t = time.perf_counter()
     objects = prepare_objects(scene.objects, table_top=table_top(scene), coacd=coacd, cache_dir=cache_dir,
-                              progress=progress)
+                              progress=progress, estimates=estimates)
+    decompose_s = time.perf_counter() - t
     spec = scene.empty_spec(physics)
     for obj in objects:
         add_object(spec, obj)
     model = compile_spec(spec)
-    return BuiltScene(scene, spec, model, tuple(objects), time.perf_counter() - t0)
+    return BuiltScene(scene, spec, model, tuple(objects), time.perf_counter() - t0, seconds, decompose_s)
 
 
 def compile_spec(spec):  # type: ignore[no-untyped-def]
@@ -90,12 +122,15 @@ def check_output(out: Path, *, keep: tuple[Path, ...] = ()) -> None:
             raise BuildError(f"{out}: not empty and not written by 'twin build'; give --out a new or empty folder")
 
 
-def write_scene(spec, out: Path, *, keep: tuple[Path, ...] = ()) -> Path:  # type: ignore[no-untyped-def]
+def write_scene(spec, out: Path, *, keep: tuple[Path, ...] = (), built: BuiltScene | None = None) -> Path:  # type: ignore[no-untyped-def]
     """Write ``out/scene.xml`` and ``out/assets/*.stl``; nothing half-written is left on failure.
 
     The in-memory spec carries mesh data inline; the written copy references STL files instead, so the
     scene opens in MuJoCo's own viewer and the XML stays readable. ``out`` is checked with
     :func:`check_output` first (``keep``: files the build must not delete).
+
+    With ``built`` (the :class:`BuiltScene` ``spec`` came from), also ``out/estimates.json``
+    (:func:`estimates_record`) and ``out/objects/<id>.xml`` for each object (:func:`object_xml`).
 
     Raises:
         BuildError: ``out`` is not ours to replace.
@@ -114,16 +149,25 @@ def write_scene(spec, out: Path, *, keep: tuple[Path, ...] = ()) -> Path:  # typ
         for mesh in copy.meshes:
             v = np.asarray(mesh.uservert, dtype=np.float64).reshape(-1, 3)
             f = np.asarray(mesh.userface, dtype=np.int64).reshape(-1, 3)
-            filename = mesh.name.replace("/", "__") + ".stl"
+            filename = mesh_filename(mesh.name)
             trimesh.Trimesh(v, f, process=False).export(staging / "assets" / filename)
             mesh.file = filename
             mesh.uservert = []
             mesh.userface = []
         (staging / "scene.xml").write_text(copy.to_xml())
+        if built is not None:
+            (staging / OBJECTS).mkdir()
+            for obj in built.objects:
+                (staging / OBJECTS / f"{obj.id}.xml").write_text(object_xml(obj, staging / OBJECTS))
+            record = estimates_record(built)
+            (staging / ESTIMATES).write_text(json.dumps(record, indent=1, allow_nan=False) + "\n")
         (staging / MARKER).write_text("written by 'twin build'; the next build into this folder replaces it\n")
         import mujoco
 
         mujoco.MjModel.from_xml_path(str(staging / "scene.xml"))  # what we write must load
+        if built is not None:
+            for obj in built.objects:  # and each object on its own
+                mujoco.MjModel.from_xml_path(str(staging / OBJECTS / f"{obj.id}.xml"))
         if out.exists():
             check_output(out, keep=keep)  # still ours: nothing else was put there while we built
             shutil.rmtree(out)
@@ -132,3 +176,127 @@ def write_scene(spec, out: Path, *, keep: tuple[Path, ...] = ()) -> Path:  # typ
         shutil.rmtree(staging, ignore_errors=True)
         raise
     return out / "scene.xml"
+
+
+#: Where :func:`write_scene` puts each object's MJCF, and every object's estimate.
+OBJECTS, ESTIMATES = "objects", "estimates.json"
+
+#: ``estimates.json``'s format; bump it when a field changes meaning or goes away (adding one does not).
+ESTIMATES_VERSION = 1
+
+
+def object_xml(obj: TwinObject, folder: Path) -> str:
+    """One object as MJCF to ``<include>`` (or ``<attach>``) into another model: ``<asset>`` and
+    ``<worldbody>`` only, no ``<compiler>`` or ``<option>`` to override the host model's.
+
+    The body (named as the object, with a free joint ``<id>/free``, explicit inertia at its origin,
+    the visual mesh and the collision hulls) sits where the build placed it. Mesh files are
+    ``../assets/*.stl``: MuJoCo resolves them against the folder of this file (``folder``, which must be
+    ``<build>/objects``), wherever the including model is.
+    """
+    import xml.etree.ElementTree as ET
+
+    import mujoco
+
+    spec = mujoco.MjSpec()
+    spec.modelname = obj.id
+    add_object(spec, obj)
+    spec.modelfiledir = str(folder)
+    for mesh in spec.meshes:
+        mesh.file = f"../assets/{mesh_filename(mesh.name)}"
+        mesh.uservert = []
+        mesh.userface = []
+    root = ET.fromstring(spec.to_xml())
+    for child in list(root):
+        if child.tag not in ("asset", "worldbody"):
+            root.remove(child)
+    ET.indent(root, space="  ")
+    comment = (f"<!-- object {obj.id!r}, written by 'twin build': include it in a model "
+               f"(<include file=\"objects/{obj.id}.xml\"/>) or attach it; its estimate is in ../{ESTIMATES} -->\n")
+    return comment + ET.tostring(root, encoding="unicode") + "\n"
+
+
+def mesh_filename(mesh_name: str) -> str:
+    """The STL file name of a spec mesh (``crate/hull0`` -> ``crate__hull0.stl``), the same in scene.xml."""
+    return mesh_name.replace("/", "__") + ".stl"
+
+
+def estimates_record(built: BuiltScene) -> dict:
+    """The ``estimates.json`` record: per object, the estimate and where its body frame is.
+
+    Units are SI and named in the keys. Frames: the *source frame* is the cloud file's or the mesh's
+    own (converted to metres; a primitive's or paper object's is centred on it), before the scene's
+    ``rotation_deg``; the *body frame* has its origin at the estimated centre of mass, and
+    ``p_body = R p_source + t`` with ``R`` the rotation of ``source_to_body.quat_wxyz`` and ``t`` its
+    ``translation_m``. ``center_of_mass_m`` is in the source frame rotated by ``R``; ``inertia_kg_m2`` is
+    about the centre of mass in body axes (what the MJCF's ``fullinertia`` holds). ``body_pose_world`` is
+    where the build placed the body.
+    """
+    specs = {o.id: o for o in built.scene.objects}
+    return {
+        "format": "tactile-twin estimates",
+        "version": ESTIMATES_VERSION,
+        "scene": built.scene.name,
+        "frames": ("p_body = rotate(source_to_body.quat_wxyz, p_source) + source_to_body.translation_m; "
+                   "quaternions w x y z (MuJoCo's order); inertia about the centre of mass, body axes"),
+        "objects": [_object_record(obj, specs[obj.id], built.estimate_seconds.get(obj.id)) for obj in built.objects],
+    }
+
+
+def _object_record(obj: TwinObject, spec: ObjectSpec, seconds: float | None) -> dict:
+    est = obj.estimate
+    m = est.mass
+    if spec.material is not None:
+        density_source = "material"
+    elif spec.density is not None:
+        density_source = "given"
+    else:
+        density_source = "default"  # estimation.materials.DEFAULT_DENSITY: water
+    # The estimate's frame is the source's after the scene's rotation (scenes.sources.source_mesh), and the
+    # body's origin is the centre of mass in that frame: p_body = R p_source - com.
+    rotation = _source_rotation(spec)
+    return {
+        "id": obj.id,
+        "source": {"kind": spec.source, "value": str(spec.value) if spec.source in ("mesh", "cloud") else spec.value,
+                   "units": spec.units, "rotation_deg": list(spec.rotation_deg), "points": spec.points},
+        "volume_m3": m.volume,
+        "density_kg_m3": m.density,
+        "density_source": density_source,
+        "material": est.material,
+        "mass_kg": m.mass,
+        "center_of_mass_m": m.center_of_mass.tolist(),
+        "inertia_kg_m2": m.inertia.tolist(),
+        "principal_moments_kg_m2": m.principal_moments.tolist(),
+        "method": est.method,
+        "points_in": est.points_in,
+        "points_used": est.points_used,
+        "watertight": est.watertight,
+        "warnings": list(est.warnings),
+        "hull_count": len(obj.hulls),
+        "hulls_cached": obj.hull_cached,
+        "friction": obj.friction,
+        "estimate_seconds": seconds,
+        "source_to_body": {"quat_wxyz": _quat_wxyz(rotation), "translation_m": (-m.center_of_mass).tolist()},
+        "body_pose_world": {"position_m": obj.position.tolist(), "quat_wxyz": obj.quat.tolist()},
+        "mjcf": f"{OBJECTS}/{obj.id}.xml",
+    }
+
+
+def _source_rotation(spec: ObjectSpec) -> np.ndarray:
+    """The rotation (3, 3) the build applied to the source before sampling it: the scene's ``rotation_deg``
+    for mesh-like sources (:func:`scenes.sources.source_mesh`); a cloud is estimated as it is."""
+    if spec.source == "cloud" or not any(spec.rotation_deg):
+        return np.eye(3)
+    from scipy.spatial.transform import Rotation
+
+    # rotation_deg is [about Z, about local X, about local Y], the paper's order (as in scenes.sources).
+    return Rotation.from_euler("ZXY", spec.rotation_deg, degrees=True).as_matrix()
+
+
+def _quat_wxyz(rotation: np.ndarray) -> list[float]:
+    """A rotation matrix as a unit quaternion, w x y z (MuJoCo's order, via MuJoCo's own conversion)."""
+    import mujoco
+
+    q = np.zeros(4)
+    mujoco.mju_mat2Quat(q, np.ascontiguousarray(rotation, dtype=np.float64).ravel())
+    return (q if q[0] >= 0 else -q).tolist()
