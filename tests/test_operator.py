@@ -1,0 +1,146 @@
+"""Operator input and force feedback over real Zenoh sessions (peer mode, scouting off, free loopback ports):
+a device driver publishes targets, the twin's end effector follows, forces come back; bad targets are
+dropped and counted."""
+
+from __future__ import annotations
+
+import queue
+import time
+
+import numpy as np
+import pytest
+
+from sync.keys import Keys
+from sync.messages import VERSION, OperatorForce, OperatorTarget, Pose, decode, encode
+from sync.recording import FORCE_TOPIC, TARGET_TOPIC, read_recording
+from sync.zenoh_transport import ZenohTransport, free_port, make_config, open_session
+from twin.runtime import Local, LocalSettings, OperatorSettings
+
+from loopback import SCENE, running_remote, wait_objects
+
+KEYS = Keys(SCENE["name"])
+
+
+@pytest.fixture
+def endpoint() -> str:
+    return f"tcp/127.0.0.1:{free_port()}"
+
+
+@pytest.fixture
+def cache(tmp_path_factory):  # type: ignore[no-untyped-def]
+    return tmp_path_factory.getbasetemp() / "coacd"
+
+
+class Driver:
+    """A device driver on its own Zenoh session: publishes targets, collects the forces it is sent."""
+
+    def __init__(self, endpoint: str) -> None:
+        self.session = open_session(make_config(connect=[endpoint], listen=[]))
+        self.forces: queue.SimpleQueue = queue.SimpleQueue()
+        self._sub = self.session.declare_subscriber(KEYS.operator_force,
+                                                    lambda s: self.forces.put(s.payload.to_bytes()))
+        self.seq = 0
+
+    def target(self, position, *, seq: int | None = None, device: str = "haptic0") -> None:  # type: ignore[no-untyped-def]
+        self.seq += 1
+        msg = OperatorTarget(v=VERSION, stamp_ns=time.time_ns(), device=device, epoch=1,
+                             seq=self.seq if seq is None else seq, position=tuple(float(x) for x in position))
+        self.session.put(KEYS.operator_target, encode(msg))
+
+    def received(self) -> list[OperatorForce]:
+        out = []
+        while True:
+            try:
+                out.append(decode(self.forces.get_nowait()))
+            except queue.Empty:
+                return out
+
+    def close(self) -> None:
+        self._sub.undeclare()
+        self.session.close()
+
+
+def _run_until(local: Local, condition, timeout: float = 20.0) -> None:  # type: ignore[no-untyped-def]
+    """Run the twin until ``condition()``; the deadline is a failsafe for a hung side, not a measurement."""
+    deadline = time.monotonic() + timeout
+    while not condition():
+        assert time.monotonic() < deadline, "timed out"
+        local.run(0.05)
+
+
+@pytest.fixture
+def twin(endpoint, cache, tmp_path):  # type: ignore[no-untyped-def]
+    with running_remote(endpoint, cache) as remote:
+        # The driver connects to the twin's own endpoint: peers with scouting off do not route for others.
+        twin_endpoint = f"tcp/127.0.0.1:{free_port()}"
+        session = open_session(make_config(connect=[endpoint], listen=[twin_endpoint]))
+        recording = tmp_path / "local.mcap"
+        from cli.record import open_recorder, recording_transport
+        from sync.clock import REAL_CLOCK
+
+        recorder = open_recorder(recording, clock=REAL_CLOCK, command="test", side="twin", scene_name="synctest")
+        local = Local(recording_transport(ZenohTransport(session), recorder, "twin"),
+                      settings=LocalSettings(cache_dir=cache), recorder=recorder,
+                      operator=OperatorSettings(listen=True, force_rate=200.0))
+        driver = Driver(twin_endpoint)
+        try:
+            wait_objects(local, 2)
+            yield local, driver, remote.remote, recorder
+        finally:
+            driver.close()
+            local.close()
+            recorder.close()  # type: ignore[union-attr]
+            session.close()
+
+
+def test_the_end_effector_follows_a_device_and_forces_come_back(twin):
+    local, driver, remote, recorder = twin
+    free = np.array([-0.25, -0.1, 0.6])
+    driver.target(free)
+    _run_until(local, lambda: local.device_target is not None)
+    local.run(0.3)
+    assert np.allclose(local.twin.data.mocap_pos[0], free)
+    assert np.allclose(remote.twin.data.mocap_pos[0], free)  # passed on to the remote as commands
+    driver.received()  # forget the free-space forces so far
+    # Into the crate (centre 0.53 m high at the table's middle): contact, and a force pushing back in -x.
+    driver.target([-0.05, 0.0, 0.53])
+    _run_until(local, lambda: np.allclose(local.twin.data.mocap_pos[0], [-0.05, 0.0, 0.53]))
+    local.run(0.3)
+    forces = driver.received()
+    assert len(forces) > 20 and all(isinstance(f, OperatorForce) for f in forces)
+    assert all(np.isfinite(f.force).all() for f in forces)
+    assert max(np.linalg.norm(f.force) for f in forces) > 0.1
+    seqs = [f.seq for f in forces]
+    assert seqs == sorted(seqs)
+    # Published at 200 Hz of twin time, not at the 1 kHz loop rate.
+    times = np.array([f.sim_time for f in forces])
+    assert np.median(np.diff(times)) == pytest.approx(0.005, abs=1.5e-3)
+    assert local.report.operator_targets == 2 and not local.report.operator_dropped
+    recorder.close(twin_time_s=local.twin.time)
+    rec = read_recording(recorder.path)
+    assert rec.counts[TARGET_TOPIC] > 500 and rec.counts[FORCE_TOPIC] > 5
+    assert any(w.key == KEYS.operator_target and w.direction == "received" for w in rec.wire())
+    assert any(w.key == KEYS.operator_force and w.direction == "sent" for w in rec.wire())
+
+
+def test_bad_targets_are_dropped_and_counted(twin):
+    local, driver, _, _ = twin
+    good = np.array([-0.2, 0.1, 0.6])
+    driver.target(good, seq=100)
+    _run_until(local, lambda: local.device_target is not None)
+    raw = driver.session
+    nan = OperatorTarget(v=VERSION, stamp_ns=0, device="haptic0", epoch=1, seq=101, position=(float("nan"), 0.0, 0.6))
+    bad_id = OperatorTarget(v=VERSION, stamp_ns=0, device="no spaces", epoch=1, seq=102, position=(0.0, 0.0, 0.6))
+    pose = Pose(v=VERSION, stamp_ns=0, object_id="crate", epoch=1, seq=1, sim_time=0.0, position=(0.0, 0.0, 0.6),
+                quat=(1.0, 0.0, 0.0, 0.0), linvel=(0.0,) * 3, angvel=(0.0,) * 3)
+    for data in [b"garbage", encode(nan), encode(bad_id), encode(pose)]:
+        raw.put(KEYS.operator_target, data)
+    driver.target([50.0, 0.0, 0.6], seq=103)  # far outside the table's workspace
+    driver.target([0.0, 0.0, 0.6], seq=99)  # older than the good one
+    driver.target([0.1, 0.1, 3000.0], seq=104)  # beyond 1 km: refused at decoding
+    counters = local.link.counters
+    _run_until(local, lambda: counters.dropped_malformed + sum(local.report.operator_dropped.values()) >= 7)
+    assert counters.dropped_by_reason == {"undecodable": 1, "non-finite": 1, "bad-id": 1, "out-of-range": 1}
+    assert local.report.operator_dropped == {"wrong-type": 1, "out-of-workspace": 1, "out-of-order": 1}
+    local.run(0.1)
+    assert np.allclose(local.device_target, good) and np.allclose(local.twin.data.mocap_pos[0], good)
