@@ -215,12 +215,17 @@ class CameraSensor:
             self.feed.stats.unseen += 1
             log.warning("%s: the scan at t=%.3f has no segments", object_id, scan.time)
             return None
+        here = self._last[object_id]
         centroids = np.array([s.centroid for s in scan.segments])
-        dist = np.linalg.norm(centroids - self._last[object_id], axis=1)
+        dist = np.linalg.norm(centroids - here, axis=1)
         k = int(np.argmin(dist))
-        if dist[k] > ASSOCIATION_RADIUS:
+        # Inside the segment's box grown by the radius: a large object's centroid (of what was seen) can be
+        # far from its frame.
+        seg = scan.segments[k]
+        lo, hi = seg.points.min(axis=0) - ASSOCIATION_RADIUS, seg.points.max(axis=0) + ASSOCIATION_RADIUS
+        if not ((here >= lo) & (here <= hi)).all():
             self.feed.stats.unseen += 1
-            log.warning("%s: no segment within %.0f mm of its last position (nearest %.0f mm); not seen",
+            log.warning("%s: no segment within %.0f mm of its last position (nearest centroid %.0f mm); not seen",
                         object_id, 1000 * ASSOCIATION_RADIUS, 1000 * dist[k])
             return None
         owners = self._claims.setdefault(k, set())
