@@ -200,9 +200,9 @@ class DepthFrame:
                                np.asarray(self.camera.position, float))
 
 
-def ring(center: Sequence[float], *, count: int = 3, radius: float = 1.0, height: float = 0.7,
+def ring(center: Sequence[float], *, count: int = 3, radius: float = 1.0, above: float = 0.7,
          start_deg: float = -90.0, **camera: object) -> tuple[Camera, ...]:
-    """``count`` cameras evenly around ``center`` at ``radius`` m out and ``height`` m above it, looking at it.
+    """``count`` cameras evenly around ``center`` at ``radius`` m out and ``above`` m above it, looking at it.
 
     The first stands at azimuth ``start_deg`` (-90: the -y side, the operator's); ``camera`` options go to
     every :class:`Camera`.
@@ -211,7 +211,7 @@ def ring(center: Sequence[float], *, count: int = 3, radius: float = 1.0, height
     out = []
     for k in range(count):
         a = np.radians(start_deg + 360.0 * k / count)
-        pos = c + np.array([radius * np.cos(a), radius * np.sin(a), height])
+        pos = c + np.array([radius * np.cos(a), radius * np.sin(a), above])
         out.append(Camera(f"cam{k}", tuple(float(v) for v in pos), tuple(float(v) for v in c), **camera))  # type: ignore[arg-type]
     return tuple(out)
 
@@ -230,7 +230,7 @@ def table_ring(table_size: Sequence[float] | None, table_height: float | None, *
     distance = 0.8 * half_diag / np.tan(np.radians(fov) / 2)
     elevation = np.radians(40.0)
     return ring((0.0, 0.0, float(table_height)), count=count, radius=distance * np.cos(elevation),
-                height=distance * np.sin(elevation), **camera)
+                above=distance * np.sin(elevation), **camera)
 
 
 @contextmanager

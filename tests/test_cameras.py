@@ -1,0 +1,164 @@
+"""Virtual depth cameras: the noise model against its formula, bad input reported not raised, fused
+volumes, rigid-motion invariance, tracking at rest. Real MuJoCo models at small resolutions."""
+
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+import pytest
+
+from scenes.cameras import EXACT, KINECT_V1, Camera, CameraFeed, Workspace, noisy_depth, render, ring
+from scenes.sensing import CameraSensor
+
+TABLE_TOP = 0.75
+BOX = (0.08, 0.06, 0.05)  # full extents, metres
+VOLUME = BOX[0] * BOX[1] * BOX[2]
+
+
+def _model(boxes):  # type: ignore[no-untyped-def]
+    """A table and free boxes (visual geoms in group 1, named like twin.model's objects)."""
+    import mujoco
+
+    spec = mujoco.MjSpec()
+    spec.worldbody.add_geom(name="table", type=mujoco.mjtGeom.mjGEOM_BOX, size=[0.4, 0.3, 0.02],
+                            pos=[0, 0, TABLE_TOP - 0.02])
+    for name, (x, y) in boxes.items():
+        body = spec.worldbody.add_body(name=name, pos=[x, y, TABLE_TOP + BOX[2] / 2])
+        body.add_freejoint(name=f"{name}/free")
+        body.add_geom(name=f"{name}/visual", type=mujoco.mjtGeom.mjGEOM_BOX, size=[s / 2 for s in BOX],
+                      group=1)
+    model = spec.compile()
+    data = mujoco.MjData(model)
+    mujoco.mj_forward(model, data)
+    return model, data
+
+
+class _Twin:
+    """What CameraSensor reads of the remote's twin.sim.Twin, over a plain model."""
+
+    def __init__(self, model, data) -> None:  # type: ignore[no-untyped-def]
+        self.model, self.data, self.time = model, data, 0.0
+
+    def object_ids(self) -> list[str]:
+        return [self.model.body(i).name for i in range(1, self.model.nbody)]
+
+    def pose(self, object_id: str):  # type: ignore[no-untyped-def]
+        b = self.model.body(object_id).id
+        return self.data.xpos[b].copy(), self.data.xquat[b].copy()
+
+
+class _Truth:
+    def __init__(self, model, data) -> None:  # type: ignore[no-untyped-def]
+        self.twin = _Twin(model, data)
+
+
+def _rig(count: int, **kw):  # type: ignore[no-untyped-def]
+    return ring((0, 0, TABLE_TOP), count=count, radius=0.45, above=0.45, width=200, height=150, **kw)
+
+
+WORKSPACE = Workspace((-0.4, -0.3, TABLE_TOP - 0.05), (0.4, 0.3, TABLE_TOP + 0.4))
+
+
+def test_axial_noise_follows_the_kinect_formula():
+    rng = np.random.default_rng(0)
+    z = np.full((200, 200), 1.5)
+    cos = np.ones_like(z)
+    noise = KINECT_V1.__class__(quantum=0.0, dropout=0.0, flying=0.0)
+    out = noisy_depth(z, cos, noise, rng)
+    expected = 1.2e-3 + 1.9e-3 * (1.5 - 0.4) ** 2  # Nguyen et al. 2012 at normal incidence
+    assert np.std(out - z) == pytest.approx(expected, rel=0.03)
+    assert abs(np.mean(out - z)) < 4 * expected / 200
+    # steeper incidence, more noise; beyond 80 degrees, no return
+    assert KINECT_V1.sigma(1.0, np.cos(np.radians(70))) > KINECT_V1.sigma(1.0, 1.0)
+    grazing = noisy_depth(z, np.full_like(z, np.cos(np.radians(85))), noise, rng)
+    assert np.isnan(grazing).all()
+
+
+def test_quantisation_and_dropouts():
+    rng = np.random.default_rng(1)
+    z = np.full((100, 100), 0.8)
+    out = noisy_depth(z, np.ones_like(z), KINECT_V1, rng)
+    finite = out[np.isfinite(out)]
+    assert np.allclose(finite / 1e-3, np.round(finite / 1e-3))
+    assert np.isnan(out).mean() == pytest.approx(0.01, abs=0.005)
+
+
+def test_a_camera_that_sees_nothing_is_reported_not_raised(caplog):
+    model, data = _model({"a": (0.0, 0.0)})
+    away = Camera("away", (0.0, 0.0, 3.0), (0.0, 0.0, 10.0), width=40, height=30)
+    with caplog.at_level(logging.WARNING):
+        frame = render(model, data, away, noise=EXACT)
+    assert np.isnan(frame.depth).all()
+    assert "sees nothing" in caplog.text
+    feed = CameraFeed([away], WORKSPACE)
+    scan = feed.scan(model, data)
+    assert scan.segments == ()
+    assert feed.stats.empty_frames == 1 and feed.stats.failed_scans == 1
+
+
+def test_an_object_seen_by_no_camera_is_reported_and_observe_returns():
+    model, data = _model({"a": (0.0, 0.0)})
+    away = Camera("away", (0.0, 0.0, 3.0), (0.0, 0.0, 10.0), width=40, height=30)
+    sensor = CameraSensor(CameraFeed([away], WORKSPACE))
+    truth = _Truth(model, data)
+    seen = sensor.observe(truth, "a", 1000, shot=1)  # type: ignore[arg-type]
+    assert len(seen.points) == 0
+    assert sensor.feed.stats.unseen >= 1
+    track = sensor.track(truth, "a")  # type: ignore[arg-type]
+    assert np.isfinite(track.position).all()
+
+
+def test_the_end_effector_is_hidden_from_cameras():
+    import mujoco
+
+    spec = mujoco.MjSpec()
+    spec.worldbody.add_geom(type=mujoco.mjtGeom.mjGEOM_BOX, size=[0.4, 0.3, 0.02], pos=[0, 0, 0.73])
+    ee = spec.worldbody.add_body(name="ee", pos=[0, 0, 0.9])
+    ee.add_geom(type=mujoco.mjtGeom.mjGEOM_SPHERE, size=[0.1, 0, 0])
+    model = spec.compile()
+    data = mujoco.MjData(model)
+    mujoco.mj_forward(model, data)
+    cam = Camera("top", (0.0, 0.0, 1.6), (0.0, 0.0, 0.75), width=20, height=20, fov_y_deg=10)
+    frame = render(model, data, cam, noise=EXACT)
+    assert np.nanmax(np.abs(frame.depth - (1.6 - 0.75))) < 1e-9  # the table, through the sphere
+    assert model.geom_group[1] == 0  # restored
+
+
+def _fused_box(count: int, seed: int = 0):  # type: ignore[no-untyped-def]
+    model, data = _model({"a": (0.02, 0.01)})
+    sensor = CameraSensor(CameraFeed(_rig(count), WORKSPACE, seed=seed))
+    return sensor, _Truth(model, data), sensor.observe(_Truth(model, data), "a", 0, shot=1)  # type: ignore[arg-type]
+
+
+def test_two_views_of_a_box_give_its_volume():
+    from estimation import estimate, make_cloud
+
+    _, _, seen = _fused_box(2)
+    assert seen.completed is not None and seen.completed.any()  # the base was closed
+    result = estimate(make_cloud(seen.points, seen.normals), 1000.0)
+    # 2 views at ~0.6 m (sigma ~1.3 mm), a 5 cm box: the base and the unseen corners are completed.
+    assert result.volume == pytest.approx(VOLUME, rel=0.15)
+
+
+def test_a_rigid_motion_of_the_views_keeps_the_volume():
+    from scipy.spatial.transform import Rotation
+
+    from estimation import estimate, make_cloud
+
+    _, _, seen = _fused_box(3)
+    base = estimate(make_cloud(seen.points, seen.normals), 1000.0).volume
+    rot = Rotation.from_euler("xyz", [31, -17, 64], degrees=True).as_matrix()
+    moved = make_cloud(seen.points @ rot.T + [0.3, -1.2, 0.5], seen.normals @ rot.T)
+    assert estimate(moved, 1000.0).volume == pytest.approx(base, rel=0.005)
+
+
+def test_tracking_at_rest_is_within_2_mm_and_1_degree():
+    from twin.poses import angle_deg
+
+    sensor, truth, seen = _fused_box(3)
+    truth.twin.time = 1.0  # a later scan, fresh noise, nothing moved
+    track = sensor.track(truth, "a")  # type: ignore[arg-type]
+    assert sensor.feed.stats.scans == 2
+    assert np.linalg.norm(track.position - seen.frame_position) < 0.002
+    assert angle_deg(track.quat, np.array([1.0, 0, 0, 0])) < 1.0

@@ -1,0 +1,68 @@
+"""Support plane and clustering on synthetic scenes with known answers."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from estimation.errors import CloudError
+from estimation.segmentation import check_segments, cluster, fit_plane, segment
+
+
+def _box_surface(centre, size, n, rng):  # type: ignore[no-untyped-def]
+    """n points uniformly on the sides and top of an axis-aligned box resting on z = 0."""
+    pts = rng.uniform(-0.5, 0.5, (n, 3)) * size
+    face = rng.integers(0, 5, n)  # 0..3 sides, 4 top
+    axis = np.where(face < 2, 0, np.where(face < 4, 1, 2))
+    sign = np.where(face % 2 == 0, 1.0, -1.0)
+    sign[face == 4] = 1.0
+    pts[np.arange(n), axis] = sign * np.asarray(size)[axis] / 2
+    return pts + np.array([centre[0], centre[1], size[2] / 2])
+
+
+def _scene(rng, gap=0.03):  # type: ignore[no-untyped-def]
+    table = np.column_stack([rng.uniform(-0.4, 0.4, 40000), rng.uniform(-0.3, 0.3, 40000), np.zeros(40000)])
+    a = _box_surface((-0.05 - gap / 2, 0.0), (0.1, 0.08, 0.06), 6000, rng)
+    b = _box_surface((0.04 + gap / 2, 0.0), (0.08, 0.08, 0.1), 6000, rng)
+    pts = np.concatenate([table, a, b]) + rng.normal(0, 0.001, (52000, 3))
+    truth = np.concatenate([np.zeros(40000, int), np.ones(6000, int), np.full(6000, 2)])
+    return pts, truth
+
+
+def test_plane_is_found_and_faces_the_sensor():
+    rng = np.random.default_rng(0)
+    pts, _ = _scene(rng)
+    plane = fit_plane(pts, threshold=0.004, toward=np.array([0.0, -1.0, 1.0]), rng=rng)
+    assert plane.normal @ [0, 0, 1] > 0.9999
+    assert abs(plane.offset) < 5e-4
+    assert plane.rms == pytest.approx(0.001, rel=0.2)
+    flipped = fit_plane(pts, threshold=0.004, toward=np.array([0.0, 0.0, -1.0]), rng=rng)
+    assert flipped.normal @ [0, 0, 1] < -0.9999
+
+
+def test_two_boxes_3_cm_apart_are_two_segments_none_merged():
+    rng = np.random.default_rng(1)
+    pts, truth = _scene(rng)
+    seg = segment(pts, toward=np.array([0.0, 0.0, 1.0]), rng=rng, plane_threshold=0.004)
+    assert seg.count == 2
+    check = check_segments(seg.labels, truth, [1, 2])
+    assert check.found == (1, 2) and check.merged == () and check.split == () and check.missed == ()
+
+
+def test_touching_boxes_are_reported_merged():
+    rng = np.random.default_rng(2)
+    pts, truth = _scene(rng, gap=0.0)
+    seg = segment(pts, toward=np.array([0.0, 0.0, 1.0]), rng=rng, plane_threshold=0.004)
+    check = check_segments(seg.labels, truth, [1, 2])
+    assert len(check.merged) == 1
+
+
+def test_small_clusters_are_noise():
+    pts = np.concatenate([np.zeros((100, 3)), np.full((5, 3), 1.0)])
+    labels = cluster(pts, cell=0.01, min_points=10)
+    assert (labels[:100] == 0).all() and (labels[100:] == -1).all()
+
+
+def test_plane_needs_three_points():
+    with pytest.raises(CloudError, match="at least 3 points"):
+        fit_plane(np.zeros((2, 3)), threshold=0.01, toward=np.zeros(3), rng=np.random.default_rng(0))
