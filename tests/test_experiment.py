@@ -1,0 +1,125 @@
+"""Latency experiments: a tiny sweep on the small scene, checked against what must hold, never wall time."""
+
+from __future__ import annotations
+
+import csv
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from cli.experiment import write_csv
+from cli.main import main
+from scenes.experiment import COLUMNS, Sweep, run_experiment
+from scenes.scenefile import load_scene
+
+SMALL = Path(__file__).parent / "data" / "small.toml"
+
+#: Two delays, two masses, the push task at twice the normal speed: 4 sessions (the truth is one of them).
+SWEEP = Sweep(tasks=("push",), delays=(0.0, 0.05), mass_scales=(1.0, 1.5), seeds=1, speed=2.0)
+ARGS = ["experiment", str(SMALL), "--delays", "0,50", "--mass-scale", "1,1.5", "--tasks", "push", "--speed", "2"]
+
+
+@pytest.fixture(scope="module")
+def cache(tmp_path_factory) -> Path:
+    return tmp_path_factory.getbasetemp() / "coacd"
+
+
+@pytest.fixture(scope="module")
+def rows(cache):  # type: ignore[no-untyped-def]
+    rows, _ = run_experiment(load_scene(SMALL), SWEEP, workers=0, cache_dir=cache)
+    return rows
+
+
+def _row(rows, **match):  # type: ignore[no-untyped-def]
+    (row,) = [r for r in rows if all(getattr(r, k) == v for k, v in match.items())]
+    return row
+
+
+def test_direct_at_zero_delay_is_the_truth_and_delay_makes_it_worse(rows):
+    zero = _row(rows, mode="direct", delay_ms=0.0, mass_scale=1.0)
+    late = _row(rows, mode="direct", delay_ms=50.0, mass_scale=1.0)
+    assert zero.force_rms_n == 0.0 and zero.force_peak_n == 0.0  # the same session as the truth
+    assert zero.truth_peak_n > 1.0  # a real push: newtons of contact force
+    assert late.force_rms_pct > 5.0 > zero.force_rms_pct
+    assert not zero.blowup and not late.blowup and late.energy_j > 0
+
+
+def test_perceived_delay_twin_is_one_step_direct_is_the_round_trip(rows):
+    for d in (0.0, 50.0):
+        twin = _row(rows, mode="twin", delay_ms=d, mass_scale=1.0)
+        direct = _row(rows, mode="direct", delay_ms=d, mass_scale=1.0)
+        assert twin.perceived_delay_ms == pytest.approx(1.0)  # one 1 ms physics step
+        # The round trip, plus the step both modes need; at zero delay the remote still sees a command one
+        # step late (it steps before the operator within a tick).
+        assert direct.perceived_delay_ms - twin.perceived_delay_ms == pytest.approx(max(2 * d, 1.0))
+
+
+def test_a_heavier_twin_pushes_back_harder(rows):
+    for d in (0.0, 50.0):
+        true_mass = _row(rows, mode="twin", delay_ms=d, mass_scale=1.0)
+        heavy = _row(rows, mode="twin", delay_ms=d, mass_scale=1.5)
+        assert heavy.contact_force_err_pct > true_mass.contact_force_err_pct + 10.0
+        assert heavy.force_rms_pct != true_mass.force_rms_pct
+        # Direct teleoperation feels C, which the twin's mass does not touch.
+        direct, direct_heavy = (_row(rows, mode="direct", delay_ms=d, mass_scale=m) for m in (1.0, 1.5))
+        assert direct.force_rms_n == direct_heavy.force_rms_n
+
+
+def test_twin_rows_carry_divergence_and_traffic(rows):
+    twin = _row(rows, mode="twin", delay_ms=50.0, mass_scale=1.0)
+    direct = _row(rows, mode="direct", delay_ms=50.0, mass_scale=1.0)
+    assert 0.0 <= twin.div_p50_mm <= twin.div_p99_mm <= twin.div_max_mm < 50.0
+    assert twin.messages > 0 and direct.messages > twin.messages  # direct streams a force sample every step
+    assert direct.bytes_per_s > twin.bytes_per_s > 0
+
+
+def test_the_cli_writes_every_column_and_the_same_rows_with_workers(rows, cache, tmp_path, monkeypatch):
+    monkeypatch.setenv("TWIN_CACHE_DIR", str(cache))
+    out = tmp_path / "sweep"
+    assert main([*ARGS, "--workers", "2", "--out", str(out)]) == 0
+    with (out / "results.csv").open() as f:
+        table = list(csv.reader(f))
+    assert tuple(table[0]) == COLUMNS
+    assert len(table) == 1 + len(rows) == 1 + 8
+    write_csv(rows, tmp_path / "in_process.csv")  # workers=0, this process
+    assert (out / "results.csv").read_bytes() == (tmp_path / "in_process.csv").read_bytes()
+    for name in ("force_vs_delay.png", "force_vs_mass.png", "divergence.png", "bytes_per_s.png", "report.md"):
+        assert (out / name).stat().st_size > 0, name
+    assert "Findings" in (out / "report.md").read_text()
+    # Its own folder may be written again; another one may not.
+    assert main([*ARGS, "--delays", "0", "--mass-scale", "1", "--workers", "0", "--out", str(out)]) == 0
+
+
+@pytest.mark.parametrize(("extra", "message"), [
+    (["--delays", "0,-10"], "--delays: a delay cannot be negative, got -10 ms"),
+    (["--loss", "101"], "--loss is a percentage: at most 100, got 101"),
+    (["--delays", "0,inf"], "--delays: inf is not a finite number"),
+    (["--mass-scale", "1,nan"], "--mass-scale: nan is not a finite number"),
+    (["--mass-scale", "0"], "--mass-scale: a mass scale must be > 0, got 0"),
+    (["--jitter", "20", "--delays", "50"], "delay 50 ms: jitter 0.02 s is more than normal jitter allows"),
+    (["--jitter", "1", "--delays", "0"], "delay 0 ms: jitter 0.001 s is more than normal jitter allows"),
+    (["--tasks", "push,wave"], "unknown task 'wave' \\(known: push, press\\)"),
+    (["--seeds", "0"], "--seeds must be at least 1, got 0"),
+])
+def test_bad_arguments_are_one_line_and_exit_2(extra, message, tmp_path, capsys):
+    assert main([*ARGS, *extra, "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("twin experiment: error: ")
+    assert re.search(message, err), err
+    assert not (tmp_path / "o").exists()  # refused before any work
+
+
+def test_an_out_folder_this_command_did_not_write_is_refused(tmp_path, capsys):
+    (tmp_path / "notes.txt").write_text("mine")
+    assert main([*ARGS, "--out", str(tmp_path)]) == 2
+    assert "exists and is not empty (and not a folder this command wrote)" in capsys.readouterr().err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["notes.txt"]
+
+
+def test_help_says_scene_files_only():
+    out = subprocess.run([sys.executable, "-m", "cli.main", "experiment", "--help"], capture_output=True,
+                         text=True, check=True, cwd=Path(__file__).parent.parent).stdout
+    assert "recordings are not accepted yet" in out
