@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import queue
 import time
+from collections import Counter
 
 import numpy as np
 import pytest
@@ -144,3 +145,31 @@ def test_bad_targets_are_dropped_and_counted(twin):
     assert local.report.operator_dropped == {"wrong-type": 1, "out-of-workspace": 1, "out-of-order": 1}
     local.run(0.1)
     assert np.allclose(local.device_target, good) and np.allclose(local.twin.data.mocap_pos[0], good)
+
+
+def test_twin_local_records_a_scripted_session(endpoint, cache, tmp_path, capsys):
+    import json
+
+    from cli.main import main
+
+    script = tmp_path / "push.csv"
+    script.write_text("t,x,y,z\n0,-0.3,0.0,0.56\n2,-0.1,0.0,0.53\n")
+    path = tmp_path / "live.mcap"
+    with running_remote(endpoint, cache):
+        code = main(["local", "--connect", endpoint, "--duration", "2", "--script", str(script), "--record",
+                     str(path), "--force-rate", "100", "--json"])
+    assert code == 0
+    record = json.loads(capsys.readouterr().out)
+    assert record["forces_sent"] > 100  # (objects may still be estimating in a worker: not asked here)
+    rec = read_recording(path)
+    assert rec.damage is None and rec.metadata["clock"] == "real" and rec.metadata["command"] == "local"
+    times, targets = rec.targets()
+    assert len(times) > 1000 and np.allclose(targets[0], [-0.3, 0.0, 0.56], atol=1e-3)
+    kinds = Counter((w.direction, w.key.rsplit("/", 1)[-1]) for w in rec.wire())
+    assert kinds["received", "cloud"] == 2 and kinds["sent", "command"] > 10 and kinds["sent", "force"] > 100
+    for topic in rec.counts:
+        stamps = [r.log_time for r in rec.topic(topic)]
+        assert stamps == sorted(stamps), topic
+    # --replay-operator refuses a missing recording before it opens a session.
+    assert main(["local", "--connect", endpoint, "--duration", "0.1", "--replay-operator", str(tmp_path / "no.mcap")]) == 2
+    assert "no such recording" in capsys.readouterr().err
