@@ -1,0 +1,231 @@
+"""What the build writes (estimates.json, objects/<id>.xml), what commands print and where, and material aliases."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import mujoco
+import numpy as np
+import pytest
+import trimesh
+
+from cli.demo import object_records
+from cli.main import main
+from estimation import MaterialError, estimate, from_mesh, make_cloud, material
+from estimation.materials import aliases, materials
+from scenes.build import BuiltScene, build_scene, estimates_record, write_scene
+from scenes.scenefile import load_scene, parse_scene
+from scenes.sources import source_mesh
+from twin.objects import TwinObject
+from twin.runtime import LocalReport
+
+ROOT = Path(__file__).resolve().parent.parent
+SMALL = ROOT / "tests" / "data" / "small.toml"
+
+
+@pytest.fixture(scope="module")
+def cache(tmp_path_factory):
+    return tmp_path_factory.mktemp("coacd")
+
+
+@pytest.fixture(scope="module")
+def built(cache):
+    return build_scene(load_scene(SMALL), cache_dir=cache, progress=False)
+
+
+@pytest.fixture(scope="module")
+def out(built, tmp_path_factory):
+    folder = tmp_path_factory.mktemp("build") / "small"
+    write_scene(built.spec, folder, built=built)
+    return folder
+
+
+def _no_constants(name: str) -> None:
+    raise AssertionError(f"{name} in JSON output")
+
+
+# -- build outputs ------------------------------------------------------------------------------------------
+
+def test_build_writes_objects_and_estimates(out, built):
+    assert sorted(p.name for p in (out / "objects").iterdir()) == ["can.xml", "crate.xml"]
+    assert (out / ".tactile-twin-build").is_file()
+    record = json.loads((out / "estimates.json").read_text(), parse_constant=_no_constants)
+    assert record["format"] == "tactile-twin estimates" and record["version"] == 1 and record["scene"] == "small"
+    objects = {o["id"]: o for o in record["objects"]}
+    assert list(objects) == ["crate", "can"]
+    model = built.model
+    for obj in built.objects:
+        o = objects[obj.id]
+        assert o["mass_kg"] == pytest.approx(model.body(obj.id).mass[0], rel=1e-12)
+        assert o["mass_kg"] == pytest.approx(o["volume_m3"] * o["density_kg_m3"], rel=1e-12)
+        assert o["hull_count"] == len(obj.hulls) >= 1
+        assert np.allclose(o["source_to_body"]["translation_m"], -obj.estimate.mass.center_of_mass)
+        assert o["source_to_body"]["quat_wxyz"] == [1.0, 0.0, 0.0, 0.0]
+        assert np.allclose(o["body_pose_world"]["position_m"], obj.position)
+        assert o["mjcf"] == f"objects/{obj.id}.xml"
+        inertia = np.asarray(o["inertia_kg_m2"])
+        assert inertia.shape == (3, 3) and np.allclose(inertia, inertia.T)
+        for key in ("center_of_mass_m", "method", "points_in", "points_used", "warnings", "watertight"):
+            assert key in o
+    assert (objects["crate"]["density_source"], objects["crate"]["material"]) == ("material", "wood_pine")
+    assert (objects["can"]["density_source"], objects["can"]["density_kg_m3"]) == ("given", 700.0)
+    assert objects["crate"]["source"] == {"kind": "primitive", "value": {"type": "box", "size": [0.12, 0.08, 0.06]},
+                                          "units": "m", "rotation_deg": [0.0, 0.0, 0.0], "points": 20000}
+
+
+def test_an_object_file_is_included_into_another_model(out, built, tmp_path):
+    # A user's own world, in a folder of its own, includes the crate; MuJoCo finds its meshes.
+    world = tmp_path / "robot" / "world.xml"
+    world.parent.mkdir()
+    world.write_text(f'<mujoco><worldbody><geom type="plane" size="1 1 0.1"/></worldbody>'
+                     f'<include file="{out / "objects" / "crate.xml"}"/></mujoco>')
+    model = mujoco.MjModel.from_xml_path(str(world))
+    crate = next(o for o in built.objects if o.id == "crate")
+    assert model.body("crate").mass[0] == pytest.approx(crate.estimate.mass.mass, rel=1e-5)  # 6 digits in MJCF
+    assert model.nmesh == 1 + len(crate.hulls)
+    assert mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, "crate/free") >= 0
+    # no <option> or <compiler> of ours: the host's settings stand
+    text = (out / "objects" / "crate.xml").read_text()
+    assert "<option" not in text and "<compiler" not in text and "sleep" not in text
+
+
+def test_an_object_file_attaches_with_a_prefix(out, tmp_path):
+    world = tmp_path / "world.xml"
+    world.write_text(f'<mujoco><asset><model name="c" file="{out / "objects" / "can.xml"}"/></asset>'
+                     f'<worldbody><attach model="c" body="can" prefix="left-"/>'
+                     f'<attach model="c" body="can" prefix="right-"/></worldbody></mujoco>')
+    model = mujoco.MjModel.from_xml_path(str(world))
+    left, right = model.body("left-can").mass[0], model.body("right-can").mass[0]
+    assert left == right > 0
+
+
+def test_source_to_body_maps_a_rotated_mesh_onto_the_body(tmp_path):
+    # A box turned 90 deg about z: its own (unrotated) vertices, mapped by source_to_body, are the body's mesh.
+    scene = parse_scene({"name": "r", "objects": [{"id": "b", "primitive": {"type": "box", "size": [0.2, 0.1, 0.05]},
+                                                   "rotation_deg": [90, 0, 0], "density": 500}]})
+    spec = scene.objects[0]
+    mesh = source_mesh(spec)
+    est = from_mesh(mesh.vertices, mesh.faces, 500.0)
+    visual = (est.vertices - est.mass.center_of_mass, est.faces)
+    obj = TwinObject(id="b", estimate=est, friction=0.5, visual=visual, hulls=(visual,),
+                     position=np.array([0, 0, 0.03]), quat=np.array([1.0, 0, 0, 0]))
+    record = estimates_record(BuiltScene(scene, None, None, (obj,), 0.0))["objects"][0]
+    transform = record["source_to_body"]
+    rotation = np.zeros(9)
+    mujoco.mju_quat2Mat(rotation, np.asarray(transform["quat_wxyz"]))
+    own = trimesh.creation.box(extents=[0.2, 0.1, 0.05]).vertices
+    mapped = own @ rotation.reshape(3, 3).T + transform["translation_m"]
+    assert np.allclose(sorted(map(tuple, np.round(mapped, 9))), sorted(map(tuple, np.round(visual[0], 9))))
+    assert np.allclose(transform["quat_wxyz"], [np.cos(np.pi / 4), 0, 0, np.sin(np.pi / 4)])
+
+
+# -- command output: results on stdout, progress on stderr, --json exactly one object ------------------------
+
+def test_build_progress_on_stderr_result_on_stdout(cache, tmp_path, capsys):
+    assert main(["build", str(SMALL), "--out", str(tmp_path / "a"), "--cache-dir", str(cache)]) == 0
+    captured = capsys.readouterr()
+    assert "[1/2] crate: estimated in" in captured.err and "[2/2] can: estimated in" in captured.err
+    assert "convex decomposition" in captured.err
+    assert "estimated in" not in captured.out and "crate" in captured.out and "wrote" in captured.out
+    assert main(["build", str(SMALL), "--out", str(tmp_path / "b"), "--cache-dir", str(cache), "--json"]) == 0
+    captured = capsys.readouterr()
+    record = json.loads(captured.out, parse_constant=_no_constants)  # the whole of stdout is one object
+    assert [o["id"] for o in record["objects"]] == ["crate", "can"]
+    assert Path(record["estimates_json"]).is_file() and all(Path(o["mjcf"]).is_file() for o in record["objects"])
+
+
+def test_run_json_has_per_object_poses(out, capsys):
+    assert main(["run", str(out), "--duration", "0.3", "--no-realtime", "--json"]) == 0
+    record = json.loads(capsys.readouterr().out, parse_constant=_no_constants)
+    assert record["objects"] == 2 and record["steps"] == 300  # the older fields stay
+    per = {o["id"]: o for o in record["per_object"]}
+    assert set(per) == {"crate", "can"}
+    for o in per.values():
+        assert len(o["position_m"]) == 3 and np.linalg.norm(o["quat_wxyz"]) == pytest.approx(1.0)
+        assert o["displacement_m"] >= 0 and 0 <= o["rotation_deg"] <= 180
+    assert per["can"]["displacement_m"] < 0.01  # the push goes along x at y = 0: the can, at y = 0.1, stays
+
+
+def test_demo_records_compare_estimated_and_true_mass():
+    report = LocalReport(touchable_after={"mug": (1.5, 1.2)}, divergence={"mug": [0.001, 0.004, 0.002]})
+    pose = (np.array([0.1, 0.2, 0.8]), np.array([1.0, 0, 0, 0]))
+    (record,) = object_records(report, {"mug": 0.33}, {"mug": pose}, {"mug": 0.002}, {"mug": 0.30})
+    assert record["id"] == "mug" and record["add_latency_s"] == 1.2 and record["add_latency_from_publish_s"] == 1.5
+    assert record["divergence_max_m"] == 0.004 and record["twin_minus_remote_m"] == 0.002
+    assert record["mass_error_pct"] == pytest.approx(10.0) and record["true_mass_kg"] == 0.30
+    (unknown,) = object_records(LocalReport(), {"mug": 0.33}, {"mug": pose}, {})
+    assert "true_mass_kg" not in unknown and unknown["add_latency_s"] is None and unknown["divergence_max_m"] is None
+    # SI base units only, and each key says which
+    assert all(k == "id" or k.endswith(("_m", "_kg", "_s", "_pct", "_wxyz")) for k in record)
+
+
+# -- materials -------------------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize(("name", "expected"), [
+    ("PLA", "pla_plastic"), ("ABS", "abs_plastic"), ("aluminum", "aluminium"), ("Aluminium", "aluminium"),
+    ("steel", "steel"), ("stainless", "stainless_steel"), ("AISI 316", "stainless_steel"), ("HDPE", "polyethylene_hd"),
+    ("plexiglass", "acrylic"), ("Teflon", "ptfe"),
+])
+def test_material_aliases(name, expected):
+    assert material(name).name == expected
+
+
+def test_every_alias_names_a_material():
+    table = materials()
+    assert aliases() and all(target in table for target in aliases().values())
+    assert not set(aliases()) & set(table)  # an alias never hides a table name
+
+
+def test_did_you_mean_considers_aliases():
+    with pytest.raises(MaterialError, match=r"unknown material 'alumnum'; did you mean aluminum \(= aluminium\)"):
+        material("alumnum")
+    with pytest.raises(MaterialError, match=r"did you mean stainless \(= stainless_steel\)"):
+        material("stainles")
+
+
+def test_cli_material_alias(tmp_path, capsys):
+    points = trimesh.creation.box(extents=[0.1, 0.06, 0.04]).sample(5000, return_index=False)
+    np.save(tmp_path / "box.npy", points)
+    assert main(["estimate", str(tmp_path / "box.npy"), "--material", "PLA", "--json"]) == 0
+    record = json.loads(capsys.readouterr().out)
+    assert record["material"] == "pla_plastic" and record["density_kg_m3"] == materials()["pla_plastic"].density
+    assert main(["estimate", str(tmp_path / "box.npy"), "--material", "alumnum"]) == 2
+    assert "did you mean aluminum (= aluminium)" in capsys.readouterr().err
+    assert main(["materials"]) == 0
+    listing = capsys.readouterr().out
+    assert "pla_plastic" in listing and "also: pla" in listing and "aluminum" in listing
+
+
+def test_scene_material_alias():
+    scene = parse_scene({"name": "x", "objects": [{"id": "a", "paper": "box", "material": "PLA"}]})
+    assert material(scene.objects[0].material).name == "pla_plastic"
+    assert estimate(make_cloud(trimesh.creation.box(extents=[0.1] * 3).sample(2000, return_index=False)),
+                    material("aluminum").density).mass.density == 2700
+
+
+# -- public surface --------------------------------------------------------------------------------------------
+
+def test_packages_re_export_lazily():
+    code = ("import sys, twin, sync, scenes, cli\n"
+            "heavy = ('mujoco', 'zenoh', 'open3d', 'rerun', 'trimesh')\n"
+            "assert not [m for m in heavy if m in sys.modules], [m for m in heavy if m in sys.modules]\n"
+            "for p in (twin, sync, scenes, cli):\n"
+            "    assert p.__all__ == sorted(p.__all__)\n"
+            "    for n in p.__all__: getattr(p, n)\n"
+            "    assert set(p.__all__) <= set(dir(p))\n"
+            "assert not [m for m in ('zenoh', 'open3d', 'rerun') if m in sys.modules]\n"
+            "import cli.main as m\n"
+            "assert callable(m.main) and m.__name__ == 'cli.main'\n"
+            "from twin import Twin; from twin.sim import Twin as T; assert Twin is T\n")
+    done = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+
+
+def test_unknown_public_name():
+    import twin
+
+    with pytest.raises(AttributeError, match="module 'twin' has no attribute 'Twinn'"):
+        twin.Twinn  # noqa: B018
