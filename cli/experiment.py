@@ -285,8 +285,8 @@ def findings(rows) -> list[str]:  # type: ignore[no-untyped-def]
         out.append(f"- **{task}**: direct teleoperation's RMS force error grows from {rms('direct', delays[0]):.1f} % "
                    f"at {delays[0]:g} ms to {rms('direct', delays[-1]):.1f} % at {delays[-1]:g} ms; the twin's stays "
                    f"{twin0:.1f}-{max(rms('twin', d) for d in delays):.1f} % (its floor is the estimated shape, not "
-                   "the network). " + (f"The twin beats direct from {worse[0]:g} ms one way."
-                                        if worse else "Direct beats the twin at every delay measured."))
+                   "the network). " + (f"The twin is closer to the truth (RMS) at {', '.join(f'{d:g}' for d in worse)} ms "
+                                        "one way." if worse else "Direct beats the twin at every delay measured."))
         better = [d for d in delays if rms("direct", d) <= rms("twin", d)]
         if better:
             out.append(f"- **{task}, where the twin loses**: at {', '.join(f'{d:g}' for d in better)} ms direct "
@@ -301,6 +301,22 @@ def findings(rows) -> list[str]:  # type: ignore[no-untyped-def]
                        + ", ".join(f"x{m:g}: {e:+.1f} %" for m, e in errs.items())
                        + f". Within the {FORCE_JND_PCT:g} % force JND at every delay: "
                        + (", ".join(f"x{m:g}" for m in ok) if ok else "none of the scales tried") + ".")
+            # How much a mass error moves the felt force: a line through (mass scale, contact error) per delay.
+            # The mass error that moves the force by one JND is the accuracy the mass needs, if nothing else
+            # were wrong.
+            slopes = []
+            for d in delays:
+                pts = [(m, _mean(r.contact_force_err_pct for r in _by(rows, task=task, mode="twin", delay_ms=d,
+                                                                        mass_scale=m))) for m in masses]
+                pts = [(m, e) for m, e in pts if math.isfinite(e)]
+                if len(pts) > 1:
+                    mx, my = _mean(m for m, _ in pts), _mean(e for _, e in pts)
+                    slope = (sum((m - mx) * (e - my) for m, e in pts) / sum((m - mx) ** 2 for m, _ in pts))
+                    slopes.append(f"{d:g} ms: {slope / 100:.2f} -> +/-{100 * FORCE_JND_PCT / abs(slope):.1f} %"
+                                  if slope else f"{d:g} ms: 0")
+            out.append(f"- **{task}, how accurate the mass must be**: felt force change per unit of relative mass "
+                       f"error, and the mass error that makes one {FORCE_JND_PCT:g} % JND, by delay: "
+                       + "; ".join(slopes) + ".")
     blow = [r for r in rows if r.blowup]
     out.append(f"- Stability: {len(blow)} of {len(rows)} runs blew up (non-finite or absurd force or speed).")
     return out
