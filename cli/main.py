@@ -1,4 +1,9 @@
-"""The ``twin`` command line. Thin: parse, call library functions, print, map errors to exit 2."""
+"""The ``twin`` command line. Thin: parse, call library functions, print, map errors to exit 2.
+
+Output, the same for every command: the result (a table or summary lines; with --json exactly one JSON
+object, SI units named in its keys, nothing else) goes to stdout; progress, status and warnings go to
+stderr; an error is one line on stderr and exit code 2.
+"""
 
 from __future__ import annotations
 
@@ -129,7 +134,8 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("cloud", type=Path, help="PLY, PCD, XYZ/TXT, NPY or NPZ point cloud")
     dens = p.add_mutually_exclusive_group()
     dens.add_argument("--density", type=float, help="kg/m^3")
-    dens.add_argument("--material", help="a name from the material table (e.g. wood_oak)")
+    dens.add_argument("--material", help="a name or alias from the material table (e.g. wood_oak, PLA, "
+                                          "aluminum; list: twin materials)")
     p.add_argument("--units", default="m", choices=["m", "cm", "mm"], help="units of the file (default m)")
     p.add_argument("--method", default="auto", choices=["auto", "obb", "hull", "surface"])
     p.add_argument("--viewpoint", type=float, nargs=3, metavar=("X", "Y", "Z"),
@@ -139,9 +145,11 @@ def _parser() -> argparse.ArgumentParser:
     _rerun_option(p)
     p.set_defaults(handler=_cmd_estimate)
 
-    p = sub.add_parser("build", help="build a scene file into DIR/scene.xml and DIR/assets/")
+    p = sub.add_parser("build", help="build a scene file into DIR: scene.xml, assets/, objects/<id>.xml, "
+                                     "estimates.json")
     p.add_argument("scene", type=Path, help="scene TOML file")
     p.add_argument("--out", type=Path, required=True, help="output directory (replaced atomically)")
+    p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     _coacd_options(p)
     _rerun_option(p)
     p.set_defaults(handler=_cmd_build)
@@ -345,12 +353,33 @@ def _cmd_build(args: argparse.Namespace) -> int:
     scene = load_scene(args.scene)
     keep = (args.scene, *(Path(str(o.value)) for o in scene.objects if o.source in ("mesh", "cloud")))
     check_output(args.out, keep=keep)  # before the work: a refused folder should not cost a build
+    from rich.console import Console
+
+    err = Console(stderr=True)
+
+    def progress(k: int, n: int, object_id: str, seconds: float, est) -> None:  # type: ignore[no-untyped-def]
+        err.print(f"[{k + 1}/{n}] {object_id}: estimated in {seconds:.1f} s ({est.mass.mass:.3f} kg, "
+                  f"{est.method}{', ' + str(len(est.warnings)) + ' warning(s)' if est.warnings else ''})")
+
     with _open_rerun(args) as rlog:  # before the work: a bad --rerun should not cost a build
-        built = build_scene(scene, coacd=_coacd_settings(args), cache_dir=args.cache_dir)
-        path = write_scene(built.spec, args.out, keep=keep)
+        err.print(f"building {scene.name!r}: {len(scene.objects)} objects")
+        built = build_scene(scene, coacd=_coacd_settings(args), cache_dir=args.cache_dir, on_estimate=progress)
+        cached = sum(o.hull_cached for o in built.objects)
+        err.print(f"convex decomposition: {built.decompose_seconds:.1f} s ({cached} of {len(built.objects)} "
+                  f"objects from the cache)")
+        path = write_scene(built.spec, args.out, keep=keep, built=built)
         _log_built(rlog, built)
+    if args.json:
+        print(to_json({"scene_xml": str(path), "estimates_json": str(path.parent / "estimates.json"),
+                       "seconds": built.seconds, "decompose_seconds": built.decompose_seconds,
+                       "objects": [{"id": o.id, "mass_kg": o.estimate.mass.mass, "volume_m3": o.estimate.volume,
+                                    "hull_count": len(o.hulls), "hulls_cached": o.hull_cached,
+                                    "estimate_seconds": built.estimate_seconds.get(o.id),
+                                    "mjcf": str(path.parent / "objects" / f"{o.id}.xml")}
+                                   for o in built.objects]}))
+        return 0
     _print_objects(built)
-    print(f"wrote {path} ({built.seconds:.1f} s)")
+    print(f"wrote {path}, objects/<id>.xml and estimates.json in {path.parent} ({built.seconds:.1f} s)")
     return 0
 
 
@@ -359,11 +388,13 @@ def _print_objects(built) -> None:  # type: ignore[no-untyped-def]
     from rich.table import Table
 
     table = Table(title=f"scene {built.scene.name}")
-    for col in ("object", "mass kg", "volume cm^3", "hulls", "cached", "material"):
+    for col in ("object", "mass kg", "volume cm^3", "hulls", "cached", "estimate s", "material"):
         table.add_column(col, justify="right" if col != "object" else "left")
     for o in built.objects:
+        secs = built.estimate_seconds.get(o.id)
         table.add_row(o.id, f"{o.estimate.mass.mass:.3f}", f"{o.estimate.volume * 1e6:.1f}", str(len(o.hulls)),
-                      "yes" if o.hull_cached else "no", o.estimate.material or f"{o.estimate.mass.density:g} kg/m^3")
+                      "yes" if o.hull_cached else "no", "-" if secs is None else f"{secs:.1f}",
+                      o.estimate.material or f"{o.estimate.mass.density:g} kg/m^3")
     Console().print(table)
 
 
@@ -414,6 +445,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
             else:
                 rlog.model_geometry(twin)
             trajectory = _trajectory(args, twin) if twin.model.nmocap else None
+            start = {i: twin.pose(i) for i in twin.object_ids()}
             if args.viewer:
                 stats = _run_with_viewer(twin, args, trajectory)
             else:
@@ -421,15 +453,32 @@ def _cmd_run(args: argparse.Namespace) -> int:
                                   rlog=rlog)
             record = {"steps": stats.steps, "rate_hz": args.rate, "step_p50_ms": stats.p50 * 1e3,
                       "step_p99_ms": stats.p99 * 1e3, "step_max_ms": stats.max * 1e3, "missed_deadlines": stats.missed,
-                      "wall_s": stats.wall, "objects": len(twin.object_ids()),
-                      "ee_force_n": twin.end_effector_force().tolist() if twin.model.nmocap else None}
+                      "wall_s": stats.wall, "sim_time_s": twin.time, "objects": len(twin.object_ids()),
+                      "ee_force_n": twin.end_effector_force().tolist() if twin.model.nmocap else None,
+                      "per_object": [_pose_record(i, *twin.pose(i), *start[i]) for i in twin.object_ids()
+                                     if i in start]}
     if args.json:
         print(to_json(record))
     else:
         print(f"{record['steps']} loop iterations at {args.rate:g} Hz over {stats.wall:.2f} s wall: "
               f"step p50 {record['step_p50_ms']:.3f} ms, p99 {record['step_p99_ms']:.3f} ms, "
               f"max {record['step_max_ms']:.3f} ms, missed deadlines {stats.missed}")
+        for o in record["per_object"]:
+            x, y, z = o["position_m"]
+            print(f"  {o['id']}: at ({x:.3f}, {y:.3f}, {z:.3f}) m, moved {o['displacement_m'] * 1e3:.1f} mm "
+                  f"and turned {o['rotation_deg']:.1f} deg")
     return 0
+
+
+def _pose_record(object_id: str, position, quat, start_position, start_quat) -> dict:  # type: ignore[no-untyped-def]
+    """Where an object ended (centre of mass, world frame; quaternion w x y z) and how far it went."""
+    import numpy as np
+
+    from twin.poses import angle_deg
+
+    return {"id": object_id, "position_m": position.tolist(), "quat_wxyz": quat.tolist(),
+            "displacement_m": float(np.linalg.norm(position - start_position)),
+            "rotation_deg": angle_deg(quat, start_quat)}
 
 
 def _run_with_viewer(twin, args, trajectory):  # type: ignore[no-untyped-def]
@@ -514,12 +563,22 @@ def _network_options(p: argparse.ArgumentParser, *, listen_default: str | None =
     p.add_argument("--listen", action="append", metavar="ENDPOINT",
                    help=f"Zenoh endpoint to listen on{f' (default {listen_default})' if listen_default else ''}")
     p.add_argument("--zenoh-config", type=Path, help="a Zenoh JSON5 config (TLS, access control, routers)")
+    p.add_argument("--insecure", action="store_true",
+                   help="allow --listen on a non-loopback address without TLS (anyone on that network can "
+                        "then read the scene and drive it)")
     p.set_defaults(listen_default=listen_default, connect_default=connect_default)
 
 
 def _session(args: argparse.Namespace):  # type: ignore[no-untyped-def]
-    from sync.zenoh_transport import make_config, open_session
+    from sync.zenoh_transport import exposed_without_tls, make_config, open_session
 
+    exposed = exposed_without_tls(args.listen or [])
+    if exposed and not args.insecure:
+        raise TwinError(f"--listen {exposed[0]} is reachable from other machines in plain text; listen on a "
+                        f"tls/ endpoint (certificates in --zenoh-config) or pass --insecure")
+    if exposed:
+        log.warning("listening on %s without TLS: anyone on that network can read and drive this scene",
+                    ", ".join(exposed))
     listen = args.listen or ([args.listen_default] if args.listen_default and not args.zenoh_config else None)
     connect = args.connect or ([args.connect_default] if args.connect_default and not args.zenoh_config else None)
     return open_session(make_config(listen=listen, connect=connect, config_file=args.zenoh_config))
@@ -548,7 +607,8 @@ def _run_remote(args: argparse.Namespace, scene, rlog) -> None:  # type: ignore[
         remote = Remote(scene, recording_transport(ZenohTransport(session), recorder, "remote"),
                         deadband=Deadband(args.deadband_mm * 1e-3, args.deadband_deg),
                         points=args.points, progress=True, rlog=rlog, recorder=recorder)
-        print(f"remote scene {scene.name!r}: {len(scene.objects)} objects published; running (Ctrl-C stops)")
+        print(f"remote scene {scene.name!r}: {len(scene.objects)} objects published; running (Ctrl-C stops)",
+              file=sys.stderr)  # status, not the result
         stats = remote.run(args.duration)
         c = remote.link.counters
         print(f"ran {stats.steps} steps; sent {c.messages_sent} messages, {c.bytes_sent:,} bytes; "
@@ -598,8 +658,16 @@ def _run_local(args: argparse.Namespace, rlog) -> None:  # type: ignore[no-untyp
                   "dropped_malformed": c.dropped_malformed, "stale_events": r.stale_events,
                   "snaps": r.snaps, "holds": r.holds, "operator_targets": r.operator_targets,
                   "operator_dropped": dict(r.operator_dropped), "forces_sent": r.forces_sent,
-                  "step_p99_ms": stats.p99 * 1e3, "missed_deadlines": stats.missed}
-        print(to_json(record) if args.json else "  ".join(f"{k} {v}" for k, v in record.items()))
+                  "step_p99_ms": stats.p99 * 1e3, "missed_deadlines": stats.missed,
+                  "objects": local.objects, "objects_pending": local.expected - len(local.objects)}
+        record["per_object"] = _local_objects(local)
+        if args.json:
+            print(to_json(record))
+        else:
+            print("  ".join(f"{k} {v}" for k, v in record.items() if k not in ("objects", "per_object")))
+            for o in record["per_object"]:
+                print(f"  {o['id']}: {o['estimated_mass_kg']:.3f} kg, touchable {o['add_latency_s'] or 0:.2f} s "
+                      f"after its cloud arrived, {(o['twin_minus_remote_m'] or 0) * 1e3:.1f} mm from the remote")
         local.close()
         if recorder is not None:
             recorder.close(twin_time_s=local.twin.time)
@@ -607,6 +675,19 @@ def _run_local(args: argparse.Namespace, rlog) -> None:  # type: ignore[no-untyp
         session.close()
         if recorder is not None:
             recorder.close()
+
+
+def _local_objects(local) -> list[dict]:  # type: ignore[no-untyped-def]
+    """Per-object records of a twin following a remote (:func:`cli.demo.object_records`)."""
+    import numpy as np
+
+    from cli.demo import body_masses, object_records
+
+    ids = local.objects
+    drift = {i: float(np.linalg.norm(local.twin.pose(i)[0] - r[0])) for i in ids
+             if (r := local.remote_pose(i)) is not None}
+    return object_records(local.report, body_masses(local.twin.model, ids), {i: local.twin.pose(i) for i in ids},
+                          drift)
 
 
 def _cmd_demo(args: argparse.Namespace) -> int:
@@ -628,10 +709,14 @@ def _cmd_demo(args: argparse.Namespace) -> int:
 
 
 def _cmd_materials(args: argparse.Namespace) -> int:
-    from estimation.materials import materials
+    from estimation.materials import aliases, materials
 
+    also: dict[str, list[str]] = {}
+    for alias, name in aliases().items():
+        also.setdefault(name, []).append(alias)
     for mat in materials().values():
-        print(f"{mat.name:18s} {mat.density:8.0f} kg/m^3  friction {mat.friction:.2f}")
+        names = f"  also: {', '.join(also[mat.name])}" if mat.name in also else ""
+        print(f"{mat.name:18s} {mat.density:8.0f} kg/m^3  friction {mat.friction:.2f}{names}")
     return 0
 
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -325,3 +326,22 @@ def test_a_twin_object_straying_on_its_own_is_held_at_the_remote_pose(tmp_path):
                 close_local(local)
     assert gaps[False][0] > 0.02 and gaps[False][1] == 0  # it slid away, and nothing brings it back
     assert gaps[True][0] < 0.002 and gaps[True][1] >= 1
+
+
+@pytest.mark.parametrize(("endpoint", "exposed"), [
+    ("tcp/127.0.0.1:7447", False), ("tcp/localhost:7447", False), ("tcp/[::1]:7447", False),
+    ("tcp/0.0.0.0:7447", True), ("tcp/[::]:7447", True), ("tcp/192.0.2.7:7447", True), ("udp/0.0.0.0:7447", True),
+    ("tls/0.0.0.0:7447", False), ("quic/[::]:7447", False),
+])
+def test_plain_listeners_beyond_loopback_are_named(endpoint, exposed):
+    from sync.zenoh_transport import exposed_without_tls
+
+    assert bool(exposed_without_tls([endpoint])) is exposed
+
+
+def test_listening_beyond_loopback_in_plain_text_needs_insecure(capsys):
+    from cli.main import main
+
+    scene = str(Path(__file__).parent / "data" / "small.toml")
+    assert main(["remote", scene, "--listen", "tcp/0.0.0.0:0", "--duration", "0.1"]) == 2
+    assert "--insecure" in capsys.readouterr().err
