@@ -1,0 +1,92 @@
+"""`auto` on a seeded subset of the generalisation benchmark (bench/shapes.py), against the issue's targets.
+
+The tolerances are the targets themselves, per shape (the benchmark's "max" column) and over the
+subset (its "median" column); they are not fitted to what the code reaches. The subset covers every
+family: thin shells and plates (1.6-3 mm walls), sharp low-poly polyhedra, concave shapes with handles
+and holes, smooth, elongated and flat ones, 1 cm to 1 m. 80k points per cloud (the benchmark uses
+100k): a little sparser, so a little harder.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from estimation import estimate
+from scenes.sampling import sample_surface
+from scenes.shapes import make_shapes
+
+RHO = 1000.0
+POINTS = 80_000
+
+#: Shape indices in ``make_shapes(22)``: cup, tray, plate, random hull, star, wedge, mug, frame,
+#: torus, blob, rod, disc.
+SUBSET = (0, 1, 4, 6, 8, 10, 11, 12, 18, 19, 20, 21)
+
+#: (median, max) absolute volume error, % -- the issue's targets.
+VOLUME_TARGETS = {"given": (0.25, 1.0), "estimated": (0.5, 2.0), "noisy": (1.0, 3.0)}
+
+#: Inertia (relative Frobenius norm of the tensor error, %) with given normals: median, max.
+INERTIA_TARGET = (0.3, 1.0)
+
+#: Centre of mass, metres.
+COM_TARGET = 0.2e-3
+
+
+@pytest.fixture(scope="module")
+def shapes():
+    return make_shapes(22)
+
+
+def _errors(shape, condition: str, seed: int) -> tuple[float, float, float, object]:
+    noisy = condition == "noisy"
+    cloud = sample_surface(shape.mesh, POINTS, seed=seed, noise_sigma=0.0005 if noisy else 0.0,
+                           with_normals=condition == "given")
+    est = estimate(cloud, RHO)
+    truth = shape.inertia(RHO)
+    return (100 * abs(est.volume / shape.volume - 1),
+            float(np.linalg.norm(est.mass.center_of_mass - shape.center_of_mass)),
+            100 * float(np.linalg.norm(est.mass.inertia - truth) / np.linalg.norm(truth)), est)
+
+
+@pytest.mark.parametrize("condition", ["given", "estimated", "noisy"])
+def test_volume_com_and_inertia_meet_the_targets(shapes, condition):
+    rows = []
+    for i in SUBSET:
+        shape = shapes[i]
+        if condition == "noisy" and shape.min_wall < 0.003:
+            continue  # the target covers walls of 3 mm and more under 0.5 mm noise
+        volume, com, inertia, est = _errors(shape, condition, seed=i)
+        rows.append((shape.name, volume, com, inertia))
+        assert est.volume_bounds_m3 is not None
+    volumes = np.array([r[1] for r in rows])
+    median_target, max_target = VOLUME_TARGETS[condition]
+    worst = max(rows, key=lambda r: r[1])
+    assert volumes.max() < max_target, f"worst volume error {worst[1]:.3f} % on {worst[0]}"
+    assert np.median(volumes) < median_target
+    if condition != "noisy":
+        worst_com = max(rows, key=lambda r: r[2])
+        assert worst_com[2] < COM_TARGET, f"centre of mass off by {1000 * worst_com[2]:.3f} mm on {worst_com[0]}"
+    if condition == "given":
+        inertias = np.array([r[3] for r in rows])
+        assert np.median(inertias) < INERTIA_TARGET[0]
+        assert inertias.max() < INERTIA_TARGET[1]
+
+
+def test_true_volume_lies_within_the_reported_bounds_on_a_thin_shell(shapes):
+    cup = shapes[0]
+    est = estimate(sample_surface(cup.mesh, POINTS, seed=7, with_normals=False), RHO)
+    low, high = est.volume_bounds_m3
+    assert low <= est.volume <= high
+    assert low <= cup.volume * 1.01 and high >= cup.volume * 0.99
+
+
+def test_walls_thinner_than_the_point_spacing_are_flagged():
+    # A 0.6 mm plate sampled at ~1 mm spacing: the cloud cannot say how thick it is.
+    import trimesh
+
+    plate = trimesh.creation.box(extents=(0.12, 0.10, 0.0006))
+    est = estimate(sample_surface(plate, 25_000, seed=8), RHO)
+    assert any("thinner than the point spacing" in w for w in est.warnings)
+    low, high = est.volume_bounds_m3
+    assert low <= plate.volume <= high
