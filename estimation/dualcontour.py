@@ -38,13 +38,12 @@ NOISE_MARGIN_SIGMAS = 3.0
 #: Gaussian width (cells) of the weight of a point's plane by its distance from the cell centre.
 WEIGHT_CELLS = 1.0
 
+#: Cells whose plane normals agree this well (|weighted mean normal|, ~6 degrees of spread) are one
+#: face: their vertex needs no eigen-decomposition.
+FLAT_AGREEMENT = 0.995
+
 #: A vertex may leave its cell by this much (cells) before it falls back to the mean crossing.
 VERTEX_SLACK_CELLS = 0.5
-
-#: A cell whose plane normals cancel to below this fraction of their weight holds both faces of a wall
-#: thinner than the cell: the vertex cannot be right, and the estimate says so.
-OPPOSED_NORMALS = 0.5
-
 
 @dataclass(frozen=True)
 class DualSurface:
@@ -52,7 +51,9 @@ class DualSurface:
 
     Attributes:
         vertices: (v, 3) float64 metres; faces: (f, 3) int64, outward.
-        opposed_cells: cells holding opposite faces of a wall thinner than a cell.
+        cells: cells with a vertex.
+        opposed_cells: cells with sign changes facing both ways along an axis: both faces of a wall
+            thinner than about a cell pass through them, and their single vertex cannot be right.
         unmeasured_area: m^2 of surface between band nodes no point reached (holes closed by the shell).
     """
 
@@ -127,7 +128,21 @@ def contour(points: np.ndarray, normals: np.ndarray, band: Band, values: np.ndar
     mean = np.stack([np.bincount(quads.ravel(), weights=np.repeat(crossing[:, i], 4), minlength=n_cells)
                      for i in range(3)], axis=1) / count[:, None]
 
-    vertices, opposed, supported = _place_vertices(points, normals, band, cell_keys, mean, noise)
+    # Each cell's outward direction from its own sign changes (the quads' normals), and whether it
+    # has sign changes facing both ways along one axis: both faces of a wall in one cell, where one
+    # vertex cannot be right.
+    outward = np.where(in_lo, 1.0, -1.0)
+    cell_of = quads.ravel()
+    facing = np.zeros((n_cells, 3))
+    both_ways = np.zeros(n_cells, dtype=bool)
+    for ax in range(3):
+        on_axis = np.repeat(axis == ax, 4)
+        plus = np.bincount(cell_of[on_axis], weights=np.repeat(outward[axis == ax] > 0, 4), minlength=n_cells)
+        minus = np.bincount(cell_of[on_axis], minlength=n_cells) - plus
+        facing[:, ax] = plus - minus
+        both_ways |= (plus > 0) & (minus > 0)
+    vertices, supported = _place_vertices(points, normals, band, cell_keys, mean, noise, facing)
+    opposed = both_ways
 
     tri = np.concatenate([quads[:, [0, 1, 2]], quads[:, [0, 2, 3]]])
     # Split each quad along its shorter diagonal: the longer one would fold across a crease.
@@ -145,7 +160,7 @@ def contour(points: np.ndarray, normals: np.ndarray, band: Band, values: np.ndar
 
 
 def _place_vertices(points: np.ndarray, normals: np.ndarray, band: Band, cell_keys: np.ndarray,
-                    mean: np.ndarray, noise: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                    mean: np.ndarray, noise: float, facing: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Each cell's vertex: the quadric minimiser of the planes through it, else the mean crossing."""
     h = band.h
     dims = band.dims
@@ -165,7 +180,10 @@ def _place_vertices(points: np.ndarray, normals: np.ndarray, band: Band, cell_ke
     # Noise moves planes off the surface both ways; a window no wider than the cell would keep the
     # ones that moved towards it and bias every vertex towards its cell.
     reach = h * (0.5 * np.abs(n).sum(axis=1) + PLANE_MARGIN_CELLS) + NOISE_MARGIN_SIGMAS * noise
-    ok = np.abs(offset) <= reach
+    # Planes facing away from the cell's own surface belong to the other face of a wall (or the far
+    # side of a thin gap): they would pull the vertex into the wall. A crease's two faces both face
+    # the cell's way, down to a knife edge of ~20 degrees.
+    ok = (np.abs(offset) <= reach) & (np.einsum("ij,ij->i", n, facing[cell]) > 0)
     cell, p, n, centre, offset = cell[ok], p[ok], n[ok], centre[ok], offset[ok]
     # Weight by the distance along the plane only: along the normal it is noise, and weighting it would
     # favour points that the noise moved towards the cell, again a bias.
@@ -182,20 +200,35 @@ def _place_vertices(points: np.ndarray, normals: np.ndarray, band: Band, cell_ke
     rhs = np.stack([acc(w * n[:, i] * d) for i in range(3)], axis=1)
     weight = acc(w)
     normal_sum = np.stack([acc(w * n[:, i]) for i in range(3)], axis=1)
-    opposed = (weight > 0) & (np.linalg.norm(normal_sum, axis=1) < OPPOSED_NORMALS * weight)
 
-    # Minimise |A x - b|-type quadric about the mean crossing: x = m + A^+ (b - A m), small eigenvalues
-    # dropped (the directions the planes do not pin down keep the mean).
-    lam, vec = np.linalg.eigh(a)
-    keep = lam > QEF_RELATIVE_EIGENVALUE * lam[:, -1:]
-    inv = np.where(keep & (lam > 0), 1.0 / np.where(lam > 0, lam, 1.0), 0.0)
-    resid = rhs - np.einsum("nij,nj->ni", a, mean)
-    along = np.einsum("nji,nj->ni", vec, resid)  # residual in the eigenbasis
-    vertex = mean + np.einsum("nij,nj->ni", vec, inv * along)
-    # The same with only the dominant direction: the fallback where a crease solution leaves the cell.
-    inv1 = np.zeros_like(inv)
-    inv1[:, -1] = np.where(lam[:, -1] > 0, 1.0 / np.where(lam[:, -1] > 0, lam[:, -1], 1.0), 0.0)
-    plane_only = mean + np.einsum("nij,nj->ni", vec, inv1 * along)
+    # Where the planes agree (a face, or a gently curved patch), the quadric has one direction: the
+    # vertex is the mean crossing moved onto the weighted mean plane. Only the rest (creases, corners)
+    # need the eigen-decomposition.
+    agree = np.linalg.norm(normal_sum, axis=1) / np.maximum(weight, np.finfo(float).tiny)
+    flat = agree > FLAT_AGREEMENT
+    vertex = mean.copy()
+    plane_only = mean.copy()
+    if flat.any():
+        nbar = normal_sum[flat] / np.linalg.norm(normal_sum[flat], axis=1, keepdims=True)
+        # Mean plane offset of the mean crossing, sum w n_i . (p_i - m) / sum w: measured from m, not
+        # from the grid origin, where the normals' spread would lever a cell's worth of error.
+        shift = (acc(w * d)[flat] - np.einsum("ij,ij->i", normal_sum[flat], mean[flat])) / weight[flat]
+        moved = mean[flat] + nbar * shift[:, None]
+        vertex[flat] = plane_only[flat] = moved
+    sharp = np.flatnonzero(~flat & (weight > 0))
+    if len(sharp):
+        # Minimise the quadric about the mean crossing: x = m + A^+ (b - A m), small eigenvalues
+        # dropped (the directions the planes do not pin down keep the mean).
+        a_s, m_s = a[sharp], mean[sharp]
+        lam, vec = np.linalg.eigh(a_s)
+        keep = lam > QEF_RELATIVE_EIGENVALUE * lam[:, -1:]
+        inv = np.where(keep & (lam > 0), 1.0 / np.where(lam > 0, lam, 1.0), 0.0)
+        along = np.einsum("nji,nj->ni", vec, rhs[sharp] - np.einsum("nij,nj->ni", a_s, m_s))
+        vertex[sharp] = m_s + np.einsum("nij,nj->ni", vec, inv * along)
+        # The same with only the dominant direction: the fallback where a crease solution leaves the cell.
+        inv1 = np.zeros_like(inv)
+        inv1[:, -1] = inv[:, -1]
+        plane_only[sharp] = m_s + np.einsum("nij,nj->ni", vec, inv1 * along)
 
     low = band.origin + h * _unravel(cell_keys, dims) - VERTEX_SLACK_CELLS * h
     high = low + h * (1 + 2 * VERTEX_SLACK_CELLS)
@@ -203,7 +236,7 @@ def _place_vertices(points: np.ndarray, normals: np.ndarray, band: Band, cell_ke
     inside_plane = ((plane_only >= low) & (plane_only <= high)).all(axis=1)
     out = np.where(inside_full[:, None], vertex, np.where(inside_plane[:, None], plane_only, mean))
     out[weight == 0] = mean[weight == 0]
-    return out, opposed, weight > 0
+    return out, weight > 0
 
 
 def _unravel(keys: np.ndarray, dims: np.ndarray) -> np.ndarray:

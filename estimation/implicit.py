@@ -45,16 +45,16 @@ def band_field(points: np.ndarray, normals: np.ndarray, band: Band) -> tuple[np.
         reach (the value is an IMLS distance), False where the sign was spread from neighbours.
     """
     h = band.h
-    # Each point reaches the 8 corners of its cell: every node within a cell of a point (per axis).
-    base = np.floor((points - band.origin) / h).astype(np.int64)
+    # Each point reaches the 27 nodes around its nearest node: every node within 1.5 cells (per axis).
+    base = np.rint((points - band.origin) / h).astype(np.int64)
     r = band.position(base) - points
-    offsets = CORNERS_8 * h
+    offsets = NEIGHBOURS_27 * h
     # For node offset o from a point's nearest node, d = r + h o: distances and plane values are two
     # small matrix products, then one bincount over band positions.
     dist2 = (r * r).sum(axis=1)[:, None] + 2 * (r @ offsets.T) + (offsets * offsets).sum(axis=1)[None]
     weight = np.exp(-dist2 / (KERNEL_CELLS * h) ** 2).ravel()
     plane = ((normals * r).sum(axis=1)[:, None] + normals @ offsets.T).ravel()
-    target = band.locate((base[:, None, :] + CORNERS_8[None]).reshape(-1, 3))
+    target = band.locate((base[:, None, :] + NEIGHBOURS_27[None]).reshape(-1, 3))
     ok = target >= 0
     weight_sum = np.bincount(target[ok], weights=weight[ok], minlength=band.size)
     value_sum = np.bincount(target[ok], weights=(weight * plane)[ok], minlength=band.size)

@@ -70,7 +70,9 @@ def mass_properties(
     com = (signed[:, None] * vertex_sum).sum(axis=0) / 4 / volume
     # Second moments, exact for a tetrahedron with a vertex at the origin:
     # integral of x x^T = V / 20 * (sum_k p_k p_k^T + s s^T), s = sum_k p_k.
-    second = np.einsum("f,fki,fkj->ij", signed, tri, tri) + np.einsum("f,fi,fj->ij", signed, vertex_sum, vertex_sum)
+    # As three (3 x f) @ (f x 3) products: BLAS, several times faster than one einsum on big meshes.
+    second = sum((tri[:, k] * signed[:, None]).T @ tri[:, k] for k in range(3))
+    second = second + (vertex_sum * signed[:, None]).T @ vertex_sum
     second = density * second / 20
     mass = density * volume
     # Move the second moment to the centre of mass, then I = tr(C) 1 - C.

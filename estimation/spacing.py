@@ -19,6 +19,14 @@ SPACING_NEIGHBOURS = 8
 #: noise slab and the plane fit follows the noise (24 neighbours read 0.3-0.45 mm for 0.5 mm).
 NOISE_NEIGHBOURS = 64
 
+#: Neighbours of the first, small noise patch.
+NOISE_FIRST_NEIGHBOURS = 24
+
+#: Noise the small patch reads below this fraction of the spacing is left as read: it is too small
+#: to set the cell (FINE_CELL_NOISE x 0.1 spacing is under the spacing), and widening the patch
+#: would risk reading a thin wall's other face as noise.
+NOISE_VISIBLE_SPACINGS = 0.1
+
 #: The noise patch must be this many sigma in radius (the slab it samples is +-2 sigma thick).
 NOISE_PATCH_SIGMAS = 5.0
 
@@ -59,8 +67,19 @@ def surface_noise(points: np.ndarray, tree=None) -> float:  # type: ignore[no-un
     from scipy.spatial import cKDTree
 
     sample = points[:: max(1, len(points) // SAMPLE)]
+    # First a small patch (a few spacings): it reads noise low, but cannot reach the other face of a
+    # wall a few spacings thick, which a wide patch would read as noise. Only when noise already
+    # shows there is the patch widened to measure it properly.
+    tree = cKDTree(points)
+    k = min(NOISE_FIRST_NEIGHBOURS, len(points))
+    dist, nbr = tree.query(sample, k=k, workers=-1)
+    local = points[nbr] - points[nbr].mean(axis=1, keepdims=True)
+    sigma = float(np.sqrt(np.median(np.linalg.eigvalsh(np.einsum("nki,nkj->nij", local, local))[:, 0])
+                          / max(k - 3, 1)))
+    spacing = float(np.sqrt(np.pi / k) * np.median(dist[:, -1]))
+    if sigma < NOISE_VISIBLE_SPACINGS * spacing:
+        return sigma
     reference, k = points, min(NOISE_NEIGHBOURS, len(points))
-    sigma = 0.0
     for _ in range(NOISE_ITERATIONS):
         tree = cKDTree(reference)
         dist, nbr = tree.query(sample, k=k, workers=-1)
