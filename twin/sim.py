@@ -12,7 +12,7 @@ import numpy as np
 from sync.clock import REAL_CLOCK, Clock
 from twin.debuglog import OFF, DebugLog
 from twin.loop import LoopStats, run_loop
-from twin.model import EE_BODY, EE_TARGET, add_object, body_pose, free_joint, remove_object
+from twin.model import EE_BODY, EE_TARGET, add_object, free_joint, remove_object
 from twin.objects import TwinObject
 from twin.trajectory import Trajectory
 
@@ -52,6 +52,7 @@ class Twin:
         self._head = spec  # the spec the next edit starts from: the last one that compiled, pending included
         self._pending: deque[tuple[Future, Callable[[], None] | None, Callable[[Exception], None] | None]] = deque()
         self._ids_of, self._ids = None, []  # object_ids() of this model
+        self._index_of, self._index = None, {}  # _joint() look-ups of this model
 
     def __enter__(self) -> Twin:
         return self
@@ -158,8 +159,29 @@ class Twin:
         return total
 
     def pose(self, object_id: str) -> tuple[np.ndarray, np.ndarray]:
-        """(position, quaternion w x y z) of an object's centre of mass."""
-        return body_pose(self.model, self.data, object_id)
+        """(position, quaternion w x y z) of an object's centre of mass, world frame."""
+        body, _, _ = self._joint(object_id)
+        return self.data.xpos[body].copy(), self.data.xquat[body].copy()
+
+    def _joint(self, object_id: str) -> tuple[int, int, int]:
+        """(body id, qpos address, dof address) of an object's free joint in the running model.
+
+        Looked up by name once per model: a name look-up costs more than the arithmetic every caller does
+        with it, and the loops ask for every object at every step.
+
+        Raises:
+            KeyError: no such object in the model.
+        """
+        if self._index_of is not self.model:
+            self._index, self._index_of = {}, self.model
+        found = self._index.get(object_id)
+        if found is None:
+            jid = free_joint(self.model, object_id)
+            if jid < 0:
+                raise KeyError(f"no object {object_id!r} in the model")
+            m = self.model
+            found = self._index[object_id] = (int(m.jnt_bodyid[jid]), int(m.jnt_qposadr[jid]), int(m.jnt_dofadr[jid]))
+        return found
 
     def object_ids(self) -> list[str]:
         """The objects in the running model (not in a spec edit still compiling)."""
@@ -288,13 +310,15 @@ class Twin:
         self.data.qvel[adr + 3:adr + 6] = xmat.T @ np.asarray(angular)  # MuJoCo keeps it in body axes
 
     def _dof(self, object_id: str) -> tuple[int, np.ndarray]:
-        jid = free_joint(self.model, object_id)
-        if jid < 0:
-            raise KeyError(f"no object {object_id!r} in the model")
-        return int(self.model.jnt_dofadr[jid]), self.data.xmat[self.model.jnt_bodyid[jid]].reshape(3, 3)
+        body, _, dof = self._joint(object_id)
+        return dof, self.data.xmat[body].reshape(3, 3)
 
     def has(self, object_id: str) -> bool:
-        return free_joint(self.model, object_id) >= 0
+        try:
+            self._joint(object_id)
+        except KeyError:
+            return False
+        return True
 
     def set_pose(self, object_id: str, position: np.ndarray, quat: np.ndarray, *, forward: bool = True) -> None:
         """Teleport an object's free joint (world frame; quaternion w x y z).
@@ -303,12 +327,9 @@ class Twin:
         """
         import mujoco
 
-        jid = free_joint(self.model, object_id)
-        if jid < 0:
-            raise KeyError(f"no object {object_id!r} in the model")
+        _, adr, _ = self._joint(object_id)
         if not (np.isfinite(position).all() and np.isfinite(quat).all() and np.linalg.norm(quat) > 0):
             raise ValueError(f"object {object_id!r}: pose must be finite with a non-zero quaternion")
-        adr = self.model.jnt_qposadr[jid]
         self.data.qpos[adr:adr + 3] = position
         self.data.qpos[adr + 3:adr + 7] = quat
         if forward:
