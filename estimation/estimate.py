@@ -1,7 +1,11 @@
 """The estimation pipeline: one object's cloud in, one :class:`PhysicalEstimate` out.
 
-Stages (each timed): downsample on a voxel grid in the cloud's principal frame, normals (given, or
-estimated and oriented outward), reconstruction by the chosen method, mass properties.
+Stages (each timed): downsample in the cloud's principal frame, normals (given, or estimated and
+oriented outward), reconstruction by the chosen method, mass properties. 'auto' takes its cell from the
+cloud's own point spacing and noise (``estimation.spacing``), works on a narrow band of that grid
+(``estimation.sparsegrid``), signs it by IMLS near the points and a coarse flood fill beyond
+(``estimation.implicit``, ``estimation.grid``) and dual-contours it with vertices on the points' own
+planes (``estimation.dualcontour``), so creases stay sharp and thin walls keep their thickness.
 """
 
 from __future__ import annotations

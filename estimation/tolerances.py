@@ -31,8 +31,9 @@ FINE_CELL_SPACINGS = 1.0
 FINE_CELL_NOISE = 2.0
 
 #: 'auto': most points the reconstruction works from. Denser clouds are voxel-averaged down to about
-#: this many (averaging also lowers noise), which keeps a 1M-point estimate well under half a second;
-#: the spacing, and so the finest wall resolved, is then that of this many points.
+#: this many (a little over: voxels on a surface hold ~1.2 of the budget's points each). Time grows
+#: about linearly with it (1M points: ~1.3 s given normals on the shared 2-core machine at 120k, ~10 s
+#: at 250k); the finest wall resolved is two or three spacings of this many points.
 POINT_BUDGET = 120_000
 
 #: 'auto': coarse cells along the longest side, at most, for the flood fill that decides inside and
