@@ -369,7 +369,8 @@ def test_cli_run_script_takes_the_csv_its_help_describes(built, small_scene, tmp
     assert "increas" in capsys.readouterr().err
 
 
-def test_a_non_finite_object_is_put_back_and_the_rest_of_the_twin_runs_on(built):
+def test_a_non_finite_object_is_put_back_and_the_rest_of_the_twin_runs_on(built, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)  # MuJoCo writes its warnings to MUJOCO_LOG.TXT in the current folder
     with Twin(built.spec.copy(), background=False) as twin:
         twin.set_velocity("can", np.array([0.0, 0.3, 0.0]), np.zeros(3))
         twin.step(50)
