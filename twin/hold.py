@@ -121,6 +121,16 @@ class Hold:
         else:
             self._rebuild_with(None)
 
+    def disturbed(self, now: float) -> set[str]:
+        """Objects the operator touched (directly or through touching objects) less than ``after`` s ago.
+
+        As of the last look (``check_every``); empty when the hold is off.
+        """
+        a = self._arrays
+        if not self.settings.enabled or a is None:
+            return set()
+        return {i for i, t in zip(a.ids, a.touched, strict=True) if now - t < self.settings.after}
+
     def forget(self, object_id: str) -> None:
         self._targets.pop(object_id, None)
         self._rebuild_with(None)

@@ -79,6 +79,9 @@ class LocalSettings:
         workers: processes estimating clouds; 0 estimates and compiles in the loop's own thread
             (headless runs: slower per object, but deterministic).
         hold: when an undisturbed object is pinned to the remote's pose (:mod:`twin.hold`).
+        defer_touched: leave objects the operator is touching (and those touching them) to the twin's
+            physics until ``hold.after`` seconds after release, instead of pulling them towards C's
+            round-trip-old pose (needs the hold's contact tracking: off with the hold).
         mass_scale: every estimate's density is multiplied by this, so mass and inertia scale together
             (the experiments' stand-in for a wrong mass estimate; 1: the estimate as it is).
     """
@@ -93,6 +96,7 @@ class LocalSettings:
     coacd: CoacdSettings = DEFAULT_SETTINGS
     cache_dir: Path | None = None
     mass_scale: float = 1.0
+    defer_touched: bool = True
 
 
 DEFAULT_LOCAL = LocalSettings()
@@ -262,8 +266,14 @@ class Local:
         self._drain()
         self._collect()
         self.twin.poll()
-        for object_id in list(self._targets):
-            self._correct(object_id)
+        if self._targets:
+            # C's pose of an object in the operator's hand is a round trip old: pulling the twin's object
+            # towards it pushes it back into the hand (felt as a wall). Such objects follow the twin's
+            # physics until released; C's later poses then correct them.
+            touched = self.hold.disturbed(self.twin.time) if self.settings.defer_touched else set()
+            for object_id in list(self._targets):
+                if object_id not in touched:
+                    self._correct(object_id)
         target = self._operator_target(trajectory)
         if target is not None:
             self.twin.set_end_effector(target)
