@@ -291,6 +291,7 @@ def estimate_to_json(result, seconds: float) -> dict:  # type: ignore[no-untyped
         "seconds": seconds,
         "timings_s": {k: getattr(result.timings, k) for k in
                       ("read", "downsample", "normals", "reconstruct", "mass_properties")},
+        "volume_bounds_m3": None if result.volume_bounds_m3 is None else list(result.volume_bounds_m3),
         "warnings": list(result.warnings),
     }
 

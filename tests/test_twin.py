@@ -327,6 +327,8 @@ def test_cli_estimate_subprocess(tmp_path):
     for key in ("volume_m3", "density_kg_m3", "center_of_mass_m", "inertia_kg_m2", "obb", "method",
                 "points_in", "points_used", "watertight", "seconds"):
         assert key in record
+    low, high = record["volume_bounds_m3"]
+    assert low <= record["volume_m3"] <= high
     res = subprocess.run([str(twin), "estimate", str(tmp_path / "missing.ply")], capture_output=True, text=True,
                          check=False)
     assert res.returncode == 2 and res.stderr.strip().count("\n") == 0 and "no such file" in res.stderr
