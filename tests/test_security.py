@@ -1,0 +1,279 @@
+"""Who may say what: the shipped mutual-TLS + access-control configs (``configs/``), and a flood.
+
+Real Zenoh sessions in peer mode with scouting off, on free loopback ports. The certificates are made here
+with the openssl CLI (a CA, the remote's and the twin's certificates, and a stranger's from another CA),
+and the shipped configs are copied with their ``configs/certs/`` paths pointed at them.
+
+Negative results ("X never arrived") are not waited out with a sleep: the sender follows its forgeries
+with an allowed message on the same link, and Zenoh delivers one link's messages of one priority in
+order, so once the allowed one is in, a forgery that was let through would be in too.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from sync.keys import Keys
+from sync.messages import VERSION, Gone, OperatorCommand, Pose, SceneInfo, cloud_message, encode
+from sync.zenoh_transport import free_port, make_config, open_session
+
+from loopback import SCENE, RemoteRunner, wait_objects
+
+CONFIGS = Path(__file__).resolve().parent.parent / "configs"
+KEYS = Keys(SCENE["name"])
+REMOTE_CN = "tactile-twin-remote"  # the names the configs' access_control subjects match
+TWIN_CN = "tactile-twin-twin"
+#: Every certificate path in the shipped configs starts with this (relative to the working folder).
+CERT_PREFIX = "configs/certs/"
+
+
+def _wait_until(condition, timeout: float = 30.0, what: str = "condition") -> None:  # type: ignore[no-untyped-def]
+    """Poll ``condition`` until it holds; the deadline is a failsafe for a hung side, not a measurement."""
+    deadline = time.monotonic() + timeout
+    while not condition():
+        if time.monotonic() > deadline:
+            raise AssertionError(f"timed out after {timeout} s waiting for {what}")
+        time.sleep(0.01)
+
+
+# -- certificates and configs -----------------------------------------------------------------------
+
+def _openssl(folder: Path, *args: str) -> None:
+    subprocess.run(["openssl", *args], cwd=folder, check=True, capture_output=True)
+
+
+def _ca(folder: Path, name: str, cn: str) -> None:
+    _openssl(folder, "req", "-x509", "-newkey", "rsa:2048", "-nodes", "-days", "2", "-subj", f"/CN={cn}",
+             "-keyout", f"{name}.key", "-out", f"{name}.pem")
+
+
+def _leaf(folder: Path, name: str, cn: str, ca: str) -> None:
+    """``name.key``/``name.pem``: CN ``cn``, for localhost and 127.0.0.1, signed by ``ca``."""
+    _openssl(folder, "req", "-newkey", "rsa:2048", "-nodes", "-subj", f"/CN={cn}", "-keyout", f"{name}.key",
+             "-out", f"{name}.csr")
+    (folder / f"{name}.ext").write_text("subjectAltName=DNS:localhost,IP:127.0.0.1\n")
+    _openssl(folder, "x509", "-req", "-in", f"{name}.csr", "-CA", f"{ca}.pem", "-CAkey", f"{ca}.key",
+             "-CAcreateserial", "-days", "2", "-extfile", f"{name}.ext", "-out", f"{name}.pem")
+
+
+@pytest.fixture(scope="module")
+def pki(tmp_path_factory) -> dict[str, Path]:
+    """The shipped configs, copied, with their certificates made (as configs/README.md says) and filled in."""
+    if shutil.which("openssl") is None:
+        pytest.fail("the openssl CLI is needed to make the test certificates")
+    root = tmp_path_factory.mktemp("pki")
+    certs = root / "certs"
+    certs.mkdir()
+    _ca(certs, "ca", "tactile-twin CA")
+    _leaf(certs, "remote", REMOTE_CN, "ca")
+    _leaf(certs, "twin", TWIN_CN, "ca")
+    _ca(certs, "other-ca", "somebody else's CA")
+    _leaf(certs, "stranger", TWIN_CN, "other-ca")  # the right name, the wrong CA
+    out = {"certs": certs}
+    for name in ("remote", "twin"):
+        text = (CONFIGS / f"{name}.json5").read_text()
+        assert text.count(f'"{CERT_PREFIX}') == 5, f"configs/{name}.json5 changed its certificate paths"
+        (root / f"{name}.json5").write_text(text.replace(f'"{CERT_PREFIX}', f'"{certs}/'))
+        out[name] = root / f"{name}.json5"
+    return out
+
+
+def _session(pki, role: str, *, connect: list[str] | None = None, listen: list[str] | None = None,
+             acl: bool = True):  # type: ignore[no-untyped-def]
+    conf = make_config(connect=connect, listen=listen, config_file=pki[role])
+    if not acl:
+        conf.insert_json5("access_control/enabled", "false")
+    return open_session(conf)
+
+
+def _stranger(pki, kind: str, port: int):  # type: ignore[no-untyped-def]
+    """A session of someone the configs must keep out, trying the remote's port."""
+    conf = make_config(connect=[f"tls/localhost:{port}"])
+    ca = str(pki["certs"] / "ca.pem")
+    if kind == "no certificate":  # trusts our CA, so only the remote's demand for a certificate stops it
+        conf.insert_json5("transport/link/tls", json.dumps({"root_ca_certificate": ca}))
+    elif kind == "another CA's certificate":
+        conf.insert_json5("transport/link/tls", json.dumps({
+            "root_ca_certificate": ca, "enable_mtls": True,
+            "connect_certificate": str(pki["certs"] / "stranger.pem"),
+            "connect_private_key": str(pki["certs"] / "stranger.key")}))
+    else:  # plain TCP to the TLS port
+        conf = make_config(connect=[f"tcp/localhost:{port}"])
+    return open_session(conf)
+
+
+class Inbox:
+    """Every sample a raw subscriber sees: (key, payload bytes), appended from Zenoh's thread."""
+
+    def __init__(self, session, keyexpr: str = "twin/**") -> None:  # type: ignore[no-untyped-def]
+        self.samples: list[tuple[str, bytes]] = []
+        self._sub = session.declare_subscriber(keyexpr, lambda s: self.samples.append(
+            (str(s.key_expr), s.payload.to_bytes())))
+
+    def has(self, payload: bytes) -> bool:
+        return any(data == payload for _, data in self.samples)
+
+    def close(self) -> None:
+        self._sub.undeclare()
+
+
+def _put_all(session, puts: list[tuple[str, bytes]]) -> None:  # type: ignore[no-untyped-def]
+    import zenoh
+
+    for key, data in puts:  # BLOCK: under load, a dropped forgery would prove nothing
+        session.put(key, data, congestion_control=zenoh.CongestionControl.BLOCK)
+
+
+def _forgeries(epoch: int, can_position: np.ndarray) -> list[tuple[str, bytes]]:
+    """Add a phantom object, remove the crate, move the can 0.2 m: all newer than anything the remote sent."""
+    epoch, seq, stamp = epoch + 1, 10**6, time.time_ns()
+    box = np.random.default_rng(3).uniform(-0.04, 0.04, (2000, 3)) + np.array([0.0, -0.2, 0.56])
+    cloud = cloud_message("phantom", box, stamp_ns=stamp, epoch=epoch, seq=seq, material="wood_pine", density=None,
+                          frame_position=np.array([0.0, -0.2, 0.56]), frame_quat=np.array([1.0, 0.0, 0.0, 0.0]))
+    moved = tuple(float(x) for x in can_position + np.array([0.2, 0.0, 0.0]))
+    pose = Pose(v=VERSION, stamp_ns=stamp, object_id="can", epoch=epoch, seq=seq + 1, sim_time=0.0, position=moved,
+                quat=(1.0, 0.0, 0.0, 0.0), linvel=(0.0, 0.0, 0.0), angvel=(0.0, 0.0, 0.0))
+    return [(KEYS.object("phantom", "cloud"), encode(cloud)),
+            (KEYS.object("crate", "gone"), encode(Gone(v=VERSION, stamp_ns=stamp, object_id="crate", epoch=epoch,
+                                                       seq=seq + 2))),
+            (KEYS.object("can", "pose"), encode(pose))]
+
+
+def _command(position, epoch: int = 7) -> bytes:  # type: ignore[no-untyped-def]
+    return encode(OperatorCommand(v=VERSION, stamp_ns=time.time_ns(), epoch=epoch, seq=1,
+                                  position=tuple(float(x) for x in position)))
+
+
+# -- the shipped configs ------------------------------------------------------------------------------
+
+def test_the_shipped_configs_parse_and_name_only_documented_certificate_files():
+    import re
+
+    readme = (CONFIGS / "README.md").read_text()
+    for name in ("remote", "twin"):
+        path = CONFIGS / f"{name}.json5"
+        make_config(config_file=path)  # Zenoh's own parser and schema accept it as shipped
+        text = path.read_text()
+        files = set(re.findall(r'"configs/certs/([^"]+)"', text))
+        assert files == {"ca.pem", f"{name}.key", f"{name}.pem"}
+        for f in files:
+            assert f"certs/{f}" in readme, f"configs/README.md does not say how to make {f}"
+        assert "enable_mtls: true" in text and 'default_permission: "deny"' in text
+
+
+# -- who gets in, and what they may say ----------------------------------------------------------------
+
+def test_without_the_access_control_a_certified_twin_could_forge_scene_state(pki):
+    """The control for the next test: the same forgeries over the same link do arrive with access control
+    off, so it is the policy that stops them, not the topology."""
+    port = free_port()
+    victim = _session(pki, "twin", listen=[f"tls/localhost:{port}"], acl=False)
+    try:
+        inbox = Inbox(victim)
+        attacker = _session(pki, "twin", connect=[f"tls/localhost:{port}"], acl=False)
+        try:
+            _wait_until(lambda: len(list(attacker.info.peers_zid())) == 1, what="the TLS link")
+            forged = _forgeries(1, np.zeros(3))
+            _put_all(attacker, forged)
+            _wait_until(lambda: all(inbox.has(data) for _, data in forged), 10, "the forgeries")
+        finally:
+            inbox.close()
+            attacker.close()
+    finally:
+        victim.close()
+
+
+def test_mutual_tls_and_access_control_let_only_the_remote_speak_for_the_scene(pki, tmp_path_factory):
+    from scenes.remote import Remote
+    from scenes.scenefile import parse_scene
+    from sync.zenoh_transport import ZenohTransport
+    from twin.runtime import Local, LocalSettings
+
+    remote_port, twin_port = free_port(), free_port()
+    remote_ep, twin_ep = f"tls/localhost:{remote_port}", f"tls/localhost:{twin_port}"
+    cache = tmp_path_factory.getbasetemp() / "coacd"
+    server = _session(pki, "remote", listen=[remote_ep])
+    opened = []
+    try:
+        at_remote = Inbox(server, KEYS.root + "/operator/**")
+        runner = RemoteRunner(Remote(parse_scene(SCENE), ZenohTransport(server), cache_dir=cache))
+        runner.start()
+        # A second, legitimate twin listens too, so a certified attacker can reach it directly.
+        client = _session(pki, "twin", connect=[remote_ep], listen=[twin_ep])
+        opened.append(client)
+        at_twin = Inbox(client)
+        attacker = _session(pki, "twin", connect=[remote_ep, twin_ep])
+        opened.append(attacker)
+        _wait_until(lambda: len(list(attacker.info.peers_zid())) == 2, what="the attacker's two TLS links")
+        seen_by_attacker = Inbox(attacker)
+        # It answers the late joiner's questions with a scene and an object of its own.
+        fake_info = encode(SceneInfo(v=VERSION, stamp_ns=1, name="phantom", table_size=(1.0, 1.0, 0.1),
+                                     table_height=0.5, table_material="wood_pine", ee_radius=0.02,
+                                     ee_position=(0.0, 0.0, 0.6)))
+        forged = _forgeries(runner.remote.epoch, runner.remote.twin.pose("can")[0])
+        queryables = [
+            attacker.declare_queryable("twin/*/scene", lambda q: q.reply("twin/phantom/scene", fake_info)),
+            attacker.declare_queryable(KEYS.state, lambda q: q.reply(forged[0][0], forged[0][1]))]
+        strangers = {kind: _stranger(pki, kind, remote_port)
+                     for kind in ("no certificate", "another CA's certificate", "plain TCP")}
+        opened.extend(strangers.values())
+        seen_by_stranger = {kind: Inbox(s) for kind, s in strangers.items()}
+
+        local = Local(ZenohTransport(client), settings=LocalSettings(cache_dir=cache))
+        try:
+            wait_objects(local, 2)  # the twin syncs the scene over mutual TLS
+            assert local.keys.scene == SCENE["name"]  # the attacker's scene answer never reached it
+            assert local.expected == 2  # nor its phantom cloud
+            _wait_until(lambda: len(seen_by_attacker.samples) > 0, what="the attacker's subscription")
+
+            # (a), (b): no link, nothing received, nothing delivered
+            stranger_command = _command([0.1, 0.1, 0.6], epoch=99)
+            own = {stranger_command, *(data for _, data in forged)}  # a session hears its own puts
+            for kind, s in strangers.items():
+                assert seen_by_stranger[kind].samples == [], f"{kind}: received scene data"
+                _put_all(s, [(KEYS.operator, stranger_command), *forged])
+                assert list(s.info.peers_zid()) == [], f"{kind}: a peer accepted it"
+            assert len(list(server.info.peers_zid())) == 2  # the twin and the certified attacker only
+
+            # (c): a certified twin forges scene state, then sends an allowed command over the same links
+            before = {i: local.twin.pose(i)[0].copy() for i in local.objects}
+            received, dropped = local.link.counters.messages_received, local.link.counters.dropped_malformed
+            target = runner.remote.twin.data.mocap_pos[0] + np.array([0.05, -0.1, 0.04])
+            command = _command(target)
+            _put_all(attacker, [*forged, (KEYS.operator, command)])
+            _wait_until(lambda: at_twin.has(command) and at_remote.has(command), what="the allowed command")
+            _wait_until(lambda: np.allclose(runner.remote.twin.data.mocap_pos[0], target),
+                        what="the remote's end effector to follow the command")
+            local.run(10.0, until=lambda: local.inbox.empty() and not local.adding)
+            for _, data in forged:
+                assert not at_twin.has(data), "a forgery reached the twin's session"
+                assert not at_remote.has(data)
+            assert sorted(local.objects) == ["can", "crate"] and local.expected == 2
+            for object_id, position in before.items():  # the forged pose would move the can 200 mm
+                now = local.twin.pose(object_id)[0]
+                assert np.linalg.norm(now - position) < 0.005, object_id
+                # the twin's body frame sits on its estimate, mm off the truth's: 20 mm is no forgery
+                assert np.linalg.norm(now - runner.remote.twin.pose(object_id)[0]) < 0.02, object_id
+            # the forgeries were not dropped by the twin's checks: they never arrived
+            assert local.link.counters.dropped_malformed == dropped == 0
+            assert local.link.counters.messages_received >= received
+            for kind in strangers:  # while the remote published poses and heartbeats all along
+                assert {data for _, data in seen_by_stranger[kind].samples} <= own, f"{kind}: received scene data"
+            assert not at_remote.has(stranger_command) and not at_twin.has(stranger_command)
+        finally:
+            local.close()
+            for q in queryables:
+                q.undeclare()
+            runner.stop()
+            runner.remote.close()
+    finally:
+        for s in opened:
+            s.close()
+        server.close()
