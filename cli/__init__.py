@@ -8,7 +8,7 @@ function). The names below load on first use (PEP 562).
 
 from __future__ import annotations
 
-import importlib
+from estimation.lazyexports import lazy_exports
 
 #: public name -> the module that defines it.
 _EXPORTS = {
@@ -21,14 +21,4 @@ _EXPORTS = {
 __all__ = sorted(_EXPORTS)
 
 
-def __getattr__(name: str) -> object:
-    module = _EXPORTS.get(name)
-    if module is None:
-        raise AttributeError(f"module 'cli' has no attribute {name!r}")
-    value = getattr(importlib.import_module(module), name)
-    globals()[name] = value  # once: later lookups do not come back here
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted({*globals(), *_EXPORTS})
+__getattr__, __dir__ = lazy_exports("cli", _EXPORTS, globals())

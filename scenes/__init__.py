@@ -9,7 +9,7 @@ trimesh::
 
 from __future__ import annotations
 
-import importlib
+from estimation.lazyexports import lazy_exports
 
 #: public name -> the module that defines it.
 _EXPORTS = {
@@ -36,14 +36,4 @@ _EXPORTS = {
 __all__ = sorted(_EXPORTS)
 
 
-def __getattr__(name: str) -> object:
-    module = _EXPORTS.get(name)
-    if module is None:
-        raise AttributeError(f"module 'scenes' has no attribute {name!r}")
-    value = getattr(importlib.import_module(module), name)
-    globals()[name] = value  # once: later lookups do not come back here
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted({*globals(), *_EXPORTS})
+__getattr__, __dir__ = lazy_exports("scenes", _EXPORTS, globals())

@@ -9,7 +9,7 @@ The public names below load on first use (PEP 562): ``import sync`` imports neit
 
 from __future__ import annotations
 
-import importlib
+from estimation.lazyexports import lazy_exports
 
 #: public name -> the module that defines it.
 _EXPORTS = {
@@ -38,14 +38,4 @@ _EXPORTS = {
 __all__ = sorted(_EXPORTS)
 
 
-def __getattr__(name: str) -> object:
-    module = _EXPORTS.get(name)
-    if module is None:
-        raise AttributeError(f"module 'sync' has no attribute {name!r}")
-    value = getattr(importlib.import_module(module), name)
-    globals()[name] = value  # once: later lookups do not come back here
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted({*globals(), *_EXPORTS})
+__getattr__, __dir__ = lazy_exports("sync", _EXPORTS, globals())
