@@ -14,6 +14,7 @@ from __future__ import annotations
 import json
 import shutil
 import subprocess
+import threading
 import time
 from pathlib import Path
 
@@ -24,7 +25,7 @@ from sync.keys import Keys
 from sync.messages import VERSION, Gone, OperatorCommand, Pose, SceneInfo, cloud_message, encode
 from sync.zenoh_transport import free_port, make_config, open_session
 
-from loopback import SCENE, RemoteRunner, wait_objects
+from loopback import SCENE, RemoteRunner, running_remote, wait_objects
 
 CONFIGS = Path(__file__).resolve().parent.parent / "configs"
 KEYS = Keys(SCENE["name"])
@@ -277,3 +278,107 @@ def test_mutual_tls_and_access_control_let_only_the_remote_speak_for_the_scene(p
         for s in opened:
             s.close()
         server.close()
+
+
+# -- a flood -------------------------------------------------------------------------------------------
+
+#: At most this many messages, for at most FLOOD_SECONDS: bounded, whatever the machine's speed.
+FLOOD_COUNT = 20_000
+FLOOD_SECONDS = 3.0
+GARBAGE = ("undecodable", "wrong-key", "non-finite")  # the flood's kinds the link drops, by reason
+
+
+def _flood_messages(epoch: int, crate_position: np.ndarray) -> dict[str, tuple[str, bytes]]:
+    """One message of each kind a flood cycles through: (key, payload) by the reason the twin should give."""
+    far = tuple(float(x) for x in crate_position + np.array([0.3, 0.0, 0.0]))
+
+    def pose(object_id: str, position, epoch: int = epoch - 1) -> bytes:  # type: ignore[no-untyped-def]
+        return encode(Pose(v=VERSION, stamp_ns=1, object_id=object_id, epoch=epoch, seq=1, sim_time=0.0,
+                           position=position, quat=(1.0, 0.0, 0.0, 0.0), linvel=(0.0, 0.0, 0.0),
+                           angvel=(0.0, 0.0, 0.0)))
+
+    return {"undecodable": (KEYS.object("crate", "pose"), b"\xc1" + bytes(range(64))),  # 0xc1: never msgpack
+            "wrong-key": (KEYS.object("crate", "pose"), pose("can", far, epoch + 1)),
+            "non-finite": (KEYS.object("crate", "pose"), pose("crate", (float("nan"), 0.0, 0.5), epoch + 1)),
+            "stale": (KEYS.object("crate", "pose"), pose("crate", far))}  # valid, older epoch: out of order
+
+
+def test_a_flood_of_garbage_and_stale_poses_is_counted_and_the_twin_runs_on(tmp_path_factory):
+    from sync.zenoh_transport import ZenohTransport
+    from twin.runtime import Local, LocalSettings
+
+    remote_ep, twin_ep = f"tcp/127.0.0.1:{free_port()}", f"tcp/127.0.0.1:{free_port()}"
+    cache = tmp_path_factory.getbasetemp() / "coacd"
+    with running_remote(remote_ep, cache) as runner:
+        session = open_session(make_config(connect=[remote_ep], listen=[twin_ep]))
+        flooder = open_session(make_config(connect=[twin_ep]))
+        try:
+            local = Local(ZenohTransport(session), settings=LocalSettings(cache_dir=cache))
+            try:
+                wait_objects(local, 2)
+                _wait_until(lambda: len(list(flooder.info.peers_zid())) == 1, what="the flooder's link")
+                done = threading.Event()
+                sentinel = (KEYS.root + "/operator/flood-done", b"done")
+                seen = Inbox(session, sentinel[0])
+                kinds = _flood_messages(runner.remote.epoch, local.twin.pose("crate")[0])
+                sent = dict.fromkeys(kinds, 0)
+
+                import zenoh
+
+                # Publishers that know the twin's subscriptions: a put before they are known goes nowhere.
+                pubs = {key: flooder.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK)
+                        for key in {k for k, _ in kinds.values()} | {sentinel[0]}}
+                _wait_until(lambda: all(p.matching_status.matching for p in pubs.values()),
+                            what="the twin's subscriptions to reach the flooder")
+
+                def flood() -> None:
+                    names, deadline = list(kinds), time.monotonic() + FLOOD_SECONDS
+                    for i in range(FLOOD_COUNT):
+                        if time.monotonic() > deadline:
+                            break
+                        name = names[i % len(names)]
+                        pubs[kinds[name][0]].put(kinds[name][1])
+                        sent[name] += 1
+                    pubs[sentinel[0]].put(sentinel[1])  # same link, after the flood: in order
+                    done.set()
+
+                crate = local.twin.pose("crate")[0].copy()
+                out_of_order, t0 = local.report.out_of_order, local.twin.time
+                thread = threading.Thread(target=flood)
+                thread.start()
+                try:
+                    # Zenoh runs each subscriber's callbacks in order, but not one subscriber's after another's:
+                    # the sentinel (its own subscriber) says the flood is over, not that the twin's
+                    # subscriber has seen all of it. So the twin runs on until the counts add up.
+                    dropped = local.link.counters.dropped_by_reason
+
+                    def all_in() -> bool:
+                        return (seen.has(b"done") and local.inbox.empty()
+                                and sum(dropped[r] for r in GARBAGE) >= sum(sent[r] for r in GARBAGE)
+                                and local.report.out_of_order - out_of_order >= sent["stale"])
+
+                    stats = local.run(120.0, until=all_in)
+                finally:
+                    thread.join()
+                seen.close()
+                for p in pubs.values():
+                    p.undeclare()
+                assert done.is_set() and seen.has(b"done"), "the flood did not finish within the run's failsafe"
+                assert sum(sent.values()) > 0
+                # The loop kept stepping: simulated time advanced by every step it took, none skipped.
+                assert stats.steps > 0 and 0 <= stats.missed <= stats.steps
+                assert local.twin.time - t0 == pytest.approx(stats.steps * local.twin.model.opt.timestep, rel=1e-6)
+                # Every garbage message was dropped and counted under its reason; every stale one refused.
+                assert all_in(), "the flood's messages did not all arrive within the run's failsafe"
+                for reason in GARBAGE:
+                    assert dropped[reason] == sent[reason], reason
+                assert local.report.out_of_order - out_of_order >= sent["stale"]
+                assert sorted(local.objects) == ["can", "crate"]
+                assert np.linalg.norm(local.twin.pose("crate")[0] - crate) < 0.005  # the stale poses say +300 mm
+                print(f"flood: {sent} in {stats.wall:.2f} s; twin loop {stats.steps} steps, {stats.missed} missed "
+                      f"deadlines, step p99 {stats.p99 * 1e3:.2f} ms")
+            finally:
+                local.close()
+        finally:
+            flooder.close()
+            session.close()
