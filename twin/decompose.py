@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from twin.workers import die_with_parent
+from twin.workers import background_worker
 
 log = logging.getLogger(__name__)
 
@@ -121,7 +121,7 @@ def decompose_many(
 
             # spawn: CoACD and MuJoCo hold threads; forking them is not safe.
             with ProcessPoolExecutor(workers, mp_context=mp.get_context("spawn"),
-                                     initializer=die_with_parent) as pool:
+                                     initializer=background_worker) as pool:
                 futures = {pool.submit(_decompose, *meshes[i], settings, cache, verified_miss=True): i
                            for i in misses}
                 for future, i in futures.items():

@@ -58,7 +58,7 @@ from twin.objects import DEFAULT_FRICTION, TwinObject, object_at_estimate
 from twin.poses import angle_deg, blend, quat_conj, quat_mul, rotation
 from twin.sim import Twin
 from twin.trajectory import Trajectory
-from twin.workers import die_with_parent
+from twin.workers import background_worker
 
 log = logging.getLogger(__name__)
 
@@ -499,7 +499,7 @@ class Local:
         if self.settings.workers == 0:
             return None
         return ProcessPoolExecutor(self.settings.workers, mp_context=mp.get_context("spawn"),
-                                   initializer=die_with_parent)
+                                   initializer=background_worker)
 
     def _submit(self, msg: Cloud) -> Future:
         """Estimate a cloud: in a worker process, or here and now when there are no workers."""

@@ -1,8 +1,10 @@
-"""Child processes that die with their parent: estimation workers, CoACD workers, the rerun writer.
+"""Child processes that die with their parent and yield the CPU to the haptic loop.
 
 A killed ``twin local`` (SIGKILL, out of memory) must not leave 300 MB of idle workers behind. On Linux
 each child asks the kernel for a signal when its parent dies (``prctl(PR_SET_PDEATHSIG)``); elsewhere
-this is a no-op and children end when their pipes close.
+this is a no-op and children end when their pipes close. Estimation and CoACD workers also run at a lower
+priority (:func:`background_worker`): on two cores, a worker at full speed otherwise takes the CPU from the
+1 kHz loop for tens of milliseconds while an object is added.
 """
 
 from __future__ import annotations
@@ -24,3 +26,16 @@ def die_with_parent() -> None:
     libc.prctl(_PR_SET_PDEATHSIG, signal.SIGTERM)
     if os.getppid() == 1:  # the parent died before we asked: nobody will send the signal
         os.kill(os.getpid(), signal.SIGTERM)
+
+
+#: Niceness added to estimation and CoACD workers: they may take seconds, the loop may not wait 1 ms.
+WORKER_NICENESS = 10
+
+
+def background_worker() -> None:
+    """Initializer for worker pools: :func:`die_with_parent`, and a lower scheduling priority."""
+    die_with_parent()
+    try:
+        os.nice(WORKER_NICENESS)
+    except OSError:  # not permitted here: run at the parent's priority
+        pass
