@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 import time
 from collections import Counter, defaultdict
 from pathlib import Path
@@ -155,7 +156,9 @@ def test_a_synchronised_session_logs_both_sides_divergence_and_events(tmp_path):
         assert any(t.startswith(f"{i}: cloud received") for t in texts)
         assert any(t.startswith(f"{i}: added to the twin") for t in texts)
     assert any(t.startswith("crate: pose correction") for t in texts)
-    assert any(t.startswith("crate: snapped 8") for t in texts)  # 80 mm is past the 50 mm snap distance
+    # 80 mm is past the 50 mm snap distance; the twin's crate sits a few mm from C's on its estimated shape.
+    snaps = [float(m.group(1)) for t in texts if (m := re.match(r"crate: snapped ([0-9.]+) mm", t))]
+    assert snaps and 70 < snaps[0] < 90, snaps
     crate_gap = np.array([v[0] for v in twin.columns["plots/divergence/crate"]["Scalars:scalars"]])
     # After the correction: within the 1 mm deadband plus where the estimated shape comes to rest.
     assert np.isfinite(crate_gap).all() and crate_gap[-1] < 5  # mm
