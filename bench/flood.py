@@ -25,23 +25,14 @@ from rich.console import Console
 from rich.table import Table
 
 from scenes.remote import Remote
-from scenes.scenefile import parse_scene
+from scenes.scenefile import load_scene
 from sync.keys import Keys
 from sync.messages import VERSION, Pose, encode
 from sync.zenoh_transport import ZenohTransport, free_port, make_config, open_session
 from twin.runtime import Local, LocalSettings
 
-SCENE = {
-    "name": "flood",
-    "table": {"size": [1.0, 0.6, 0.04], "height": 0.5},
-    "end_effector": {"radius": 0.02, "position": [-0.3, 0.0, 0.56]},
-    "objects": [
-        {"id": "crate", "primitive": {"type": "box", "size": [0.12, 0.08, 0.06]}, "material": "wood_pine",
-         "position": [0.0, 0.0], "points": 8000},
-        {"id": "can", "primitive": {"type": "cylinder", "size": [0.03, 0.1]}, "density": 700,
-         "position": [0.2, 0.1], "points": 8000},
-    ],
-}
+#: The tests' two-object scene (a crate and a can on a table).
+SCENE = Path(__file__).resolve().parent.parent / "tests" / "data" / "small.toml"
 
 
 def _messages(keys: Keys, epoch: int) -> list[bytes]:
@@ -77,10 +68,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--cache", type=Path, default=Path("/tmp/tactile-twin-bench-coacd"))
     args = parser.parse_args(argv)
     rates = [None if r == "max" else float(r) for r in args.rates.split(",")]
-    keys = Keys(SCENE["name"])
+    scene = load_scene(SCENE)
+    keys = Keys(scene.name)
     remote_ep, twin_ep = f"tcp/127.0.0.1:{free_port()}", f"tcp/127.0.0.1:{free_port()}"
     server = open_session(make_config(listen=[remote_ep]))
-    remote = Remote(parse_scene(SCENE), ZenohTransport(server), cache_dir=args.cache)
+    remote = Remote(scene, ZenohTransport(server), cache_dir=args.cache)
     stop_remote = threading.Event()
     remote_thread = threading.Thread(target=remote.run, args=(3600.0,), kwargs={"stop": stop_remote})
     remote_thread.start()
