@@ -93,3 +93,16 @@ def test_without_workers_the_twin_estimates_in_its_own_thread(cache):
         assert session.local._pool is None and not session.local.twin.background  # forced headless
         session.tick()
         assert sorted(session.local.objects) == ["can", "crate"]  # touchable after one tick
+
+
+def test_a_pose_far_outside_the_scene_is_dropped_and_counted(cache):
+    with Headless(load_scene(SMALL), cache_dir=cache) as session:
+        session.run(0.2)
+        remote, keys = session.remote, Keys("small")
+        before = session.local.twin.pose("crate")[0]
+        far = Pose(v=VERSION, stamp_ns=0, object_id="crate", epoch=remote.epoch, seq=10**6, sim_time=0.0,
+                   position=(50.0, 0.0, 0.6), quat=(1.0, 0.0, 0.0, 0.0), linvel=(0.0,) * 3, angvel=(0.0,) * 3)
+        Link(session.bus.transport()).put(keys.object("crate", "pose"), far)  # decodes: 50 m is under 1 km
+        session.run(0.2)
+        assert session.local.report.out_of_scene == 1
+        assert np.linalg.norm(session.local.twin.pose("crate")[0] - before) < 0.002

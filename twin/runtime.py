@@ -143,6 +143,7 @@ class LocalReport:
     estimation_errors: int = 0
     failed_edits: int = 0  # objects whose model did not compile: the twin went on without them
     out_of_order: int = 0  # messages older than what the twin already had from the remote
+    out_of_scene: int = 0  # poses and clouds placed outside the scene's box (SCENE_REACH around the table)
     holds: int = 0  # times an object strayed from the remote's pose on its own and was pinned to it
     snaps: int = 0  # corrections too large to blend in: the object was moved at once
     operator_targets: int = 0  # device targets taken (OperatorSettings.listen)
@@ -193,6 +194,7 @@ class Local:
         self.twin = Twin(_empty_spec(info), background=settings.workers > 0)
         self._floor = info.table_height if info.table_size is not None else 0.0
         self.workspace = _workspace(info, operator.reach)
+        self.scene_box = _workspace(info, SCENE_REACH)
         if info.table_size is not None:
             rlog.table(info.table_size, info.table_height)
         self._dropped_seen = 0
@@ -404,13 +406,25 @@ class Local:
         self.device_target = position
         self.report.operator_targets += 1
 
+    def _in_scene(self, msg, position) -> bool:  # type: ignore[no-untyped-def]
+        """Whether an object message's position lies in the scene's box (:data:`SCENE_REACH` around the
+        table); one that does not is dropped and counted, never written into the twin."""
+        low, high = self.scene_box
+        p = np.asarray(position, dtype=float)
+        if np.all(p >= low) and np.all(p <= high):
+            return True
+        self.report.out_of_scene += 1
+        if self.report.out_of_scene <= 10:
+            log.warning("dropped a %s of %r at %s: outside the scene", type(msg).__name__, msg.object_id, p.tolist())
+        return False
+
     def _handle(self, received: float, key: str, msg) -> None:  # type: ignore[no-untyped-def]
         if key == self.keys.operator_target:
             self._on_device_target(msg)
         elif isinstance(msg, Heartbeat):
             self._on_heartbeat(msg)
         elif isinstance(msg, Pose):
-            if not self._newer(self._pose_mark, msg):
+            if not self._in_scene(msg, msg.position) or not self._newer(self._pose_mark, msg):
                 return
             self._latest[msg.object_id] = msg
             if msg.object_id in self._offsets and self.twin.has(msg.object_id):
@@ -422,7 +436,7 @@ class Local:
                 if self.rlog.enabled:  # every pose passes here: no string building with rerun off
                     self.rlog.event(self.twin.time, f"{msg.object_id}: pose correction (seq {msg.seq})", "DEBUG")
         elif isinstance(msg, Cloud):
-            if not self._newer(self._clouds, msg):
+            if not self._in_scene(msg, msg.frame_position) or not self._newer(self._clouds, msg):
                 return
             self._jobs[msg.object_id] = (self._submit(msg), msg, received)
             self.rlog.event(self.twin.time, f"{msg.object_id}: cloud received (seq {msg.seq}); estimating")
@@ -614,8 +628,13 @@ class Local:
         return found[0]
 
 
+#: How far beyond the table (and above its top) an object's pose may be, metres: objects fall off tables and
+#: roll across floors, but a pose 10 m from the table is no pose of this scene (a forged or corrupt one).
+SCENE_REACH = 10.0
+
+
 def _workspace(info: SceneInfo, reach: float) -> tuple[np.ndarray, np.ndarray]:
-    """(low, high) corners of the box operator targets must lie in, metres, world frame: ``reach`` beyond
+    """(low, high) corners of the box targets or object poses must lie in, metres, world frame: ``reach`` beyond
     the table's edges and above its top, down to the floor; without a table, ``reach`` around the end
     effector's start."""
     if info.table_size is None:
