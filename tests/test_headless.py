@@ -91,8 +91,10 @@ def test_a_forged_sequence_number_silences_an_object_only_until_a_heartbeat_and_
 def test_without_workers_the_twin_estimates_in_its_own_thread(cache):
     with Headless(load_scene(SMALL), cache_dir=cache, settings=LocalSettings(workers=3)) as session:
         assert session.local._pool is None and not session.local.twin.background  # forced headless
+        assert sorted(session.local.pending) == ["can", "crate"] and session.local.objects == []
         session.tick()
         assert sorted(session.local.objects) == ["can", "crate"]  # touchable after one tick
+        assert session.local.pending == []
 
 
 def test_a_pose_far_outside_the_scene_is_dropped_and_counted(cache):

@@ -328,7 +328,13 @@ class Local:
 
     @property
     def objects(self) -> list[str]:
+        """Objects in the running twin (touchable)."""
         return [i for i in self._clouds if self.twin.has(i)]
+
+    @property
+    def pending(self) -> list[str]:
+        """Objects whose cloud arrived but which are not touchable yet (estimating or compiling)."""
+        return [i for i in self._clouds if not self.twin.has(i)]
 
     # -- messages ------------------------------------------------------------------------------------
 
