@@ -247,7 +247,7 @@ def _cmd_estimate(args: argparse.Namespace) -> int:
     scale = unit_scale(args.units)
     density, mat = resolve_density(args.material, args.density)
     name = None if mat is None else mat.name
-    with _open_rerun(args) as rlog:
+    with _open_rerun(args, "estimate") as rlog:
         t0 = time.perf_counter()
         cloud = load_cloud(args.cloud, scale=scale)
         read = time.perf_counter() - t0
@@ -362,7 +362,7 @@ def _cmd_build(args: argparse.Namespace) -> int:
         err.print(f"[{k + 1}/{n}] {object_id}: estimated in {seconds:.1f} s ({est.mass.mass:.3f} kg, "
                   f"{est.method}{', ' + str(len(est.warnings)) + ' warning(s)' if est.warnings else ''})")
 
-    with _open_rerun(args) as rlog:  # before the work: a bad --rerun should not cost a build
+    with _open_rerun(args, "scene") as rlog:  # before the work: a bad --rerun should not cost a build
         err.print(f"building {scene.name!r}: {len(scene.objects)} objects")
         built = build_scene(scene, coacd=_coacd_settings(args), cache_dir=args.cache_dir, on_estimate=progress)
         cached = sum(o.hull_cached for o in built.objects)
@@ -438,7 +438,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
     if args.duration <= 0 or args.rate <= 0:
         raise TwinError("--duration and --rate must be positive")
-    with _open_rerun(args) as rlog:
+    with _open_rerun(args, "twin") as rlog:
         twin, built = _load_twin(args)
         with twin:
             if built is not None:
@@ -513,14 +513,14 @@ def _rerun_option(p: argparse.ArgumentParser) -> None:
                    help=f"poses and forces logged per simulated second (default {DEFAULT_RATE_HZ:g})")
 
 
-def _open_rerun(args: argparse.Namespace):  # type: ignore[no-untyped-def]
-    """The rerun log the command's --rerun asks for (off without it)."""
+def _open_rerun(args: argparse.Namespace, layout: str = "sync"):  # type: ignore[no-untyped-def]
+    """The rerun log the command's --rerun asks for (off without it), in the viewer layout ``layout``."""
     from twin.rerunlog import RerunLog, parse_target
 
     target = None if args.rerun is None else parse_target(args.rerun, args.rerun_rate)
     if target is not None and target.mode == "save":
         print(f"rerun: recording to {target.address} (open it with: rerun {target.address})", file=sys.stderr)
-    return RerunLog.open(target)
+    return RerunLog.open(target, layout=layout)
 
 
 def _log_built(rlog, built) -> None:  # type: ignore[no-untyped-def]
@@ -591,7 +591,7 @@ def _cmd_remote(args: argparse.Namespace) -> int:
     scene = load_scene(args.scene)
     if args.deadband_mm < 0 or args.deadband_deg < 0:
         raise TwinError("--deadband-mm and --deadband-deg must be >= 0")
-    with _open_rerun(args) as rlog:
+    with _open_rerun(args, "remote") as rlog:
         _run_remote(args, scene, rlog)
     return 0
 

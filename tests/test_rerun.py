@@ -32,6 +32,14 @@ class Recording:
         reader = RrdReader(path)
         assert len(reader.recordings()) == 1
         assert reader.blueprints() or not blueprint, "no default blueprint in the file"
+        self.views: set[tuple[str, str, str]] = set()  # (kind, title, origin) of each view in the default layout
+        for store in reader.blueprints():
+            for chunk in reader.stream(store=store):
+                batch = chunk.to_record_batch()
+                if "ViewBlueprint:class_identifier" in batch.schema.names:
+                    kind, title, origin = (batch.column(f"ViewBlueprint:{c}").to_pylist()[0][0]
+                                           for c in ("class_identifier", "display_name", "space_origin"))
+                    self.views.add((kind, title, origin))
         self.rows: Counter[str] = Counter()
         self.timelines: set[str] = set()
         self.columns: dict[str, dict[str, list]] = defaultdict(lambda: defaultdict(list))
@@ -48,6 +56,14 @@ class Recording:
 
     def under(self, prefix: str) -> dict[str, int]:
         return {p: n for p, n in self.rows.items() if p.startswith(prefix)}
+
+    def view_kinds(self) -> dict[str, str]:
+        """Each view's origin and kind ('3D', 'TimeSeries', 'TextLog', 'TextDocument')."""
+        return {origin: kind for kind, _, origin in self.views}
+
+    def scene_title(self) -> str:
+        (title,) = [t for kind, t, _ in self.views if kind == "3D"]
+        return title
 
     def texts(self) -> list[str]:
         return [t for batch in self.columns["events"]["TextLog:text"] for t in (batch or [])]
@@ -92,9 +108,24 @@ def test_estimate_writes_cloud_normals_mesh_obb_and_properties(box_cloud, tmp_pa
     assert len(positions) == DISPLAY_POINTS  # 30k in, the display cap shown
     assert rec.columns[f"{base}/cloud"]["Points3D:labels"] == [["30,000 points (20,000 shown)"]]
     (label,) = rec.columns[f"{base}/com"]["Points3D:labels"][0]
-    assert "kg" in label and "cm³" in label
+    assert re.fullmatch(r"crate [0-9.]+ kg", label)  # short: volume and the rest are in the properties
+    assert rec.columns[f"{base}/cloud"]["Points3D:show_labels"] == [[False]]  # the com's is the one label shown
     (doc,) = rec.columns[f"{base}/properties"]["TextDocument:text"][0]
-    assert "wood_pine" in doc and "mass" in doc
+    assert "wood_pine" in doc and "mass" in doc and "volume" in doc
+    # The OBB is an outline (rerun's FillMode.MajorWireframe = 1), not a solid box hiding the mesh.
+    assert rec.columns[f"{base}/obb"]["Boxes3D:fill_mode"] == [[1]]
+    # One object, no sync: the 3D view and its properties, no divergence, force or event panels.
+    assert rec.view_kinds() == {"/world": "3D", "/world/estimate": "TextDocument"}
+    assert "remote" not in rec.scene_title() and "twin" not in rec.scene_title()
+
+
+def test_an_unknown_layout_is_named():
+    from twin.rerunlog import blueprint
+
+    with pytest.raises(TwinError, match="unknown rerun layout 'full'; expected one of estimate, scene"):
+        blueprint("full")
+    with pytest.raises(TwinError, match="unknown rerun layout"):
+        RerunLog(None, layout="full")
 
 
 def test_a_bad_rerun_option_is_exit_2_and_writes_nothing(box_cloud, tmp_path, monkeypatch, capsys):
@@ -121,15 +152,20 @@ def test_run_logs_objects_once_and_poses_at_the_rerun_rate(tmp_path, capsys):
         assert rec.rows[f"world/twin/crate/{part}"] == 1, part
     # 1 s at 20 Hz: 20 frames (+1 for the pose logged with the object).
     assert rec.rows["world/twin/crate"] == 21
-    assert rec.rows["plots/ee_force"] == 20 and rec.rows["world/end_effector"] == 20
-    times = np.array(rec.columns["plots/ee_force"]["sim_time"]) * 1e-9
+    assert rec.rows["plots/ee_force"] == 20 + 1 and rec.rows["world/end_effector"] == 20  # +1: the series' names
+    assert rec.columns["plots/ee_force"]["SeriesLines:names"] == [["x", "y", "z"]]
+    assert rec.columns["world/twin/crate/obb"]["Boxes3D:fill_mode"] == [[1]]
+    # A twin on its own: the 3D view and the force; no divergence or event panels, no remote in the legend.
+    assert rec.view_kinds() == {"/world": "3D", "/plots/ee_force": "TimeSeries"}
+    assert "remote" not in rec.scene_title()
+    times = np.array([t for t in rec.columns["plots/ee_force"]["sim_time"] if t is not None]) * 1e-9
     assert np.allclose(np.diff(times), 0.05, atol=0.0015)
 
 
 def test_a_synchronised_session_logs_both_sides_divergence_and_events(tmp_path):
     endpoint, cache = f"tcp/127.0.0.1:{free_port()}", tmp_path / "coacd"
     remote_rrd, twin_rrd = tmp_path / "remote.rrd", tmp_path / "twin.rrd"
-    with RerunLog.open(RerunTarget("save", str(remote_rrd))) as remote_log, \
+    with RerunLog.open(RerunTarget("save", str(remote_rrd)), layout="remote") as remote_log, \
             running_remote(endpoint, cache, rlog=remote_log) as remote:
         with RerunLog.open(RerunTarget("save", str(twin_rrd), rate_hz=50)) as twin_log:
             local = open_local(endpoint, cache, rlog=twin_log)
@@ -146,6 +182,10 @@ def test_a_synchronised_session_logs_both_sides_divergence_and_events(tmp_path):
         time.sleep(0.1)
     twin = Recording(twin_rrd)
     ids = [o["id"] for o in SCENE["objects"]]
+    # The full layout (twin local and twin demo): every panel has something in it.
+    assert twin.view_kinds() == {"/world": "3D", "/plots/divergence": "TimeSeries", "/plots/ee_force": "TimeSeries",
+                                 "/events": "TextLog"}
+    assert "remote C" in twin.scene_title() and "twin C'" in twin.scene_title()
     for i in ids:
         assert twin.rows[f"world/twin/{i}/hulls/0"] >= 1 and twin.rows[f"world/twin/{i}/cloud"] == 1
         assert twin.rows[f"world/remote/{i}/mesh"] == 1  # the ghost of where C has it
@@ -164,6 +204,9 @@ def test_a_synchronised_session_logs_both_sides_divergence_and_events(tmp_path):
     assert np.isfinite(crate_gap).all() and crate_gap[-1] < 5  # mm
 
     remote_rec = Recording(remote_rrd)
+    assert remote_rec.view_kinds() == {"/world": "3D", "/plots/ee_force": "TimeSeries", "/events": "TextLog"}
+    assert "twin" not in remote_rec.scene_title()
+    assert not remote_rec.under("plots/divergence")  # hence no divergence panel
     for i in ids:
         assert remote_rec.rows[f"world/remote/{i}/hulls/0"] >= 1 and remote_rec.rows[f"world/remote/{i}/cloud"] >= 1
         assert remote_rec.rows[f"world/remote/{i}"] > 10
@@ -210,7 +253,11 @@ def test_an_unreachable_viewer_costs_a_warning_not_the_result(box_cloud, caplog,
 
 def test_run_on_a_built_directory_logs_the_compiled_geometry(tmp_path, capsys):
     scene, built = Path(__file__).parent / "data" / "small.toml", tmp_path / "built"
-    assert main(["build", str(scene), "--out", str(built), "--cache-dir", str(tmp_path / "coacd")]) == 0
+    built_rrd = tmp_path / "build.rrd"
+    assert main(["build", str(scene), "--out", str(built), "--cache-dir", str(tmp_path / "coacd"),
+                 "--rerun", "save", str(built_rrd)]) == 0
+    # A build runs no simulation: the 3D view alone (no force, divergence or event panels).
+    assert Recording(built_rrd).view_kinds() == {"/world": "3D"}
     out = tmp_path / "dir.rrd"
     assert main(["run", str(built), "--duration", "0.2", "--no-realtime", "--rerun", "save", str(out)]) == 0
     rec = Recording(out)

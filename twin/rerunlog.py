@@ -14,17 +14,21 @@ Entity tree (``<side>`` is ``twin`` for C', ``remote`` for C, ``estimate`` for `
     world/<side>/<id>/cloud        Points3D, body frame: the input cloud (at most DISPLAY_POINTS; count in label)
     world/<side>/<id>/normals      Arrows3D, body frame: the normals the surface was built from (a subset)
     world/<side>/<id>/mesh         Mesh3D, body frame: the reconstructed (decimated) surface
-    world/<side>/<id>/obb          Boxes3D, body frame: the points' oriented bounding box
+    world/<side>/<id>/obb          Boxes3D, body frame: the points' oriented bounding box, as an outline
     world/<side>/<id>/hulls/<k>    Mesh3D, body frame: CoACD's convex parts, one colour each
-    world/<side>/<id>/com          Points3D: centre of mass, labelled with mass and volume
+    world/<side>/<id>/com          Points3D: centre of mass, labelled "<id> <mass> kg" (the only label shown)
     world/<side>/<id>/properties   TextDocument: the estimate in full
     world/end_effector             Points3D: the operator's sphere; .../force Arrows3D (N drawn at FORCE_SCALE)
     plots/divergence/<id>          Scalars: |twin - remote| of the centre of mass, mm
-    plots/ee_force                 Scalars: end-effector contact force x y z, N
+    plots/ee_force                 Scalars: end-effector contact force, N; SeriesLines (static) names them x, y, z
     events                         TextLog: clouds received, objects added/removed, corrections, stale link,
                                    dropped messages
 
 Timelines: ``sim_time`` (simulated seconds) and ``wall_time`` (Unix time).
+
+Each command picks the default layout (:data:`LAYOUTS`) whose panels it fills: ``twin estimate`` the 3D view
+and the properties; ``twin build`` the 3D view; ``twin run`` adds the force; ``twin remote`` the force and
+events; ``twin local`` and ``twin demo`` the divergence as well.
 """
 
 from __future__ import annotations
@@ -115,20 +119,45 @@ def parse_target(words: list[str], rate_hz: float = DEFAULT_RATE_HZ) -> RerunTar
     raise TwinError(f"--rerun expects 'spawn', 'save FILE.rrd' or 'connect [HOST:PORT]', got {' '.join(words)!r}")
 
 
-def blueprint():  # type: ignore[no-untyped-def]
-    """The default layout: the 3D scene on the left; divergence, force and the event log on the right."""
+#: The layout each command asks for: which panels it fills. A panel nothing is logged to is left out.
+LAYOUTS = {
+    "estimate": "one estimate (twin estimate): the 3D view and its properties",
+    "scene": "a built scene (twin build): the 3D view",
+    "twin": "a twin on its own (twin run): the 3D view and the end-effector force",
+    "remote": "the remote C (twin remote): the 3D view, the end-effector force and the events",
+    "sync": "a twin following a remote (twin local, twin demo): all of the above and the divergence",
+}
+
+
+def blueprint(layout: str = "sync"):  # type: ignore[no-untyped-def]
+    """The default layout for ``layout`` (a key of :data:`LAYOUTS`): the 3D scene on the left, plots on the right.
+
+    Raises:
+        TwinError: an unknown layout.
+    """
     import rerun.blueprint as rrb
 
+    if layout not in LAYOUTS:
+        raise TwinError(f"unknown rerun layout {layout!r}; expected one of {', '.join(LAYOUTS)}")
+    # The 3D view's title is its legend: it names only the sides this recording has.
+    scene = {"estimate": "estimate: cloud (green), mesh (blue), OBB (yellow outline)",
+             "remote": "remote C (orange)", "sync": "remote C (orange) and twin C' (blue)"}.get(layout, "twin C' (blue)")
+    view = rrb.Spatial3DView(origin="/world", name=scene)
+    force = rrb.TimeSeriesView(origin="/plots/ee_force", name="end-effector force, N")
+    events = rrb.TextLogView(origin="/events", name="sync events")
+    if layout == "estimate":
+        side = [rrb.TextDocumentView(origin="/world/estimate", name="properties")]
+    elif layout == "scene":
+        side = []
+    elif layout == "twin":
+        side = [force]
+    elif layout == "remote":
+        side = [force, events]
+    else:
+        side = [rrb.TimeSeriesView(origin="/plots/divergence", name="divergence |C' - C|, mm"), force, events]
+    root = view if not side else rrb.Horizontal(view, rrb.Vertical(*side), column_shares=[3, 2])
     return rrb.Blueprint(
-        rrb.Horizontal(
-            rrb.Spatial3DView(origin="/world", name="remote C (orange) and twin C' (blue)"),
-            rrb.Vertical(
-                rrb.TimeSeriesView(origin="/plots/divergence", name="divergence |C' - C|, mm"),
-                rrb.TimeSeriesView(origin="/plots/ee_force", name="end-effector force, N"),
-                rrb.TextLogView(origin="/events", name="sync events"),
-            ),
-            column_shares=[3, 2],
-        ),
+        root,
         rrb.TimePanel(timeline="sim_time", play_state="following"),  # opens at the latest state
         collapse_panels=True,
     )
@@ -142,8 +171,10 @@ class RerunLog:
     for it. Use as a context manager or call :meth:`close`, which waits until everything queued is written.
     """
 
-    def __init__(self, target: RerunTarget | None = None, *, recording_id: str | None = None,
+    def __init__(self, target: RerunTarget | None = None, *, layout: str = "sync", recording_id: str | None = None,
                  queue_size: int = 4096) -> None:
+        if layout not in LAYOUTS:
+            raise TwinError(f"unknown rerun layout {layout!r}; expected one of {', '.join(LAYOUTS)}")
         self.period = 1.0 / (target.rate_hz if target is not None else DEFAULT_RATE_HZ)
         self.dropped = 0  # items not logged because the queue was full
         self.logged = 0  # items the writer logged (known after close)
@@ -153,20 +184,20 @@ class RerunLog:
             ctx = mp.get_context("spawn")
             self._queue = ctx.Queue(queue_size)
             self._result = ctx.Queue(1)
-            self._proc = ctx.Process(target=_writer_main, args=(target, recording_id, self._queue, self._result),
+            self._proc = ctx.Process(target=_writer_main, args=(target, layout, recording_id, self._queue, self._result),
                                      name="rerun-log", daemon=True)
             self._proc.start()
 
     @classmethod
-    def open(cls, target: RerunTarget | None, *, recording_id: str | None = None) -> RerunLog:
-        """A log to ``target`` (None: off).
+    def open(cls, target: RerunTarget | None, *, layout: str = "sync", recording_id: str | None = None) -> RerunLog:
+        """A log to ``target`` (None: off), shown in the viewer with the default ``layout`` (see :data:`LAYOUTS`).
 
         Raises:
-            TwinError: ``spawn`` without a display.
+            TwinError: ``spawn`` without a display, or an unknown layout.
         """
         if target is not None and target.mode == "spawn":
             _check_display()
-        return cls(target, recording_id=recording_id)
+        return cls(target, layout=layout, recording_id=recording_id)
 
     @property
     def enabled(self) -> bool:
@@ -323,7 +354,7 @@ class RerunLog:
             self.dropped += 1
 
 
-def _writer_main(target: RerunTarget, recording_id: str | None, items, result) -> None:  # type: ignore[no-untyped-def]
+def _writer_main(target: RerunTarget, layout: str, recording_id: str | None, items, result) -> None:  # type: ignore[no-untyped-def]
     """The child process: open the recording, log every queued item, report how many (or what failed)."""
     import os
     import signal
@@ -337,11 +368,11 @@ def _writer_main(target: RerunTarget, recording_id: str | None, items, result) -
         if target.mode == "spawn":
             # rerun looks for its viewer on PATH; ours is beside this interpreter, which may not be on it.
             os.environ["PATH"] = os.path.dirname(sys.executable) + os.pathsep + os.environ.get("PATH", "")
-            stream.spawn(default_blueprint=blueprint())
+            stream.spawn(default_blueprint=blueprint(layout))
         elif target.mode == "save":
-            stream.save(target.address, default_blueprint=blueprint())
+            stream.save(target.address, default_blueprint=blueprint(layout))
         else:
-            stream.connect_grpc(target.address, default_blueprint=blueprint())
+            stream.connect_grpc(target.address, default_blueprint=blueprint(layout))
     except Exception as exc:  # reported to the parent, which warns and goes on without rerun
         result.put(f"could not open the recording ({target.mode}): {exc}".splitlines()[0])
         return
@@ -367,6 +398,7 @@ class _Writer:
         self._now = (0.0, 0.0)  # (sim, wall) of the item being logged
         self._rows: dict[tuple[str, str], list] = {}
         self._batch_start = 0.0
+        self._force_named = False
 
     def log(self, sim_time: float, wall: float, what: str, args: tuple) -> None:
         self._now = (sim_time, wall)
@@ -399,6 +431,9 @@ class _Writer:
             self._row("point", "world/end_effector", ee)
             self._row("arrow", "world/end_effector/force", np.concatenate([ee, force * FORCE_SCALE]))
             self._row("scalars", "plots/ee_force", force)
+            if not self._force_named:  # the three series are x, y, z in the legend, not ee_force[0..2]
+                self.stream.log("plots/ee_force", _force_series(), static=True)
+                self._force_named = True
         if self._now[1] - self._batch_start >= BATCH_SECONDS:
             self.send_rows()
 
@@ -442,9 +477,11 @@ class _Writer:
         box = est.obb
         s.log(f"{path}/obb", rr.Boxes3D(centers=[box.center - com], half_sizes=[box.extents / 2],
                                         quaternions=[rr.Quaternion(xyzw=_matrix_xyzw(box.rotation))],
-                                        colors=[(230, 200, 40)], radii=0.0005))
+                                        colors=[(230, 200, 40)], radii=0.0008, fill_mode="majorwireframe"))
+        # One short label per object, on its centre of mass only: objects side by side would otherwise
+        # stack their texts. Volume, density and the rest are in .../properties.
         m = est.mass
-        label = f"{_leaf(path)} {m.mass:.3g} kg, {m.volume * 1e6:,.0f} cm³"
+        label = f"{_leaf(path)} {m.mass:.3g} kg"
         s.log(f"{path}/com", rr.Points3D([np.zeros(3)], radii=0.003, colors=[(255, 255, 255)], labels=[label]))
         s.log(f"{path}/properties", rr.TextDocument(_properties(est, len(hulls)), media_type="text/markdown"))
         if cloud is not None:
@@ -477,6 +514,12 @@ class _Writer:
         import rerun as rr
 
         self.stream.log("events", rr.TextLog(text, level=level))
+
+
+def _force_series():  # type: ignore[no-untyped-def]
+    import rerun as rr
+
+    return rr.SeriesLines(names=["x", "y", "z"], colors=[(220, 60, 60), (60, 170, 60), (70, 110, 230)])
 
 
 def _hull_rgba(k: int) -> tuple[int, int, int, int]:
