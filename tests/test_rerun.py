@@ -109,7 +109,9 @@ def test_estimate_writes_cloud_normals_mesh_obb_and_properties(box_cloud, tmp_pa
     assert rec.columns[f"{base}/cloud"]["Points3D:labels"] == [["30,000 points (20,000 shown)"]]
     (label,) = rec.columns[f"{base}/com"]["Points3D:labels"][0]
     assert re.fullmatch(r"crate [0-9.]+ kg", label)  # short: volume and the rest are in the properties
-    assert rec.columns[f"{base}/cloud"]["Points3D:show_labels"] == [[False]]  # the com's is the one label shown
+    # Labels show on hover only: drawn always, neighbouring objects' labels overlap.
+    assert rec.columns[f"{base}/com"]["Points3D:show_labels"] == [[False]]
+    assert rec.columns[f"{base}/cloud"]["Points3D:show_labels"] == [[False]]
     (doc,) = rec.columns[f"{base}/properties"]["TextDocument:text"][0]
     assert "wood_pine" in doc and "mass" in doc and "volume" in doc
     # The OBB is an outline (rerun's FillMode.MajorWireframe = 1), not a solid box hiding the mesh.

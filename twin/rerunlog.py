@@ -16,7 +16,7 @@ Entity tree (``<side>`` is ``twin`` for C', ``remote`` for C, ``estimate`` for `
     world/<side>/<id>/mesh         Mesh3D, body frame: the reconstructed (decimated) surface
     world/<side>/<id>/obb          Boxes3D, body frame: the points' oriented bounding box, as an outline
     world/<side>/<id>/hulls/<k>    Mesh3D, body frame: CoACD's convex parts, one colour each
-    world/<side>/<id>/com          Points3D: centre of mass, labelled "<id> <mass> kg" (the only label shown)
+    world/<side>/<id>/com          Points3D: centre of mass, labelled "<id> <mass> kg", shown on hover
     world/<side>/<id>/properties   TextDocument: the estimate in full
     world/end_effector             Points3D: the operator's sphere; .../force Arrows3D (N drawn at FORCE_SCALE)
     plots/divergence/<id>          Scalars: |twin - remote| of the centre of mass, mm
@@ -478,11 +478,12 @@ class _Writer:
         s.log(f"{path}/obb", rr.Boxes3D(centers=[box.center - com], half_sizes=[box.extents / 2],
                                         quaternions=[rr.Quaternion(xyzw=_matrix_xyzw(box.rotation))],
                                         colors=[(230, 200, 40)], radii=0.0008, fill_mode="majorwireframe"))
-        # One short label per object, on its centre of mass only: objects side by side would otherwise
-        # stack their texts. Volume, density and the rest are in .../properties.
+        # One short label per object, on its centre of mass, shown on hover only: drawn always, the labels
+        # of neighbouring objects overlap (8 objects on a table did). The whole estimate is in .../properties.
         m = est.mass
-        label = f"{_leaf(path)} {m.mass:.3g} kg"
-        s.log(f"{path}/com", rr.Points3D([np.zeros(3)], radii=0.003, colors=[(255, 255, 255)], labels=[label]))
+        label = f"{_leaf(path)} {m.mass:.3g} kg" if m.mass < 100 else f"{_leaf(path)} {m.mass:,.0f} kg"
+        s.log(f"{path}/com", rr.Points3D([np.zeros(3)], radii=0.003, colors=[(255, 255, 255)], labels=[label],
+                                         show_labels=False))
         s.log(f"{path}/properties", rr.TextDocument(_properties(est, len(hulls)), media_type="text/markdown"))
         if cloud is not None:
             n = est.points_in or len(cloud)
