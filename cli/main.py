@@ -660,7 +660,7 @@ def _run_local(args: argparse.Namespace, rlog) -> None:  # type: ignore[no-untyp
                   "snaps": r.snaps, "holds": r.holds, "operator_targets": r.operator_targets,
                   "operator_dropped": dict(r.operator_dropped), "forces_sent": r.forces_sent,
                   "step_p99_ms": stats.p99 * 1e3, "missed_deadlines": stats.missed,
-                  "objects": local.objects, "objects_pending": local.expected - len(local.objects)}
+                  "objects": local.objects, "objects_pending": local.pending}
         record["per_object"] = _local_objects(local)
         if args.json:
             print(to_json(record))

@@ -161,6 +161,8 @@ def test_twin_local_records_a_scripted_session(endpoint, cache, tmp_path, capsys
     assert code == 0
     record = json.loads(capsys.readouterr().out)
     assert record["forces_sent"] > 100  # (objects may still be estimating in a worker: not asked here)
+    # Every object the remote published is either touchable or named as pending.
+    assert sorted(record["objects"] + record["objects_pending"]) == ["can", "crate"]
     rec = read_recording(path)
     assert rec.damage is None and rec.metadata["clock"] == "real" and rec.metadata["command"] == "local"
     times, targets = rec.targets()
