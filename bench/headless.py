@@ -37,8 +37,8 @@ def session(path: Path, seconds: float, cache: Path) -> dict:
         s.tick()  # the twin takes in every estimated object at its first tick
         t1 = time.perf_counter()
         start, tw = s.local.twin.data.mocap_pos[0].copy(), s.local.twin.time
-        push = push_trajectory(start, start + np.array([2.2, 0.0, -0.12]), seconds)
-        s.run(seconds, trajectory=lambda t: push(t - tw))
+        push = push_trajectory(start, start + np.array([2.2, 0.0, -0.12]), seconds, start_time=tw)
+        s.run(seconds, trajectory=push)
         t2 = time.perf_counter()
         gaps = [float(np.linalg.norm(p[0] - s.remote.twin.pose(i)[0])) for i, p in s.poses().items()]
         return {"objects": len(s.local.objects), "setup_s": t1 - t0, "run_s": t2 - t1, "sim_s": seconds,

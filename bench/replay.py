@@ -49,7 +49,7 @@ def replay(path: Path, seconds: float, cache: Path, profile: cProfile.Profile | 
         s.tick()  # the twin takes in every estimated object at its first tick
         t1 = time.perf_counter()
         start, tw = s.local.twin.data.mocap_pos[0].copy(), s.local.twin.time
-        push = push_trajectory(start, start + np.array([1.0, 0.6, -0.03]), seconds)
+        push = push_trajectory(start, start + np.array([1.0, 0.6, -0.03]), seconds, start_time=tw)
         rng = np.random.default_rng(0)
         ids = sorted(s.remote.twin.object_ids())
         steps, kick_every, moving = round(seconds / s.dt), round(KICK_EVERY / s.dt), []
@@ -59,7 +59,7 @@ def replay(path: Path, seconds: float, cache: Path, profile: cProfile.Profile | 
         for k in range(steps):
             if k % kick_every == 0:
                 _kick(s, rng)
-            s.tick(lambda t: push(t - tw))
+            s.tick(push)
             if k % 50 == 25:
                 moving.append(np.mean([np.linalg.norm(s.remote.twin.velocity(i)[0]) > 0.01 for i in ids]))
         t3 = time.perf_counter()

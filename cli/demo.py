@@ -110,9 +110,8 @@ def run_demo(*, duration: float = 5.0, scene_path: Path | None = None, zenoh_con
         sync_s = time.perf_counter() - t_join
         console.print(f"all {len(local.objects)} objects touchable in the twin after {sync_s:.1f} s")
         start = local.twin.data.mocap_pos[0].copy()
-        push = push_trajectory(start, start + np.array([2.2, 0.0, -0.12]), duration)
-        t_push = local.twin.time
-        stats = local.run(duration, trajectory=lambda t: push(t - t_push))
+        push = push_trajectory(start, start + np.array([2.2, 0.0, -0.12]), duration, start_time=local.twin.time)
+        stats = local.run(duration, trajectory=push)
         session_s = time.perf_counter() - t_join
         report, counters = local.report, local.link.counters
         drift = {i: float(np.linalg.norm(local.twin.pose(i)[0] - r[0])) for i in local.objects

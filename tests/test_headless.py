@@ -27,8 +27,7 @@ def cache(tmp_path_factory) -> Path:
 def _push(session: Headless):  # type: ignore[no-untyped-def]
     """Through the crate and on, over 5 s of twin time from now, then hold."""
     start, t0 = session.local.twin.data.mocap_pos[0].copy(), session.local.twin.time
-    push = push_trajectory(start, start + np.array([0.6, 0.0, -0.03]), 5.0)
-    return lambda t: push(t - t0)
+    return push_trajectory(start, start + np.array([0.6, 0.0, -0.03]), 5.0, start_time=t0)
 
 
 def _session_poses(cache: Path, seconds: float) -> tuple[dict, dict, int]:

@@ -224,8 +224,8 @@ def test_a_headless_twin_sees_poses_50_ms_after_the_remote_sent_them(tmp_path_fa
     network = Network(uplink=Conditions(delay=0.05), downlink=Conditions(delay=0.05), seed=1)
     with Headless(load_scene(SMALL), cache_dir=cache, network=network) as session:
         start, t0 = session.local.twin.data.mocap_pos[0].copy(), session.local.twin.time
-        push = push_trajectory(start, start + np.array([0.6, 0.0, -0.03]), 2.0)
-        session.run(2.0, trajectory=lambda t: push(t - t0))
+        push = push_trajectory(start, start + np.array([0.6, 0.0, -0.03]), 2.0, start_time=t0)
+        session.run(2.0, trajectory=push)
         latency = np.array(session.local.report.pose_latency)
         dt = session.dt
         assert session.local.report.pose_updates > 50

@@ -21,12 +21,13 @@ class TrajectoryError(TwinError, ValueError):
     """A trajectory file that cannot be read or does not describe a trajectory."""
 
 
-def push_trajectory(start: np.ndarray, end: np.ndarray, duration: float) -> Trajectory:
-    """A straight push from ``start`` to ``end`` over ``duration`` seconds, then hold."""
+def push_trajectory(start: np.ndarray, end: np.ndarray, duration: float, *, start_time: float = 0.0) -> Trajectory:
+    """A straight push from ``start`` to ``end`` over ``duration`` seconds from ``start_time`` (twin time,
+    seconds), holding ``start`` before it and ``end`` after."""
     start, end = np.asarray(start, float), np.asarray(end, float)
 
     def at(t: float) -> np.ndarray:
-        s = min(1.0, max(0.0, t / duration))
+        s = min(1.0, max(0.0, (t - start_time) / duration))
         return start + s * (end - start)
 
     return at
