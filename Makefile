@@ -17,7 +17,7 @@ $(APT_STAMP): | $(PY)
 
 $(STAMP): pyproject.toml | $(PY)
 	@$(PY) -m pip install -q --disable-pip-version-check --upgrade pip 2>/dev/null
-	@$(PY) -m pip install -q --disable-pip-version-check -e '.[dev]'
+	@$(PY) -m pip install -q --disable-pip-version-check -e '.[dev,dask]'
 	@touch $@
 
 demo: $(APT_STAMP) $(STAMP)

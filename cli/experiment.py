@@ -41,6 +41,9 @@ def add_parser(sub) -> None:  # type: ignore[no-untyped-def]
     p.add_argument("--tasks", default="push,press", help="tasks, comma-separated: push, press (default both)")
     p.add_argument("--speed", type=float, default=1.0, help="task speed factor (2: twice as fast; default 1)")
     p.add_argument("--workers", type=int, default=2, help="worker processes (default 2; 0: this process)")
+    p.add_argument("--dask", metavar="ADDRESS",
+                   help="run the sessions on a Dask cluster instead: a scheduler address (tcp://HOST:8786) or "
+                        "'local' (a LocalCluster of --workers processes on loopback); needs the 'dask' extra")
     p.add_argument("--out", type=Path, required=True, help="output folder (new, empty or written by this command)")
     p.set_defaults(handler=run)
 
@@ -84,6 +87,8 @@ def parse(args: argparse.Namespace):  # type: ignore[no-untyped-def]
         raise TwinError(f"--seeds must be at least 1, got {args.seeds}")
     if args.workers < 0:
         raise TwinError(f"--workers must be >= 0, got {args.workers}")
+    if args.dask is not None and args.dask != "local" and "://" not in args.dask:
+        raise TwinError(f"--dask: expected 'local' or a scheduler address like tcp://HOST:8786, got {args.dask!r}")
     tasks = tuple(t.strip() for t in args.tasks.split(",") if t.strip())
     sweep = Sweep(tasks=tasks, delays=tuple(d / 1e3 for d in delays), jitter=args.jitter / 1e3,
                   loss=args.loss / 100, mass_scales=masses, seeds=args.seeds, speed=args.speed)
@@ -97,9 +102,11 @@ def parse(args: argparse.Namespace):  # type: ignore[no-untyped-def]
 
 def run(args: argparse.Namespace) -> int:
     """The ``twin experiment`` handler: sweep, CSV, plots, report."""
+    from contextlib import nullcontext
+
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-    from scenes.experiment import run_experiment
+    from scenes.experiment import dask_executor, run_experiment
     from scenes.scenefile import load_scene
 
     sweep = parse(args)
@@ -107,14 +114,15 @@ def run(args: argparse.Namespace) -> int:
     out: Path = args.out
     out.mkdir(parents=True, exist_ok=True)
     (out / MARKER).write_text("written by twin experiment\n")
-    with Progress(TextColumn("sessions"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
-                  transient=False) as bar:
+    engine = nullcontext(None) if args.dask is None else dask_executor(args.dask, args.workers)
+    with engine as executor, Progress(TextColumn("sessions"), BarColumn(), MofNCompleteColumn(),
+                                      TimeElapsedColumn(), transient=False) as bar:
         task = bar.add_task("sessions", total=None)
 
         def progress(done: int, total: int) -> None:
             bar.update(task, completed=done, total=total)
 
-        rows, traces = run_experiment(scene, sweep, workers=args.workers, progress=progress)
+        rows, traces = run_experiment(scene, sweep, workers=args.workers, executor=executor, progress=progress)
     write_csv(rows, out / "results.csv")
     plots = write_plots(rows, traces, out)
     (out / "report.md").write_text(report(rows, args, plots))

@@ -21,16 +21,18 @@ twin's is one step; the direct one adds the uplink's transit (at least one step:
 the operator's command of the same tick) and the force sample's downlink transit (means of the measured
 per-packet delays).
 
-Runs go to worker processes (``spawn``) or any :class:`concurrent.futures.Executor` (a Dask
-``Client.get_executor()`` works); rows are sorted, so the result does not depend on the number of workers.
+Runs go to worker processes (``spawn``) or any :class:`concurrent.futures.Executor`:
+:func:`dask_executor` hands them to a Dask distributed cluster (the optional ``dask`` extra), a running one
+or a local one. Rows are sorted, so the result does not depend on the number or kind of workers.
 """
 
 from __future__ import annotations
 
 import math
 import multiprocessing as mp
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import Executor, ProcessPoolExecutor, as_completed
+from contextlib import contextmanager
 from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 
@@ -496,6 +498,37 @@ class Sweep:
         return runs
 
 
+@contextmanager
+def dask_executor(address: str, workers: int = 2) -> Iterator[Executor]:
+    """Sessions on a Dask distributed cluster, as an :class:`~concurrent.futures.Executor`.
+
+    Args:
+        address: a running scheduler's address (``tcp://HOST:8786``; its workers need this package and the
+            scene's files at the same paths), or ``"local"`` for a :class:`distributed.LocalCluster` of
+            ``workers`` single-threaded processes on this machine, listening on loopback only, no dashboard.
+        workers: processes of the local cluster (at least 1).
+
+    Raises:
+        ExperimentError: ``distributed`` is not installed (``pip install 'tactile-twin[dask]'``), or no
+            scheduler answers at ``address`` within 10 s.
+    """
+    try:
+        from distributed import Client, LocalCluster
+    except ImportError:
+        raise ExperimentError("Dask is not installed: pip install 'tactile-twin[dask]' (or distributed)") from None
+    if address == "local":
+        with LocalCluster(n_workers=max(1, workers), threads_per_worker=1, processes=True, host="127.0.0.1",
+                          dashboard_address=None) as cluster, Client(cluster) as client:
+            yield client.get_executor()
+        return
+    try:
+        client = Client(address, timeout=10)
+    except (OSError, TimeoutError, ValueError) as exc:
+        raise ExperimentError(f"no Dask scheduler at {address!r}: {exc}") from None
+    with client:
+        yield client.get_executor()
+
+
 def _job(scene: SceneSpec, condition: Condition, cache_dir: Path | None) -> Trace:
     return run_session(scene, condition, cache_dir=cache_dir)
 
@@ -509,7 +542,7 @@ def run_experiment(scene: SceneSpec, sweep: Sweep, *, workers: int = 1, executor
         scene: the scene (objects, table, end effector).
         sweep: the conditions.
         workers: processes (spawned) when no ``executor`` is given; 0 runs everything in this process.
-        executor: where to run the sessions instead (e.g. a Dask client's ``get_executor()``).
+        executor: where to run the sessions instead (e.g. :func:`dask_executor`).
         cache_dir: CoACD cache for both sides (default: the usual one).
         progress: called as ``progress(done, total)`` after each session.
 

@@ -123,3 +123,22 @@ def test_help_says_scene_files_only():
     out = subprocess.run([sys.executable, "-m", "cli.main", "experiment", "--help"], capture_output=True,
                          text=True, check=True, cwd=Path(__file__).parent.parent).stdout
     assert "recordings are not accepted yet" in out
+
+
+def test_a_dask_local_cluster_gives_the_rows_local_processes_give(rows, cache):
+    from scenes.experiment import dask_executor
+
+    one = Sweep(tasks=("push",), delays=(0.05,), mass_scales=(1.5,), seeds=1, speed=2.0)  # 2 sessions, truth too
+    with dask_executor("local", workers=2) as executor:
+        on_dask, _ = run_experiment(load_scene(SMALL), one, executor=executor, cache_dir=cache)
+    assert len(on_dask) == 2
+    # repr: NaN fields (undefined for a mode) compare equal as text, and every float to the last digit.
+    assert repr(on_dask) == repr([r for r in rows if r.delay_ms == 50 and r.mass_scale == 1.5])
+
+
+def test_an_unreachable_dask_scheduler_is_one_line(tmp_path, capsys):
+    from sync.zenoh_transport import free_port
+
+    assert main([*ARGS, "--dask", f"tcp://127.0.0.1:{free_port()}", "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "no Dask scheduler at" in err, err
