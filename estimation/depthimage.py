@@ -1,0 +1,157 @@
+"""Depth images from files: read, check, and back-project into a view of the object.
+
+The formats and conventions are the common ones (ROS REP 118, Open3D's ``create_from_depth_image``, the
+TUM and Redwood RGB-D datasets): a 16-bit single-channel PNG in millimetres, or a ``.npy`` (h, w) array
+(float in metres, integer in millimetres). Zero and NaN mean "no return" and are dropped. Intrinsics are
+OpenCV's pinhole ``fx fy cx cy`` in pixels with pixel centres at integer coordinates (what Open3D's
+``PinholeCameraIntrinsic``, OpenCV's calibration and ROS ``camera_info`` give); the camera's axes are
+OpenCV's (x right, y down, z forward) and depth is the z coordinate. The pose is camera-to-world, the
+PCD ``VIEWPOINT`` form ``tx ty tz qw qx qy qz``; its translation is the view's sensor origin.
+
+The back-projection itself is :func:`estimation.fusion.depth_to_points` (the same as for the simulated
+cameras).
+"""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+
+import numpy as np
+
+from estimation.errors import CloudError, CloudFileError
+from estimation.fusion import Intrinsics, depth_to_points
+
+log = logging.getLogger(__name__)
+
+#: Suffixes read as depth images when intrinsics are given.
+DEPTH_SUFFIXES = (".png", ".npy")
+
+#: Metres per stored unit when the caller gives none: integers are millimetres (16-bit PNG, the Kinect
+#: and RealSense convention), floats are metres (REP 118's 32FC1).
+INTEGER_DEPTH_SCALE = 0.001
+FLOAT_DEPTH_SCALE = 1.0
+
+#: A depth scale this large (metres per unit) is almost surely Open3D's inverse convention (units per
+#: metre, 1000 for millimetres): 10 m per unit fits no depth sensor.
+MAX_DEPTH_SCALE = 10.0
+
+#: A quaternion's norm must be within this of 1 (files carry ~7 significant digits; a wrong order or a
+#: missing component is off by far more).
+QUAT_NORM_TOLERANCE = 1e-3
+
+
+def read_depth(path: str | Path, *, scale: float | None = None) -> np.ndarray:
+    """A depth image in metres.
+
+    Args:
+        path: a 16-bit single-channel PNG, or a ``.npy`` (h, w) numeric array.
+        scale: metres per stored unit; None: ``INTEGER_DEPTH_SCALE`` for integer data, ``FLOAT_DEPTH_SCALE``
+            for float data.
+
+    Returns:
+        (h, w) float64 metres, NaN where there was no return (zero, negative or non-finite).
+
+    Raises:
+        CloudFileError: missing or unreadable file, not single-channel, 8-bit PNG.
+        CloudError: a bad ``scale``, an empty image, or one with no valid depth.
+    """
+    path = Path(path)
+    if scale is not None and not (np.isfinite(scale) and 0 < scale <= MAX_DEPTH_SCALE):
+        raise CloudError(f"depth scale must be metres per unit in (0, {MAX_DEPTH_SCALE:g}] (0.001 for millimetres; "
+                         f"Open3D's depth_scale is the inverse), got {scale:g}")
+    if not path.is_file():
+        raise CloudFileError(f"{path}: no such file")
+    suffix = path.suffix.lower()
+    if suffix == ".png":
+        raw = _read_png(path)
+    elif suffix == ".npy":
+        try:
+            raw = np.load(path, allow_pickle=False)
+        except (OSError, ValueError) as exc:
+            raise CloudFileError(f"{path}: not a readable .npy array ({exc})") from None
+        if raw.ndim != 2 or not (np.issubdtype(raw.dtype, np.floating) or np.issubdtype(raw.dtype, np.integer)):
+            raise CloudFileError(f"{path}: a depth image must be a numeric (h, w) array, got {raw.dtype} {raw.shape}")
+    else:
+        raise CloudFileError(f"{path}: depth images are read from .png or .npy, not {suffix or 'no suffix'}")
+    if raw.size == 0:
+        raise CloudError(f"{path}: the depth image is empty ({raw.shape[1] if raw.ndim == 2 else 0}x{raw.shape[0]})")
+    if scale is None:
+        scale = FLOAT_DEPTH_SCALE if np.issubdtype(raw.dtype, np.floating) else INTEGER_DEPTH_SCALE
+    depth = raw.astype(np.float64) * scale
+    with np.errstate(invalid="ignore"):
+        depth[~(np.isfinite(depth) & (depth > 0))] = np.nan
+    if np.isnan(depth).all():
+        raise CloudError(f"{path}: no pixel holds a depth (all {raw.size} are zero or NaN)")
+    return depth
+
+
+def _read_png(path: Path) -> np.ndarray:
+    from PIL import Image, UnidentifiedImageError
+
+    try:
+        with Image.open(path) as image:
+            mode = image.mode
+            raw = np.asarray(image)
+    except (OSError, UnidentifiedImageError) as exc:
+        raise CloudFileError(f"{path}: not a readable PNG ({exc})") from None
+    if mode in ("L", "P", "1") or raw.dtype == np.uint8:
+        raise CloudFileError(f"{path}: an 8-bit PNG cannot hold depth; expected a 16-bit single-channel PNG "
+                             f"(millimetres)")
+    if raw.ndim != 2:
+        raise CloudFileError(f"{path}: expected a single-channel depth PNG, got mode {mode} with shape {raw.shape}")
+    return raw
+
+
+def intrinsics(fx: float, fy: float, cx: float, cy: float, *, width: int, height: int) -> Intrinsics:
+    """Intrinsics in OpenCV's convention (pixel centres at integers) checked against the image size.
+
+    Raises:
+        CloudError: non-finite or non-positive focal lengths, a principal point outside the image.
+    """
+    values = (fx, fy, cx, cy)
+    if not all(np.isfinite(v) for v in values):
+        raise CloudError(f"intrinsics must be finite, got fx fy cx cy = {' '.join(f'{v:g}' for v in values)}")
+    if fx <= 0 or fy <= 0:
+        raise CloudError(f"focal lengths must be > 0 pixels, got fx {fx:g}, fy {fy:g}")
+    if not (0 <= cx <= width and 0 <= cy <= height):
+        raise CloudError(f"principal point ({cx:g}, {cy:g}) lies outside the {width}x{height} image (intrinsics "
+                         f"for another resolution?)")
+    # fusion.Intrinsics puts pixel centres at integer + 0.5 (its rays start at u + 0.5).
+    return Intrinsics(float(fx), float(fy), float(cx) + 0.5, float(cy) + 0.5, int(width), int(height))
+
+
+def pose(values: object) -> tuple[np.ndarray, np.ndarray]:
+    """Camera-to-world rotation (3, 3) and position (3,) metres from ``tx ty tz qw qx qy qz``.
+
+    Raises:
+        CloudError: not seven finite numbers, or a quaternion whose norm is not 1.
+    """
+    from scipy.spatial.transform import Rotation
+
+    v = np.asarray(values, dtype=np.float64).ravel()
+    if v.shape != (7,) or not np.isfinite(v).all():
+        raise CloudError(f"pose: expected seven finite numbers tx ty tz qw qx qy qz, got {v.tolist()}")
+    norm = float(np.linalg.norm(v[3:]))
+    if abs(norm - 1) > QUAT_NORM_TOLERANCE:
+        raise CloudError(f"pose: the quaternion qw qx qy qz must have norm 1, got {norm:.4g}")
+    # scipy's order is x y z w; ours (MuJoCo's, PCD's VIEWPOINT) is w x y z.
+    return Rotation.from_quat(np.r_[v[4:7], v[3]] / norm).as_matrix(), v[:3].copy()
+
+
+def depth_view(depth: np.ndarray, camera: Intrinsics, rotation: np.ndarray,
+               position: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A depth image's points in the world and its sensor origin.
+
+    Args:
+        depth: (h, w) float64 metres, NaN where no return. camera: its intrinsics (size must match).
+        rotation: (3, 3) camera-to-world. position: (3,) metres, the camera centre in the world.
+
+    Returns:
+        points (n, 3) float64 metres world frame, and the origin (3,).
+
+    Raises:
+        CloudError: the image size does not match the intrinsics.
+    """
+    points, _ = depth_to_points(depth, camera, rotation, position)
+    return points, np.asarray(position, dtype=np.float64)

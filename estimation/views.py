@@ -1,0 +1,234 @@
+"""Several views of one object to one estimate that says how sure it is.
+
+A view is a cloud in a shared world frame plus the sensor origin it was seen from (a PCD's ``VIEWPOINT``
+translation, a depth image's camera centre). The views are fused with per-point origins
+(:func:`estimation.fusion.fuse_views`), the support plane's points are cut away and the object's base is
+closed on the plane (:func:`estimation.completion.close_bottom`), normals are oriented towards each
+point's sensor (:func:`estimation.fusion.fused_cloud`) and the result is estimated ('auto'). The record
+adds what the estimate alone cannot know: the share of the closed surface some sensor saw (``coverage``)
+and a volume interval that widens with what was completed or closed rather than observed
+(:func:`estimation.completion.honest_bounds`).
+
+Frames: world, metres, with ``+z`` up where a direction is needed (the plane "just below the lowest
+points" is horizontal), as in MuJoCo's world.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+
+import numpy as np
+
+from estimation.completion import Completion, close_bottom, coverage, honest_bounds
+from estimation.contracts import as_points
+from estimation.errors import CloudError
+from estimation.estimate import PhysicalEstimate, estimate
+from estimation.fusion import fuse_views, fused_cloud, oriented_normals
+from estimation.segmentation import PLANE_SIGMAS, Plane, fit_plane
+
+log = logging.getLogger(__name__)
+
+#: RANSAC inlier distance for a plane found in a file, in noise sigmas (``spacing.surface_noise``) and at
+#: least ``PLANE_SPACINGS`` point spacings: a table scanned at 1 mm noise is a slab ~6 mm thick.
+PLANE_NOISE_SIGMAS = 3.0
+PLANE_SPACINGS = 1.5
+
+#: A plane found by RANSAC is the support only if it holds at least this share of the points (a table
+#: around an object shows as a good part of a tabletop scan; a stray face of the object does not count)...
+MIN_PLANE_SHARE = 0.05
+
+#: ...and at most this share of the other points lie below it (the object's own face fails: the rest of
+#: the object is behind it, on the side away from the sensors).
+MAX_BELOW_SHARE = 0.05
+
+#: A given plane with more than this share of the points more than a cut below it is refused: its normal
+#: most likely points into the table, or the numbers are for another frame.
+MAX_BELOW_GIVEN = 0.1
+
+
+@dataclass(frozen=True)
+class View:
+    """One view of an object.
+
+    Attributes:
+        points: (n, 3) float64, metres, world frame (n may be 0: reported, not fused).
+        origin: (3,) float64 metres, world frame: the sensor centre; None when unknown.
+        name: where it came from (a file name), for messages.
+    """
+
+    points: np.ndarray
+    origin: np.ndarray | None
+    name: str = ""
+
+
+@dataclass(frozen=True)
+class ViewsEstimate:
+    """An estimate from views, with how much of it rests on observation.
+
+    Attributes:
+        estimate: the physical estimate of the fused, completed cloud.
+        coverage: share (0-1) of the closed surface's area within reach of an observed point.
+        volume_bounds_m3: (low, high) m^3: where the volume may lie given the noise and what was not
+            observed (see :func:`estimation.completion.honest_bounds`).
+        view_points: points each view contributed (input order; table points included).
+        object_points: observed points of the object after the support plane was cut away.
+        completed_points: points added by completion (the base on the support plane).
+        plane: the support plane used, or None.
+        warnings: the estimate's warnings and those of fusion and completion.
+    """
+
+    estimate: PhysicalEstimate
+    coverage: float
+    volume_bounds_m3: tuple[float, float]
+    view_points: tuple[int, ...]
+    object_points: int
+    completed_points: int
+    plane: Plane | None
+    warnings: tuple[str, ...]
+
+
+def plane_from_abcd(abcd: object) -> Plane:
+    """The plane ``A x + B y + C z + D = 0`` (metres), normal ``(A, B, C)`` normalised.
+
+    Raises:
+        CloudError: not four finite numbers, or a zero normal.
+    """
+    try:
+        values = np.asarray(abcd, dtype=np.float64).ravel()
+    except (TypeError, ValueError) as exc:
+        raise CloudError(f"support plane: expected four numbers A B C D, got {abcd!r}") from exc
+    if values.shape != (4,) or not np.isfinite(values).all():
+        raise CloudError(f"support plane: expected four finite numbers A B C D, got {values.tolist()}")
+    length = float(np.linalg.norm(values[:3]))
+    if length == 0:
+        raise CloudError("support plane: the normal (A, B, C) is zero")
+    return Plane(values[:3] / length, float(values[3]) / length, 0.0, 0)
+
+
+def plane_below(points: np.ndarray) -> Plane:
+    """The horizontal plane (normal +z, world up) through the lowest of ``points`` ((n, 3) metres)."""
+    pts = as_points(points, "points")
+    return Plane(np.array([0.0, 0.0, 1.0]), -float(pts[:, 2].min()), 0.0, 0)
+
+
+def find_support_plane(points: np.ndarray, origins: np.ndarray, *, threshold: float,
+                       rng: np.random.Generator) -> Plane | None:
+    """The support plane in the data (RANSAC), or None when the largest plane is not one.
+
+    The largest plane is the support when it holds at least ``MIN_PLANE_SHARE`` of the points and almost
+    all the others (``1 - MAX_BELOW_SHARE``) lie on its sensors' side: an object's own face has the rest of
+    the object behind it.
+
+    Args:
+        points: (n, 3) float64 metres, world frame. origins: (n, 3) the sensor of each point.
+        threshold: RANSAC inlier distance, metres. rng: for RANSAC's draws.
+    """
+    if len(points) < 3:
+        return None
+    try:
+        plane = fit_plane(points, threshold=threshold, toward=origins.mean(axis=0), rng=rng)
+    except CloudError:
+        return None
+    h = plane.height(points)
+    margin = max(PLANE_SIGMAS * plane.rms, threshold)
+    off = np.abs(h) > margin
+    if plane.inliers < MIN_PLANE_SHARE * len(points) or not off.any():
+        return None
+    if (h[off] < 0).mean() > MAX_BELOW_SHARE:
+        return None
+    return plane
+
+
+def estimate_views(views: list[View], density: float, *, support: Plane | str | None = None,
+                   material: str | None = None, seed: int = 0) -> ViewsEstimate:
+    """Fuse ``views`` of one object, close its base on the support plane, estimate, and say how sure.
+
+    Args:
+        views: one or more views in one world frame; every view needs an ``origin``.
+        density: kg/m^3.
+        support: a :class:`Plane` (normal up into the object's side), ``"auto"`` (found in the data, else
+            the horizontal plane through the lowest point) or None (no plane: nothing is cut or closed).
+        material: recorded with the estimate.
+        seed: RANSAC's randomness (``"auto"``).
+
+    Raises:
+        CloudError: a view without origin, a view with no points, a plane with most points below it, or
+            too few object points left.
+        ReconstructionError: as :func:`estimation.estimate`.
+    """
+    from estimation.spacing import point_spacing, surface_noise
+
+    for k, view in enumerate(views):
+        label = view.name or f"view {k + 1}"
+        if view.origin is None:
+            raise CloudError(f"{label}: no sensor origin (no VIEWPOINT header; pass --viewpoint X Y Z)")
+        if len(view.points) == 0:
+            raise CloudError(f"{label}: the view has no points")
+    points, origins = fuse_views([(v.points, v.origin) for v in views])
+    spacing = point_spacing(points)
+    noise = surface_noise(points)
+    threshold = max(PLANE_NOISE_SIGMAS * noise, PLANE_SPACINGS * spacing)
+    warnings: list[str] = []
+    plane: Plane | None
+    if isinstance(support, str):
+        if support != "auto":
+            raise CloudError(f"support plane: expected 'auto' or A B C D, got {support!r}")
+        plane = find_support_plane(points, origins, threshold=threshold, rng=np.random.default_rng(seed))
+        if plane is None:
+            plane = plane_below(points)
+            warnings.append(f"no support plane in the data; assumed the horizontal plane through the lowest "
+                            f"point (z = {-plane.offset:.4g} m)")
+    else:
+        plane = support
+    completion = Completion(np.zeros((0, 3)), np.zeros((0, 3)), 0.0)
+    cut = 0.0
+    if plane is not None:
+        h = plane.height(points)
+        cut = max(PLANE_SIGMAS * plane.rms, threshold)
+        below = float((h < -cut).mean())
+        if below > MAX_BELOW_GIVEN:
+            raise CloudError(f"support plane: {100 * below:.0f} % of the points lie more than {1000 * cut:.2g} mm "
+                             f"below it (its normal must point up into the object's side)")
+        keep = h > cut
+        points, origins = points[keep], origins[keep]
+        if len(points) < 3:
+            raise CloudError(f"only {len(points)} points lie above the support plane")
+        normals = oriented_normals(points, origins)
+        completion = close_bottom(points, normals, plane, cell=spacing, cut=cut)
+    observed = len(points)
+    completed = np.concatenate([np.zeros(observed, bool), np.ones(len(completion.points), bool)])
+    allp = np.concatenate([points, completion.points])
+    # A completed point's "sensor" is a virtual one outside the object along its outward normal.
+    allo = np.concatenate([origins, completion.points + completion.normals])
+    alln = np.concatenate([np.full((observed, 3), np.nan), completion.normals])
+    cloud = fused_cloud(allp, allo, completed=completed, completed_normals=alln)
+    result = estimate(cloud, density, material=material)
+    share, bounds = assess(result, points, noise)
+    warnings.extend(result.warnings)
+    if len(completion.points):
+        warnings.append(f"the base ({completion.base_area * 1e4:.3g} cm^2) was closed on the support plane, "
+                        f"not observed")
+    if share < COVERAGE_WARNING:
+        warnings.append(f"only {100 * share:.0f} % of the closed surface was observed, the rest rests on "
+                        f"completion: with the sensor noise, the volume lies in {bounds[0]:.4g}..{bounds[1]:.4g} m^3")
+    return ViewsEstimate(result, share, bounds, tuple(len(v.points) for v in views), observed,
+                         len(completion.points), plane, tuple(warnings))
+
+
+#: Coverage below this earns a warning that the answer rests on completion.
+COVERAGE_WARNING = 0.9
+
+
+def assess(result: PhysicalEstimate, observed: np.ndarray, noise: float) -> tuple[float, tuple[float, float]]:
+    """Coverage (0-1) of ``result``'s mesh by the ``observed`` points and its volume interval (m^3).
+
+    Args:
+        result: an estimate (its mesh, cell and bounds are used).
+        observed: (n, 3) float64 metres, same frame: the points a sensor returned (no completed ones).
+        noise: metres, the observed points' sigma (``spacing.surface_noise``).
+    """
+    seen, total = coverage(result.vertices, result.faces, observed, radius=2 * result.cell)
+    share = seen / total if total > 0 else 0.0
+    return share, honest_bounds(result.volume, result.volume_bounds_m3, total - seen, total, noise=noise,
+                                extent=float(result.obb.extents.min()))
