@@ -1,8 +1,9 @@
 """One side's end of the wire: publish encoded messages (counting bytes), receive checked ones.
 
 Receiving is where bad input from the network stops: anything :func:`~sync.messages.decode` rejects, and
-an object message filed under another object's key, is dropped, counted per reason and logged (the first
-few at WARNING, the rest at DEBUG), never passed on and never raised into the transport's threads.
+an object message filed under another object's key, is dropped, counted per reason and logged, rate-limited
+per reason (:class:`~sync.ratelimit.RateLimitedLog`), never passed on and never raised into the transport's
+threads.
 """
 
 from __future__ import annotations
@@ -16,12 +17,10 @@ from dataclasses import dataclass, field
 from sync.clock import REAL_CLOCK, Clock
 from sync.keys import object_of
 from sync.messages import Message, MessageError, decode, encode
+from sync.ratelimit import RateLimitedLog
 from sync.transport import Transport
 
 log = logging.getLogger(__name__)
-
-#: Malformed messages logged at WARNING before the rest go to DEBUG (a flood must not flood the log).
-_WARN_LIMIT = 10
 
 Handler = Callable[[str, Message], None]
 
@@ -47,6 +46,7 @@ class Link:
         self.transport = transport
         self.clock = clock
         self.counters = LinkCounters()
+        self.dropped_log = RateLimitedLog(log, clock)  # a flood of bad messages must not flood the log
         self._lock = threading.Lock()
 
     def put(self, key: str, msg: Message) -> bytes:
@@ -86,8 +86,7 @@ class Link:
             with self._lock:
                 self.counters.dropped_malformed += 1
                 self.counters.dropped_by_reason[exc.reason] += 1
-                n = self.counters.dropped_malformed
-            (log.warning if n <= _WARN_LIMIT else log.debug)("dropped malformed message on %s: %s", key, exc)
+            self.dropped_log.warning(exc.reason, "dropped malformed message on %s: %s", key, exc)
             return False
         with self._lock:
             self.counters.messages_received += 1

@@ -1,0 +1,62 @@
+"""Warnings that a flood of bad input cannot turn into a flood of log lines.
+
+Each reason (``"non-finite"``, ``"wrong-key"``, ``"out-of-scene"``, ...) has its own budget: the first
+``burst`` go to WARNING; after that, at most one WARNING per ``period`` seconds of the given clock, saying how
+many of that reason were held back since the last one. Held-back lines go to DEBUG, so nothing is lost to
+anyone who asks for it. One noisy reason never silences another.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+from dataclasses import dataclass
+
+from sync.clock import REAL_CLOCK, Clock
+
+
+@dataclass
+class _Budget:
+    logged: int = 0
+    held: int = 0  # held back since the last WARNING of this reason
+    next_at: float = 0.0
+
+
+class RateLimitedLog:
+    """Per-reason rate limiting in front of a :class:`logging.Logger`; safe to call from any thread."""
+
+    def __init__(self, logger: logging.Logger, clock: Clock = REAL_CLOCK, *, burst: int = 10,
+                 period: float = 60.0) -> None:
+        if burst < 1 or not period > 0:
+            raise ValueError(f"burst must be >= 1 and period > 0, got {burst}, {period}")
+        self.logger = logger
+        self.clock = clock
+        self.burst = burst
+        self.period = period
+        self._budgets: dict[str, _Budget] = {}
+        self._lock = threading.Lock()
+
+    def warning(self, reason: str, msg: str, *args: object) -> bool:
+        """Log ``msg % args`` for ``reason`` at WARNING if its budget allows, else at DEBUG.
+
+        Returns:
+            Whether it went out at WARNING.
+        """
+        now = self.clock.now()
+        with self._lock:
+            b = self._budgets.setdefault(reason, _Budget())
+            loud = b.logged < self.burst or now >= b.next_at
+            if loud:
+                held, b.held = b.held, 0
+                b.logged += 1
+                if b.logged >= self.burst:
+                    b.next_at = now + self.period
+            else:
+                b.held += 1
+        if not loud:
+            self.logger.debug(msg, *args)
+        elif held:
+            self.logger.warning(msg + " (%d more like it held back; see DEBUG)", *args, held)
+        else:
+            self.logger.warning(msg, *args)
+        return loud
