@@ -47,6 +47,7 @@ from sync.messages import (
     encode,
     unpack_points,
 )
+from sync.ratelimit import RateLimitedLog
 from sync.recording import Recorder
 from sync.transport import Transport
 from twin.debuglog import OFF, DebugLog, display_subset
@@ -188,6 +189,7 @@ class Local:
         self.rlog = rlog
         self.clock = clock
         self.link = Link(transport, clock)
+        self.dropped_log = RateLimitedLog(log, clock)  # per reason: a flood of bad input, a few log lines
         self.report = LocalReport()
         info = self._find_scene(scene, wait)
         self.keys = Keys(info.name)
@@ -405,8 +407,8 @@ class Local:
         low, high = self.workspace
         if not (np.all(position >= low) and np.all(position <= high)):
             dropped["out-of-workspace"] += 1
-            if sum(dropped.values()) <= 10:
-                log.warning("dropped an operator target outside the workspace: %s", position.tolist())
+            self.dropped_log.warning("out-of-workspace", "dropped an operator target outside the workspace: %s",
+                                     position.tolist())
             return
         self._device_marks[msg.device] = (msg.epoch, msg.seq)
         self.device_target = position
@@ -420,8 +422,8 @@ class Local:
         if np.all(p >= low) and np.all(p <= high):
             return True
         self.report.out_of_scene += 1
-        if self.report.out_of_scene <= 10:
-            log.warning("dropped a %s of %r at %s: outside the scene", type(msg).__name__, msg.object_id, p.tolist())
+        self.dropped_log.warning("out-of-scene", "dropped a %s of %r at %s: outside the scene", type(msg).__name__,
+                                 msg.object_id, p.tolist())
         return False
 
     def _handle(self, received: float, key: str, msg) -> None:  # type: ignore[no-untyped-def]
