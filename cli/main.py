@@ -234,6 +234,10 @@ def _parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("materials", help="list the material table")
     p.set_defaults(handler=_cmd_materials)
+
+    p = sub.add_parser("schema", help="print a file format's JSON Schema (scene: the scene TOML's, as docs/scene.schema.json)")
+    p.add_argument("kind", choices=["scene"], help="which format")
+    p.set_defaults(handler=_cmd_schema)
     return parser
 
 
@@ -718,6 +722,13 @@ def _cmd_materials(args: argparse.Namespace) -> int:
     for mat in materials().values():
         names = f"  also: {', '.join(also[mat.name])}" if mat.name in also else ""
         print(f"{mat.name:18s} {mat.density:8.0f} kg/m^3  friction {mat.friction:.2f}{names}")
+    return 0
+
+
+def _cmd_schema(args: argparse.Namespace) -> int:
+    from scenes.scenefile import scene_schema_text
+
+    sys.stdout.write(scene_schema_text())
     return 0
 
 

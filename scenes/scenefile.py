@@ -1,35 +1,38 @@
-"""Scene files: a small TOML document listing objects, the table and the operator's end effector.
+"""Scene files: a small TOML document listing objects, the table, the operator's end effector and the workspace.
 
-Schema (SI units; every key is checked, an unknown one is an error naming it)::
+The document's shape is a set of msgspec Structs (:class:`SceneDoc` and the classes it holds): the loader
+validates a parsed document with ``msgspec.convert`` against them, and :func:`scene_schema` generates the
+JSON Schema from the same classes (shipped as ``docs/scene.schema.json``; ``twin schema scene`` prints it).
+What a schema cannot say is checked in code after the conversion: every number finite, exactly one source,
+files that exist, known materials and paper objects, a rotation matrix that is a rotation, min < max.
+Every problem is one :class:`SceneError` naming the object and the key; ``docs/scenes.md`` documents it all.
+A short example (SI units)::
 
-    name = "tabletop"                      # required
-    [table]                                # optional; omit for objects on the floor
-    size = [1.2, 0.8, 0.04]                # full extents, m
-    height = 0.75                          # top surface above the floor, m
-    material = "wood_oak"
-    [end_effector]                         # optional
-    radius = 0.02                          # sphere, m
-    position = [0.0, -0.3, 0.85]           # start, world frame, m
+    name = "tabletop"
+    [table]
+    size = [1.2, 0.8, 0.04]
+    height = 0.75
     [[objects]]
-    id = "mug"                             # unique, [A-Za-z0-9_-]
-    paper = "mug"                          # exactly one source: paper | mesh | cloud | primitive
-    # mesh = "assets/mug.stl"              # a mesh file (relative to the scene file), sampled to a cloud
-    # cloud = "scans/mug.ply"              # a cloud file, estimated as is
-    # primitive = { type = "box", size = [0.1, 0.05, 0.03] }   # box|cylinder|sphere|capsule|torus
-    units = "m"                            # of the mesh/cloud file: m | cm | mm
-    material = "ceramic"                   # or: density = 2400
-    position = [0.1, 0.2]                  # [x, y]: rest on the table; [x, y, z]: exactly there
-    rotation_deg = [0, 0, 30]              # about Z, then local X, then local Y (the paper's order)
-    points = 100000                        # cloud size when sampling a mesh/primitive/paper object
+    id = "mug"
+    paper = "mug"
+    material = "ceramic"
+    position = [0.1, 0.2]
 """
 
 from __future__ import annotations
 
+import difflib
+import json
 import math
 import re
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Annotated, Literal
+
+import msgspec
+import numpy as np
+from msgspec import UNSET, Meta, Struct, UnsetType
 
 from estimation import tolerances as tol
 from estimation.errors import TwinError
@@ -46,17 +49,166 @@ class SceneError(TwinError, ValueError):
 
 
 SOURCES = ("paper", "mesh", "cloud", "primitive")
-PRIMITIVES = {"box": 3, "cylinder": 2, "sphere": 1, "capsule": 2, "torus": 2}
-_ID = re.compile(r"^[A-Za-z0-9_-]{1,64}$")
+_ID_PATTERN = r"^[A-Za-z0-9_-]{1,64}$"
+_ID = re.compile(_ID_PATTERN)
 #: Fewer points than this cannot be estimated: the estimator's own floor.
 MIN_POINTS = tol.MIN_POINTS
 #: A sampled cloud is 24 bytes a point in float64: 10 million is 240 MB per object, already generous.
 MAX_POINTS = 10_000_000
+#: How far a hand-written rotation may be from one: a quaternion's norm from 1, a matrix's R^T R from the
+#: identity (largest entry) and its determinant from 1. Four printed decimals (0.7071) are 1e-5 off; a
+#: matrix 1e-3 off scales the cloud by at most 0.1 %. Within it, the rotation is made exact (normalised,
+#: or the nearest rotation matrix) before use.
+ROTATION_TOLERANCE = 1e-3
+#: Viewpoints one cloud may list: more sensors than any rig we know of, and a bound on the per-point work.
+MAX_VIEWPOINTS = 64
+
+# -- the document's shape ----------------------------------------------------------------------------------
+# Struct defaults are the loader's defaults; UNSET marks a key whose absence means something (no table,
+# no source of that kind). TOML has no null, so no field takes None.
+
+Positive = Annotated[float, Meta(gt=0)]
+Vec3 = tuple[float, float, float]
+Text = Annotated[str, Meta(min_length=1)]
+
+
+class TableDoc(Struct, forbid_unknown_fields=True):
+    """A box table whose top is at ``height``; omit ``[table]`` for objects on the floor."""
+
+    size: Annotated[tuple[Positive, Positive, Positive], Meta(description="full extents x, y, z, m")] = TableSpec.size
+    height: Annotated[Positive, Meta(description="top surface above the floor, m")] = TableSpec.height
+    material: Annotated[Text, Meta(description="material name or alias; sets the table's friction")] = \
+        TableSpec.material
+
+
+class EndEffectorDoc(Struct, forbid_unknown_fields=True):
+    """The operator's sphere."""
+
+    radius: Annotated[Positive, Meta(description="sphere radius, m")] = EndEffectorSpec.radius
+    position: Annotated[Vec3, Meta(description="start position, world frame, m")] = EndEffectorSpec.position
+
+
+class WorkspaceDoc(Struct, forbid_unknown_fields=True):
+    """The box, world frame, metres, every object pose must lie in (a twin drops poses outside it)."""
+
+    min: Annotated[Vec3, Meta(description="low corner [x, y, z], m")]
+    max: Annotated[Vec3, Meta(description="high corner [x, y, z], m; each above min")]
+
+
+class BoxDoc(Struct, tag="box", tag_field="type", forbid_unknown_fields=True):
+    """A box of full extents ``size`` = [x, y, z], m."""
+
+    size: tuple[Positive, Positive, Positive]
+
+
+class CylinderDoc(Struct, tag="cylinder", tag_field="type", forbid_unknown_fields=True):
+    """A cylinder along z: ``size`` = [radius, height], m."""
+
+    size: tuple[Positive, Positive]
+
+
+class SphereDoc(Struct, tag="sphere", tag_field="type", forbid_unknown_fields=True):
+    """A sphere: ``size`` = [radius], m."""
+
+    size: tuple[Positive]
+
+
+class CapsuleDoc(Struct, tag="capsule", tag_field="type", forbid_unknown_fields=True):
+    """A capsule along z: ``size`` = [radius, height of the cylinder part], m."""
+
+    size: tuple[Positive, Positive]
+
+
+class TorusDoc(Struct, tag="torus", tag_field="type", forbid_unknown_fields=True):
+    """A torus about z: ``size`` = [major radius, minor radius], m."""
+
+    size: tuple[Positive, Positive]
+
+
+_PRIMITIVE_DOCS = (BoxDoc, CylinderDoc, SphereDoc, CapsuleDoc, TorusDoc)
+PrimitiveDoc = BoxDoc | CylinderDoc | SphereDoc | CapsuleDoc | TorusDoc
+#: primitive type -> how many ``size`` numbers it takes (from the classes above).
+PRIMITIVES: dict[str, int] = {
+    str(c.__struct_config__.tag): len(msgspec.inspect.type_info(c).fields[0].type.item_types)  # type: ignore[attr-defined]
+    for c in _PRIMITIVE_DOCS
+}
+
+
+class ObjectDoc(Struct, forbid_unknown_fields=True):
+    """One object: an id, exactly one source (paper, mesh, cloud or primitive), its mass and its pose."""
+
+    id: Annotated[str, Meta(pattern=_ID_PATTERN, description="unique in the scene")]
+    paper: Annotated[Text, Meta(description="one of the paper's objects")] | UnsetType = UNSET
+    mesh: Annotated[Text, Meta(description="mesh file, relative to the scene file, in `units`")] | UnsetType = UNSET
+    cloud: Annotated[Text, Meta(description="point-cloud file, relative to the scene file, in `units`")] | UnsetType = UNSET
+    primitive: PrimitiveDoc | UnsetType = UNSET
+    units: Annotated[Literal["m", "cm", "mm"], Meta(description="units of a mesh or cloud file")] = "m"
+    material: Annotated[Text, Meta(description="material name or alias: density and friction")] | UnsetType = UNSET
+    density: Annotated[Positive, Meta(description="kg/m^3, instead of material")] | UnsetType = UNSET
+    position: Annotated[tuple[float, ...], Meta(
+        min_length=2, max_length=3,
+        description="world frame, m: [x, y] rests on the table, [x, y, z] exactly there (see docs/scenes.md)")] = (0.0, 0.0)
+    rotation_deg: Annotated[Vec3, Meta(
+        description="degrees about Z, then local X, then local Y; not for clouds")] = (0.0, 0.0, 0.0)
+    quat: Annotated[tuple[float, float, float, float], Meta(
+        description="cloud only: orientation of the cloud's frame in the world, w x y z")] | UnsetType = UNSET
+    rotation: Annotated[tuple[Vec3, Vec3, Vec3], Meta(
+        description="cloud only: rotation matrix (rows) of the cloud's frame in the world")] | UnsetType = UNSET
+    viewpoints: Annotated[list[Vec3], Meta(
+        min_length=1, max_length=MAX_VIEWPOINTS,
+        description="cloud only: sensor origins, in the cloud file's frame and units")] | UnsetType = UNSET
+    points: Annotated[int, Meta(ge=MIN_POINTS, le=MAX_POINTS,
+                                description="cloud size when sampling a paper/mesh/primitive source")] = 100_000
+
+
+class SceneDoc(Struct, forbid_unknown_fields=True):
+    """A tactile-twin scene file (TOML). SI units; positions in the world frame, z up, floor at z = 0."""
+
+    name: Annotated[Text, Meta(description="the scene's name; also its Zenoh key prefix")]
+    table: TableDoc | UnsetType = UNSET
+    end_effector: EndEffectorDoc | UnsetType = UNSET
+    workspace: WorkspaceDoc | UnsetType = UNSET
+    objects: list[ObjectDoc] = []
+
+
+_TOP_KEYS = set(SceneDoc.__struct_fields__)
+_OBJECT_KEYS = set(ObjectDoc.__struct_fields__)
+#: Keys only a cloud source takes.
+_CLOUD_POSE_KEYS = ("quat", "rotation", "viewpoints")
+
+
+def scene_schema() -> dict:
+    """The JSON Schema (draft 2020-12) of a scene document, generated from :class:`SceneDoc`.
+
+    The paper objects' names are added as an enum here: they live with the meshes (``scenes.paper_objects``,
+    which loads trimesh), not in the classes.
+    """
+    from scenes.paper_objects import NAMES
+
+    schema = msgspec.json.schema(SceneDoc)
+    schema["$defs"]["ObjectDoc"]["properties"]["paper"]["enum"] = list(NAMES)
+    return {"$schema": "https://json-schema.org/draft/2020-12/schema", "title": "tactile-twin scene file",
+            **schema}
+
+
+def scene_schema_text() -> str:
+    """:func:`scene_schema` as the text of ``docs/scene.schema.json`` (what ``twin schema scene`` prints)."""
+    return json.dumps(scene_schema(), indent=2) + "\n"
+
+
+# -- the validated scene -----------------------------------------------------------------------------------
 
 
 @dataclass(frozen=True)
 class ObjectSpec:
-    """One object of a scene, as written in the file (paths resolved)."""
+    """One object of a scene, as written in the file (paths resolved).
+
+    Attributes:
+        frame_rotation: a cloud's frame orientation in the world, (3, 3) rows, an exact rotation; None when
+            the file gave no ``quat`` or ``rotation`` (then ``position`` is the centre of mass's, as for
+            every other source; with it, ``position`` is the cloud frame's origin's).
+        viewpoints: a cloud's sensor origins, in the cloud file's frame and units (empty: none given).
+    """
 
     id: str
     source: str
@@ -67,23 +219,29 @@ class ObjectSpec:
     position: tuple[float, ...] = (0.0, 0.0)
     rotation_deg: tuple[float, float, float] = (0.0, 0.0, 0.0)
     points: int = 100_000
+    frame_rotation: tuple[Vec3, Vec3, Vec3] | None = None
+    viewpoints: tuple[Vec3, ...] = ()
+
+    @property
+    def posed(self) -> bool:
+        """A cloud whose file gave its frame's orientation (``quat`` or ``rotation``)."""
+        return self.frame_rotation is not None
 
 
 @dataclass(frozen=True)
 class SceneSpec:
+    """A validated scene. ``workspace``: (low, high) corners, world frame, m, or None for the default box."""
+
     name: str
     objects: tuple[ObjectSpec, ...]
     table: TableSpec | None = None
     end_effector: EndEffectorSpec | None = field(default_factory=EndEffectorSpec)
     path: Path | None = None
+    workspace: tuple[Vec3, Vec3] | None = None
 
     def empty_spec(self, physics: PhysicsSettings = DEFAULT_PHYSICS):  # type: ignore[no-untyped-def]
         """An MjSpec of this scene's floor, table and end effector, with no objects yet."""
         return new_spec(self.name, table=self.table, end_effector=self.end_effector, physics=physics)
-
-
-_TOP_KEYS = {"name", "table", "end_effector", "objects"}
-_OBJECT_KEYS = {"id", *SOURCES, "units", "material", "density", "position", "rotation_deg", "points"}
 
 
 def load_scene(path: str | Path) -> SceneSpec:
@@ -105,107 +263,274 @@ def load_scene(path: str | Path) -> SceneSpec:
 def parse_scene(doc: dict, *, base: Path = Path("."), path: Path | None = None) -> SceneSpec:
     """Validate a scene document (the parsed TOML) into a :class:`SceneSpec`.
 
-    Every value is type-checked: numbers must be finite ints or floats (never booleans), vectors lists of
-    them, names strings. Any problem is one :class:`SceneError` naming the object and the key.
+    Types, lengths and ranges are checked by ``msgspec.convert`` against :class:`SceneDoc` (numbers are
+    ints or floats, never booleans); then, in code, what a schema cannot say. Any problem is one
+    :class:`SceneError` naming the object and the key.
 
     Raises:
         SceneError: unknown keys, missing or duplicate ids, wrong types, non-finite or out-of-range values,
-            missing files.
+            no or several sources, pose keys on a non-cloud, a matrix that is no rotation, missing files.
     """
-    _no_unknown(_table(doc, "scene"), _TOP_KEYS, "scene")
-    if "name" not in doc:
-        raise SceneError("scene: missing 'name'")
-    name = _string(doc["name"], "scene: name")
+    if not isinstance(doc, dict):
+        raise SceneError(f"scene: expected a table, got {_kind(doc)}")
+    try:
+        scene = msgspec.convert(doc, SceneDoc)
+    except msgspec.ValidationError as exc:
+        raise SceneError(_translate(str(exc), doc)) from None
+    _check_finite(scene, [], doc)
     table = None
-    if "table" in doc:
-        t = _table(doc["table"], "table")
-        _no_unknown(t, {"size", "height", "material"}, "table")
-        table = TableSpec(size=_vec(t.get("size", TableSpec.size), 3, "table.size", positive=True),
-                          height=_number(t.get("height", TableSpec.height), "table.height", positive=True),
-                          material=_material(t.get("material", TableSpec.material), "table.material"))
+    if scene.table is not UNSET:
+        t = scene.table
+        table = TableSpec(size=t.size, height=t.height, material=_material(t.material, "table.material"))
     ee = EndEffectorSpec()
-    if "end_effector" in doc:
-        e = _table(doc["end_effector"], "end_effector")
-        _no_unknown(e, {"radius", "position"}, "end_effector")
-        ee = EndEffectorSpec(radius=_number(e.get("radius", ee.radius), "end_effector.radius", positive=True),
-                             position=_vec(e.get("position", ee.position), 3, "end_effector.position"))
-    raw_objects = doc.get("objects", [])
-    if not isinstance(raw_objects, list):
-        raise SceneError(f"scene: 'objects' must be an array of tables ([[objects]]), got {_kind(raw_objects)}")
-    objects = tuple(_parse_object(o, i, base) for i, o in enumerate(raw_objects))
+    if scene.end_effector is not UNSET:
+        ee = EndEffectorSpec(radius=scene.end_effector.radius, position=scene.end_effector.position)
+    workspace = None
+    if scene.workspace is not UNSET:
+        low, high = scene.workspace.min, scene.workspace.max
+        if not all(a < b for a, b in zip(low, high, strict=True)):
+            raise SceneError(f"workspace: min must be below max on every axis, got min {list(low)}, max {list(high)}")
+        workspace = (low, high)
+    objects = tuple(_object(o, i, base, doc) for i, o in enumerate(scene.objects))
     ids = [o.id for o in objects]
     dupes = {i for i in ids if ids.count(i) > 1}
     if dupes:
         raise SceneError(f"scene: duplicate object id(s) {sorted(dupes)}")
-    return SceneSpec(name=name, objects=objects, table=table, end_effector=ee, path=path)
+    return SceneSpec(name=scene.name, objects=objects, table=table, end_effector=ee, path=path, workspace=workspace)
 
 
-def _parse_object(o: object, index: int, base: Path) -> ObjectSpec:
-    if not isinstance(o, dict):
-        raise SceneError(f"object #{index}: expected a table ([[objects]]), got {_kind(o)}")
-    oid = o.get("id")
-    where = f"object {oid!r}" if isinstance(oid, str) and _ID.match(oid) else f"object #{index}"
-    _no_unknown(o, _OBJECT_KEYS, where)
-    if not isinstance(oid, str) or not _ID.match(oid):
-        raise SceneError(f"{where}: 'id' must be 1-64 characters of letters, digits, '_' or '-'")
-    sources = [s for s in SOURCES if s in o]
+def _object(o: ObjectDoc, index: int, base: Path, doc: dict) -> ObjectSpec:
+    """The checks a schema cannot make, on one converted object."""
+    where = _label(index, doc)
+    sources = [s for s in SOURCES if getattr(o, s) is not UNSET]
     if len(sources) != 1:
         raise SceneError(f"{where}: needs exactly one source of {', '.join(SOURCES)}; got {sources or 'none'}")
     source = sources[0]
-    value = o[source]
+    value: object = getattr(o, source)
     if source in ("mesh", "cloud"):
-        file = _string(value, f"{where} {source}")
+        file = str(value)
         try:
             value = (base / file).resolve()
-            found = value.is_file()
+            found = value.is_file()  # type: ignore[attr-defined]
         except (OSError, ValueError) as exc:  # a NUL byte, a loop of links
             raise SceneError(f"{where}: {source} path {file!r} is not usable ({exc})") from None
         if not found:
             raise SceneError(f"{where}: {source} file {value} does not exist")
     elif source == "primitive":
-        kind = value.get("type") if isinstance(value, dict) else None
-        if not isinstance(kind, str) or kind not in PRIMITIVES:
-            raise SceneError(f"{where}: primitive needs type = one of {', '.join(PRIMITIVES)}")
-        _no_unknown(value, {"type", "size"}, f"{where} primitive")
-        value = {"type": kind, "size": _vec(value.get("size"), PRIMITIVES[kind], f"{where} primitive.size",
-                                            positive=True)}
-    elif source == "paper":
-        from scenes.paper_objects import NAMES
-
-        if not isinstance(value, str) or value not in NAMES:
-            raise SceneError(f"{where}: unknown paper object {value!r}; choose from {', '.join(NAMES)}")
-    if "material" in o and "density" in o:
+        value = {"type": o.primitive.__struct_config__.tag, "size": o.primitive.size}  # type: ignore[union-attr]
+    else:
+        _paper(value, where)
+    if o.material is not UNSET and o.density is not UNSET:
         raise SceneError(f"{where}: give 'material' or 'density', not both")
-    density = _number(o["density"], f"{where} density", positive=True) if "density" in o else None
-    material = _material(o["material"], f"{where} material") if "material" in o else None
-    position = o.get("position", (0.0, 0.0))
-    if not isinstance(position, list | tuple) or len(position) not in (2, 3):
-        raise SceneError(f"{where} position: must be [x, y] (rest on the table) or [x, y, z], got {position!r}")
-    units = o.get("units", "m")
-    if units not in ("m", "cm", "mm") or not isinstance(units, str):
-        raise SceneError(f"{where} units: must be m, cm or mm, got {units!r}")
-    points = o.get("points", ObjectSpec.points)
-    if isinstance(points, bool) or not isinstance(points, int):
-        raise SceneError(f"{where} points: expected a whole number, got {points!r}")
-    if not MIN_POINTS <= points <= MAX_POINTS:
-        raise SceneError(f"{where} points: must be {MIN_POINTS} to {MAX_POINTS:,}, got {points}")
+    material = None if o.material is UNSET else _material(o.material, f"{where} material")
+    frame_rotation = _frame_rotation(o, source, where)
     return ObjectSpec(
-        id=oid, source=source, value=value, material=material, density=density, units=units,
-        position=_vec(position, len(position), f"{where} position"),
-        rotation_deg=_vec(o.get("rotation_deg", (0, 0, 0)), 3, f"{where} rotation_deg"),  # type: ignore[arg-type]
-        points=points,
+        id=o.id, source=source, value=value, material=material, density=None if o.density is UNSET else o.density,
+        units=o.units, position=o.position, rotation_deg=o.rotation_deg, points=o.points,
+        frame_rotation=frame_rotation, viewpoints=() if o.viewpoints is UNSET else tuple(o.viewpoints),
     )
 
 
-def _no_unknown(d: dict, allowed: set[str], where: str) -> None:
-    unknown = set(d) - allowed
-    if unknown:
-        import difflib
+def _frame_rotation(o: ObjectDoc, source: str, where: str) -> tuple[Vec3, Vec3, Vec3] | None:
+    """A cloud's frame orientation as an exact rotation matrix, from ``quat`` or ``rotation``; None without."""
+    given = [k for k in _CLOUD_POSE_KEYS if getattr(o, k) is not UNSET]
+    if source != "cloud":
+        if given:
+            raise SceneError(f"{where}: '{given[0]}' is for cloud sources only (a {source} turns by rotation_deg)")
+        return None
+    if any(o.rotation_deg):
+        raise SceneError(f"{where}: rotation_deg does not turn a cloud; give its frame's orientation as "
+                         f"quat = [w, x, y, z] or rotation = [[...], [...], [...]]")
+    if o.quat is not UNSET and o.rotation is not UNSET:
+        raise SceneError(f"{where}: give 'quat' or 'rotation', not both")
+    if o.quat is not UNSET:
+        from twin.poses import rotation
 
-        key = sorted(map(str, unknown))[0]
+        norm = math.sqrt(sum(x * x for x in o.quat))
+        if not abs(norm - 1.0) <= ROTATION_TOLERANCE:
+            raise SceneError(f"{where} quat: must be a unit quaternion [w, x, y, z], got norm {norm:.6g}")
+        m = rotation(np.asarray(o.quat))  # w x y z, MuJoCo's order; normalised there
+    elif o.rotation is not UNSET:
+        m = np.asarray(o.rotation, dtype=np.float64)
+        off = float(np.abs(m.T @ m - np.eye(3)).max())
+        det = float(np.linalg.det(m))
+        if off > ROTATION_TOLERANCE or abs(det - 1.0) > ROTATION_TOLERANCE:
+            raise SceneError(f"{where} rotation: must be a rotation matrix (orthonormal rows, determinant +1); "
+                             f"R^T R is {off:.3g} off the identity, determinant {det:.6g}")
+        u, _, vt = np.linalg.svd(m)
+        m = u @ vt  # the nearest rotation: the matrix was within tolerance of one
+    else:
+        return None
+    r0, r1, r2 = (tuple(float(x) for x in row) for row in m)
+    return r0, r1, r2  # type: ignore[return-value]
+
+
+# -- errors: msgspec's path into today's naming ------------------------------------------------------------
+
+_AT = re.compile(r"^(?P<what>.*?)(?: - at `(?P<path>\$[^`]*)`)?$", re.S)
+_TOKEN = re.compile(r"\.([A-Za-z_][A-Za-z0-9_]*)|\[(\d+)\]")
+
+
+def _translate(message: str, doc: dict) -> str:
+    """A msgspec ValidationError (``Expected `float`, got `str` - at `$.objects[0].position[1]```) as one line
+    naming the object and the key (``object 'mug' position[1]: expected a number, got str 'b'``)."""
+    m = _AT.match(message)
+    what, path = (m.group("what"), m.group("path")) if m else (message, None)
+    tokens: list[str | int] = []
+    if path is not None:
+        tokens = [name if name else int(index) for name, index in _TOKEN.findall(path)]
+    found, value = _lookup(doc, tokens)
+    where = _where(tokens, doc)
+    last = next((t for t in reversed(tokens) if isinstance(t, str)), None)
+    in_primitive = len(tokens) >= 3 and tokens[0] == "objects" and tokens[2] == "primitive"
+
+    if what.startswith("Object contains unknown field"):
+        allowed = _fields_at(tokens, doc)
+        unknown = sorted(map(str, set(value) - allowed)) if isinstance(value, dict) and allowed else []
+        key = unknown[0] if unknown else what.partition("`")[2].rpartition("`")[0]
         close = difflib.get_close_matches(key, sorted(allowed), n=1)
         hint = f" (did you mean {close[0]!r}?)" if close else f" (allowed: {', '.join(sorted(allowed))})"
-        raise SceneError(f"{where}: unknown key {key!r}{hint}")
+        return f"{where}: unknown key {key!r}{hint}"
+    if what.startswith("Object missing required field"):
+        key = what.partition("`")[2].rpartition("`")[0]
+        if key == "id" and tokens[:1] == ["objects"]:
+            return f"{where}: 'id' must be 1-64 characters of letters, digits, '_' or '-'"
+        if in_primitive and key == "type":
+            return f"{_where(tokens[:2], doc)}: primitive needs type = one of {', '.join(PRIMITIVES)}"
+        return f"{where}: missing {key!r}"
+    if found and isinstance(value, float | int) and not isinstance(value, bool) and not _finite(value):
+        return f"{where}: must be finite, got {float(value)}"
+    if tokens == ["objects"]:
+        return f"scene: 'objects' must be an array of tables ([[objects]]), got {_kind(value)}"
+    if len(tokens) == 2 and tokens[0] == "objects":
+        return f"{where}: expected a table ([[objects]]), got {_kind(value)}"
+    if in_primitive and (len(tokens) == 3 or last == "type"):
+        return f"{_where(tokens[:2], doc)}: primitive needs type = one of {', '.join(PRIMITIVES)}"
+    if last == "id" and len(tokens) == 3 and tokens[0] == "objects":
+        return f"{_where(tokens[:2], doc)}: 'id' must be 1-64 characters of letters, digits, '_' or '-'"
+    if last == "paper" and len(tokens) == 3:
+        _paper(value, _where(tokens[:2], doc))
+    if last == "units" and len(tokens) == 3:
+        return f"{where}: must be m, cm or mm, got {value!r}"
+    if last == "points" and len(tokens) == 3:
+        if what.startswith("Expected `int`,"):
+            return f"{where}: expected a whole number, got {value!r}"
+        return f"{where}: must be {MIN_POINTS} to {MAX_POINTS:,}, got {value}"
+    if last == "position" and len(tokens) == 3:
+        return f"{where}: must be [x, y] (rest on the table) or [x, y, z], got {value!r}"
+    expected = what.partition(",")[0]
+    if expected.startswith("Expected `float` >"):
+        return f"{where}: must be positive, got {float(value)}"  # type: ignore[arg-type]
+    if expected.startswith(("Expected `float`", "Expected `int`")):
+        return f"{where}: expected a number, got {_kind(value)}"
+    if expected.startswith("Expected `str`"):
+        return f"{where}: expected a non-empty string, got {_kind(value)}"
+    if expected.startswith("Expected `object"):
+        return f"{where}: expected a table, got {_kind(value)}"
+    if expected.startswith("Expected `array"):
+        shape = _shape(tokens, doc)
+        got = f"{len(value)}" if isinstance(value, list | tuple) else _kind(value)
+        return f"{where}: expected {shape}, got {got}"
+    return f"{where}: {what[:1].lower()}{what[1:]}"  # anything else, in msgspec's own words
+
+
+def _lookup(doc: object, tokens: list[str | int]) -> tuple[bool, object]:
+    """(found, value) at ``tokens`` in the raw document."""
+    node = doc
+    for t in tokens:
+        try:
+            node = node[t]  # type: ignore[index]
+        except (KeyError, IndexError, TypeError):
+            return False, None
+    return True, node
+
+
+def _label(index: int, doc: dict) -> str:
+    """How messages name the object at ``objects[index]``: by its id when that is a valid one."""
+    _, oid = _lookup(doc, ["objects", index, "id"])
+    return f"object {oid!r}" if isinstance(oid, str) and _ID.match(oid) else f"object #{index}"
+
+
+def _where(tokens: list[str | int], doc: dict) -> str:
+    """``object 'mug' position[1]``, ``table.size[0]``, ``scene: name``, ``scene``."""
+    if len(tokens) >= 2 and tokens[0] == "objects" and isinstance(tokens[1], int):
+        rest = _dotted(tokens[2:])
+        return _label(tokens[1], doc) + (f" {rest}" if rest else "")
+    if not tokens or tokens == ["objects"]:
+        return "scene"
+    if tokens[0] in ("table", "end_effector", "workspace"):
+        return _dotted(tokens)
+    return f"scene: {_dotted(tokens)}"
+
+
+def _dotted(tokens: list[str | int]) -> str:
+    return "".join(f"[{t}]" if isinstance(t, int) else f".{t}" for t in tokens).lstrip(".")
+
+
+def _type_at(tokens: list[str | int], doc: dict) -> msgspec.inspect.Type:
+    """The declared type at ``tokens`` (a tagged primitive resolved by the document's ``type``)."""
+    t: msgspec.inspect.Type = msgspec.inspect.type_info(SceneDoc)
+    for depth, tok in enumerate(tokens):
+        t = _unwrap(t, _lookup(doc, tokens[:depth])[1])
+        if isinstance(t, msgspec.inspect.StructType):
+            t = next(f.type for f in t.fields if f.name == tok)
+        elif isinstance(t, msgspec.inspect.TupleType):
+            t = t.item_types[int(tok)]
+        elif isinstance(t, msgspec.inspect.ListType | msgspec.inspect.VarTupleType):
+            t = t.item_type
+    return _unwrap(t, _lookup(doc, tokens)[1])
+
+
+def _unwrap(t: msgspec.inspect.Type, value: object) -> msgspec.inspect.Type:
+    while True:
+        if isinstance(t, msgspec.inspect.Metadata):
+            t = t.type
+        elif isinstance(t, msgspec.inspect.UnionType):
+            members = t.types  # UNSET is not a member: type_info leaves it out
+            kind = value.get("type") if isinstance(value, dict) else None
+            t = next((m for m in members if isinstance(m, msgspec.inspect.StructType) and m.tag == kind), members[0])
+        else:
+            return t
+
+
+def _fields_at(tokens: list[str | int], doc: dict) -> set[str]:
+    t = _type_at(tokens, doc)
+    if not isinstance(t, msgspec.inspect.StructType):
+        return set()
+    return {f.name for f in t.fields} | ({t.tag_field} if t.tag_field else set())
+
+
+def _shape(tokens: list[str | int], doc: dict) -> str:
+    """What an array at ``tokens`` must hold, in words: ``3 numbers``, ``3 rows of 3 numbers``."""
+    t = _type_at(tokens, doc)
+    if isinstance(t, msgspec.inspect.TupleType):
+        inner = _unwrap(t.item_types[0], None)
+        if isinstance(inner, msgspec.inspect.TupleType):
+            return f"{len(t.item_types)} rows of {len(inner.item_types)} numbers"
+        return f"{len(t.item_types)} numbers"
+    if isinstance(t, msgspec.inspect.ListType):
+        return f"a list of 1 to {MAX_VIEWPOINTS} [x, y, z] points"
+    return "an array"
+
+
+def _check_finite(node: object, tokens: list[str | int], doc: dict) -> None:
+    """Every float in the converted document finite (msgspec takes NaN and inf for a float)."""
+    if isinstance(node, float):
+        if not math.isfinite(node):
+            raise SceneError(f"{_where(tokens, doc)}: must be finite, got {node}")
+    elif isinstance(node, Struct):
+        for name in node.__struct_fields__:
+            _check_finite(getattr(node, name), [*tokens, name], doc)
+    elif isinstance(node, list | tuple):
+        for i, x in enumerate(node):
+            _check_finite(x, [*tokens, i], doc)
+
+
+def _finite(value: float | int) -> bool:
+    try:
+        return math.isfinite(value)
+    except OverflowError:  # an integer beyond float range
+        return False
 
 
 def _kind(value: object) -> str:
@@ -214,50 +539,18 @@ def _kind(value: object) -> str:
     return f"{type(value).__name__} {text if len(text) <= 40 else text[:37] + '...'}"
 
 
-def _table(value: object, where: str) -> dict:
-    if not isinstance(value, dict):
-        raise SceneError(f"{where}: expected a table, got {_kind(value)}")
-    return value
+def _paper(value: object, where: str) -> None:
+    from scenes.paper_objects import NAMES
+
+    if not isinstance(value, str) or value not in NAMES:
+        raise SceneError(f"{where}: unknown paper object {value!r}; choose from {', '.join(NAMES)}")
 
 
-def _string(value: object, where: str) -> str:
-    if not isinstance(value, str) or not value:
-        raise SceneError(f"{where}: expected a non-empty string, got {_kind(value)}")
-    return value
-
-
-def _material(value: object, where: str) -> str:
+def _material(value: str, where: str) -> str:
     from estimation.materials import material
 
-    name = _string(value, where)
     try:
-        material(name)
+        material(value)
     except TwinError as exc:
         raise SceneError(f"{where}: {exc}") from exc
-    return name
-
-
-def _number(value: object, where: str, *, positive: bool = False) -> float:
-    # bool is an int in Python; `height = true` is a mistake, not 1.0.
-    if isinstance(value, bool) or not isinstance(value, int | float):
-        raise SceneError(f"{where}: expected a number, got {_kind(value)}")
-    try:
-        x = float(value)
-    except OverflowError:  # a TOML integer beyond float range
-        raise SceneError(f"{where}: {value} is out of range") from None
-    if not math.isfinite(x):
-        raise SceneError(f"{where}: must be finite, got {x}")
-    if positive and not x > 0:
-        raise SceneError(f"{where}: must be positive, got {x}")
-    return x
-
-
-def _vec(value: object, n: int, where: str, *, positive: bool = False) -> tuple[float, ...]:
-    if not isinstance(value, list | tuple):
-        raise SceneError(f"{where}: expected {n} numbers, got {_kind(value)}")
-    if len(value) != n:
-        raise SceneError(f"{where}: expected {n} numbers, got {len(value)}")
-    out = tuple(_number(x, f"{where}[{i}]") for i, x in enumerate(value))
-    if positive and any(x <= 0 for x in out):
-        raise SceneError(f"{where}: must be positive, got {list(out)}")
-    return out
+    return value
