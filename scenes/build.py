@@ -284,8 +284,13 @@ def _object_record(obj: TwinObject, spec: ObjectSpec, seconds: float | None) -> 
 
 def _source_rotation(spec: ObjectSpec) -> np.ndarray:
     """The rotation (3, 3) the build applied to the source before sampling it: the scene's ``rotation_deg``
-    for mesh-like sources (:func:`scenes.sources.source_mesh`); a cloud is estimated as it is."""
-    if spec.source == "cloud" or not any(spec.rotation_deg):
+    for mesh-like sources (:func:`scenes.sources.source_mesh`); a cloud's frame rotation
+    (:func:`scenes.sources.frame_rotation`, identity when the scene gives none)."""
+    if spec.source == "cloud":
+        from scenes.sources import frame_rotation
+
+        return frame_rotation(spec)
+    if not any(spec.rotation_deg):
         return np.eye(3)
     from scipy.spatial.transform import Rotation
 

@@ -10,13 +10,17 @@ from __future__ import annotations
 
 import logging
 import zlib
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import trimesh
+from scipy.spatial import cKDTree
 
-from estimation import PhysicalEstimate, estimate, from_mesh, load_cloud
+from estimation import PhysicalEstimate, PointCloud, estimate, from_mesh, load_cloud
+from estimation.cloud import is_single_origin
 from estimation.errors import TwinError
+from estimation.fusion import oriented_normals
 from estimation.materials import resolve_density
 from estimation.units import unit_scale
 from scenes.scenefile import ObjectSpec, SceneError
@@ -71,17 +75,71 @@ def estimate_object(spec: ObjectSpec) -> tuple[PhysicalEstimate, float]:
     try:
         density, mat = resolve_density(spec.material, spec.density)
         mesh = source_mesh(spec)
+        viewpoint = None
         if mesh is None:
-            cloud = load_cloud(spec.value, scale=unit_scale(spec.units))  # type: ignore[arg-type]
+            cloud, viewpoint = scene_cloud(spec)
         else:
             # Seeded by the id, so the same scene builds the same twin.
             cloud = sample_surface(mesh, spec.points, seed=zlib.crc32(spec.id.encode()))
-        result = estimate(cloud, density, material=None if mat is None else mat.name)
+        result = estimate(cloud, density, material=None if mat is None else mat.name, viewpoint=viewpoint)
     except SceneError:
         raise
     except TwinError as exc:
         raise SceneError(f"object {spec.id!r}: {exc}") from exc
     return result, DEFAULT_FRICTION if mat is None else mat.friction
+
+
+def frame_rotation(spec: ObjectSpec) -> np.ndarray:
+    """(3, 3) rotation of a cloud's frame in the world (the scene's ``quat`` or ``rotation``); identity when
+    the scene gives none (the cloud's axes are the world's)."""
+    return np.eye(3) if spec.frame_rotation is None else np.asarray(spec.frame_rotation, dtype=np.float64)
+
+
+def scene_cloud(spec: ObjectSpec) -> tuple[PointCloud, np.ndarray | None]:
+    """A cloud object's points in metres, turned into world axes by its frame's rotation (not moved:
+    :func:`placement` puts it in place), with what orients its normals.
+
+    Viewpoints are the scene's ``viewpoints`` (file frame and units), else the file's own (a PCD
+    ``VIEWPOINT``, an NPZ ``sensor_origins``). One viewpoint is returned for ``estimate(viewpoint=...)``,
+    as ``twin estimate --viewpoint`` passes it. Several: each point is oriented towards the nearest one (the
+    sensor most likely to have seen it; a list of origins says nothing of which point each saw) and the
+    cloud comes back with those normals. Normals the file carries are kept either way (``estimate`` uses them).
+
+    Returns:
+        The cloud ((n, 3) metres, world axes, origin the cloud file's) and one viewpoint ((3,) metres, same
+        frame) or None.
+
+    Raises:
+        SceneError: the file cannot be read (with the object's id).
+    """
+    scale = unit_scale(spec.units)
+    try:
+        cloud = load_cloud(spec.value, scale=scale)  # type: ignore[arg-type]
+    except TwinError as exc:
+        raise SceneError(f"object {spec.id!r}: {exc}") from exc
+    rotation = frame_rotation(spec)
+    # Rotating moves the file's own sensor origins with the points (PointCloud.transformed).
+    cloud = cloud.transformed(rotation, np.zeros(3))
+    if spec.viewpoints:
+        origins = np.asarray(spec.viewpoints, dtype=np.float64) * scale @ rotation.T
+    elif cloud.sensor_origins is not None:
+        single = is_single_origin(cloud.sensor_origins)
+        origins = cloud.sensor_origins[:1] if single else cloud.sensor_origins
+        if not single:  # one origin per point: the file says which sensor saw each
+            return _with_normals(cloud, origins), None
+    else:
+        return cloud, None
+    if len(origins) == 1:
+        return cloud, origins[0]
+    nearest = cKDTree(origins).query(cloud.points)[1]
+    return _with_normals(cloud, origins[nearest]), None
+
+
+def _with_normals(cloud: PointCloud, origins: np.ndarray) -> PointCloud:
+    """``cloud`` with normals each flipped towards its point's sensor origin ((n, 3) metres), unless it has some."""
+    if cloud.normals is not None:
+        return cloud
+    return replace(cloud, normals=oriented_normals(cloud.points, origins))
 
 
 def reference_estimate(spec: ObjectSpec) -> tuple[PhysicalEstimate, float]:
@@ -118,23 +176,34 @@ def prepare_objects(
     hulls = decompose_many(visuals, coacd, cache_dir=cache_dir, progress=progress)
     out = []
     for s, (est, friction), visual, (parts, cached) in zip(specs, estimates, visuals, hulls, strict=True):
+        position = placement(s, parts, table_top, center_of_mass=est.mass.center_of_mass)
         out.append(TwinObject(id=s.id, estimate=est, friction=friction, visual=visual, hulls=tuple(parts),
-                              position=placement(s, parts, table_top), quat=np.array([1.0, 0, 0, 0]),
+                              position=position, quat=np.array([1.0, 0, 0, 0]),
                               hull_cached=cached))
     return out
 
 
-def placement(spec: ObjectSpec, hulls: list[Hull], table_top: float | None) -> np.ndarray:
+def placement(spec: ObjectSpec, hulls: list[Hull], table_top: float | None, *,
+              center_of_mass: np.ndarray | None = None) -> np.ndarray:
     """World position of the centre of mass: [x, y] rests the object on the table (or floor).
+
+    For a posed cloud (``spec.posed``) ``position`` is its frame's origin, and ``center_of_mass`` ((3,)
+    metres, the estimate's: the cloud's frame in world axes) is added to it: [x, y, z] puts the cloud
+    exactly where its pose says; [x, y] keeps x and y so and rests it on the table.
 
     Rests it by its collision hulls, not its visual mesh: contact is between hulls, and a hull reaching
     below the visual mesh would start inside the table and be kicked out.
     """
+    offset = np.zeros(3)
+    if spec.posed:
+        if center_of_mass is None:
+            raise ValueError(f"object {spec.id!r}: a posed cloud is placed by its centre of mass; none given")
+        offset = np.asarray(center_of_mass, dtype=np.float64)
     if len(spec.position) == 3:
-        return np.asarray(spec.position, dtype=np.float64)
+        return np.asarray(spec.position, dtype=np.float64) + offset
     lowest = float(min(v[:, 2].min() for v, _ in hulls))
     base = table_top if table_top is not None else 0.0
-    return np.array([spec.position[0], spec.position[1], base - lowest + PLACEMENT_GAP])
+    return np.array([spec.position[0] + offset[0], spec.position[1] + offset[1], base - lowest + PLACEMENT_GAP])
 
 
 def _primitive(p: dict) -> trimesh.Trimesh:
