@@ -148,10 +148,15 @@ def depth_view(depth: np.ndarray, camera: Intrinsics, rotation: np.ndarray,
         rotation: (3, 3) camera-to-world. position: (3,) metres, the camera centre in the world.
 
     Returns:
-        points (n, 3) float64 metres world frame, and the origin (3,).
+        points (n, 3) float64 metres world frame (pixels on depth edges dropped), and the origin (3,).
 
     Raises:
         CloudError: the image size does not match the intrinsics.
     """
+    from estimation.fusion import edge_mask
+
+    # Pixels on a depth edge are where real sensors return "flying pixels" between the object and what is
+    # behind it; the sensor's sigma is unknown here, so the jump threshold is fusion's smallest (1 cm).
+    depth = np.where(edge_mask(depth, 0.0), np.nan, depth)
     points, _ = depth_to_points(depth, camera, rotation, position)
     return points, np.asarray(position, dtype=np.float64)
