@@ -301,7 +301,9 @@ class Remote:
                          table_size=None if t is None else _floats(t.size), table_height=0.0 if t is None else t.height,
                          table_material="" if t is None else t.material,
                          ee_radius=0.0 if ee is None else ee.radius,
-                         ee_position=(0.0, 0.0, 0.0) if ee is None else _floats(ee.position))
+                         ee_position=(0.0, 0.0, 0.0) if ee is None else _floats(ee.position),
+                         workspace_min=None if self.scene.workspace is None else _floats(self.scene.workspace[0]),
+                         workspace_max=None if self.scene.workspace is None else _floats(self.scene.workspace[1]))
 
     def _next(self) -> int:
         self._seq += 1

@@ -57,7 +57,13 @@ class _Msg(msgspec.Struct, array_like=True, tag_field="t", forbid_unknown_fields
 
 
 class SceneInfo(_Msg, tag="scene"):
-    """The static scene: table (size xyz, top height, friction) and end effector (radius, start)."""
+    """The static scene: table (size xyz, top height, friction), end effector (radius, start) and the
+    scene's declared workspace.
+
+    ``workspace_min``/``workspace_max``: the box (world frame, metres) object poses must lie in, as the scene
+    file declares it; None when it declares none (the twin then takes its default box around the table).
+    They come last with defaults, so a SceneInfo from a sender without them still decodes.
+    """
 
     name: str
     table_size: tuple[float, float, float] | None
@@ -65,6 +71,8 @@ class SceneInfo(_Msg, tag="scene"):
     table_material: str
     ee_radius: float
     ee_position: tuple[float, float, float]
+    workspace_min: tuple[float, float, float] | None = None
+    workspace_max: tuple[float, float, float] | None = None
 
 
 class Cloud(_Msg, tag="cloud"):
@@ -284,6 +292,14 @@ def _check(msg: Message) -> None:
         _coordinates(msg, msg.ee_position, msg.table_size or (), (msg.table_height,))
         if (msg.table_size is not None and min(msg.table_size) <= 0) or msg.ee_radius < 0:
             raise MessageError("bad-size", "scene: non-positive table size or negative end-effector radius")
+        low, high = msg.workspace_min, msg.workspace_max
+        if (low is None) != (high is None):
+            raise MessageError("bad-size", "scene: a workspace needs both corners")
+        if low is not None and high is not None:
+            _finite(msg, low, high)
+            _coordinates(msg, low, high)
+            if not all(a < b for a, b in zip(low, high, strict=True)):
+                raise MessageError("bad-size", "scene: workspace min is not below max on every axis")
 
 
 def _check_cloud(msg: Cloud) -> None:

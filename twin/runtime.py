@@ -144,7 +144,7 @@ class LocalReport:
     estimation_errors: int = 0
     failed_edits: int = 0  # objects whose model did not compile: the twin went on without them
     out_of_order: int = 0  # messages older than what the twin already had from the remote
-    out_of_scene: int = 0  # poses and clouds placed outside the scene's box (SCENE_REACH around the table)
+    out_of_scene: int = 0  # poses and clouds placed outside the scene's box (its workspace, or SCENE_REACH around the table)
     holds: int = 0  # times an object strayed from the remote's pose on its own and was pinned to it
     snaps: int = 0  # corrections too large to blend in: the object was moved at once
     operator_targets: int = 0  # device targets taken (OperatorSettings.listen)
@@ -196,7 +196,7 @@ class Local:
         self.twin = Twin(_empty_spec(info), background=settings.workers > 0)
         self._floor = info.table_height if info.table_size is not None else 0.0
         self.workspace = _workspace(info, operator.reach)
-        self.scene_box = _workspace(info, SCENE_REACH)
+        self.scene_box = _scene_box(info)
         if info.table_size is not None:
             rlog.table(info.table_size, info.table_height)
         self._dropped_seen = 0
@@ -415,8 +415,9 @@ class Local:
         self.report.operator_targets += 1
 
     def _in_scene(self, msg, position) -> bool:  # type: ignore[no-untyped-def]
-        """Whether an object message's position lies in the scene's box (:data:`SCENE_REACH` around the
-        table); one that does not is dropped and counted, never written into the twin."""
+        """Whether an object message's position lies in the scene's box (:func:`_scene_box`: its declared
+        workspace, or :data:`SCENE_REACH` around the table); one that does not is dropped and counted, never
+        written into the twin."""
         low, high = self.scene_box
         p = np.asarray(position, dtype=float)
         if np.all(p >= low) and np.all(p <= high):
@@ -650,6 +651,14 @@ def _workspace(info: SceneInfo, reach: float) -> tuple[np.ndarray, np.ndarray]:
         return centre - reach, centre + reach
     half = np.array([info.table_size[0] / 2 + reach, info.table_size[1] / 2 + reach])
     return np.array([-half[0], -half[1], 0.0]), np.array([half[0], half[1], info.table_height + reach])
+
+
+def _scene_box(info: SceneInfo) -> tuple[np.ndarray, np.ndarray]:
+    """(low, high) corners, metres, world frame, of the box object poses and clouds must lie in: the scene's
+    declared workspace when the remote announces one, else :data:`SCENE_REACH` around the table."""
+    if info.workspace_min is not None and info.workspace_max is not None:
+        return np.asarray(info.workspace_min, dtype=float), np.asarray(info.workspace_max, dtype=float)
+    return _workspace(info, SCENE_REACH)
 
 
 def _float3(v: np.ndarray) -> tuple[float, float, float]:

@@ -1,0 +1,127 @@
+"""A scene's declared [workspace]: from the file, through the remote's SceneInfo, to the twin's scene box."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+
+import msgspec
+import numpy as np
+import pytest
+
+from scenes.headless import Headless
+from scenes.scenefile import SceneError, load_scene, parse_scene
+from sync.keys import Keys
+from sync.link import Link
+from sync.messages import VERSION, MessageError, Pose, SceneInfo, decode, encode
+
+SMALL = Path(__file__).parent / "data" / "small.toml"
+#: Around small.toml's table (1.0 x 0.6, top at 0.5 m) and a little beyond: the crate and can start inside.
+BOX = ((-0.6, -0.4, 0.0), (0.6, 0.4, 1.0))
+
+
+def _info(**fields: object) -> SceneInfo:
+    return SceneInfo(v=VERSION, stamp_ns=0, name="s", table_size=(1.0, 0.6, 0.04), table_height=0.5,
+                     table_material="wood_oak", ee_radius=0.02, ee_position=(0.0, 0.0, 0.6), **fields)
+
+
+def test_the_file_declares_it():
+    scene = parse_scene({"name": "x", "workspace": {"min": list(BOX[0]), "max": list(BOX[1])}})
+    assert scene.workspace == BOX
+    assert parse_scene({"name": "x"}).workspace is None
+
+
+@pytest.mark.parametrize(
+    ("workspace", "message"),
+    [
+        ({"min": [0, 0, 0], "max": [1, 0, 1]}, r"^workspace: min must be below max on every axis"),
+        ({"min": [0, 0, 0]}, r"^workspace: missing 'max'$"),
+        ({"min": [0, 0, 0], "max": [1, 1, float("nan")]}, r"^workspace.max\[2\]: must be finite, got nan$"),
+        ({"min": [0, 0], "max": [1, 1, 1]}, r"^workspace.min: expected 3 numbers, got 2$"),
+        ({"min": [0, 0, 0], "max": [1, 1, 1], "margin": 1}, r"^workspace: unknown key 'margin'"),
+        ([0, 0, 0], r"^workspace: expected a table, got list"),
+    ],
+)
+def test_a_bad_workspace_is_one_scene_error(workspace, message):
+    with pytest.raises(SceneError, match=message):
+        parse_scene({"name": "x", "workspace": workspace})
+
+
+def test_scene_info_carries_it_and_an_older_one_still_decodes():
+    info = _info(workspace_min=BOX[0], workspace_max=BOX[1])
+    assert decode(encode(info)) == info
+
+    class OldSceneInfo(msgspec.Struct, array_like=True, tag_field="t", tag="scene"):
+        """SceneInfo as senders before the workspace wrote it."""
+
+        v: int
+        stamp_ns: int
+        name: str
+        table_size: tuple[float, float, float] | None
+        table_height: float
+        table_material: str
+        ee_radius: float
+        ee_position: tuple[float, float, float]
+
+    old = OldSceneInfo(VERSION, 0, "s", (1.0, 0.6, 0.04), 0.5, "wood_oak", 0.02, (0.0, 0.0, 0.6))
+    assert decode(msgspec.msgpack.encode(old)) == _info()
+
+
+@pytest.mark.parametrize(
+    "fields",
+    [
+        {"workspace_min": (0.0, 0.0, 0.0), "workspace_max": (1.0, float("inf"), 1.0)},
+        {"workspace_min": (0.0, float("nan"), 0.0), "workspace_max": (1.0, 1.0, 1.0)},
+        {"workspace_min": (0.0, 0.0, 0.0), "workspace_max": (1.0, 0.0, 1.0)},
+        {"workspace_min": (0.0, 0.0, 0.0)},
+        {"workspace_min": (0.0, 0.0, 0.0), "workspace_max": (1.0, 1.0, 5e3)},
+    ],
+)
+def test_decode_rejects_a_workspace_no_sender_could_mean(fields):
+    with pytest.raises(MessageError) as err:
+        decode(encode(_info(**fields)))
+    assert err.value.reason in ("non-finite", "bad-size", "out-of-range")
+
+
+@pytest.fixture(scope="module")
+def cache(tmp_path_factory) -> Path:
+    return tmp_path_factory.getbasetemp() / "coacd"
+
+
+def _forge(session: Headless, position: tuple[float, float, float], seq: int) -> None:
+    remote = session.remote
+    pose = Pose(v=VERSION, stamp_ns=0, object_id="crate", epoch=remote.epoch, seq=seq, sim_time=0.0,
+                position=position, quat=(1.0, 0.0, 0.0, 0.0), linvel=(0.0,) * 3, angvel=(0.0,) * 3)
+    Link(session.bus.transport()).put(Keys("small").object("crate", "pose"), pose)
+
+
+def test_the_twin_drops_poses_outside_the_declared_workspace_and_applies_those_inside(cache):
+    scene = replace(load_scene(SMALL), workspace=BOX)
+    with Headless(scene, cache_dir=cache) as session:
+        low, high = session.local.scene_box
+        np.testing.assert_array_equal(low, BOX[0])
+        np.testing.assert_array_equal(high, BOX[1])
+        session.run(0.2)
+        assert session.local.report.out_of_scene == 0  # the scene's own clouds and poses are inside
+        before = session.local.twin.pose("crate")[0]
+        # 0.8 m from the table's centre: inside the default box (10 m around the table), outside this one.
+        _forge(session, (0.8, 0.0, 0.56), 10**6)
+        session.run(0.2)
+        assert session.local.report.out_of_scene == 1
+        assert np.linalg.norm(session.local.twin.pose("crate")[0] - before) < 0.002
+        # Inside it, on the table 8 cm along x: applied (the twin pulls the crate there).
+        target = before + np.array([0.08, 0.0, 0.0])
+        _forge(session, tuple(target.tolist()), 10**6 + 1)
+        session.run(0.2)
+        assert session.local.report.out_of_scene == 1
+        assert np.linalg.norm(session.local.twin.pose("crate")[0] - before) > 0.04
+
+
+def test_without_a_declared_workspace_the_default_box_applies(cache):
+    with Headless(load_scene(SMALL), cache_dir=cache) as session:
+        low, high = session.local.scene_box
+        assert low[0] < -10 and high[0] > 10  # SCENE_REACH beyond the table's edges
+        session.run(0.2)
+        _forge(session, (0.8, 0.0, 0.56), 10**6)
+        session.run(0.2)
+        assert session.local.report.out_of_scene == 0
