@@ -81,8 +81,9 @@ def check_args(args: argparse.Namespace) -> None:
         if value < low or (value == low and not low_ok) or value > high:
             bounds = f"{'>=' if low_ok else '>'} {low:g}" + (f" and <= {high:g}" if math.isfinite(high) else "")
             raise TwinError(f"{flag} must be {bounds}, got {value:g}")
-    if getattr(args, "viewpoint", None) is not None and not all(math.isfinite(x) for x in args.viewpoint):
-        raise TwinError(f"--viewpoint must be three finite numbers, got {args.viewpoint}")
+    for viewpoint in getattr(args, "viewpoint", None) or ():  # once per view
+        if not all(math.isfinite(x) for x in viewpoint):
+            raise TwinError(f"--viewpoint must be three finite numbers, got {viewpoint}")
     if getattr(args, "points", None) is not None and args.points < 100:
         raise TwinError(f"--points must be at least 100, got {args.points}")
     if getattr(args, "record", None) is not None:
@@ -130,16 +131,35 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument("-v", "--verbose", action="store_true", help="log debug messages to stderr")
     sub = parser.add_subparsers(dest="command", required=True)
 
-    p = sub.add_parser("estimate", help="estimate volume, mass, centre of mass and inertia from a cloud")
-    p.add_argument("cloud", type=Path, help="PLY, PCD, XYZ/TXT, NPY or NPZ point cloud")
+    p = sub.add_parser("estimate", help="estimate volume, mass, centre of mass and inertia from a cloud",
+                       description="Several VIEWs are views of one object: points in one shared world frame, each "
+                                   "with its sensor origin (a PCD's VIEWPOINT header, or --viewpoint once per view). "
+                                   "Depth images (16-bit PNG in millimetres, .npy) need --intrinsics.")
+    p.add_argument("views", nargs="+", type=Path, metavar="VIEW",
+                   help="PLY, PCD, XYZ/TXT, NPY or NPZ point cloud; with --intrinsics, a depth image (.png, .npy)")
     dens = p.add_mutually_exclusive_group()
     dens.add_argument("--density", type=float, help="kg/m^3")
     dens.add_argument("--material", help="a name or alias from the material table (e.g. wood_oak, PLA, "
                                           "aluminum; list: twin materials)")
     p.add_argument("--units", default="m", choices=["m", "cm", "mm"], help="units of the file (default m)")
     p.add_argument("--method", default="auto", choices=["auto", "obb", "hull", "surface"])
-    p.add_argument("--viewpoint", type=float, nargs=3, metavar=("X", "Y", "Z"),
-                   help="sensor position (file units) to orient estimated normals towards")
+    p.add_argument("--viewpoint", type=float, nargs=3, metavar=("X", "Y", "Z"), action="append",
+                   help="sensor position (file units) to orient estimated normals towards; once per VIEW, in "
+                        "order (replaces a PCD VIEWPOINT header)")
+    p.add_argument("--support-plane", nargs="+", metavar="auto|A B C D",
+                   help="the plane the object rests on: 'auto' (found in the data, else the horizontal plane "
+                        "through the lowest point, z up) or A B C D with A x + B y + C z + D = 0 (D in file "
+                        "units), normal pointing up into the object's side; its points are cut away and the "
+                        "object's base is closed on it")
+    p.add_argument("--intrinsics", type=float, nargs=4, metavar=("FX", "FY", "CX", "CY"),
+                   help="pinhole intrinsics in pixels (OpenCV/Open3D convention): every VIEW is a depth image")
+    p.add_argument("--depth-scale", type=float,
+                   help="metres per depth unit (default 0.001 for integer images, 1 for float .npy; the inverse "
+                        "of Open3D's depth_scale)")
+    p.add_argument("--viewpoint-pose", type=float, nargs=7, action="append",
+                   metavar=("TX", "TY", "TZ", "QW", "QX", "QY", "QZ"),
+                   help="a depth image's camera-to-world pose (metres; camera axes x right, y down, z forward), "
+                        "once per depth image (default: identity, points in the camera frame)")
     p.add_argument("--mesh-out", type=Path, help="write the reconstructed mesh (.stl, .ply, .obj)")
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     _rerun_option(p)
@@ -244,30 +264,110 @@ def _parser() -> argparse.ArgumentParser:
 def _cmd_estimate(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from estimation import estimate, load_cloud
+    from estimation import estimate, make_cloud
     from estimation.materials import resolve_density
     from estimation.units import unit_scale
+    from estimation.views import assess, estimate_views
 
     scale = unit_scale(args.units)
     density, mat = resolve_density(args.material, args.density)
     name = None if mat is None else mat.name
+    support = _support_plane(args.support_plane, scale)
     with _open_rerun(args, "estimate") as rlog:
         t0 = time.perf_counter()
-        cloud = load_cloud(args.cloud, scale=scale)
+        loaded = _estimate_views(args, scale)
+        views = [v for v, _ in loaded]
         read = time.perf_counter() - t0
-        viewpoint = None if args.viewpoint is None else np.asarray(args.viewpoint) * scale
-        result = estimate(cloud, density, method=args.method, material=name, viewpoint=viewpoint,
-                          read_seconds=read)
+        single = len(views) == 1 and views[0].origin is None and support is None
+        if args.method != "auto" or single:
+            if len(views) > 1 or support is not None:
+                raise TwinError(f"several views and --support-plane need --method auto, not {args.method}")
+            # One cloud with no sensor origin: the estimate orients its normals by the flood fill.
+            cloud = loaded[0][1] if loaded[0][1] is not None else make_cloud(views[0].points)
+            origin = views[0].origin
+            result = estimate(cloud, density, method=args.method, material=name, read_seconds=read,
+                              viewpoint=origin if origin is not None and origin.ndim == 1 else None)
+            cov = assess(result, cloud.points, 0.0)[0] if result.method == "auto" else None
+            bounds, warnings, plane = result.volume_bounds_m3, result.warnings, None
+        else:
+            fused = estimate_views(views, density, support=support, material=name)
+            result, cov, bounds, warnings, plane = (fused.estimate, fused.coverage, fused.volume_bounds_m3,
+                                                    fused.warnings, fused.plane)
         if args.mesh_out is not None:
             _write_mesh(result.vertices, result.faces, args.mesh_out)
         seconds = time.perf_counter() - t0
-        rlog.estimate(args.cloud.stem, result, cloud.points)
+        rlog.estimate(args.views[0].stem, result, np.concatenate([v.points for v in views]))
     record = estimate_to_json(result, seconds)
+    record["volume_bounds_m3"] = None if bounds is None else list(bounds)
+    record["coverage"] = cov
+    record["views"] = {"count": len(views), "points": [len(v.points) for v in views]}
+    record["support_plane"] = None if plane is None else list(plane.as_abcd())
+    record["warnings"] = list(warnings)
     if args.json:
         print(to_json(record))
     else:
         _print_estimate(record)
     return 0
+
+
+def _support_plane(words: list[str] | None, scale: float):  # type: ignore[no-untyped-def]
+    """--support-plane as 'auto', a Plane in metres (D scaled from file units), or None."""
+    if words is None:
+        return None
+    if words == ["auto"]:
+        return "auto"
+    from estimation.views import plane_from_abcd
+
+    try:
+        a, b, c, d = (float(w) for w in words)
+    except ValueError:
+        raise TwinError(f"--support-plane takes 'auto' or four numbers A B C D, got {' '.join(words)}") from None
+    return plane_from_abcd([a, b, c, d * scale])
+
+
+def _estimate_views(args: argparse.Namespace, scale: float) -> list[tuple]:  # type: ignore[type-arg]
+    """The VIEWs in metres with their sensor origins (clouds, or depth images with --intrinsics), each with
+    its loaded cloud (None for a depth image)."""
+    import numpy as np
+
+    from estimation import load_cloud
+    from estimation.errors import CloudError
+    from estimation.views import View
+
+    n = len(args.views)
+    depth = args.intrinsics is not None
+    if args.viewpoint is not None and len(args.viewpoint) != n:
+        raise TwinError(f"--viewpoint given {len(args.viewpoint)} times for {n} views: give it once per VIEW, in order")
+    if not depth and (args.depth_scale is not None or args.viewpoint_pose is not None):
+        raise TwinError("--depth-scale and --viewpoint-pose are for depth images: pass --intrinsics FX FY CX CY")
+    if depth and args.viewpoint is not None:
+        raise TwinError("a depth image's sensor origin is its camera: give --viewpoint-pose, not --viewpoint")
+    if depth and args.viewpoint_pose is not None and len(args.viewpoint_pose) != n:
+        raise TwinError(f"--viewpoint-pose given {len(args.viewpoint_pose)} times for {n} depth images: give it once "
+                        f"per VIEW, in order")
+    views = []
+    for k, path in enumerate(args.views):
+        try:
+            if depth:
+                from estimation.depthimage import depth_view, intrinsics, pose, read_depth
+
+                image = read_depth(path, scale=args.depth_scale)
+                camera = intrinsics(*args.intrinsics, width=image.shape[1], height=image.shape[0])
+                rot, pos = pose(args.viewpoint_pose[k] if args.viewpoint_pose else [0, 0, 0, 1, 0, 0, 0])
+                points, origin = depth_view(image, camera, rot, pos)
+                view = (View(points, origin, path.name), None)
+            else:
+                cloud = load_cloud(path, scale=scale)
+                origin = cloud.sensor_origins
+                if args.viewpoint is not None:
+                    origin = np.asarray(args.viewpoint[k], dtype=np.float64) * scale
+                elif origin is not None and origin.strides[0] == 0:
+                    origin = origin[0]  # one origin for the whole file (a PCD VIEWPOINT)
+                view = (View(cloud.points, origin, path.name), cloud)
+        except CloudError as exc:
+            raise TwinError(exc if str(path) in str(exc) else f"{path}: {exc}") from exc
+        views.append(view)
+    return views
 
 
 def estimate_to_json(result, seconds: float) -> dict:  # type: ignore[no-untyped-def]
@@ -317,6 +417,12 @@ def _print_estimate(record: dict) -> None:
         ("watertight", str(record["watertight"])),
         ("time", f"{record['seconds']:.3f} s"),
     ]
+    if record.get("volume_bounds_m3"):
+        low, high = record["volume_bounds_m3"]
+        rows.insert(1, ("volume bounds", f"{low * 1e6:.2f} .. {high * 1e6:.2f} cm^3"))
+    if record.get("coverage") is not None:
+        rows.insert(2, ("coverage", f"{100 * record['coverage']:.0f} % of the surface observed, "
+                                    f"{record['views']['count']} view(s)"))
     for key, value in rows:
         table.add_row(key, value)
     console = Console()
