@@ -29,12 +29,13 @@ def _turn(axis: tuple[float, float, float], degrees: float) -> np.ndarray:
 R_FILE = _turn((0.3, -1.0, 0.5), 70.0)
 
 
-def _scan(folder: Path, name: str, turn: np.ndarray = np.eye(3), *, normals: bool = False,
+def _scan(folder: Path, name: str, turn: np.ndarray | None = None, *, normals: bool = False,
           origin: np.ndarray | None = None) -> Path:
     """A 12 x 8 x 5 cm box, centred 2 cm off its file's origin, sampled at 20k points (metres)."""
     box = trimesh.creation.box(extents=(0.12, 0.08, 0.05))
     box.apply_translation((0.02, -0.01, 0.03))
     cloud = sample_surface(box, 20_000, seed=3)
+    turn = np.eye(3) if turn is None else turn
     pts = cloud.points @ turn.T
     out = make_cloud(pts, cloud.normals @ turn.T if normals else None, sensor_origins=origin)
     save_cloud(out, folder / name)
