@@ -10,10 +10,13 @@ from __future__ import annotations
 
 import argparse
 import csv
+import logging
 import math
 from pathlib import Path
 
 from estimation.errors import TwinError
+
+log = logging.getLogger(__name__)
 
 #: Human force discrimination threshold (Weber fraction), percent: Jones 1989 (see the module docstring).
 FORCE_JND_PCT = 7.0
@@ -23,14 +26,17 @@ MARKER = ".twin-experiment"
 
 HELP = """Run a latency sweep headless: per condition one session on the simulated clock gives both direct
 teleoperation (the operator feels C's force after the round trip) and the twin (the operator feels C' at once).
-SCENE is a scene TOML file; recordings are not accepted yet. Writes OUT/results.csv, OUT/*.png, OUT/report.md."""
+SCENE_OR_RECORDING is a scene TOML file (tasks: push, press) or an MCAP recording of a session (twin demo/local
+--record, twin replay --out): its scene, and its operator's targets replayed as the task 'recorded'.
+Writes OUT/results.csv, OUT/*.png, OUT/report.md."""
 
 
 def add_parser(sub) -> None:  # type: ignore[no-untyped-def]
     """Register ``twin experiment`` on the ``twin`` command's subparsers."""
     p = sub.add_parser("experiment", help="latency sweep: direct teleoperation against the twin, headless",
                        description=HELP)
-    p.add_argument("scene", type=Path, help="scene TOML file (recordings are not accepted yet)")
+    p.add_argument("scene", type=Path, metavar="SCENE_OR_RECORDING",
+                   help="scene TOML file, or an .mcap recording (its scene and its operator's targets)")
     p.add_argument("--delays", default="0,10,25,50,100,200",
                    help="one-way delays in ms, each direction, comma-separated (default 0,10,25,50,100,200)")
     p.add_argument("--jitter", type=float, default=0.0,
@@ -38,7 +44,9 @@ def add_parser(sub) -> None:  # type: ignore[no-untyped-def]
     p.add_argument("--loss", type=float, default=0.0, help="independent packet loss, percent, each direction")
     p.add_argument("--mass-scale", default="1", help="twin mass / true mass, comma-separated (default 1)")
     p.add_argument("--seeds", type=int, default=1, help="network seeds per condition (default 1)")
-    p.add_argument("--tasks", default="push,press", help="tasks, comma-separated: push, press (default both)")
+    p.add_argument("--tasks", default=None,
+                   help="tasks, comma-separated: push, press, recorded (default: push,press for a scene, "
+                        "recorded for a recording)")
     p.add_argument("--speed", type=float, default=1.0, help="task speed factor (2: twice as fast; default 1)")
     p.add_argument("--workers", type=int, default=2, help="worker processes (default 2; 0: this process)")
     p.add_argument("--dask", metavar="ADDRESS",
@@ -89,7 +97,11 @@ def parse(args: argparse.Namespace):  # type: ignore[no-untyped-def]
         raise TwinError(f"--workers must be >= 0, got {args.workers}")
     if args.dask is not None and args.dask != "local" and "://" not in args.dask:
         raise TwinError(f"--dask: expected 'local' or a scheduler address like tcp://HOST:8786, got {args.dask!r}")
+    if args.tasks is None:
+        args.tasks = "recorded" if is_recording(args.scene) else "push,press"
     tasks = tuple(t.strip() for t in args.tasks.split(",") if t.strip())
+    if "recorded" in tasks and not is_recording(args.scene):
+        raise TwinError("--tasks recorded needs a recording (.mcap) in place of the scene file")
     sweep = Sweep(tasks=tasks, delays=tuple(d / 1e3 for d in delays), jitter=args.jitter / 1e3,
                   loss=args.loss / 100, mass_scales=masses, seeds=args.seeds, speed=args.speed)
     sweep.conditions()  # every condition checked before any work
@@ -100,6 +112,39 @@ def parse(args: argparse.Namespace):  # type: ignore[no-untyped-def]
     return sweep
 
 
+def is_recording(path: Path) -> bool:
+    """Whether the command's input is a recording (by its suffix, as ``twin replay`` takes them)."""
+    return path.suffix.lower() == ".mcap"
+
+
+def source(args: argparse.Namespace):  # type: ignore[no-untyped-def]
+    """The scene and, for a recording, its operator as a :class:`scenes.experiment.RecordedTask` (else None).
+
+    Raises:
+        TwinError: an unreadable scene file or recording, a recording without a scene, or one whose operator
+            applied no target while the recorded task was asked for.
+    """
+    from scenes.experiment import RecordedTask
+    from scenes.scenefile import load_scene
+
+    if not is_recording(args.scene):
+        return load_scene(args.scene), None
+    from cli.record import recorded_scene
+    from sync.recording import read_recording
+
+    recording = read_recording(args.scene)
+    if recording.damage:
+        log.warning("%s", recording.damage)
+    scene = recorded_scene(recording)
+    times, points = recording.targets()
+    if len(times) == 0:
+        if "recorded" in args.tasks.split(","):
+            raise TwinError(f"{args.scene}: the recording has no operator targets (a remote's recording has none; "
+                            "record the twin side, or give --tasks push,press)")
+        return scene, None
+    return scene, RecordedTask(times=times, points=points)
+
+
 def run(args: argparse.Namespace) -> int:
     """The ``twin experiment`` handler: sweep, CSV, plots, report."""
     from contextlib import nullcontext
@@ -107,10 +152,9 @@ def run(args: argparse.Namespace) -> int:
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
     from scenes.experiment import dask_executor, run_experiment
-    from scenes.scenefile import load_scene
 
     sweep = parse(args)
-    scene = load_scene(args.scene)
+    scene, recorded = source(args)
     out: Path = args.out
     out.mkdir(parents=True, exist_ok=True)
     (out / MARKER).write_text("written by twin experiment\n")
@@ -122,7 +166,8 @@ def run(args: argparse.Namespace) -> int:
         def progress(done: int, total: int) -> None:
             bar.update(task, completed=done, total=total)
 
-        rows, traces = run_experiment(scene, sweep, workers=args.workers, executor=executor, progress=progress)
+        rows, traces = run_experiment(scene, sweep, workers=args.workers, executor=executor, recorded=recorded,
+                                      progress=progress)
     write_csv(rows, out / "results.csv")
     plots = write_plots(rows, traces, out)
     (out / "report.md").write_text(report(rows, args, plots))

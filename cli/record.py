@@ -52,21 +52,14 @@ def recording_transport(transport: Transport, recorder: Recorder | None, side: s
 
 
 def recorded_trajectory(recording: Recording) -> Trajectory | None:
-    """The operator's recorded targets as a trajectory of twin time (None if the recording has none).
+    """The operator's recorded targets as a trajectory of twin time (None if the recording has none): each
+    held from the time it was applied, as recorded (:func:`twin.trajectory.held_trajectory`)."""
+    from twin.trajectory import held_trajectory
 
-    A zero-order hold: at time t, the last target applied at or before t (half a millisecond of slack,
-    since step times are float sums); before the first, None (the end effector stays where it starts).
-    """
     times, points = recording.targets()
     if len(times) == 0:
         return None
-    slack = 5e-4  # half the smallest step the CLI runs: a target recorded at t is found at t
-
-    def at(t: float) -> np.ndarray | None:
-        i = int(np.searchsorted(times, t + slack, side="right")) - 1
-        return None if i < 0 else points[i]
-
-    return at
+    return held_trajectory(times, points, start_time=float(times[0]))
 
 
 def recorded_scene(recording: Recording):  # type: ignore[no-untyped-def]

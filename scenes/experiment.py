@@ -45,6 +45,8 @@ from twin.runtime import LocalSettings
 
 #: Tasks :func:`run_experiment` knows.
 TASKS = ("push", "press")
+#: The task of an experiment on a recording: the operator's recorded targets (:class:`RecordedTask`).
+RECORDED = "recorded"
 
 #: Modes of each run, in the order rows are written.
 MODES = ("direct", "twin")
@@ -95,6 +97,35 @@ class Condition:
     def truth(self) -> Condition:
         """The ground truth for this run: same task and timing, no delay, no loss, true mass."""
         return Condition(task=self.task, speed=self.speed)
+
+
+@dataclass(frozen=True, eq=False)
+class RecordedTask:
+    """A recorded operator, as an experiment's task: the targets a session applied.
+
+    ``times`` are twin seconds (ascending), ``points`` (n, 3) metres, world frame. Replayed from the first
+    target on, each held until the next; the run goes on ``settle`` seconds after the last.
+    """
+
+    times: np.ndarray
+    points: np.ndarray
+    settle: float = 1.0
+
+    def __post_init__(self) -> None:
+        t, p = np.asarray(self.times, float), np.asarray(self.points, float)
+        if t.ndim != 1 or len(t) == 0 or p.shape != (len(t), 3):
+            raise ExperimentError(f"a recorded task needs n times and (n, 3) targets, got {t.shape} and {p.shape}")
+        if not (np.isfinite(t).all() and np.isfinite(p).all() and np.all(np.diff(t) >= 0)):
+            raise ExperimentError("a recorded task's times and targets must be finite, times ascending")
+        if not (math.isfinite(self.settle) and self.settle >= 0):
+            raise ExperimentError(f"settle must be a finite number >= 0, got {self.settle!r}")
+
+    def plan(self, speed: float = 1.0):  # type: ignore[no-untyped-def]
+        """``(trajectory(t), duration)`` from t = 0, times divided by ``speed`` (as :func:`plan_task`)."""
+        from twin.trajectory import held_trajectory
+
+        times = (np.asarray(self.times, float) - float(self.times[0])) / speed
+        return held_trajectory(times, self.points), float(times[-1]) + self.settle
 
 
 @dataclass(frozen=True)
@@ -182,7 +213,7 @@ def check_condition(c: Condition) -> None:
         ExperimentError: an unknown task, a mass scale or speed that is not a finite positive number, or
             network conditions :class:`sync.netem.Conditions` refuses (the message names the delay).
     """
-    if c.task not in TASKS:
+    if c.task not in (*TASKS, RECORDED):
         raise ExperimentError(f"unknown task {c.task!r} (known: {', '.join(TASKS)})")
     for name, value in (("mass scale", c.mass_scale), ("speed", c.speed)):
         if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
@@ -317,11 +348,13 @@ def force_sample_bytes() -> int:
                                       position=(-1.2345678, 2.3456789, -3.4567891))))
 
 
-def run_session(scene: SceneSpec, condition: Condition, *, cache_dir: Path | None = None) -> Trace:
-    """One deterministic headless session of ``condition``; see the module docstring.
+def run_session(scene: SceneSpec, condition: Condition, *, cache_dir: Path | None = None,
+                recorded: RecordedTask | None = None) -> Trace:
+    """One deterministic headless session of ``condition``; see the module docstring. The task
+    :data:`RECORDED` replays ``recorded``.
 
     Raises:
-        ExperimentError: as :func:`check_condition` and :func:`plan_task`.
+        ExperimentError: as :func:`check_condition` and :func:`plan_task`; the recorded task without a recording.
     """
     from scenes.headless import Headless
 
@@ -333,8 +366,13 @@ def run_session(scene: SceneSpec, condition: Condition, *, cache_dir: Path | Non
         remote, local = session.remote, session.local
         dt = session.dt
         session.run(SETUP_S)
-        trajectory, duration = plan_task(condition.task, scene, remote.twin.model, remote.twin.data,
-                                         speed=condition.speed)
+        if condition.task == RECORDED:
+            if recorded is None:
+                raise ExperimentError(f"the {RECORDED!r} task needs a recording")
+            trajectory, duration = recorded.plan(condition.speed)
+        else:
+            trajectory, duration = plan_task(condition.task, scene, remote.twin.model, remote.twin.data,
+                                             speed=condition.speed)
         t0 = local.twin.time
         steps = round(duration / dt)
         # The force samples' own downlink: a third generator from the seed (the session's are the first two).
@@ -529,12 +567,12 @@ def dask_executor(address: str, workers: int = 2) -> Iterator[Executor]:
         yield client.get_executor()
 
 
-def _job(scene: SceneSpec, condition: Condition, cache_dir: Path | None) -> Trace:
-    return run_session(scene, condition, cache_dir=cache_dir)
+def _job(scene: SceneSpec, condition: Condition, cache_dir: Path | None, recorded: RecordedTask | None) -> Trace:
+    return run_session(scene, condition, cache_dir=cache_dir, recorded=recorded)
 
 
 def run_experiment(scene: SceneSpec, sweep: Sweep, *, workers: int = 1, executor: Executor | None = None,
-                   cache_dir: Path | None = None,
+                   cache_dir: Path | None = None, recorded: RecordedTask | None = None,
                    progress: Callable[[int, int], None] | None = None) -> tuple[list[Row], dict[Condition, Trace]]:
     """Run every condition of ``sweep`` and its tasks' ground truths; one session per worker job.
 
@@ -544,6 +582,7 @@ def run_experiment(scene: SceneSpec, sweep: Sweep, *, workers: int = 1, executor
         workers: processes (spawned) when no ``executor`` is given; 0 runs everything in this process.
         executor: where to run the sessions instead (e.g. :func:`dask_executor`).
         cache_dir: CoACD cache for both sides (default: the usual one).
+        recorded: the operator of the :data:`RECORDED` task (an experiment on a recording).
         progress: called as ``progress(done, total)`` after each session.
 
     Returns:
@@ -553,17 +592,19 @@ def run_experiment(scene: SceneSpec, sweep: Sweep, *, workers: int = 1, executor
         ExperimentError: a condition :func:`check_condition` refuses (before any session runs).
     """
     runs = sweep.conditions()
+    if RECORDED in sweep.tasks and recorded is None:
+        raise ExperimentError(f"the {RECORDED!r} task needs a recording")
     todo = sorted(set(runs) | {r.truth() for r in runs}, key=lambda c: tuple(asdict(c).values()))
     traces: dict[Condition, Trace] = {}
     if executor is None and workers == 0:
         for i, c in enumerate(todo):
-            traces[c] = run_session(scene, c, cache_dir=cache_dir)
+            traces[c] = run_session(scene, c, cache_dir=cache_dir, recorded=recorded)
             if progress is not None:
                 progress(i + 1, len(todo))
     else:
         pool = executor or ProcessPoolExecutor(workers, mp_context=mp.get_context("spawn"))
         try:
-            futures = {pool.submit(_job, scene, c, cache_dir): c for c in todo}
+            futures = {pool.submit(_job, scene, c, cache_dir, recorded): c for c in todo}
             for i, future in enumerate(as_completed(futures)):
                 traces[futures[future]] = future.result()
                 if progress is not None:

@@ -119,10 +119,10 @@ def test_an_out_folder_this_command_did_not_write_is_refused(tmp_path, capsys):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["notes.txt"]
 
 
-def test_help_says_scene_files_only():
+def test_help_names_both_inputs():
     out = subprocess.run([sys.executable, "-m", "cli.main", "experiment", "--help"], capture_output=True,
                          text=True, check=True, cwd=Path(__file__).parent.parent).stdout
-    assert "recordings are not accepted yet" in out
+    assert "SCENE_OR_RECORDING" in out and "recorded" in out and "--dask" in out
 
 
 def test_a_dask_local_cluster_gives_the_rows_local_processes_give(rows, cache):

@@ -174,3 +174,34 @@ def test_twin_replay_runs_as_a_command(recorded, cache):
                            "--cache-dir", str(cache)], cwd=ROOT, capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr
     assert "replayed" in done.stdout and "x real time" in done.stdout
+
+
+def test_an_experiment_on_a_recording_replays_its_operator_under_each_delay(recorded, cache, tmp_path, monkeypatch):
+    import csv
+
+    monkeypatch.setenv("TWIN_CACHE_DIR", str(cache))
+    out = tmp_path / "sweep"
+    path, _, _ = recorded
+    assert main(["experiment", str(path), "--delays", "0,50", "--workers", "0", "--out", str(out)]) == 0
+    with (out / "results.csv").open() as f:
+        rows = list(csv.DictReader(f))
+    assert {r["task"] for r in rows} == {"recorded"}
+    assert sorted((r["mode"], float(r["delay_ms"])) for r in rows) == [
+        ("direct", 0.0), ("direct", 50.0), ("twin", 0.0), ("twin", 50.0)]
+    direct = {float(r["delay_ms"]): r for r in rows if r["mode"] == "direct"}
+    assert float(direct[0.0]["force_rms_n"]) == 0.0  # direct at zero delay is the truth
+    assert float(direct[0.0]["truth_peak_n"]) > 1.0  # the recorded push reached the crate
+    assert float(direct[50.0]["force_rms_n"]) > 0.0
+    assert float(direct[50.0]["perceived_delay_ms"]) >= 100.0
+
+
+def test_an_experiment_asks_for_what_its_input_can_give(recorded, tmp_path, capsys):
+    assert main(["experiment", str(SMALL), "--tasks", "recorded", "--out", str(tmp_path / "a")]) == 2
+    assert "--tasks recorded needs a recording (.mcap)" in capsys.readouterr().err
+    remote_only = tmp_path / "remote.mcap"
+    with Recorder(remote_only, clock=SimClock(), metadata={"scene_toml": SMALL.read_text(),
+                                                           "scene_dir": str(SMALL.parent)}):
+        pass
+    assert main(["experiment", str(remote_only), "--out", str(tmp_path / "b")]) == 2
+    assert "the recording has no operator targets" in capsys.readouterr().err
+    assert not (tmp_path / "a").exists() and not (tmp_path / "b").exists()

@@ -33,6 +33,24 @@ def push_trajectory(start: np.ndarray, end: np.ndarray, duration: float, *, star
     return at
 
 
+def held_trajectory(times: np.ndarray, points: np.ndarray, *, start_time: float = 0.0,
+                    ) -> Callable[[float], np.ndarray | None]:
+    """Targets taken at ``times`` (twin seconds, ascending), each held until the next (a zero-order hold, as a
+    device's commands are), shifted so the first is taken at ``start_time``; None before it.
+
+    Half a millisecond of slack: step times are float sums, so a target recorded at t is found at t.
+    """
+    times = np.asarray(times, float) - (float(times[0]) - start_time if len(times) else 0.0)
+    points = np.asarray(points, float)
+    slack = 5e-4
+
+    def at(t: float) -> np.ndarray | None:
+        i = int(np.searchsorted(times, t + slack, side="right")) - 1
+        return None if i < 0 else points[i]
+
+    return at
+
+
 def load_trajectory(path: str | Path) -> Trajectory:
     """An end-effector trajectory from a CSV file.
 
