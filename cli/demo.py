@@ -28,8 +28,18 @@ def default_scene() -> Path:
     return Path(str(resources.files("scenes").joinpath("data/paper_table.toml")))
 
 
+def remote_sensor(name: str, scene):  # type: ignore[no-untyped-def]
+    """The remote's sensor for ``--sensor name``: None (the Remote's default, the surface sensor) or the
+    scene's default camera rig (:meth:`scenes.sensing.CameraSensor.for_scene`)."""
+    if name == "surface":
+        return None
+    from scenes.sensing import CameraSensor
+
+    return CameraSensor.for_scene(scene)
+
+
 def _remote_main(scene_path: str, endpoint: str, zenoh_config: str | None, ready, stop, results,  # type: ignore[no-untyped-def]
-                 record: str | None = None) -> None:
+                 record: str | None = None, sensor: str = "surface") -> None:
     from cli.record import open_recorder, recording_transport
     from scenes.remote import Remote
     from scenes.scenefile import load_scene
@@ -42,8 +52,9 @@ def _remote_main(scene_path: str, endpoint: str, zenoh_config: str | None, ready
     recorder = open_recorder(None if record is None else Path(record), clock=REAL_CLOCK, command="demo",
                              side="remote", scene_path=Path(scene_path))
     try:
-        remote = Remote(load_scene(scene_path), recording_transport(ZenohTransport(session), recorder, "remote"),
-                        recorder=recorder)
+        scene = load_scene(scene_path)
+        remote = Remote(scene, recording_transport(ZenohTransport(session), recorder, "remote"),
+                        recorder=recorder, sensor=remote_sensor(sensor, scene))
         ready.set()
         stats = remote.run(24 * 3600.0, stop=stop)
         c = remote.link.counters
@@ -59,12 +70,15 @@ def _remote_main(scene_path: str, endpoint: str, zenoh_config: str | None, ready
 
 
 def run_demo(*, duration: float = 5.0, scene_path: Path | None = None, zenoh_config: str | None = None,
-             progress: bool = True, rlog: RerunLog = OFF, hold: bool = True, record: Path | None = None) -> dict:
+             progress: bool = True, rlog: RerunLog = OFF, hold: bool = True, record: Path | None = None,
+             sensor: str = "surface") -> dict:
     """Run both sides and return the summary (the ``--json`` record).
 
     ``record``: an ``.mcap`` file for the twin's side (its wire messages both ways, the operator's targets
     and force, the scene file); the remote process writes its side, with the ground truth, beside it as
     ``<name>.remote.mcap``. Either replays with ``twin replay``.
+
+    ``sensor``: the remote's, 'surface' or 'cameras' (``twin demo --sensor``).
 
     ``hold``: pin objects the remote reports at rest while the operator leaves them alone (:mod:`twin.hold`).
 
@@ -85,7 +99,7 @@ def run_demo(*, duration: float = 5.0, scene_path: Path | None = None, zenoh_con
     ready, stop, results = ctx.Event(), ctx.Event(), ctx.Queue()
     remote_record = None if record is None else str(Path(record).with_suffix(".remote.mcap"))
     remote = ctx.Process(target=_remote_main, args=(str(scene_path), endpoint, zenoh_config, ready, stop, results,
-                                                    remote_record))
+                                                    remote_record, sensor))
     console.print(f"[bold]tactile-twin demo[/bold]: remote scene {scene_path.name} on {endpoint} (peer mode)")
     t0 = time.perf_counter()
     remote.start()

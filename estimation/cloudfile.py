@@ -552,6 +552,10 @@ def _viewpoint(path: Path, words: list[str] | None) -> np.ndarray | None:
         raise CloudFileError(f"{path}: VIEWPOINT needs 7 finite numbers (tx ty tz qw qx qy qz), got {' '.join(words)[:80]!r}")
     if values == _DEFAULT_VIEWPOINT:
         return None
+    if not any(values[3:]):
+        # The rotation is not used (an origin does not turn), but a zero quaternion is no rotation at all:
+        # the header is damaged, and so may be its translation.
+        raise CloudFileError(f"{path}: VIEWPOINT's quaternion qw qx qy qz is zero, not a rotation")
     return np.array(values[:3])
 
 

@@ -222,3 +222,12 @@ def _png(path, array):  # type: ignore[no-untyped-def]
     from PIL import Image
 
     Image.fromarray(array).save(path)
+
+
+def test_a_pcd_viewpoint_with_a_zero_quaternion_is_refused(capsys, tmp_path):
+    path = tmp_path / "z.pcd"
+    path.write_text("VERSION .7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH 1\nHEIGHT 1\n"
+                    "VIEWPOINT 1 2 3 0 0 0 0\nPOINTS 1\nDATA ascii\n1 2 3\n")
+    assert main(["estimate", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert "z.pcd: VIEWPOINT's quaternion qw qx qy qz is zero" in err and err.count("\n") == 1
