@@ -7,7 +7,8 @@ table, noise per scenes/cameras.py), the remote settles, the rig scans once, eve
 fused, its base closed on the support plane, and estimated ('auto', normals oriented to each point's
 camera); the volume is compared with the true mesh's (scenes.sources.reference_estimate). Then the scene is
 stepped for one tracking period (at rest), scanned again with fresh noise, and every object's ICP track is
-compared with its (unmoved) frame.
+compared with its (unmoved) frame. Each estimate's coverage and volume interval are those ``twin estimate``
+reports for views (``estimation.views.assess``); the table counts how often the interval holds the truth.
 """
 
 from __future__ import annotations
@@ -28,6 +29,8 @@ RIGS = (1, 2, 3)
 def run_scene(name: str, cameras: int) -> dict:
     from estimation import estimate, make_cloud
     from estimation.errors import TwinError
+    from estimation.spacing import surface_noise
+    from estimation.views import assess
     from scenes.remote import Remote
     from scenes.scenefile import load_scene
     from scenes.sensing import CameraSensor
@@ -42,6 +45,7 @@ def run_scene(name: str, cameras: int) -> dict:
     sensor = CameraSensor.for_scene(scene, cameras=cameras, seed=1)
     scan = sensor._current(remote, force=True)
     errors, unseen, fuse_s, est_s = {}, [], 0.0, 0.0
+    held, coverage, width = {}, {}, {}  # truth inside the interval; observed share; interval width / truth
     frames = {}
     for spec in scene.objects:
         t0 = time.perf_counter()
@@ -53,9 +57,13 @@ def run_scene(name: str, cameras: int) -> dict:
             continue
         frames[spec.id] = seen.frame_position
         try:
-            result = estimate(make_cloud(seen.points, seen.normals), reference_estimate(spec)[0].mass.mass
-                              / reference_estimate(spec)[0].volume)
-            errors[spec.id] = result.volume / reference_estimate(spec)[0].volume - 1
+            truth = reference_estimate(spec)[0].volume
+            result = estimate(make_cloud(seen.points, seen.normals), reference_estimate(spec)[0].mass.mass / truth)
+            errors[spec.id] = result.volume / truth - 1
+            observed = seen.points if seen.completed is None else seen.points[~seen.completed]
+            coverage[spec.id], (low, high) = assess(result, observed, surface_noise(observed))
+            held[spec.id] = low <= truth <= high
+            width[spec.id] = (high - low) / truth
         except TwinError as exc:
             unseen.append(f"{spec.id} ({exc})")
         est_s += time.perf_counter() - t1
@@ -66,15 +74,16 @@ def run_scene(name: str, cameras: int) -> dict:
         track_mm.append(1000 * float(np.linalg.norm(tr.position - frame)))
         track_deg.append(angle_deg(tr.quat, np.array([1.0, 0, 0, 0])))
     remote.close()
-    return {"errors": errors, "unseen": unseen, "check": scan.check, "seconds": scan.seconds, "fuse": fuse_s,
+    return {"errors": errors, "held": held, "coverage": coverage, "width": width, "unseen": unseen, "check": scan.check, "seconds": scan.seconds, "fuse": fuse_s,
             "estimate": est_s, "track_mm": track_mm, "track_deg": track_deg, "stats": sensor.feed.stats,
             "sigma": float(np.nanmedian(np.concatenate([f.sigma.ravel() for f in scan.frames])))}
 
 
 def main() -> int:
-    console = Console(record=True, width=150)
+    console = Console(record=True, width=200)
     summary = Table(title="camera feed: volume error over objects (auto, normals to each point's camera, base closed)")
-    for col in ("scene", "cams", "median sigma mm", "objects", "median |err| %", "max |err| %", "unseen",
+    for col in ("scene", "cams", "median sigma mm", "objects", "median |err| %", "max |err| %", "coverage p50",
+                "truth in interval", "interval p50 x truth", "unseen",
                 "track p50/max mm", "track max deg", "render s", "segment s", "fuse s", "estimate s"):
         summary.add_column(col, justify="right")
     detail: dict[str, dict[int, dict]] = {}
@@ -85,6 +94,9 @@ def main() -> int:
             err = np.abs(np.array(list(r["errors"].values()))) * 100
             summary.add_row(name, str(k), f"{r['sigma'] * 1000:.1f}", str(len(err)),
                             f"{np.median(err):.1f}" if len(err) else "-", f"{err.max():.1f}" if len(err) else "-",
+                            f"{np.median(list(r['coverage'].values())):.2f}" if err.size else "-",
+                            f"{sum(r['held'].values())}/{len(r['held'])}",
+                            f"{np.median(list(r['width'].values())):.2f}" if err.size else "-",
                             str(len(r["unseen"])),
                             f"{np.median(r['track_mm']):.2f}/{max(r['track_mm']):.2f}" if r["track_mm"] else "-",
                             f"{max(r['track_deg']):.2f}" if r["track_deg"] else "-",
@@ -101,6 +113,9 @@ def main() -> int:
             per.add_row(obj, *(f"{100 * detail[name][k]['errors'][obj]:+.1f}" if obj in detail[name][k]["errors"]
                                else "unseen" for k in RIGS))
         console.print(per)
+    held = [h for d in detail.values() for r in d.values() for h in r["held"].values()]
+    console.print(f"true volume inside the reported interval (estimation.views.assess): {sum(held)} of {len(held)} "
+                  f"estimates ({100 * np.mean(held):.0f} %), merged segments included")
     check = detail["clutter20"][3]["check"]
     console.print(f"clutter20, 3 cameras, segmentation vs the geom-id image: found {len(check.found)} / 20, "
                   f"merged {len(check.merged)}, split {len(check.split)}, missed {len(check.missed)}")
