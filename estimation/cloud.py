@@ -163,9 +163,10 @@ def check_estimable(cloud: PointCloud) -> None:
     n = len(cloud)
     if n < tol.MIN_POINTS:
         raise CloudError(f"too few points: {n} (need at least {tol.MIN_POINTS})")
-    centred = cloud.points - cloud.points.mean(axis=0)
-    # Singular values of the centred cloud are its spread along the principal axes.
-    spread = np.linalg.svd(centred[:: max(1, n // 20000)], compute_uv=False)
+    # Singular values of the centred cloud are its spread along the principal axes (a uniform subset of
+    # 20,000 tells flat from solid as well as a million points, at a 50th of the cost).
+    sample = cloud.points[:: max(1, n // 20000)]
+    spread = np.linalg.svd(sample - sample.mean(axis=0), compute_uv=False)
     if spread[0] <= 0:
         raise CloudError("degenerate cloud: all points are identical")
     if spread[2] < tol.FLATNESS_RATIO * spread[0]:
