@@ -166,14 +166,15 @@ def _place_vertices(points: np.ndarray, normals: np.ndarray, band: Band, cell_ke
     dims = band.dims
     n_cells = len(cell_keys)
     # The 8 cells around each point's nearest node: every cell whose centre is within a cell of it.
+    # Keys are linear in the index, so each point's 8 keys are its node's key minus 8 constants.
     base = np.rint((points - band.origin) / h).astype(np.int64)
-    near = (base[:, None, :] - CORNERS_8[None]).reshape(-1, 3)
-    key = (near[:, 0] * dims[1] + near[:, 1]) * dims[2] + near[:, 2]
+    corner_key = (CORNERS_8[:, 0] * dims[1] + CORNERS_8[:, 1]) * dims[2] + CORNERS_8[:, 2]
+    key = (((base[:, 0] * dims[1] + base[:, 1]) * dims[2] + base[:, 2])[:, None] - corner_key).reshape(-1)
     pos = np.minimum(np.searchsorted(cell_keys, key), n_cells - 1)
-    hit = cell_keys[pos] == key
+    hit = np.flatnonzero(cell_keys[pos] == key)
     cell = pos[hit]
-    src = np.repeat(np.arange(len(points)), len(CORNERS_8))[hit]
-    centre = band.position(near[hit]) + h / 2
+    src, corner = np.divmod(hit, len(CORNERS_8))
+    centre = band.position(base[src] - CORNERS_8[corner]) + h / 2
     p, n = points[src], normals[src]
     offset = np.einsum("ij,ij->i", n, centre - p)
     # A plane meets the cube of side h around ``centre`` iff |n . (centre - p)| <= h/2 * sum |n_k|.

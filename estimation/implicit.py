@@ -46,24 +46,45 @@ def band_field(points: np.ndarray, normals: np.ndarray, band: Band) -> tuple[np.
     """
     h = band.h
     # Each point reaches the 27 nodes around its nearest node: every node within 1.5 cells (per axis).
+    # The Gaussian weight and the plane value are separable per axis, so both are built from three
+    # (n, 3) factors (one per axis offset -1, 0, 1) broadcast to (n, 3, 3, 3), in NEIGHBOURS_27's order.
     base = np.rint((points - band.origin) / h).astype(np.int64)
     r = band.position(base) - points
-    offsets = NEIGHBOURS_27 * h
-    # For node offset o from a point's nearest node, d = r + h o: distances and plane values are two
-    # small matrix products, then one bincount over band positions.
-    dist2 = (r * r).sum(axis=1)[:, None] + 2 * (r @ offsets.T) + (offsets * offsets).sum(axis=1)[None]
-    weight = np.exp(-dist2 / (KERNEL_CELLS * h) ** 2).ravel()
-    plane = ((normals * r).sum(axis=1)[:, None] + normals @ offsets.T).ravel()
-    target = band.locate((base[:, None, :] + NEIGHBOURS_27[None]).reshape(-1, 3))
-    ok = target >= 0
-    weight_sum = np.bincount(target[ok], weights=weight[ok], minlength=band.size)
-    value_sum = np.bincount(target[ok], weights=(weight * plane)[ok], minlength=band.size)
+    steps = np.array([-1, 0, 1])
+    along = r[:, :, None] + h * steps  # (n, axis, offset): node minus point, metres
+    w = np.exp(-(along / (KERNEL_CELLS * h)) ** 2)
+    d = normals[:, :, None] * along
+    weight = (w[:, 0, :, None, None] * w[:, 1, None, :, None] * w[:, 2, None, None, :]).reshape(-1)
+    plane = (d[:, 0, :, None, None] + d[:, 1, None, :, None] + d[:, 2, None, None, :]).reshape(-1)
+    target = _locate_27(band, base)
+    weight_sum = np.bincount(target, weights=weight, minlength=band.size + 1)[:-1]
+    value_sum = np.bincount(target, weights=weight * plane, minlength=band.size + 1)[:-1]
     measured = weight_sum > 0
     far = FAR_CELLS * h
     values = np.zeros(band.size, dtype=np.float32)
     values[measured] = np.clip(value_sum[measured] / weight_sum[measured], -far, far)
     _spread_signs(values, measured, band, far)
     return values, measured
+
+
+def _locate_27(band: Band, base: np.ndarray) -> np.ndarray:
+    """Band positions ((n * 27,) int64, NEIGHBOURS_27's order) of the 27 nodes around fine nodes ``base``.
+
+    Nodes outside the band get ``band.size`` (a spare bin for ``np.bincount``). What ``Band.locate``
+    does for any nodes, per axis first: the coarse block and the position in it of ``base + o`` take
+    three values per axis, and only the slot look-up is done on all 27 combinations.
+    """
+    b = band.ratio
+    shifted = base[:, :, None] + np.array([-1, 0, 1]) + b // 2  # (n, axis, offset)
+    coarse = shifted // b
+    within = shifted - b * coarse
+    shape = band.coarse.shape
+    # Points lie in the coarse grid's interior (it is padded by PAD_CELLS >= 2), so no bounds checks.
+    key = (coarse[:, 0, :, None, None] * shape[1] + coarse[:, 1, None, :, None]) * shape[2] \
+        + coarse[:, 2, None, None, :]
+    block = band.slot.reshape(-1)[key.reshape(-1)].astype(np.int64)
+    inner = ((within[:, 0, :, None, None] * b + within[:, 1, None, :, None]) * b + within[:, 2, None, None, :])
+    return np.where(block >= 0, block * b**3 + inner.reshape(-1), band.size)
 
 
 def _spread_signs(values: np.ndarray, measured: np.ndarray, band: Band, far: float) -> None:
