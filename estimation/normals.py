@@ -49,23 +49,36 @@ THIN_WALL_OFFSET = 0.2
 THIN_WALL_NOISE = 2.0
 
 
-def estimate_normals(points: np.ndarray, k: int = tol.NORMAL_NEIGHBOURS) -> np.ndarray:
+#: Points per block when normals are fitted: bounds the (block, k, 3) gather to ~10-70 MB.
+NORMAL_BLOCK = 30_000
+
+
+def estimate_normals(points: np.ndarray, k: int = tol.NORMAL_NEIGHBOURS, *,
+                     neighbours: np.ndarray | None = None) -> np.ndarray:
     """Unoriented unit normals (n, 3): smallest principal direction of each point's ``k`` neighbours.
 
     Args:
         points: (n, 3) float64, metres.
         k: neighbours per point (including itself).
+        neighbours: (n, >= k) int, each point's nearest neighbours by distance (itself first), when a
+            ``cKDTree.query`` already found them; the first ``k`` columns are used.
     """
-    import open3d as o3d
-
-    pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
-    pcd.estimate_normals(o3d.geometry.KDTreeSearchParamKNN(knn=min(k, len(points))))
-    return np.asarray(pcd.normals).copy()
+    k = min(k, len(points))
+    if neighbours is None:
+        neighbours = cKDTree(points).query(points, k=k, workers=-1)[1]
+    neighbours = neighbours[:, :k]
+    normals = np.empty_like(points)
+    for start in range(0, len(points), NORMAL_BLOCK):
+        patch = points[neighbours[start:start + NORMAL_BLOCK]]
+        patch -= patch.mean(axis=1, keepdims=True)
+        # eigh sorts eigenvalues ascending: column 0 is the direction of least spread.
+        normals[start:start + NORMAL_BLOCK] = np.linalg.eigh(np.einsum("nki,nkj->nij", patch, patch))[1][:, :, 0]
+    return normals
 
 
 def orient_outward(
     points: np.ndarray, normals: np.ndarray, grid: Grid, occ: Occupancy, tree: cKDTree,
-    noise: float | None = None,
+    noise: float | None = None, *, neighbours: np.ndarray | None = None,
 ) -> np.ndarray:
     """Flip ``normals`` ((n, 3), unit) so that each points out of the solid bounded by ``points``.
 
@@ -74,6 +87,8 @@ def orient_outward(
     would read the same outside on both faces (or, worse, a cavity the shell closed). There the
     material is on the side of the other sheet (``thin_wall_side``). ``noise`` (metres, the points'
     standard deviation about their surface) enables that test; sheets closer than a few sigma are noise.
+    ``neighbours``: (n, >= THIN_WALL_NEIGHBOURS) int, each point's nearest neighbours from ``tree``
+    (itself first), to save the two searches here.
     """
     outside = ndimage.gaussian_filter(occ.outside.astype(np.float32), OUTSIDE_BLUR_CELLS)
     # The shell reaches ``closing`` cells from the points; the outside starts just beyond.
@@ -86,18 +101,21 @@ def orient_outward(
     if unsure.any() and (~unsure).any():
         # Take the side that agrees with the confident neighbours' (already flipped) normals.
         oriented = normals * sign[:, None]
-        _, nbr = tree.query(points[unsure], k=min(tol.NORMAL_NEIGHBOURS, len(points)), workers=-1)
+        k = min(tol.NORMAL_NEIGHBOURS, len(points))
+        nbr = (tree.query(points[unsure], k=k, workers=-1)[1] if neighbours is None
+               else neighbours[unsure, :k])
         weight = (~unsure[nbr]).astype(float)
         votes = np.einsum("nk,nkj,nj->n", weight, oriented[nbr], normals[unsure])
         sign[unsure] = np.where(votes < 0, -1.0, 1.0)
     if noise is not None:
-        side = thin_wall_side(points, normals, tree, min_offset=THIN_WALL_NOISE * noise)
+        side = thin_wall_side(points, normals, tree, min_offset=THIN_WALL_NOISE * noise, neighbours=neighbours)
         sign = np.where(side != 0, side, sign)
     return normals * sign[:, None]
 
 
 def thin_wall_side(points: np.ndarray, normals: np.ndarray, tree: cKDTree,
-                   k: int = THIN_WALL_NEIGHBOURS, min_offset: float = 0.0) -> np.ndarray:
+                   k: int = THIN_WALL_NEIGHBOURS, min_offset: float = 0.0, *,
+                   neighbours: np.ndarray | None = None) -> np.ndarray:
     """+1 or -1 where the point lies on a thin wall (its normal should be flipped by that), 0 elsewhere.
 
     Among a point's ``k`` neighbours, those with (unoriented) normals parallel to its own are on its
@@ -107,7 +125,7 @@ def thin_wall_side(points: np.ndarray, normals: np.ndarray, tree: cKDTree,
     outward normal points away from it. A t-test on the offsets keeps noise from deciding.
     """
     k = min(k, len(points))
-    _, nbr = tree.query(points, k=k, workers=-1)
+    nbr = tree.query(points, k=k, workers=-1)[1] if neighbours is None else neighbours[:, :k]
     offsets = np.einsum("nkj,nj->nk", points[nbr] - points[:, None, :], normals)
     # Offsets from the point's own sheet, as its nearest neighbours place it: measured from the
     # point itself, its own noise would read as a second sheet.
