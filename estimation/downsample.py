@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from estimation.obb import column_bounds
+
 #: Largest voxel grid (cells) counted densely; beyond it we sort instead (memory ~16 bytes a cell).
 DENSE_LIMIT = 16_000_000
 
@@ -47,3 +49,33 @@ def voxel_downsample(
     summed = mean(normals)
     length = np.linalg.norm(summed, axis=1, keepdims=True)
     return centroids, summed / np.maximum(length, np.finfo(float).tiny), counts
+
+
+def voxel_subsample(points: np.ndarray, voxel: float) -> np.ndarray:
+    """Indices of one point of ``points`` in each occupied cube of side ``voxel``, ascending.
+
+    Unlike :func:`voxel_downsample` the kept points are measured ones, not centroids: the centroid of a
+    patch of a curved surface lies inside it by about ``voxel**2 / (12 R)`` at radius ``R``, which
+    shrank a 2 cm sphere by ~0.25 % at 2 mm voxels. Which point of a voxel is kept is arbitrary but
+    deterministic for a given input.
+
+    Args:
+        points: (n, 3) float64, metres.
+        voxel: cube side, metres, > 0.
+
+    Returns:
+        (m,) int64 indices into ``points``, m = occupied voxels.
+    """
+    low, high = column_bounds(points)
+    # Measured from the lowest point the coordinates are >= 0, so truncation is the floor.
+    key = ((points - low) * (1.0 / voxel)).astype(np.int64)
+    dims = ((high - low) * (1.0 / voxel)).astype(np.int64) + 1
+    linear = (key[:, 0] * dims[1] + key[:, 1]) * dims[2] + key[:, 2]
+    if np.prod(dims) <= DENSE_LIMIT:
+        # Scatter every point's index into its voxel; one of them survives per voxel.
+        chosen = np.full(int(np.prod(dims)), -1, dtype=np.int64)
+        chosen[linear] = np.arange(len(points))
+        kept = chosen[chosen >= 0]
+        kept.sort()
+        return kept
+    return np.unique(linear, return_index=True)[1]

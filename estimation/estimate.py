@@ -13,17 +13,21 @@ from __future__ import annotations
 import logging
 import time
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from estimation import tolerances as tol
 from estimation.cloud import PointCloud, check_estimable
-from estimation.downsample import voxel_downsample
+from estimation.downsample import voxel_downsample, voxel_subsample
 from estimation.errors import CloudError
 from estimation.inertia import MassProperties, mass_properties
 from estimation.materials import check_density
-from estimation.obb import OrientedBox, oriented_box
+from estimation.obb import OrientedBox, oriented_box, oriented_box_local
 from estimation.units import units_warning
+
+if TYPE_CHECKING:
+    from estimation.dualcontour import DualSurface
 
 log = logging.getLogger(__name__)
 
@@ -129,7 +133,7 @@ def estimate(
     check_estimable(cloud)
     warnings = [f"dropped {cloud.dropped_nonfinite} rows with NaN or inf"] if cloud.dropped_nonfinite else []
 
-    box = oriented_box(cloud.points)
+    box, local = oriented_box_local(cloud.points)
     if (hint := units_warning(box.extents)) is not None:
         log.info(hint)
         warnings.append(hint)
@@ -156,92 +160,157 @@ def estimate(
                        warnings, stages, time.perf_counter())
 
     if method == "auto":
-        return _estimate_auto(cloud, box, density, material, viewpoint, warnings, stages)
+        return _estimate_auto(cloud, box, local, density, material, viewpoint, warnings, stages)
     return _estimate_from_surface(cloud, box, density, method, material, viewpoint, resolution, warnings, stages)
 
 
 def _estimate_auto(
     cloud: PointCloud,
     box: OrientedBox,
+    local: np.ndarray,
     density: float,
     material: str | None,
     viewpoint: np.ndarray | None,
     warnings: list[str],
     stages: dict[str, float],
 ) -> PhysicalEstimate:
-    """'auto': narrow band at the point spacing, flood-filled sign, dual contouring on the points' planes."""
+    """'auto': narrow band at the point spacing, flood-filled sign, dual contouring on the points' planes.
+
+    The resolution: the cell is the spacing of at most ``tol.POINT_BUDGET`` points (one measured point
+    per voxel of a denser cloud), or twice the noise if coarser. That meets the accuracy targets on
+    smooth and low-poly shapes, and the pass says where it does not: its ``volume_bounds_m3`` widen with
+    the surface it could not measure and the cells holding both faces of a wall. When they are wider
+    than ``tol.REFINE_DOUBT`` of the volume and the budget left points out, a second pass runs on
+    enough points to bring them to that (the bound shrinks about linearly with the cell, so with the
+    square of the doubt), at most ``tol.REFINE_POINTS``.
+    """
+    from estimation.spacing import point_spacing, surface_noise
+
+    # The principal frame: the grid, and so the result, does not depend on the cloud's rotation.
+    t0 = time.perf_counter()
+    spacing = point_spacing(local)
+    noise = surface_noise(local)  # before thinning: see ``spacing.NOISE_SUBSET``
+    stages["downsample"] = time.perf_counter() - t0
+    run = _auto_pass(cloud, box, local, spacing, noise, tol.POINT_BUDGET, density, viewpoint, stages)
+    doubt = (run.hole + run.thin) / run.props.volume
+    if run.points_used < len(local) and doubt > tol.REFINE_DOUBT:
+        budget = min(tol.REFINE_POINTS, int(run.points_used * (doubt / tol.REFINE_DOUBT) ** 2))
+        if budget > run.points_used:
+            log.info("refining: volume doubt %.2f %% at %d points, again with about %d", 100 * doubt,
+                     run.points_used, budget)
+            run = _auto_pass(cloud, box, local, spacing, noise, budget, density, viewpoint, stages)
+
+    t0 = time.perf_counter()
+    props, surface, h = run.props, run.surface, run.h
+    bounds = (max(0.0, props.volume - run.hole - run.thin), props.volume + run.hole + run.thin)
+    if run.hole > tol.VOLUME_DOUBT_FRACTION * props.volume:
+        warnings.append(f"{100 * surface.unmeasured_area / max(_area(surface), 1e-30):.1f} % of the surface "
+                        f"was not measured (holes closed by a {run.closing}-cell shell): the volume is "
+                        f"only known to {bounds[0]:.4g}..{bounds[1]:.4g} m^3")
+    if run.thin > tol.VOLUME_DOUBT_FRACTION * props.volume:
+        warnings.append(f"parts thinner than the point spacing ({1000 * h:.2g} mm cells hold both faces of a "
+                        f"wall in {surface.opposed_cells} places): the volume is only known to "
+                        f"{bounds[0]:.4g}..{bounds[1]:.4g} m^3")
+    props = _rotate_properties(props, box.rotation, box.center)
+    stages["mass_properties"] += time.perf_counter() - t0
+    return PhysicalEstimate(
+        method="auto", mass=props, obb=box, vertices=box.to_cloud(surface.vertices), faces=surface.faces,
+        watertight=True, points_in=len(cloud), points_used=run.points_used, cell=h,
+        timings=Timings(**stages), material=material, warnings=tuple(warnings),
+        points=box.to_cloud(run.points).astype(np.float32),
+        normals=box.to_cloud(run.normals, direction=True).astype(np.float32),
+        volume_bounds_m3=bounds,
+    )
+
+
+@dataclass(frozen=True)
+class _AutoPass:
+    """One 'auto' reconstruction at one resolution, in the box frame.
+
+    Attributes:
+        points, normals: (m, 3) the points used and their outward normals. h: fine cell, metres.
+        surface: the contoured surface. props: its mass properties (box frame). closing: the coarse
+        shell's radius, cells. hole, thin: m^3 of volume the cloud leaves open (see ``volume_bounds_m3``).
+    """
+
+    points: np.ndarray
+    normals: np.ndarray
+    h: float
+    surface: DualSurface
+    props: MassProperties
+    closing: int
+    hole: float
+    thin: float
+
+    @property
+    def points_used(self) -> int:
+        return len(self.points)
+
+
+def _auto_pass(cloud: PointCloud, box: OrientedBox, local: np.ndarray, spacing: float, noise: float,
+               budget: int, density: float, viewpoint: np.ndarray | None, stages: dict[str, float]) -> _AutoPass:
+    """Thin ``local`` ((n, 3) metres, box frame; ``spacing`` and ``noise`` metres) to ``budget`` points
+    and reconstruct; stage seconds are added to ``stages``."""
     from scipy.spatial import cKDTree
 
     from estimation.dualcontour import contour
     from estimation.grid import grid_around, occupancy
     from estimation.implicit import band_field
-    from estimation.normals import estimate_normals, orient_outward, orient_to_viewpoint
-    from estimation.spacing import point_spacing, surface_noise
+    from estimation.normals import THIN_WALL_NEIGHBOURS, estimate_normals, orient_outward, orient_to_viewpoint
+    from estimation.spacing import point_spacing
     from estimation.sparsegrid import narrow_band
 
-    # The principal frame: the grid, and so the result, does not depend on the cloud's rotation.
+    def lap(stage: str, since: float) -> float:
+        now = time.perf_counter()
+        stages[stage] = stages.get(stage, 0.0) + now - since
+        return now
+
     t0 = time.perf_counter()
-    frame = box.rotation
-    points = (cloud.points - box.center) @ frame
-    normals = None if cloud.normals is None else cloud.normals @ frame
-    spacing = point_spacing(points)
-    if len(points) > tol.POINT_BUDGET:
-        # Averaging within voxels of the budget's spacing keeps about POINT_BUDGET points.
-        voxel = spacing * np.sqrt(len(points) / tol.POINT_BUDGET)
-        points, normals, _ = voxel_downsample(points, voxel, normals)
+    points, normals = local, cloud.normals
+    if len(points) > budget:
+        # One measured point per voxel of the budget's spacing keeps about ``budget`` points (centroids
+        # would sit inside curved surfaces; see ``voxel_subsample``).
+        keep = voxel_subsample(points, spacing * np.sqrt(tol.VOXELS_PER_AREA * len(points) / budget))
+        points = points[keep]
+        normals = None if normals is None else normals[keep]
         spacing = point_spacing(points)
-    noise = surface_noise(points)
+    if normals is not None:
+        normals = box.to_local(normals, direction=True)
     h = max(tol.FINE_CELL_SPACINGS * spacing, tol.FINE_CELL_NOISE * noise)
     ratio = max(2, int(np.ceil(float(box.extents.max()) / (h * tol.COARSE_RESOLUTION))))
     coarse = grid_around(points, ratio * h)
-    stages["downsample"] = time.perf_counter() - t0
+    t0 = lap("downsample", t0)
 
-    t0 = time.perf_counter()
     occ = occupancy(points, coarse)
     if normals is None:
         # Fit normals over about a cell of surface: where noise sets the cell, a wider patch than the
         # default neighbours span (voxel-averaging the points instead biases noisy curved surfaces
         # outward by a good fraction of sigma).
         k = int(np.clip(tol.NORMAL_NEIGHBOURS * (h / spacing) ** 2, tol.NORMAL_NEIGHBOURS, tol.MAX_NORMAL_NEIGHBOURS))
-        normals = estimate_normals(points, k)
+        # One neighbour search serves the fit and both orientation tests (the thin-wall one looks
+        # at THIN_WALL_NEIGHBOURS).
+        tree = cKDTree(points)
+        neighbours = tree.query(points, k=min(max(k, THIN_WALL_NEIGHBOURS), len(points)), workers=-1)[1]
+        normals = estimate_normals(points, k, neighbours=neighbours)
         if viewpoint is not None:
-            view_local = (np.asarray(viewpoint, dtype=np.float64) - box.center) @ frame
-            normals = orient_to_viewpoint(points, normals, view_local)
+            normals = orient_to_viewpoint(points, normals, box.to_local(np.asarray(viewpoint, dtype=np.float64)[None])[0])
         else:
-            normals = orient_outward(points, normals, coarse, occ, cKDTree(points), noise)
-    stages["normals"] = time.perf_counter() - t0
+            normals = orient_outward(points, normals, coarse, occ, tree, noise, neighbours=neighbours)
+    t0 = lap("normals", t0)
 
-    t0 = time.perf_counter()
     band = narrow_band(coarse, occ, ratio)
     values, measured = band_field(points, normals, band)
     surface = contour(points, normals, band, values, measured, noise=noise)
-    stages["reconstruct"] = time.perf_counter() - t0
+    t0 = lap("reconstruct", t0)
 
-    t0 = time.perf_counter()
     props = mass_properties(surface.vertices, surface.faces, density)
     # What the cloud leaves open: unmeasured surface anywhere across the closing shell's half width,
     # and cells holding both faces of a wall anywhere from none to a whole cell of material.
     hole = surface.unmeasured_area * (occ.closing + 0.5) * coarse.cell
     thin = surface.opposed_cells * h**3 / 2
-    bounds = (max(0.0, props.volume - hole - thin), props.volume + hole + thin)
-    if hole > tol.VOLUME_DOUBT_FRACTION * props.volume:
-        warnings.append(f"{100 * surface.unmeasured_area / max(_area(surface), 1e-30):.1f} % of the surface "
-                        f"was not measured (holes closed by a {occ.closing}-cell shell): the volume is "
-                        f"only known to {bounds[0]:.4g}..{bounds[1]:.4g} m^3")
-    if thin > tol.VOLUME_DOUBT_FRACTION * props.volume:
-        warnings.append(f"parts thinner than the point spacing ({1000 * h:.2g} mm cells hold both faces of a "
-                        f"wall in {surface.opposed_cells} places): the volume is only known to "
-                        f"{bounds[0]:.4g}..{bounds[1]:.4g} m^3")
-    props = _rotate_properties(props, frame, box.center)
-    vertices = surface.vertices @ frame.T + box.center
-    stages["mass_properties"] = time.perf_counter() - t0
-    return PhysicalEstimate(
-        method="auto", mass=props, obb=box, vertices=vertices, faces=surface.faces,
-        watertight=True, points_in=len(cloud), points_used=len(points), cell=h,
-        timings=Timings(**stages), material=material, warnings=tuple(warnings),
-        points=(points @ frame.T + box.center).astype(np.float32), normals=(normals @ frame.T).astype(np.float32),
-        volume_bounds_m3=bounds,
-    )
+    lap("mass_properties", t0)
+    return _AutoPass(points=points, normals=normals, h=h, surface=surface, props=props, closing=occ.closing,
+                     hole=hole, thin=thin)
 
 
 def _area(surface) -> float:  # type: ignore[no-untyped-def]

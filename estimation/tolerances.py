@@ -30,11 +30,32 @@ FINE_CELL_SPACINGS = 1.0
 #: sigma -0.3 %, while thick shapes moved by under 0.2 %.
 FINE_CELL_NOISE = 2.0
 
-#: 'auto': most points the reconstruction works from. Denser clouds are voxel-averaged down to about
-#: this many (a little over: voxels on a surface hold ~1.2 of the budget's points each). Time grows
-#: about linearly with it (1M points: ~1.3 s given normals on the shared 2-core machine at 120k, ~10 s
-#: at 250k); the finest wall resolved is two or three spacings of this many points.
-POINT_BUDGET = 120_000
+#: 'auto': most points (so about most surface cells: the cell is their spacing) the reconstruction
+#: works from; denser clouds keep one measured point per voxel (``downsample.voxel_subsample``). Time
+#: grows linearly with it, accuracy does not need more for the targets (0.25 % median, 1 % worst with
+#: given normals): on the 44 shapes of ``bench/shapes.py`` at 100k points, with given normals, keeping
+#: ~20k / 30k / 40k / all points gave volume median 0.021 / 0.018 / 0.012 / 0.014 %, worst 0.30 / 0.11 /
+#: 0.09 / 0.06 %, centre of mass worst 0.20 / 0.13 / 0.14 / 0.06 mm, inertia worst 0.74 / 0.32 / 0.31 /
+#: 0.24 % (``.venv/bin/python bench/shapes.py --no-baseline`` with this changed). 30k keeps a million
+#: points within ~0.4 s of CPU. What it costs: walls thinner than two or three spacings of this many
+#: points (a 1.6 mm wall on ~0.03 m^2 of surface) are resolved only when the first pass reports cells
+#: holding both faces of a wall (``estimate._estimate_auto`` then refines, up to ``REFINE_POINTS``).
+POINT_BUDGET = 30_000
+
+#: 'auto' runs a second, finer pass when the first one's volume bounds (surface it did not measure,
+#: cells holding both faces of a wall) exceed this fraction of the volume and points were left out.
+#: On bench/shapes.py at 30k points the bound tracked the error: every shape off by more than 0.1 %
+#: had a bound over 0.19 %, smooth shapes had ~0 (thin walls and sharp low-poly shapes carry it).
+REFINE_DOUBT = 0.001
+
+#: Most points of the second pass: the old fixed budget, at which the benchmark's worst shape was
+#: 0.06 % off with given normals (~1.5 s of CPU for its reconstruction).
+REFINE_POINTS = 120_000
+
+#: Occupied voxels per point budget: a random plane through a cube of side v cuts ~(2/3) v^2 of it
+#: (Cauchy: volume over mean width 3/2 v), so a surface of area A touches ~1.5 A / v^2 voxels; the voxel
+#: is widened by sqrt(1.5) to keep POINT_BUDGET, not 1.5 x POINT_BUDGET, points.
+VOXELS_PER_AREA = 1.5
 
 #: 'auto': coarse cells along the longest side, at most, for the flood fill that decides inside and
 #: outside away from the points (and closes holes). The fine band lives inside its shell.
