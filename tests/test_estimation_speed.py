@@ -1,0 +1,110 @@
+"""The fast paths of 'auto' against their slow references, the point budget and its refinement, and the lazy package.
+
+No timing is asserted: these check that what was made fast still computes the same thing.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from estimation import estimate
+from estimation import tolerances as tol
+from estimation.downsample import voxel_subsample
+from estimation.grid import grid_around, occupancy
+from estimation.implicit import NEIGHBOURS_27, _locate_27
+from estimation.normals import estimate_normals
+from estimation.obb import column_bounds, oriented_box_local
+from estimation.sparsegrid import narrow_band
+from scenes.sampling import sample_surface
+from scenes.shapes import make_shapes
+
+RHO = 1000.0
+
+
+@pytest.fixture(scope="module")
+def shapes():
+    return {s.name: s for s in make_shapes(44, 0)}
+
+
+@pytest.mark.parametrize("ratio", [2, 3, 4])
+def test_locate_27_matches_band_locate(ratio, shapes):
+    points = sample_surface(shapes["thin-cup-00"].mesh, 5000, seed=1).points
+    grid = grid_around(points, 0.0015 * ratio)
+    band = narrow_band(grid, occupancy(points, grid), ratio)
+    base = np.rint((points - band.origin) / band.h).astype(np.int64)
+    slow = band.locate((base[:, None, :] + NEIGHBOURS_27[None]).reshape(-1, 3))
+    assert (slow >= 0).any()
+    np.testing.assert_array_equal(_locate_27(band, base), np.where(slow < 0, band.size, slow))
+
+
+def test_voxel_subsample_keeps_one_measured_point_per_voxel():
+    rng = np.random.default_rng(0)
+    points = rng.normal(size=(20_000, 3))
+    voxel = 0.3
+    kept = voxel_subsample(points, voxel)
+    keys = np.floor((points - points.min(axis=0)) / voxel).astype(np.int64)
+    assert len(kept) == len(np.unique(keys, axis=0))
+    assert len(np.unique(keys[kept], axis=0)) == len(kept)  # one per voxel
+    assert np.all(np.diff(kept) > 0)  # indices of measured points, in order
+
+
+def test_box_frame_points_are_the_box_transform():
+    rng = np.random.default_rng(1)
+    points = rng.normal(size=(5000, 3)) * [0.3, 0.1, 0.02] + [1.0, -2.0, 0.5]
+    box, local = oriented_box_local(points)
+    np.testing.assert_allclose(local, box.to_local(points), atol=1e-12)
+    np.testing.assert_allclose(box.to_cloud(local), points, atol=1e-12)
+    low, high = column_bounds(local)
+    np.testing.assert_allclose(high - low, box.extents, atol=1e-12)
+    np.testing.assert_allclose((low + high) / 2, 0, atol=1e-12)
+
+
+def test_numpy_normals_are_radial_on_a_sphere():
+    rng = np.random.default_rng(2)
+    points = rng.normal(size=(4000, 3))
+    points /= np.linalg.norm(points, axis=1, keepdims=True)
+    normals = estimate_normals(points, 16)
+    np.testing.assert_allclose(np.linalg.norm(normals, axis=1), 1, atol=1e-9)
+    assert np.abs(np.einsum("ij,ij->i", normals, points)).min() > 0.98
+
+
+def test_dense_smooth_cloud_is_thinned_to_the_budget_and_stays_accurate(shapes):
+    shape = shapes["smooth-blob-19"]
+    est = estimate(sample_surface(shape.mesh, 4 * tol.POINT_BUDGET, seed=3), RHO)
+    assert 0.7 * tol.POINT_BUDGET < est.points_used < 1.2 * tol.POINT_BUDGET
+    assert abs(est.volume / shape.volume - 1) < 0.001
+
+
+def test_a_thin_wall_the_budget_cannot_resolve_gets_a_finer_second_pass(shapes, monkeypatch):
+    # A 1.6 mm tube wall: at 8k points the cells are wider than the wall and the first pass's volume
+    # bounds say so; the second pass uses more of the cloud.
+    shape = shapes["thin-tube-02"]
+    cloud = sample_surface(shape.mesh, 60_000, seed=4)
+    monkeypatch.setattr(tol, "POINT_BUDGET", 8000)
+    est = estimate(cloud, RHO)
+    assert est.points_used > 2 * 8000
+    assert abs(est.volume / shape.volume - 1) < 0.005
+    monkeypatch.setattr(tol, "REFINE_DOUBT", 1.0)  # never refine: the one pass is worse
+    coarse = estimate(cloud, RHO)
+    assert coarse.points_used < 1.2 * 8000
+    assert abs(coarse.volume / shape.volume - 1) > abs(est.volume / shape.volume - 1)
+
+
+def test_the_package_is_lazy_and_estimate_stays_the_function():
+    code = (
+        "import sys\n"
+        "import estimation.errors\n"
+        "assert 'numpy' not in sys.modules, 'estimation.errors pulled in numpy'\n"
+        "import estimation.estimate\n"
+        "from estimation import estimate\n"
+        "import estimation\n"
+        "assert callable(estimate) and estimation.estimate is estimate, estimation.estimate\n"
+        "from estimation.estimate import Timings\n"
+        "assert estimation.estimate is estimate\n"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
