@@ -106,6 +106,11 @@ def test_without_the_plane_the_unseen_base_is_not_closed_and_coverage_says_so(ca
         paths.append(str(tmp_path / f"obj{k}.pcd"))
     bare = _run(capsys, paths)
     closed = _run(capsys, [*paths, "--support-plane", "0", "0", "1", str(-TOP)])
+    # 'auto' does not take the bracket's own top or side for the table (the rest of it lies behind them):
+    # no plane in these views, so the one through the lowest point.
+    found = _run(capsys, [*paths, "--support-plane", "auto"])
+    assert any("no support plane in the data" in w for w in found["warnings"])
+    assert found["support_plane"][:3] == [0, 0, 1] and -found["support_plane"][3] == pytest.approx(TOP, abs=0.01)
     assert bare["coverage"] < closed["coverage"] + 0.05
     assert not any("support plane" in w for w in bare["warnings"])
     assert abs(closed["volume_m3"] / VOLUME - 1) < abs(bare["volume_m3"] / VOLUME - 1)
