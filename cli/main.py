@@ -470,16 +470,21 @@ def _cmd_build(args: argparse.Namespace) -> int:
 
     err = Console(stderr=True)
 
-    def progress(k: int, n: int, object_id: str, seconds: float, est) -> None:  # type: ignore[no-untyped-def]
-        err.print(f"[{k + 1}/{n}] {object_id}: estimated in {seconds:.1f} s ({est.mass.mass:.3f} kg, "
-                  f"{est.method}{', ' + str(len(est.warnings)) + ' warning(s)' if est.warnings else ''})")
+    def progress(k: int, n: int, obj, report) -> None:  # type: ignore[no-untyped-def]
+        est = obj.estimate
+        how = "cached" if obj.hull_cached else "near-convex, no CoACD" if report.skipped_coacd else "CoACD"
+        err.print(f"[{k + 1}/{n}] {obj.id}: estimated in {report.source_seconds + report.estimate_seconds:.1f} s "
+                  f"({est.mass.mass:.3f} kg, {est.method}"
+                  f"{', ' + str(len(est.warnings)) + ' warning(s)' if est.warnings else ''}), "
+                  f"{len(obj.hulls)} hull(s) in {report.hull_seconds:.1f} s ({how})")
 
     with _open_rerun(args, "scene") as rlog:  # before the work: a bad --rerun should not cost a build
         err.print(f"building {scene.name!r}: {len(scene.objects)} objects")
-        built = build_scene(scene, coacd=_coacd_settings(args), cache_dir=args.cache_dir, on_estimate=progress)
+        built = build_scene(scene, coacd=_coacd_settings(args), cache_dir=args.cache_dir, on_object=progress)
         cached = sum(o.hull_cached for o in built.objects)
-        err.print(f"convex decomposition: {built.decompose_seconds:.1f} s ({cached} of {len(built.objects)} "
-                  f"objects from the cache)")
+        skipped = sum(r.skipped_coacd for r in built.reports.values())
+        err.print(f"convex decomposition: {built.decompose_seconds:.1f} s over {built.workers} worker(s) ({cached} of "
+                  f"{len(built.objects)} objects from the cache, {skipped} near-convex without CoACD)")
         path = write_scene(built.spec, args.out, keep=keep, built=built)
         _log_built(rlog, built)
     if args.json:

@@ -8,6 +8,7 @@ object's estimate and the transform from its cloud's or mesh's frame to its body
 from __future__ import annotations
 
 import json
+import os
 import shutil
 import tempfile
 import time
@@ -20,7 +21,7 @@ import numpy as np
 from estimation.errors import TwinError
 from scenes.scenefile import ObjectSpec, SceneSpec
 from scenes.sources import estimate_object, prepare_objects
-from twin.decompose import DEFAULT_SETTINGS, CoacdSettings
+from twin.decompose import DEFAULT_SETTINGS, CoacdSettings, ProgressBar, concavity, skips_coacd
 from twin.model import DEFAULT_PHYSICS, PhysicsSettings, add_object
 from twin.objects import TwinObject
 
@@ -40,7 +41,11 @@ class BuiltScene:
     Attributes:
         seconds: the whole build, wall time.
         estimate_seconds: object id -> seconds its estimate took (sampling included).
-        decompose_seconds: CoACD for every object together (they run in parallel), cache reads included.
+        decompose_seconds: visual meshes and convex decomposition, summed over objects (which run in
+            parallel: more than the wall time they took), cache reads included.
+        reports: object id -> how it was built (:class:`ObjectReport`).
+        compile_seconds: adding every object to the spec and compiling it, wall time.
+        workers: processes the objects were built in (1: this one).
     """
 
     scene: SceneSpec
@@ -50,11 +55,37 @@ class BuiltScene:
     seconds: float
     estimate_seconds: dict[str, float] = field(default_factory=dict)
     decompose_seconds: float = 0.0
+    reports: dict[str, ObjectReport] = field(default_factory=dict)
+    compile_seconds: float = 0.0
+    workers: int = 1
 
 
-#: ``on_estimate(index, total, object id, seconds, estimate)``: called by :func:`build_scene` after each
-#: object's estimate, so a command can show progress (the library itself prints nothing).
-OnEstimate = Callable[[int, int, str, float, object], None]
+@dataclass(frozen=True)
+class ObjectReport:
+    """How one object was built, measured in the process that built it.
+
+    Attributes:
+        source_seconds: wall seconds to make its cloud: sample its true mesh, or read its cloud file.
+        estimate_seconds: wall seconds of the estimator itself (``PhysicalEstimate.timings``).
+        hull_seconds: wall seconds of its visual mesh and convex parts (decimation, cache, CoACD).
+        cpu_seconds: CPU seconds of all three, in the process that built it.
+        concavity: :func:`twin.decompose.concavity` of its visual mesh.
+        skipped_coacd: near-convex (:func:`twin.decompose.skips_coacd`): it collides as its convex hull and
+            CoACD did not run on it. False for hulls read from the cache.
+    """
+
+    source_seconds: float
+    estimate_seconds: float
+    hull_seconds: float
+    cpu_seconds: float
+    concavity: float
+    skipped_coacd: bool
+
+
+#: ``on_object(index, total, obj, report)``: called by :func:`build_scene` as each object is built, in the
+#: order they finish (``index``: its place in the scene, from 0), so a command can show progress (the
+#: library itself prints nothing).
+OnObject = Callable[[int, int, TwinObject, ObjectReport], None]
 
 
 def table_top(scene: SceneSpec) -> float | None:
@@ -63,31 +94,113 @@ def table_top(scene: SceneSpec) -> float | None:
 
 def build_scene(scene: SceneSpec, *, coacd: CoacdSettings = DEFAULT_SETTINGS, cache_dir: Path | None = None,
                 progress: bool = True, physics: PhysicsSettings = DEFAULT_PHYSICS,
-                on_estimate: OnEstimate | None = None) -> BuiltScene:
+                on_object: OnObject | None = None, workers: int | None = None) -> BuiltScene:
     """Estimate every object, decompose it, and compile the whole scene.
 
-    ``progress``: CoACD's progress bar (stderr). ``on_estimate``: see :data:`OnEstimate`.
+    Objects are built independently (:func:`build_object`), in ``workers`` processes (default: one per
+    core, at most one per object; 1 builds them here); the result does not depend on how many.
+
+    ``progress``: a progress bar over the objects on stderr, unless ``on_object`` (see :data:`OnObject`)
+    reports them instead.
 
     Raises:
-        SceneError: bad objects. BuildError: MuJoCo rejected the model.
+        SceneError: bad objects. BuildError: MuJoCo rejected the model, or a worker process died.
     """
     t0 = time.perf_counter()
-    estimates, seconds = [], {}
-    for k, spec_obj in enumerate(scene.objects):
-        t = time.perf_counter()
-        estimates.append(estimate_object(spec_obj))
-        seconds[spec_obj.id] = time.perf_counter() - t
-        if on_estimate is not None:
-            on_estimate(k, len(scene.objects), spec_obj.id, seconds[spec_obj.id], estimates[-1][0])
+    workers = default_workers(len(scene.objects)) if workers is None else workers
+    if workers < 1:
+        raise ValueError(f"workers must be at least 1, got {workers}")
+    built = _build_objects(scene, coacd=coacd, cache_dir=cache_dir, workers=workers, on_object=on_object,
+                           progress=progress)
+    objects = tuple(obj for obj, _ in built)
+    reports = {obj.id: report for obj, report in built}
     t = time.perf_counter()
-    objects = prepare_objects(scene.objects, table_top=table_top(scene), coacd=coacd, cache_dir=cache_dir,
-                              progress=progress, estimates=estimates)
-    decompose_s = time.perf_counter() - t
     spec = scene.empty_spec(physics)
     for obj in objects:
         add_object(spec, obj)
     model = compile_spec(spec)
-    return BuiltScene(scene, spec, model, tuple(objects), time.perf_counter() - t0, seconds, decompose_s)
+    compile_s = time.perf_counter() - t
+    return BuiltScene(scene, spec, model, objects, time.perf_counter() - t0,
+                      {i: r.source_seconds + r.estimate_seconds for i, r in reports.items()},
+                      sum(r.hull_seconds for r in reports.values()), reports, compile_s, workers)
+
+
+def default_workers(objects: int) -> int:
+    """Processes to build ``objects`` objects in: one per core this process may run on, at most one each."""
+    return max(1, min(objects, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1))
+
+
+def build_object(spec: ObjectSpec, *, table_top: float | None, coacd: CoacdSettings = DEFAULT_SETTINGS,
+                 cache_dir: Path | None = None) -> tuple[TwinObject, ObjectReport]:
+    """One object of a scene, ready for the model, and how it was built: its estimate
+    (:func:`scenes.sources.estimate_object`), then its visual mesh, hulls and placement
+    (:func:`scenes.sources.prepare_objects`). What runs in each build worker.
+
+    Raises:
+        SceneError: the object cannot be estimated.
+    """
+    cpu0, t0 = time.process_time(), time.perf_counter()
+    est, friction = estimate_object(spec)
+    t1 = time.perf_counter()
+    (obj,) = prepare_objects([spec], table_top=table_top, coacd=coacd, cache_dir=cache_dir, progress=False,
+                             estimates=[(est, friction)])
+    t2 = time.perf_counter()
+    # Measured again here (a hull of the ~3000-face visual mesh: milliseconds) so the report says whether
+    # CoACD was skipped by the very rule twin.decompose applied, even though prepare_objects returns hulls only.
+    excess = concavity(*obj.visual)
+    report = ObjectReport(source_seconds=max(0.0, t1 - t0 - est.timings.total), estimate_seconds=est.timings.total,
+                          hull_seconds=t2 - t1, cpu_seconds=time.process_time() - cpu0, concavity=excess,
+                          skipped_coacd=not obj.hull_cached and skips_coacd(excess, coacd))
+    return obj, report
+
+
+def _build_objects(scene: SceneSpec, *, coacd: CoacdSettings, cache_dir: Path | None, workers: int,
+                   on_object: OnObject | None, progress: bool) -> list[tuple[TwinObject, ObjectReport]]:
+    """:func:`build_object` for every object, in scene order whatever order they finish in."""
+    specs, top = scene.objects, table_top(scene)
+    results: list[tuple[TwinObject, ObjectReport] | None] = [None] * len(specs)
+    bar = ProgressBar(progress and on_object is None, len(specs), "objects")
+
+    def finished(i: int, result: tuple[TwinObject, ObjectReport]) -> None:
+        results[i] = result
+        bar.advance()
+        if on_object is not None:
+            on_object(i, len(specs), *result)
+
+    try:
+        if workers == 1 or len(specs) < 2:
+            for i, s in enumerate(specs):
+                finished(i, build_object(s, table_top=top, coacd=coacd, cache_dir=cache_dir))
+        else:
+            _build_in_pool(specs, top, coacd, cache_dir, workers, finished)
+    finally:
+        bar.close()
+    return [r for r in results if r is not None]
+
+
+def _build_in_pool(specs: tuple[ObjectSpec, ...], top: float | None, coacd: CoacdSettings, cache_dir: Path | None,
+                   workers: int, finished: Callable[[int, tuple[TwinObject, ObjectReport]], None]) -> None:
+    import multiprocessing as mp
+    from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+    from concurrent.futures.process import BrokenProcessPool
+
+    from twin.workers import background_worker
+
+    # spawn: CoACD and MuJoCo hold threads, forking them is not safe. background_worker: niced, and the
+    # workers die with this process.
+    pool = ProcessPoolExecutor(workers, mp_context=mp.get_context("spawn"), initializer=background_worker)
+    try:
+        pending = {pool.submit(build_object, s, table_top=top, coacd=coacd, cache_dir=cache_dir): i
+                   for i, s in enumerate(specs)}
+        while pending:
+            ready, _ = wait(pending, return_when=FIRST_COMPLETED)
+            for future in ready:
+                finished(pending.pop(future), future.result())
+    except BrokenProcessPool as exc:
+        raise BuildError(f"a build worker process died ({exc}); nothing was written") from exc
+    finally:
+        # On an error, objects not started are dropped; the (at most `workers`) running ones finish first.
+        pool.shutdown(wait=True, cancel_futures=True)
 
 
 def compile_spec(spec):  # type: ignore[no-untyped-def]

@@ -1,0 +1,120 @@
+"""Building at scale: near-convex objects skip CoACD, concave ones do not, and the process pool changes nothing.
+
+Real parts throughout: real estimates, real CoACD on a small L-bracket, real spawned worker processes.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import trimesh
+
+from estimation.cloudfile import save_cloud
+from scenes.build import build_scene, write_scene
+from scenes.sampling import sample_surface
+from scenes.scenefile import SceneError, parse_scene
+from twin.decompose import DEFAULT_SETTINGS, concavity
+
+
+def _box(extents, center=(0.0, 0.0, 0.0)) -> trimesh.Trimesh:  # type: ignore[no-untyped-def]
+    return trimesh.creation.box(extents=extents, transform=trimesh.transformations.translation_matrix(center))
+
+
+def _l_bracket() -> trimesh.Trimesh:
+    """A 10 x 4 cm plate with a 6 cm upright at one end, 1 cm thick: far from convex."""
+    return trimesh.boolean.union([_box((0.10, 0.04, 0.01), (0.0, 0.0, 0.005)),
+                                  _box((0.01, 0.04, 0.06), (-0.045, 0.0, 0.03))])
+
+
+def _scene(folder: Path) -> dict:
+    """Five objects: two near-convex primitives, a scanned (cloud file) ellipsoid, a torus and an L-bracket mesh."""
+    _l_bracket().export(folder / "bracket.stl")
+    blob = trimesh.creation.icosphere(subdivisions=3, radius=0.03)
+    blob.apply_scale((1.0, 0.7, 0.5))
+    save_cloud(sample_surface(blob, 3000, seed=1, noise_sigma=0.0005, with_normals=False), folder / "scan.pcd")
+    points = 8000  # the scene file's own lever: enough for these sizes, and quick
+    return {"name": "mixed5", "table": {"size": [1.0, 0.6, 0.04], "height": 0.5}, "objects": [
+        {"id": "box", "primitive": {"type": "box", "size": [0.08, 0.05, 0.04]}, "position": [-0.3, 0.0],
+         "points": points},
+        {"id": "ball", "primitive": {"type": "sphere", "size": [0.03]}, "position": [-0.15, 0.0], "points": points},
+        {"id": "scan", "cloud": "scan.pcd", "position": [0.0, 0.0]},
+        {"id": "ring", "primitive": {"type": "torus", "size": [0.04, 0.012]}, "position": [0.15, 0.0],
+         "points": points},
+        {"id": "bracket", "mesh": "bracket.stl", "position": [0.3, 0.0], "points": points},
+    ]}
+
+
+@pytest.fixture(scope="module")
+def builds(tmp_path_factory):  # type: ignore[no-untyped-def]
+    """The same scene built cold twice: in this process, and in two worker processes (fresh caches both)."""
+    folder = tmp_path_factory.mktemp("scene")
+    scene = parse_scene(_scene(folder), base=folder)
+    out = {}
+    for workers in (1, 2):
+        built = build_scene(scene, cache_dir=folder / f"cache{workers}", progress=False, workers=workers)
+        out[workers] = (built, write_scene(built.spec, folder / f"out{workers}", built=built))
+    return out
+
+
+def test_near_convex_objects_skip_coacd_and_concave_ones_are_decomposed(builds):
+    built, _ = builds[2]
+    reports = {i: r for i, r in built.reports.items()}
+    hulls = {o.id: o.hulls for o in built.objects}
+    for oid in ("box", "ball", "scan"):
+        assert reports[oid].skipped_coacd, (oid, reports[oid].concavity)
+        assert reports[oid].concavity <= DEFAULT_SETTINGS.convex_tolerance
+        (v, _), = hulls[oid]  # one hull, and it is the visual mesh's own convex hull, not CoACD's remeshed part
+        visual = next(o.visual for o in built.objects if o.id == oid)
+        hull = trimesh.convex.convex_hull(visual[0])
+        assert len(v) == len(hull.vertices) and trimesh.Trimesh(*hulls[oid][0]).volume == pytest.approx(hull.volume)
+    for oid in ("ring", "bracket"):
+        assert not reports[oid].skipped_coacd
+        assert reports[oid].concavity > 2 * DEFAULT_SETTINGS.convex_tolerance  # a ring's hole, a bracket's corner
+        assert len(hulls[oid]) >= 2
+
+
+def test_a_pool_build_writes_the_same_files_as_an_in_process_one(builds):
+    (one, xml1), (two, xml2) = builds[1], builds[2]
+    assert (one.workers, two.workers) == (1, 2)
+    assert xml1.read_text() == xml2.read_text()
+    files1 = sorted(p.relative_to(xml1.parent) for p in xml1.parent.rglob("*") if p.is_file())
+    files2 = sorted(p.relative_to(xml2.parent) for p in xml2.parent.rglob("*") if p.is_file())
+    assert files1 == files2
+    for rel in files1:
+        if rel.name != "estimates.json":  # it records seconds, which differ
+            assert (xml1.parent / rel).read_bytes() == (xml2.parent / rel).read_bytes(), rel
+
+
+def test_concavity_known_answers():
+    box = _box((0.1, 0.06, 0.04))
+    assert concavity(box.vertices, box.faces) == pytest.approx(0.0, abs=1e-12)
+    ell = trimesh.boolean.union([_box((2, 1, 1), (0.5, 0, 0)), _box((1, 1, 1), (0, 1, 0))])  # three unit cubes
+    # The hull adds half a cube; its area is 2 x 3.5 (top, bottom) + 6 (sides) + sqrt 2 (the cut corner);
+    # the largest extent is 2.
+    assert concavity(ell.vertices, ell.faces) == pytest.approx(0.5 / (13 + np.sqrt(2)) / 2, rel=1e-9)
+    assert concavity(box.vertices, box.faces[:, ::-1]) == float("inf")  # inside out: left to CoACD
+
+
+def test_a_bad_object_in_a_worker_is_a_scene_error_naming_it(tmp_path):
+    save_cloud(sample_surface(_box((0.05, 0.05, 0.05)), 20, seed=0), tmp_path / "few.ply")
+    scene = parse_scene({"name": "bad", "objects": [
+        {"id": "fine", "primitive": {"type": "box", "size": [0.05, 0.05, 0.05]}, "points": 2000},
+        {"id": "sparse", "cloud": "few.ply", "position": [0.2, 0.0]},
+    ]}, base=tmp_path)
+    with pytest.raises(SceneError, match="object 'sparse'"):
+        build_scene(scene, cache_dir=tmp_path / "cache", progress=False, workers=2)
+
+
+def test_workers_must_be_positive(tmp_path):
+    scene = parse_scene({"name": "one", "objects": [{"id": "a", "primitive": {"type": "sphere", "size": [0.02]}}]})
+    with pytest.raises(ValueError, match="workers must be at least 1, got 0"):
+        build_scene(scene, cache_dir=tmp_path, progress=False, workers=0)
+
+
+def test_scene_points_key_is_what_lowers_the_sample_count(builds):
+    built, _ = builds[1]
+    est = {o.id: o.estimate for o in built.objects}
+    assert est["box"].points_in == 8000 and est["scan"].points_in == 3000
+    assert np.isfinite([r.cpu_seconds for r in built.reports.values()]).all()
