@@ -146,7 +146,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--viewpoint", type=float, nargs=3, metavar=("X", "Y", "Z"), action="append",
                    help="sensor position (file units) to orient estimated normals towards; once per VIEW, in "
                         "order (replaces a PCD VIEWPOINT header)")
-    p.add_argument("--support-plane", nargs="+", metavar="auto|A B C D",
+    p.add_argument("--support-plane", nargs="+", metavar="PLANE",
                    help="the plane the object rests on: 'auto' (found in the data, else the horizontal plane "
                         "through the lowest point, z up) or A B C D with A x + B y + C z + D = 0 (D in file "
                         "units), normal pointing up into the object's side; its points are cut away and the "
