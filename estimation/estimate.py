@@ -2,7 +2,9 @@
 
 Stages (each timed): downsample in the cloud's principal frame, normals (given, or estimated and
 oriented outward), reconstruction by the chosen method, mass properties. 'auto' takes its cell from the
-cloud's own point spacing and noise (``estimation.spacing``), works on a narrow band of that grid
+point spacing of at most ``tolerances.POINT_BUDGET`` of the cloud's points and its noise
+(``estimation.spacing``), refines once where its own volume bounds say the cells were too coarse
+(``tolerances.REFINE_DOUBT``), works on a narrow band of that grid
 (``estimation.sparsegrid``), signs it by IMLS near the points and a coarse flood fill beyond
 (``estimation.implicit``, ``estimation.grid``) and dual-contours it with vertices on the points' own
 planes (``estimation.dualcontour``), so creases stay sharp and thin walls keep their thickness.
@@ -118,7 +120,8 @@ def estimate(
         viewpoint: (3,) metres; when normals must be estimated, orient them towards it instead of by
             the flood fill (for single-view scans).
         resolution: grid cells along the object's longest side for 'obb' and 'surface'. 'auto' takes
-            its cell from the point spacing (``tolerances.FINE_CELL_SPACINGS``).
+            its cell from the point spacing (``tolerances.FINE_CELL_SPACINGS``) of at most
+            ``tolerances.POINT_BUDGET`` points (see ``_estimate_auto``).
         read_seconds: time spent reading the file, carried into ``timings``.
 
     Raises:
