@@ -2,8 +2,10 @@
 
 Every object body has a free joint, an explicit inertial (the estimate: MuJoCo must not recompute it
 from the hulls, whose union is not the object), a visual mesh that does not collide (group 1), and
-its CoACD hulls as colliding meshes (group 3). Each element's ``info`` names the object it came from,
-so a compile error points back to it.
+its CoACD hulls as colliding meshes (group 3). An object that is nearly a box, cylinder, capsule or
+sphere (:func:`twin.objects.collision_primitive`) collides as that MuJoCo primitive instead; its hulls
+stay in group 3 for viewers but collide with nothing. Each element's ``info`` names the object it came
+from, so a compile error points back to it.
 """
 
 from __future__ import annotations
@@ -12,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from twin.objects import TwinObject
+from twin.objects import TwinObject, collision_primitive
 
 #: Physics step for the haptic loop: 1 kHz.
 TIMESTEP = 0.001
@@ -131,8 +133,14 @@ def add_end_effector(spec, ee: EndEffectorSpec) -> None:  # type: ignore[no-unty
     body.gravcomp = 1.0
 
 
-def add_object(spec, obj: TwinObject, *, rgba: tuple[float, float, float, float] | None = None) -> None:  # type: ignore[no-untyped-def]
-    """Add one object body (free joint, explicit inertia, visual mesh, collision hulls) to ``spec``."""
+def add_object(spec, obj: TwinObject, *, rgba: tuple[float, float, float, float] | None = None,  # type: ignore[no-untyped-def]
+               primitives: bool = True) -> None:
+    """Add one object body (free joint, explicit inertia, visual mesh, collision hulls) to ``spec``.
+
+    With ``primitives`` (the default), an object :func:`twin.objects.collision_primitive` fits collides
+    as that primitive, named ``<id>/primitive``: MuJoCo's analytic colliders cost a fraction of convex
+    mesh pairs (``bench/replay.py``). Inertia is the estimate's either way, not the primitive's.
+    """
     import mujoco
 
     m = obj.estimate.mass
@@ -152,14 +160,30 @@ def add_object(spec, obj: TwinObject, *, rgba: tuple[float, float, float, float]
     geom = body.add_geom(name=vis_name, type=mujoco.mjtGeom.mjGEOM_MESH, meshname=vis_name, contype=0,
                          conaffinity=0, group=VISUAL_GROUP, rgba=colour, mass=0)
     geom.info = f"object {obj.id} visual"
+    friction = [obj.friction, 0.005, 0.0001]
+    primitive = collision_primitive(obj) if primitives else None
+    if primitive is not None:
+        g = body.add_geom(name=f"{obj.id}/primitive", type=_geom_types()[primitive.kind], size=list(primitive.size),
+                          pos=primitive.position.tolist(), quat=primitive.quat.tolist(), group=COLLISION_GROUP,
+                          friction=friction, rgba=hull_colour(0), mass=0)
+        g.info = f"object {obj.id} {primitive.kind} (fill {primitive.fill:.3f})"
     for k, (v, f) in enumerate(obj.hulls):
         name = f"{obj.id}/hull{k}"
         hull = spec.add_mesh(name=name, uservert=v.ravel().tolist(), userface=f.ravel().tolist())
         hull.maxhullvert = MAX_HULL_VERTICES
         hull.info = f"object {obj.id} hull {k}"
+        # Under a primitive the hulls are only to look at: no contact type, no affinity.
         g = body.add_geom(name=name, type=mujoco.mjtGeom.mjGEOM_MESH, meshname=name, group=COLLISION_GROUP,
-                          friction=[obj.friction, 0.005, 0.0001], rgba=hull_colour(k), mass=0)
+                          friction=friction, rgba=hull_colour(k), mass=0,
+                          contype=0 if primitive is not None else 1, conaffinity=0 if primitive is not None else 1)
         g.info = f"object {obj.id} hull {k}"
+
+
+def _geom_types() -> dict[str, object]:
+    import mujoco
+
+    return {"box": mujoco.mjtGeom.mjGEOM_BOX, "cylinder": mujoco.mjtGeom.mjGEOM_CYLINDER,
+            "capsule": mujoco.mjtGeom.mjGEOM_CAPSULE, "sphere": mujoco.mjtGeom.mjGEOM_SPHERE}
 
 
 def remove_object(spec, object_id: str) -> None:  # type: ignore[no-untyped-def]

@@ -1,7 +1,9 @@
 """What the twin needs of one object: its estimate, a visual mesh and convex hulls, and where it is.
 
 :class:`TwinObject` is the record every part of the twin reads; :func:`object_at_estimate` makes one from
-an estimate (decimating the reconstruction and decomposing it with CoACD).
+an estimate (decimating the reconstruction and decomposing it with CoACD). :func:`fit_primitive` says
+when a convex hull is so nearly a box, cylinder, capsule or sphere that MuJoCo's own primitive can collide
+in its place (much cheaper than a mesh, and a sphere or cylinder rolls instead of resting on a facet).
 """
 
 from __future__ import annotations
@@ -27,6 +29,27 @@ DECIMATION_AGGRESSION = 3.0
 #: Friction for objects given by density only.
 DEFAULT_FRICTION = 0.5
 
+#: An object collides as one primitive when its volume over the fitted primitive's (the fill) is within
+#: [this, 1 / this]. Measured (``bench/replay.py --fills``) on clutter20 and the paper scene, from 30k- and
+#: 100k-point estimates and from the true meshes: every box, cylinder, capsule and sphere there fills
+#: 0.954-1.0 of its primitive; the nearest other shape, the paper's chunk (a box with a corner cut off),
+#: 0.90-0.92; tori, the mug, the cone, the stack and the bridge under 0.7.
+PRIMITIVE_MIN_FILL = 0.94
+
+#: Primitive kinds tried, in MuJoCo's geom type names.
+PRIMITIVE_KINDS = ("box", "cylinder", "capsule", "sphere")
+
+#: Fraction of the surface's vertices a fitted primitive may leave outside on each side. Dual contouring
+#: leaves a few vertices at creases and corners up to 5 mm proud of the true surface (0.1-1 % of a
+#: decimated 30k-point box's vertices); a primitive sized to contain them all was up to 20 % too large.
+PRIMITIVE_TRIM = 0.01
+
+#: A round primitive whose centre (sphere) or axis (cylinder, capsule) misses the centre of mass by less
+#: than this fraction of its radius is moved onto it. Off by 0.1 mm (fitting noise: the estimated centre
+#: of mass is good to 0.01 mm, the fitted centre to about 0.1 mm at 30k points), a resting orange rolled
+#: 50 mm in 2 s like an unbalanced wheel; a mesh hull rests on a facet instead and never showed it.
+ROUND_SNAP = 0.02
+
 
 @dataclass(frozen=True)
 class TwinObject:
@@ -51,6 +74,117 @@ class TwinObject:
     position: np.ndarray
     quat: np.ndarray
     hull_cached: bool = False
+
+
+@dataclass(frozen=True)
+class Primitive:
+    """A MuJoCo primitive geom that contains one convex hull and nearly equals it.
+
+    Attributes:
+        kind: "box", "cylinder", "capsule" or "sphere" (MuJoCo's geom type names).
+        size: MuJoCo's geom size, metres: box half-extents; cylinder and capsule (radius, half-length of
+            the axis or of the segment between the caps, 0); sphere (radius, 0, 0). Axis along local z.
+        position: (3,) centre in the body frame (relative to the centre of mass), metres.
+        quat: (4,) orientation in the body frame, w x y z (MuJoCo order).
+        fill: the hull's volume over the primitive's (at most 1).
+    """
+
+    kind: str
+    size: tuple[float, float, float]
+    position: np.ndarray
+    quat: np.ndarray
+    fill: float
+
+
+def fit_primitive(mesh: Hull, *, min_fill: float = PRIMITIVE_MIN_FILL) -> Primitive | None:
+    """The primitive of :data:`PRIMITIVE_KINDS` whose volume is closest to what ``mesh`` encloses, or None
+    when that volume ratio (the fill) is outside ``[min_fill, 1 / min_fill]``.
+
+    The frame is the mesh's smallest oriented bounding box (trimesh, from its convex hull's faces: a
+    cube's covariance axes are arbitrary, its faces are not); cylinders and capsules try each box axis.
+    Sizes are area-weighted quantiles of the vertices (:data:`PRIMITIVE_TRIM`), so the primitive runs
+    along the surface and not out to the few crease vertices that stick out of it.
+
+    Args:
+        mesh: vertices (v, 3) float64 metres, body frame; faces (f, 3) int, a closed outward surface.
+    """
+    import mujoco
+    import trimesh
+
+    from estimation.inertia import signed_volumes
+
+    vertices, faces = mesh
+    tri = vertices[faces]
+    volume = float(signed_volumes(tri).sum())
+    if volume <= 0:
+        return None
+    # Each vertex stands for a third of the area of the faces around it.
+    area = np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1) / 6
+    weight = np.bincount(faces.ravel(), weights=np.repeat(area, 3), minlength=len(vertices))
+    to_origin, _ = trimesh.bounds.oriented_bounds(vertices)
+    rot = to_origin[:3, :3].T  # columns: the box axes in the body frame
+    if np.linalg.det(rot) < 0:  # a reflection would turn into a wrong quaternion
+        rot = rot * np.array([1.0, 1.0, -1.0])
+    origin = -to_origin[:3, :3].T @ to_origin[:3, 3]
+    local = (vertices - origin) @ rot  # vertices in the box frame
+    lo = np.array([_quantile(local[:, k], weight, PRIMITIVE_TRIM) for k in range(3)])
+    hi = np.array([_quantile(local[:, k], weight, 1 - PRIMITIVE_TRIM) for k in range(3)])
+    centre = (lo + hi) / 2
+    local = local - centre
+    half = (hi - lo) / 2
+    candidates = [(float(np.prod(2 * half)), "box", (float(half[0]), float(half[1]), float(half[2])), np.eye(3))]
+    for axis in range(3):
+        # The axis onto the geom's z, keeping a proper rotation (a cyclic permutation of the box axes).
+        perm = np.eye(3)[:, [(axis + 1) % 3, (axis + 2) % 3, axis]]
+        radial = np.hypot(local[:, (axis + 1) % 3], local[:, (axis + 2) % 3])
+        r = _quantile(radial, weight, 1 - PRIMITIVE_TRIM)
+        candidates.append((np.pi * r**2 * 2 * half[axis], "cylinder", (r, float(half[axis]), 0.0), perm))
+        # Capsule: the shortest segment whose caps of radius r reach the (trimmed) farthest points.
+        reach = np.abs(local[:, axis]) - np.sqrt(np.maximum(r**2 - radial**2, 0.0))
+        segment = max(0.0, _quantile(reach, weight, 1 - PRIMITIVE_TRIM))
+        candidates.append((np.pi * r**2 * 2 * segment + 4 / 3 * np.pi * r**3, "capsule", (r, segment, 0.0), perm))
+    r = _quantile(np.linalg.norm(local, axis=1), weight, 1 - PRIMITIVE_TRIM)
+    candidates.append((4 / 3 * np.pi * r**3, "sphere", (r, 0.0, 0.0), np.eye(3)))
+    # Best: the primitive whose volume is closest to the surface's, on a log scale (over or under).
+    best = min(((volume / v, kind, size, perm) for v, kind, size, perm in candidates if v > 0),
+               key=lambda c: abs(np.log(c[0])))
+    fill, kind, size, perm = best
+    if not min_fill <= fill <= 1 / min_fill:
+        return None
+    frame = rot @ perm
+    quat = np.empty(4)
+    mujoco.mju_mat2Quat(quat, np.ascontiguousarray(frame).ravel())
+    return Primitive(kind=kind, size=size, position=_on_centre(kind, origin + rot @ centre, frame[:, 2], size[0]),
+                     quat=quat, fill=fill)
+
+
+def _on_centre(kind: str, position: np.ndarray, axis: np.ndarray, radius: float) -> np.ndarray:
+    """A sphere's centre, or a cylinder's or capsule's axis, moved onto the centre of mass (the body
+    origin) when it is off by less than :data:`ROUND_SNAP` of the radius; other positions as they are."""
+    if kind == "sphere":
+        off = position
+    elif kind in ("cylinder", "capsule"):
+        off = position - float(position @ axis) * axis
+    else:
+        return position
+    return position - off if float(np.linalg.norm(off)) < ROUND_SNAP * radius else position
+
+
+def _quantile(values: np.ndarray, weight: np.ndarray, q: float) -> float:
+    """The ``q`` quantile of ``values`` (n,) where each counts ``weight`` (n,) times (the lower value)."""
+    order = np.argsort(values)
+    cumulative = np.cumsum(weight[order])
+    return float(values[order][min(int(np.searchsorted(cumulative, q * cumulative[-1])), len(values) - 1)])
+
+
+def collision_primitive(obj: TwinObject, *, min_fill: float = PRIMITIVE_MIN_FILL) -> Primitive | None:
+    """The primitive that may collide for the whole object (instead of its hulls), or None.
+
+    Decided on the visual mesh (the decimated reconstruction) and its own volume: a mug or a torus fills
+    its bounding cylinder far too little, whatever CoACD made of it; a box CoACD split in two is still one
+    box.
+    """
+    return fit_primitive(obj.visual, min_fill=min_fill)
 
 
 def decimate(vertices: np.ndarray, faces: np.ndarray, target: int = VISUAL_FACES) -> Hull:
