@@ -3,7 +3,8 @@
     .venv/bin/python bench/convexity.py            # about a minute of CPU; writes bench/results/convexity.txt
 
 For each object, the twin's visual mesh (estimated from a sampled cloud, then decimated, as ``twin build``
-does) is measured with :func:`twin.decompose.concavity` (mean gap to its convex hull over its largest extent) and,
+does) is measured with :func:`twin.decompose.concavity` (widest gap between its convex hull and it, over its
+largest extent) and,
 for comparison, the hull's volume ratio (hull volume / mesh volume - 1). The truth is the same measure on
 the true mesh. Two sets that the threshold was not chosen on together: the shapes of ``scenes/shapes.py``
 at seed 1 (not the seed-0 shapes the mixed100 scene scans), 30k clean points and 3k points with 0.5 mm
@@ -78,7 +79,7 @@ def main(argv: list[str] | None = None) -> int:
     for k, (name, mesh) in enumerate(primitives(np.random.default_rng(7), args.primitives)):
         rows.append(measure(name, mesh, (8_000, 30_000)[k // 4 % 2], 0.0, k))  # each kind at both counts
     lines = [f"{'object':26s} {'points':>7s} {'noise mm':>8s} {'true':>8s} {'est':>8s} {'true vol+':>9s} "
-             f"{'est vol+':>9s}  (concavity = mean hull gap / largest extent; vol+ = hull volume / volume - 1)"]
+             f"{'est vol+':>9s}  (concavity = widest hull-to-mesh gap / largest extent; vol+ = hull volume / volume - 1)"]
     for r in sorted(rows, key=lambda r: (r["true"] > CONVEX_TRUTH, r["est"])):
         lines.append(f"{r['name']:26s} {r['points']:7d} {r['noise'] * 1000:8.1f} {r['true']:8.4f} {r['est']:8.4f} "
                      f"{r['true_excess']:9.3f} {r['est_excess']:9.3f}")

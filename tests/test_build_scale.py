@@ -34,7 +34,7 @@ def _scene(folder: Path) -> dict:
     blob = trimesh.creation.icosphere(subdivisions=3, radius=0.03)
     blob.apply_scale((1.0, 0.7, 0.5))
     save_cloud(sample_surface(blob, 3000, seed=1, noise_sigma=0.0005, with_normals=False), folder / "scan.pcd")
-    points = 8000  # the scene file's own lever: enough for these sizes, and quick
+    points = 30000  # as clutter20: reconstruction ridges at 8000 points come near the tolerance (bench/convexity.py)
     return {"name": "mixed5", "table": {"size": [1.0, 0.6, 0.04], "height": 0.5}, "objects": [
         {"id": "box", "primitive": {"type": "box", "size": [0.08, 0.05, 0.04]}, "position": [-0.3, 0.0],
          "points": points},
@@ -88,12 +88,14 @@ def test_a_pool_build_writes_the_same_files_as_an_in_process_one(builds):
 
 
 def test_concavity_known_answers():
+    """Distances are between surface samples: they read up to about 1 % of the size high or low."""
     box = _box((0.1, 0.06, 0.04))
-    assert concavity(box.vertices, box.faces) == pytest.approx(0.0, abs=1e-12)
+    assert 0.0 <= concavity(box.vertices, box.faces) < 0.02
     ell = trimesh.boolean.union([_box((2, 1, 1), (0.5, 0, 0)), _box((1, 1, 1), (0, 1, 0))])  # three unit cubes
-    # The hull adds half a cube; its area is 2 x 3.5 (top, bottom) + 6 (sides) + sqrt 2 (the cut corner);
-    # the largest extent is 2.
-    assert concavity(ell.vertices, ell.faces) == pytest.approx(0.5 / (13 + np.sqrt(2)) / 2, rel=1e-9)
+    # The middle of the hull's cut face is 0.5 from the faces below it; the largest extent is 2.
+    assert concavity(ell.vertices, ell.faces) == pytest.approx(0.25, abs=0.01)
+    scaled = concavity(ell.vertices * 0.01, ell.faces)  # size does not matter
+    assert scaled == pytest.approx(concavity(ell.vertices, ell.faces), abs=0.01)
     assert concavity(box.vertices, box.faces[:, ::-1]) == float("inf")  # inside out: left to CoACD
 
 
@@ -116,5 +118,5 @@ def test_workers_must_be_positive(tmp_path):
 def test_scene_points_key_is_what_lowers_the_sample_count(builds):
     built, _ = builds[1]
     est = {o.id: o.estimate for o in built.objects}
-    assert est["box"].points_in == 8000 and est["scan"].points_in == 3000
+    assert est["box"].points_in == 30000 and est["scan"].points_in == 3000
     assert np.isfinite([r.cpu_seconds for r in built.reports.values()]).all()
