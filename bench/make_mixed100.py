@@ -3,8 +3,9 @@
     .venv/bin/python bench/make_mixed100.py          # rewrites the TOML and scenes/data/mixed100/*.pcd
 
 The mix (seeded, so a re-run rewrites identical files): 40 primitive boxes and 32 cylinders (3-20 cm,
-some lying down, sampled at 30k points like clutter20's), the paper's 8 objects (20 cm to 1.2 m, 30k
-points), and 20 scanned shapes: :mod:`scenes.shapes` (every family but the 1-3 mm thin shells, which
+some lying down), the paper's 8 objects (20 cm to 1.2 m), all sampled at 20k points (the scene's
+``points``, fewer than clutter20's 30k: bench/build.py prints every object's concavity, and the boxes'
+and cylinders' stay under the near-convex tolerance), and 20 scanned shapes: :mod:`scenes.shapes` (every family but the 1-3 mm thin shells, which
 3000 points cannot resolve), scaled to 5-20 cm, sampled at 3000 points with 0.5 mm Gaussian noise and no
 normals, and stored as binary PCD (float32, 12 bytes a point: the 20 files are about 0.7 MB). Small
 objects sit on a grid, the paper's on rows beside it; the generator checks that no two footprints
@@ -28,7 +29,7 @@ ROOT = Path(__file__).resolve().parents[1]
 SCENE = ROOT / "scenes" / "data" / "mixed100.toml"
 CLOUDS = "mixed100"  # folder beside the scene file
 BOXES, CYLINDERS, SCANS = 40, 32, 20
-PRIMITIVE_POINTS, SCAN_POINTS, SCAN_NOISE_M = 30_000, 3_000, 0.0005
+PRIMITIVE_POINTS, SCAN_POINTS, SCAN_NOISE_M = 20_000, 3_000, 0.0005
 PITCH_M, GAP_M, TABLE_HEIGHT_M = 0.32, 0.05, 0.75
 BOX_MATERIALS = ("cardboard", "wood_pine", "abs_plastic", "polypropylene", "cork", "brick")
 CYLINDER_MATERIALS = ("steel", "aluminium", "glass", "ceramic", "water", "polyethylene_hd")
