@@ -1,4 +1,4 @@
-"""Primitive collision geoms: a hull that is nearly a box, cylinder, capsule or sphere collides as one.
+"""Primitive collision geoms: an object that is nearly a box, capsule or sphere collides as one.
 
 Known answers from exact meshes (no CoACD), then the real path: a sampled box cloud estimated, decomposed
 by CoACD and compiled becomes one box geom of the right size and pose; the paper's mug stays meshes.
@@ -25,14 +25,13 @@ def _mesh(m: trimesh.Trimesh) -> tuple[np.ndarray, np.ndarray]:
 
 @pytest.mark.parametrize(("mesh", "kind", "size"), [
     (trimesh.creation.box(extents=(0.3, 0.1, 0.05)), "box", (0.15, 0.05, 0.025)),
-    (trimesh.creation.cylinder(radius=0.04, height=0.2, sections=64), "cylinder", (0.04, 0.1)),
     (trimesh.creation.capsule(height=0.12, radius=0.01, count=[32, 32]), "capsule", (0.01, 0.06)),
     (trimesh.creation.icosphere(subdivisions=3, radius=0.05), "sphere", (0.05,)),
 ])
 def test_exact_primitive_meshes_are_recognised_with_their_size(mesh, kind, size):
     fit = fit_primitive(_mesh(mesh))
     assert fit is not None and fit.kind == kind
-    # Sorted for the box (the frame's axis order is the fitter's); cylinders and capsules are (radius, half).
+    # Sorted for the box (the frame's axis order is the fitter's); a capsule is (radius, half-length).
     got = sorted(fit.size, reverse=True) if kind == "box" else fit.size[:len(size)]
     np.testing.assert_allclose(got, size, atol=2e-4)  # a 64-gon's flats sit 0.05 % inside its radius
     assert fit.fill > 0.98
@@ -41,6 +40,8 @@ def test_exact_primitive_meshes_are_recognised_with_their_size(mesh, kind, size)
 
 @pytest.mark.parametrize("make", [
     lambda: trimesh.creation.cone(radius=0.05, height=0.1, sections=64),
+    # Fitted, but left to its hulls (twin.objects.PRIMITIVE_KINDS says why).
+    lambda: trimesh.creation.cylinder(radius=0.04, height=0.2, sections=64),
     lambda: trimesh.creation.torus(major_radius=0.05, minor_radius=0.015),
     lambda: paper_object("chunk"),  # a box with a corner cut off: the nearest miss we know (fill ~0.92)
 ])

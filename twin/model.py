@@ -2,8 +2,8 @@
 
 Every object body has a free joint, an explicit inertial (the estimate: MuJoCo must not recompute it
 from the hulls, whose union is not the object), a visual mesh that does not collide (group 1), and
-its CoACD hulls as colliding meshes (group 3). An object that is nearly a box, cylinder, capsule or
-sphere (:func:`twin.objects.collision_primitive`) collides as that MuJoCo primitive instead; its hulls
+its CoACD hulls as colliding meshes (group 3). An object that is nearly a box, capsule or sphere
+(:func:`twin.objects.collision_primitive`) collides as that MuJoCo primitive instead; its hulls
 stay in group 3 for viewers but collide with nothing. Each element's ``info`` names the object it came
 from, so a compile error points back to it.
 """

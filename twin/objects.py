@@ -2,8 +2,8 @@
 
 :class:`TwinObject` is the record every part of the twin reads; :func:`object_at_estimate` makes one from
 an estimate (decimating the reconstruction and decomposing it with CoACD). :func:`fit_primitive` says
-when a convex hull is so nearly a box, cylinder, capsule or sphere that MuJoCo's own primitive can collide
-in its place (much cheaper than a mesh, and a sphere or cylinder rolls instead of resting on a facet).
+when an object is so nearly a box, capsule or sphere that MuJoCo's own primitive can collide in its place
+(much cheaper than meshes, and a ball rolls instead of resting on a facet).
 """
 
 from __future__ import annotations
@@ -32,12 +32,15 @@ DEFAULT_FRICTION = 0.5
 #: An object collides as one primitive when its volume over the fitted primitive's (the fill) is within
 #: [this, 1 / this]. Measured (``bench/replay.py --fills``) on clutter20 and the paper scene, from 30k- and
 #: 100k-point estimates and from the true meshes: every box, cylinder, capsule and sphere there fills
-#: 0.954-1.0 of its primitive; the nearest other shape, the paper's chunk (a box with a corner cut off),
+#: 0.96-1.0 of its primitive; the nearest other shape, the paper's chunk (a box with a corner cut off),
 #: 0.90-0.92; tori, the mug, the cone, the stack and the bridge under 0.7.
 PRIMITIVE_MIN_FILL = 0.94
 
-#: Primitive kinds tried, in MuJoCo's geom type names.
-PRIMITIVE_KINDS = ("box", "cylinder", "capsule", "sphere")
+#: Primitive kinds used, in MuJoCo's geom type names. Not "cylinder", though it is fitted: MuJoCo collides
+#: cylinders with boxes through its general convex routine, no cheaper than a hull (clutter20 awake: 6.5k
+#: steps/s without cylinders, 6.3k with), and a cylinder lying on its side crept on its line contact (the
+#: battery rolled 11 mm, 38 degrees, in 2 s at rest) where its prism hull rests on a facet.
+PRIMITIVE_KINDS = ("box", "capsule", "sphere")
 
 #: Fraction of the surface's vertices a fitted primitive may leave outside on each side. Dual contouring
 #: leaves a few vertices at creases and corners up to 5 mm proud of the true surface (0.1-1 % of a
@@ -100,8 +103,9 @@ def fit_primitive(mesh: Hull, *, min_fill: float = PRIMITIVE_MIN_FILL) -> Primit
     """The primitive of :data:`PRIMITIVE_KINDS` whose volume is closest to what ``mesh`` encloses, or None
     when that volume ratio (the fill) is outside ``[min_fill, 1 / min_fill]``.
 
-    The frame is the mesh's smallest oriented bounding box (trimesh, from its convex hull's faces: a
-    cube's covariance axes are arbitrary, its faces are not); cylinders and capsules try each box axis.
+    Two frames are tried: the mesh's principal axes of inertia (exact for a box or cylinder, whatever
+    spikes its surface has) and its smallest oriented bounding box (trimesh, from its convex hull's faces:
+    a cube's principal axes are arbitrary, its faces are not); cylinders and capsules try each axis.
     Sizes are area-weighted quantiles of the vertices (:data:`PRIMITIVE_TRIM`), so the primitive runs
     along the surface and not out to the few crease vertices that stick out of it.
 
@@ -111,7 +115,7 @@ def fit_primitive(mesh: Hull, *, min_fill: float = PRIMITIVE_MIN_FILL) -> Primit
     import mujoco
     import trimesh
 
-    from estimation.inertia import signed_volumes
+    from estimation.inertia import mass_properties, signed_volumes
 
     vertices, faces = mesh
     tri = vertices[faces]
@@ -122,40 +126,47 @@ def fit_primitive(mesh: Hull, *, min_fill: float = PRIMITIVE_MIN_FILL) -> Primit
     area = np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1) / 6
     weight = np.bincount(faces.ravel(), weights=np.repeat(area, 3), minlength=len(vertices))
     to_origin, _ = trimesh.bounds.oriented_bounds(vertices)
-    rot = to_origin[:3, :3].T  # columns: the box axes in the body frame
-    if np.linalg.det(rot) < 0:  # a reflection would turn into a wrong quaternion
-        rot = rot * np.array([1.0, 1.0, -1.0])
-    origin = -to_origin[:3, :3].T @ to_origin[:3, 3]
-    local = (vertices - origin) @ rot  # vertices in the box frame
+    obb = (to_origin[:3, :3].T, -to_origin[:3, :3].T @ to_origin[:3, 3])  # (axes as columns, centre)
+    principal = (mass_properties(vertices, faces, 1.0).principal_axes, np.zeros(3))
+    # Best over both frames: the primitive whose volume is closest to the surface's, on a log scale.
+    fill, kind, size, frame, position = min((c for axes, origin in (obb, principal)
+                                             for c in _candidates(vertices, weight, volume, axes, origin)
+                                             if c[1] in PRIMITIVE_KINDS),
+                                            key=lambda c: abs(np.log(c[0])))
+    if not min_fill <= fill <= 1 / min_fill:
+        return None
+    quat = np.empty(4)
+    mujoco.mju_mat2Quat(quat, np.ascontiguousarray(frame).ravel())
+    return Primitive(kind=kind, size=size, position=_on_centre(kind, position, frame[:, 2], size[0]), quat=quat,
+                     fill=fill)
+
+
+def _candidates(vertices: np.ndarray, weight: np.ndarray, volume: float, axes: np.ndarray,
+                origin: np.ndarray) -> list[tuple[float, str, tuple[float, float, float], np.ndarray, np.ndarray]]:
+    """(fill, kind, size, frame (3, 3) columns in the body frame, centre (3,)) of each primitive kind fitted
+    in the frame of ``axes`` (columns) about ``origin``; sizes are area-weighted trimmed quantiles."""
+    rot = axes * np.array([1.0, 1.0, np.sign(np.linalg.det(axes))])  # a proper rotation, for the quaternion
+    local = (vertices - origin) @ rot
     lo = np.array([_quantile(local[:, k], weight, PRIMITIVE_TRIM) for k in range(3)])
     hi = np.array([_quantile(local[:, k], weight, 1 - PRIMITIVE_TRIM) for k in range(3)])
     centre = (lo + hi) / 2
     local = local - centre
     half = (hi - lo) / 2
-    candidates = [(float(np.prod(2 * half)), "box", (float(half[0]), float(half[1]), float(half[2])), np.eye(3))]
+    fits = [(float(np.prod(2 * half)), "box", (float(half[0]), float(half[1]), float(half[2])), np.eye(3))]
     for axis in range(3):
         # The axis onto the geom's z, keeping a proper rotation (a cyclic permutation of the box axes).
         perm = np.eye(3)[:, [(axis + 1) % 3, (axis + 2) % 3, axis]]
         radial = np.hypot(local[:, (axis + 1) % 3], local[:, (axis + 2) % 3])
         r = _quantile(radial, weight, 1 - PRIMITIVE_TRIM)
-        candidates.append((np.pi * r**2 * 2 * half[axis], "cylinder", (r, float(half[axis]), 0.0), perm))
+        fits.append((np.pi * r**2 * 2 * half[axis], "cylinder", (r, float(half[axis]), 0.0), perm))
         # Capsule: the shortest segment whose caps of radius r reach the (trimmed) farthest points.
         reach = np.abs(local[:, axis]) - np.sqrt(np.maximum(r**2 - radial**2, 0.0))
-        segment = max(0.0, _quantile(reach, weight, 1 - PRIMITIVE_TRIM))
-        candidates.append((np.pi * r**2 * 2 * segment + 4 / 3 * np.pi * r**3, "capsule", (r, segment, 0.0), perm))
+        segment = _quantile(reach, weight, 1 - PRIMITIVE_TRIM)
+        if segment > 0:  # no segment: the sphere below (MuJoCo refuses a capsule of zero length)
+            fits.append((np.pi * r**2 * 2 * segment + 4 / 3 * np.pi * r**3, "capsule", (r, segment, 0.0), perm))
     r = _quantile(np.linalg.norm(local, axis=1), weight, 1 - PRIMITIVE_TRIM)
-    candidates.append((4 / 3 * np.pi * r**3, "sphere", (r, 0.0, 0.0), np.eye(3)))
-    # Best: the primitive whose volume is closest to the surface's, on a log scale (over or under).
-    best = min(((volume / v, kind, size, perm) for v, kind, size, perm in candidates if v > 0),
-               key=lambda c: abs(np.log(c[0])))
-    fill, kind, size, perm = best
-    if not min_fill <= fill <= 1 / min_fill:
-        return None
-    frame = rot @ perm
-    quat = np.empty(4)
-    mujoco.mju_mat2Quat(quat, np.ascontiguousarray(frame).ravel())
-    return Primitive(kind=kind, size=size, position=_on_centre(kind, origin + rot @ centre, frame[:, 2], size[0]),
-                     quat=quat, fill=fill)
+    fits.append((4 / 3 * np.pi * r**3, "sphere", (r, 0.0, 0.0), np.eye(3)))
+    return [(volume / v, kind, size, rot @ perm, origin + rot @ centre) for v, kind, size, perm in fits if v > 0]
 
 
 def _on_centre(kind: str, position: np.ndarray, axis: np.ndarray, radius: float) -> np.ndarray:
