@@ -1,13 +1,24 @@
-"""Headless replay speed, as a multiple of real time: remote C and twin C' in one process, every object pushed.
+"""Headless replay speed, as a multiple of real time, and the twin's own stepping rate, against a baseline.
 
-For each scene: build the session (set-up, not timed in the ratio), then for ``--seconds`` simulated seconds
-the end effector sweeps across the table while every object of C gets a seeded horizontal kick
-(0.2-0.4 m/s) every 0.5 s, so nothing sleeps; the twin follows C's poses over the in-process bus. The ratio
-is simulated seconds per wall second of stepping (1.0: as fast as the live 1 kHz loops; the issue's target
-is 20x). "moving" is the mean fraction of C's objects faster than 1 cm/s over the run. With ``--profile``,
-the clutter scene's stepping runs once more under cProfile and the top functions by own time are printed.
+Two tables, each run for the current configuration and for the baseline (every object colliding with its
+CoACD hulls, no primitives: the configuration before ``twin.model`` substituted MuJoCo primitives), in this
+one process, so machine load hits both alike. Times are this process's CPU time (``time.process_time``;
+the machine's two cores are shared) with wall time beside it.
 
-    .venv/bin/python bench/replay.py [--seconds 5] [--profile] | tee bench/results/replay.txt
+1. The twin C' alone (clutter20, its model as the headless session built it from estimated clouds):
+   steps/s (best of two runs) with every body awake (sleeping off, every object kicked at 0.2-0.4 m/s every 0.5 s, the end
+   effector sweeping across the table), and at rest with sleeping on (as the twin runs).
+2. Replay: remote C and twin C' in one process (:class:`scenes.headless.Headless`), for ``--seconds``
+   simulated seconds, every object of C kicked the same way, the twin following C's poses over the
+   in-process bus. "x real time" is simulated seconds per CPU second of stepping (1.0: as fast as the live
+   1 kHz loops; the issue's target is 20x). "moving": the mean fraction of C's objects faster than 1 cm/s.
+
+With ``--profile`` the clutter scene's replay runs once more under cProfile (top functions by cumulative
+time; cProfile inflates Python against MuJoCo's C).
+With ``--fills`` it prints, for clutter20 and the paper scene, each object's best-fitting primitive and
+fill (estimated from its cloud and from its true mesh): the data behind ``twin.objects.PRIMITIVE_MIN_FILL``.
+
+    .venv/bin/python bench/replay.py [--seconds 5] [--profile] [--fills] | tee bench/results/replay.txt
 """
 
 from __future__ import annotations
@@ -16,7 +27,9 @@ import argparse
 import cProfile
 import io
 import pstats
+import sys
 import time
+from collections.abc import Callable
 from importlib import resources
 from pathlib import Path
 
@@ -24,8 +37,11 @@ import numpy as np
 from rich.console import Console
 from rich.table import Table
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
 from scenes.headless import Headless
 from scenes.scenefile import load_scene
+from twin.sim import Twin
 from twin.trajectory import push_trajectory
 
 SCENES = {
@@ -36,18 +52,71 @@ SCENES = {
 KICK_EVERY = 0.5  # seconds between kicks: sliding friction stops a 0.3 m/s object in well under a second
 
 
-def _kick(session: Headless, rng: np.random.Generator) -> None:
-    for object_id in sorted(session.remote.twin.object_ids()):
+def meshes_only(spec) -> None:  # type: ignore[no-untyped-def]
+    """The baseline collision: drop every ``<id>/primitive`` geom and let the hulls collide again."""
+    for geom in list(spec.geoms):
+        if geom.name.endswith("/primitive"):
+            spec.delete(geom)
+        elif "/hull" in geom.name:
+            geom.contype, geom.conaffinity = 1, 1
+
+
+CONFIGS: dict[str, Callable[[object], None] | None] = {"baseline (hulls)": meshes_only, "current": None}
+
+
+def _kick(twin: Twin, rng: np.random.Generator) -> None:
+    for object_id in sorted(twin.object_ids()):
         angle, speed = rng.uniform(0, 2 * np.pi), rng.uniform(0.2, 0.4)
-        session.remote.twin.set_velocity(object_id, speed * np.array([np.cos(angle), np.sin(angle), 0.0]),
-                                         np.zeros(3))
+        twin.set_velocity(object_id, speed * np.array([np.cos(angle), np.sin(angle), 0.0]), np.zeros(3))
 
 
-def replay(path: Path, seconds: float, cache: Path, profile: cProfile.Profile | None = None) -> dict:
-    t0 = time.perf_counter()
+def _times() -> tuple[float, float]:
+    return time.process_time(), time.perf_counter()
+
+
+def twin_rates(spec, seconds: float, repeats: int = 2) -> dict[str, float]:  # type: ignore[no-untyped-def]
+    """Steps per CPU second of ``spec``'s model, the best of ``repeats`` runs (the least disturbed by other
+    processes): all awake (sleep off, kicked, pushed), and resting asleep (sleep on, after 1 s to settle)."""
+    import mujoco
+
+    awake = spec.copy()
+    awake.option.enableflags &= ~int(mujoco.mjtEnableBit.mjENBL_SLEEP)
+    out = {"awake": 0.0, "asleep": 0.0}
+    for _ in range(repeats):
+        with Twin(awake) as twin:
+            start = twin.data.mocap_pos[0].copy()
+            push = push_trajectory(start, start + np.array([1.0, 0.6, -0.03]), seconds, start_time=twin.time)
+            rng, n = np.random.default_rng(0), round(seconds / twin.model.opt.timestep)
+            kick_every = round(KICK_EVERY / twin.model.opt.timestep)
+            c0 = time.process_time()
+            for k in range(n):
+                if k % kick_every == 0:
+                    _kick(twin, rng)
+                twin.set_end_effector(push(twin.time))
+                twin.step()
+            out["awake"] = max(out["awake"], n / (time.process_time() - c0))
+        with Twin(spec.copy()) as twin:
+            twin.step(1000)  # settle and fall asleep
+            hold, n = twin.data.mocap_pos[0].copy(), round(seconds / twin.model.opt.timestep)
+            c0 = time.process_time()
+            for _ in range(n):
+                twin.set_end_effector(hold)
+                twin.step()
+            out["asleep"] = max(out["asleep"], n / (time.process_time() - c0))
+    return out
+
+
+def replay(path: Path, seconds: float, cache: Path, config: Callable[[object], None] | None,
+           profile: cProfile.Profile | None = None, rates: bool = False) -> dict:
+    """One headless session of ``path``: set-up, then ``seconds`` of kicked, pushed replay (CPU and wall)."""
+    c0, w0 = _times()
     with Headless(load_scene(path), cache_dir=cache) as s:
         s.tick()  # the twin takes in every estimated object at its first tick
-        t1 = time.perf_counter()
+        if config is not None:
+            s.remote.twin.edit(config)
+            s.local.twin.edit(config)
+        setup_cpu = time.process_time() - c0
+        twin_rate = twin_rates(s.local.twin.spec, min(seconds, 2.0)) if rates else {}
         start, tw = s.local.twin.data.mocap_pos[0].copy(), s.local.twin.time
         push = push_trajectory(start, start + np.array([1.0, 0.6, -0.03]), seconds, start_time=tw)
         rng = np.random.default_rng(0)
@@ -55,18 +124,44 @@ def replay(path: Path, seconds: float, cache: Path, profile: cProfile.Profile | 
         steps, kick_every, moving = round(seconds / s.dt), round(KICK_EVERY / s.dt), []
         if profile is not None:
             profile.enable()
-        t2 = time.perf_counter()
+        c2, w2 = _times()
         for k in range(steps):
             if k % kick_every == 0:
-                _kick(s, rng)
+                _kick(s.remote.twin, rng)
             s.tick(push)
             if k % 50 == 25:
                 moving.append(np.mean([np.linalg.norm(s.remote.twin.velocity(i)[0]) > 0.01 for i in ids]))
-        t3 = time.perf_counter()
+        c3, w3 = _times()
         if profile is not None:
             profile.disable()
-        return {"objects": len(ids), "setup_s": t1 - t0, "run_s": t3 - t2, "sim_s": seconds,
-                "moving": float(np.mean(moving)), "steps": steps}
+        return {"objects": len(ids), "setup_cpu_s": setup_cpu, "setup_wall_s": time.perf_counter() - w0,
+                "run_cpu_s": c3 - c2, "run_wall_s": w3 - w2, "sim_s": seconds, "moving": float(np.mean(moving)),
+                "steps": steps, **{f"twin_{k}": v for k, v in twin_rate.items()}}
+
+
+def fills(console: Console, cache: Path) -> None:
+    """Each object's best primitive and fill, estimated and true (clutter20 and the paper scene)."""
+    from scenes.sources import estimate_object, prepare_objects, reference_estimate
+    from twin.objects import PRIMITIVE_MIN_FILL, collision_primitive
+
+    table = Table(title=f"best primitive and fill (object volume / primitive volume; accepted in "
+                        f"[{PRIMITIVE_MIN_FILL:g}, {1 / PRIMITIVE_MIN_FILL:.3f}])")
+    for col in ("scene", "object", "estimated", "fill", "true mesh", "fill "):
+        table.add_column(col, justify="right")
+    for name in ("clutter20", "paper_table"):
+        scene = load_scene(str(resources.files("scenes").joinpath(f"data/{name}.toml")))
+        top = scene.table.height if scene.table else None
+        sides = [prepare_objects(scene.objects, table_top=top, cache_dir=cache, progress=False,
+                                 estimates=[make(s) for s in scene.objects])
+                 for make in (estimate_object, reference_estimate)]
+        for est, ref in zip(*sides, strict=True):
+            row = [name, est.id]
+            for obj in (est, ref):
+                fit = collision_primitive(obj, min_fill=1e-9)  # the best fit, accepted or not
+                ok = fit is not None and PRIMITIVE_MIN_FILL <= fit.fill <= 1 / PRIMITIVE_MIN_FILL
+                row += [f"{fit.kind}{'' if ok else ' (no)'}" if fit else "-", f"{fit.fill:.3f}" if fit else "-"]
+            table.add_row(*row)
+    console.print(table)
 
 
 def main() -> None:
@@ -76,26 +171,48 @@ def main() -> None:
     ap.add_argument("--cache-dir", type=Path, default=Path(".cache/bench-headless"),
                     help="CoACD cache (warm after the first run)")
     ap.add_argument("--profile", action="store_true", help="profile the clutter scene's stepping (cProfile)")
+    ap.add_argument("--fills", action="store_true", help="print each object's primitive fit (slow: estimates)")
     args = ap.parse_args()
-    console = Console(width=140)
-    table = Table(title=f"headless replay: {args.seconds:g} s simulated, remote + twin in one process, all pushed")
-    for col in ("scene", "objects", "set-up s", "stepping s", "ticks/s", "moving", "x real time", "target"):
+    console = Console(width=160)
+    runs = {(name, label): replay(SCENES[name], args.seconds, args.cache_dir, config, rates=name == "clutter20")
+            for name in args.scenes for label, config in CONFIGS.items()}
+    base_label = next(iter(CONFIGS))
+
+    if "clutter20" in args.scenes:
+        table = Table(title="twin C' alone, clutter20: steps per CPU second")
+        for col in ("configuration", "all awake steps/s", "resting, asleep steps/s", "awake x baseline",
+                    "target 10k awake"):
+            table.add_column(col, justify="right")
+        base = runs["clutter20", base_label]
+        for label in CONFIGS:
+            r = runs["clutter20", label]
+            table.add_row(label, f"{r['twin_awake']:,.0f}", f"{r['twin_asleep']:,.0f}",
+                          f"{r['twin_awake'] / base['twin_awake']:.2f}x",
+                          "met" if r["twin_awake"] >= 10_000 else "NOT met")
+        console.print(table)
+
+    table = Table(title=f"headless replay: {args.seconds:g} s simulated, remote + twin in one process, all kicked")
+    for col in ("scene", "configuration", "objects", "set-up CPU s", "stepping CPU s", "wall s", "ticks/CPU s",
+                "moving", "x real time (CPU)", "(wall)", "x baseline", "target 20x"):
         table.add_column(col, justify="right")
-    for name in args.scenes:
-        r = replay(SCENES[name], args.seconds, args.cache_dir)
-        ratio = r["sim_s"] / r["run_s"]
-        table.add_row(name, str(r["objects"]), f"{r['setup_s']:.1f}", f"{r['run_s']:.2f}",
-                      f"{r['steps'] / r['run_s']:,.0f}", f"{100 * r['moving']:.0f} %", f"{ratio:.1f}x",
-                      "20x " + ("met" if ratio >= 20 else "NOT met"))
+    for (name, label), r in runs.items():
+        ratio = r["sim_s"] / r["run_cpu_s"]
+        base = runs[name, base_label]
+        table.add_row(name, label, str(r["objects"]), f"{r['setup_cpu_s']:.1f}", f"{r['run_cpu_s']:.2f}",
+                      f"{r['run_wall_s']:.2f}", f"{r['steps'] / r['run_cpu_s']:,.0f}", f"{100 * r['moving']:.0f} %",
+                      f"{ratio:.1f}x", f"{r['sim_s'] / r['run_wall_s']:.1f}x",
+                      f"{base['run_cpu_s'] / r['run_cpu_s']:.2f}x", "met" if ratio >= 20 else "NOT met")
     console.print(table)
     if args.profile:
         prof = cProfile.Profile()
-        replay(SCENES["clutter20"], min(args.seconds, 2.0), args.cache_dir, profile=prof)
+        replay(SCENES["clutter20"], min(args.seconds, 2.0), args.cache_dir, None, profile=prof)
         buf = io.StringIO()
-        pstats.Stats(prof, stream=buf).sort_stats("tottime").print_stats(14)
+        pstats.Stats(prof, stream=buf).sort_stats("cumulative").print_stats(20)
         text = buf.getvalue()
-        console.print("cProfile, clutter20 stepping, top functions by own time:")
+        console.print("cProfile, clutter20 stepping (current configuration), top 20 by cumulative time:")
         console.print(text[text.find("ncalls") - 1:].rstrip(), markup=False, highlight=False)
+    if args.fills:
+        fills(console, args.cache_dir)
 
 
 if __name__ == "__main__":

@@ -33,7 +33,7 @@ DEFAULT_FRICTION = 0.5
 #: [this, 1 / this]. Measured (``bench/replay.py --fills``) on clutter20 and the paper scene, from 30k- and
 #: 100k-point estimates and from the true meshes: every box, cylinder, capsule and sphere there fills
 #: 0.96-1.0 of its primitive; the nearest other shape, the paper's chunk (a box with a corner cut off),
-#: 0.90-0.92; tori, the mug, the cone, the stack and the bridge under 0.7.
+#: 0.86-0.92; tori, the mug, the cone, the stack and the bridge under 0.7.
 PRIMITIVE_MIN_FILL = 0.94
 
 #: Primitive kinds used, in MuJoCo's geom type names. Not "cylinder", though it is fitted: MuJoCo collides
