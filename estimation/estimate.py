@@ -184,8 +184,9 @@ def _estimate_auto(
     smooth and low-poly shapes, and the pass says where it does not: its ``volume_bounds_m3`` widen with
     the surface it could not measure and the cells holding both faces of a wall. When they are wider
     than ``tol.REFINE_DOUBT`` of the volume and the budget left points out, a second pass runs on
-    enough points to bring them to that (the bound shrinks about linearly with the cell, so with the
-    square of the doubt), at most ``tol.REFINE_POINTS``.
+    enough points to bring them to that (the thin-wall bound shrinks about linearly with the cell, so
+    the points grow with the square of the doubt), at least ``tol.REFINE_MIN_FACTOR`` times as many and
+    at most ``tol.REFINE_POINTS``.
     """
     from estimation.spacing import point_spacing, surface_noise
 
@@ -197,7 +198,8 @@ def _estimate_auto(
     run = _auto_pass(cloud, box, local, spacing, noise, tol.POINT_BUDGET, density, viewpoint, stages)
     doubt = (run.hole + run.thin) / run.props.volume
     if run.points_used < len(local) and doubt > tol.REFINE_DOUBT:
-        budget = min(tol.REFINE_POINTS, int(run.points_used * (doubt / tol.REFINE_DOUBT) ** 2))
+        factor = max(tol.REFINE_MIN_FACTOR, (doubt / tol.REFINE_DOUBT) ** 2)
+        budget = min(tol.REFINE_POINTS, int(run.points_used * factor))
         if budget > run.points_used:
             log.info("refining: volume doubt %.2f %% at %d points, again with about %d", 100 * doubt,
                      run.points_used, budget)
