@@ -125,6 +125,9 @@ def run_demo(*, duration: float = 5.0, scene_path: Path | None = None, zenoh_con
         console.print(f"all {len(local.objects)} objects touchable in the twin after {sync_s:.1f} s")
         start = local.twin.data.mocap_pos[0].copy()
         push = push_trajectory(start, start + np.array([2.2, 0.0, -0.12]), duration, start_time=local.twin.time)
+        # The latency target is the push phase's (the live stack's own); poses while objects were being
+        # estimated (keyframes, competing with the estimation workers for the two cores) are reported apart.
+        pushed_from = len(local.report.pose_latency)
         stats = local.run(duration, trajectory=push)
         session_s = time.perf_counter() - t_join
         report, counters = local.report, local.link.counters
@@ -144,7 +147,9 @@ def run_demo(*, duration: float = 5.0, scene_path: Path | None = None, zenoh_con
     if remote.is_alive():
         remote.terminate()
     raw = sum(remote_stats["points"].values()) * RAW_BYTES_PER_POINT * RAW_STREAM_HZ * session_s
-    lat = np.asarray(report.pose_latency) * 1e3 if report.pose_latency else np.zeros(1)
+    lat_all = np.asarray(report.pose_latency) * 1e3
+    lat = lat_all[pushed_from:] if len(lat_all) > pushed_from else np.zeros(1)
+    joining = lat_all[:pushed_from] if pushed_from else np.zeros(1)
     gaps = np.concatenate([np.asarray(g) for g in report.divergence.values()] or [np.zeros(1)]) * 1e3
     out = {
         "objects_synced": report.objects_synced,
@@ -152,8 +157,12 @@ def run_demo(*, duration: float = 5.0, scene_path: Path | None = None, zenoh_con
         "bytes_sent": remote_stats["bytes_sent"] + counters.bytes_sent,
         "raw_stream_bytes": int(raw),
         "bandwidth_ratio": raw / max(1, remote_stats["bytes_sent"] + counters.bytes_sent),
-        "pose_latency_p50_ms": float(np.percentile(lat, 50)),
+        "pose_latency_p50_ms": float(np.percentile(lat, 50)),  # while pushing, publish to applied
         "pose_latency_p99_ms": float(np.percentile(lat, 99)),
+        "pose_latency_max_ms": float(lat.max()),
+        "poses_while_pushing": int(len(lat_all) - pushed_from),
+        "pose_latency_while_adding_p99_ms": float(np.percentile(joining, 99)),
+        "poses_while_adding": int(pushed_from),
         "dropped_malformed": counters.dropped_malformed + remote_stats["dropped_malformed"],
         "add_latency_s": [round(x, 3) for x in report.add_latency],
         "worst_step_while_adding_ms": report.worst_step_while_adding * 1e3,
@@ -173,8 +182,9 @@ def run_demo(*, duration: float = 5.0, scene_path: Path | None = None, zenoh_con
     }
     # The summary is the result: stdout (progress went to stderr); with --json, the caller prints the record.
     Console(quiet=not progress).print(
-        f"pushed for {duration:g} s: {out['pose_updates']} pose corrections, latency p50 "
-        f"{out['pose_latency_p50_ms']:.3f} ms, p99 {out['pose_latency_p99_ms']:.3f} ms\n"
+        f"pushed for {duration:g} s: {out['poses_while_pushing']} pose corrections, latency p50 "
+        f"{out['pose_latency_p50_ms']:.3f} ms, p99 {out['pose_latency_p99_ms']:.3f} ms (while objects were "
+        f"added: {out['poses_while_adding']}, p99 {out['pose_latency_while_adding_p99_ms']:.3f} ms)\n"
         f"bytes sent {out['bytes_sent']:,} vs {out['raw_stream_bytes']:,} for raw clouds at 30 Hz "
         f"({out['bandwidth_ratio']:,.0f}x less); malformed dropped {out['dropped_malformed']}\n"
         f"twin loop: p50 {out['step_p50_ms']:.3f} ms, p99 {out['step_p99_ms']:.3f} ms per step; worst step while "
