@@ -127,7 +127,8 @@ def build_scene(scene: SceneSpec, *, coacd: CoacdSettings = DEFAULT_SETTINGS, ca
 
 def default_workers(objects: int) -> int:
     """Processes to build ``objects`` objects in: one per core this process may run on, at most one each."""
-    return max(1, min(objects, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1))
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+    return max(1, min(objects, cores))
 
 
 def build_object(spec: ObjectSpec, *, table_top: float | None, coacd: CoacdSettings = DEFAULT_SETTINGS,
