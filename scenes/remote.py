@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from scenes.scenefile import ObjectSpec, SceneSpec
-from scenes.sensing import Sensor, SurfaceSensor
+from scenes.sensing import Sensor, SurfaceSensor, Track
 from scenes.sources import prepare_objects, reference_estimate, source_mesh
 from sync.clock import REAL_CLOCK, Clock
 from sync.keys import Keys
@@ -95,6 +95,8 @@ class Remote:
         self._operator: np.ndarray | None = None
         self._seq = 0
         self._published: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+        self._rows: _Published | None = None  # _published as arrays, for the deadband check over all objects
+        self._pose_keys: dict[str, str] = {}  # object id -> its pose key (built once, not at every publication)
         self._objects: dict[str, _Truth] = {}
         self._cache_dir = cache_dir
         self.pose_updates = 0
@@ -204,8 +206,7 @@ class Remote:
             self.recorder.truth(self.twin.time, {i: self.twin.pose(i) for i in self._objects if self.twin.has(i)})
         if self.rlog.due(self.twin.time):
             self.rlog.frame(self.twin, side="remote")
-        for object_id in self._objects:
-            self._publish_pose(object_id)
+        self._publish_moved()
         now = self.clock.now()
         if self.keyframe_s > 0 and now - self._last_keyframe >= self.keyframe_s:
             # Every pose now and then, moved or not: a twin that drifted on its own (its estimated shape
@@ -242,6 +243,7 @@ class Remote:
         self.rlog.event(self.twin.time, f"{object_id}: removed")
         self._objects.pop(object_id, None)
         self._published.pop(object_id, None)
+        self._rows = None  # rebuilt without it at the next step
         with self._lock:  # the queryable reads these from Zenoh's threads
             for kind in ("cloud", "pose"):
                 self._replies.pop(self.keys.object(object_id, kind), None)
@@ -267,8 +269,44 @@ class Remote:
                 break
         return self.twin.time
 
-    def _publish_pose(self, object_id: str, *, force: bool = False) -> None:
-        seen = self.sensor.track(self, object_id)
+    def _publish_moved(self) -> None:
+        """Publish every object whose sensed frame left the deadband since its last publication.
+
+        One check over all objects' arrays at once: the deadband is asked about every object at every step
+        and passed by a few, so only those are asked for a full track (velocity included). A sensor without
+        :meth:`scenes.sensing.PoseSensor.poses` gives a full track of each object, as it always did.
+        """
+        ids = list(self._objects)
+        if not ids:
+            return
+        tracks = None
+        poses = getattr(self.sensor, "poses", None)
+        if poses is not None:
+            pos, quat = poses(self, ids)
+        else:
+            tracks = [self.sensor.track(self, i) for i in ids]
+            pos = np.array([t.position for t in tracks], dtype=float).reshape(-1, 3)
+            quat = np.array([t.quat for t in tracks], dtype=float).reshape(-1, 4)
+        last = self._last_published(ids)
+        # Batched matmul, not einsum: row by row it sums as np.linalg.norm and np.dot do on one vector,
+        # so each object's decision is bit for bit the one the per-object check made.
+        gap = pos - last.position
+        moved = np.sqrt(np.matmul(gap[:, None, :], gap[:, :, None])[:, 0, 0])
+        cos_half = np.fmin(1.0, np.abs(np.matmul(quat[:, None, :], last.quat[:, :, None])[:, 0, 0]))
+        turned = 2 * np.degrees(np.arccos(cos_half))  # as twin.poses.angle_deg (fmin: as its min on NaN)
+        still = (moved <= self.deadband.position) & (turned <= self.deadband.angle_deg) & last.known
+        for k in np.flatnonzero(~still):
+            self._publish_pose(ids[k], track=None if tracks is None else tracks[k], force=True)
+
+    def _last_published(self, ids: list[str]) -> _Published:
+        """The last published poses of ``ids`` as arrays, rebuilt only when the objects change."""
+        rows = self._rows
+        if rows is None or rows.ids != ids:
+            rows = self._rows = _Published.of(ids, self._published)
+        return rows
+
+    def _publish_pose(self, object_id: str, *, track: Track | None = None, force: bool = False) -> None:
+        seen = self.sensor.track(self, object_id) if track is None else track
         pos, quat = seen.position, seen.quat
         last = self._published.get(object_id)
         if not force and last is not None:
@@ -277,12 +315,17 @@ class Remote:
             if moved <= self.deadband.position and turned <= self.deadband.angle_deg:
                 return
         self._published[object_id] = (pos, quat)
+        if self._rows is not None:
+            self._rows.update(object_id, pos, quat)
         msg = Pose(v=VERSION, stamp_ns=self.clock.stamp_ns(), object_id=object_id, epoch=self.epoch, seq=self._next(),
                    sim_time=self.twin.time, position=_floats(pos), quat=_floats(quat), linvel=_floats(seen.linvel),
                    angvel=_floats(seen.angvel))
-        data = self.link.put(self.keys.object(object_id, "pose"), msg)
+        key = self._pose_keys.get(object_id)
+        if key is None:
+            key = self._pose_keys[object_id] = self.keys.object(object_id, "pose")
+        data = self.link.put(key, msg)
         with self._lock:
-            self._replies[self.keys.object(object_id, "pose")] = data
+            self._replies[key] = data
         self.pose_updates += 1
 
     def _replies_snapshot(self) -> list[tuple[str, bytes]]:
@@ -311,5 +354,31 @@ class Remote:
 
 
 def _floats(values) -> tuple[float, ...]:  # type: ignore[no-untyped-def]
-    """Plain floats for the encoder (it takes no numpy scalars)."""
-    return tuple(float(x) for x in values)
+    """Plain floats for the encoder (it takes no numpy scalars); ``tolist`` converts in one call."""
+    return tuple(np.asarray(values, dtype=np.float64).tolist())
+
+
+@dataclass
+class _Published:
+    """The last published pose of each object as rows: what the deadband check compares with every step.
+
+    ``known`` is False for an object never published (it is published at once)."""
+
+    ids: list[str]
+    index: dict[str, int]
+    position: np.ndarray  # (n, 3) metres, world frame
+    quat: np.ndarray  # (n, 4) w x y z
+    known: np.ndarray  # (n,) bool
+
+    @classmethod
+    def of(cls, ids: list[str], published: dict[str, tuple[np.ndarray, np.ndarray]]) -> _Published:
+        rows = cls(list(ids), {i: k for k, i in enumerate(ids)}, np.zeros((len(ids), 3)), np.zeros((len(ids), 4)),
+                   np.zeros(len(ids), dtype=bool))
+        for object_id, (pos, quat) in published.items():
+            rows.update(object_id, pos, quat)
+        return rows
+
+    def update(self, object_id: str, position: np.ndarray, quat: np.ndarray) -> None:
+        k = self.index.get(object_id)
+        if k is not None:
+            self.position[k], self.quat[k], self.known[k] = position, quat, True

@@ -19,6 +19,7 @@ from typing import Protocol
 import numpy as np
 
 from scenes.sampling import sample_surface
+from twin.model import free_joint
 from twin.poses import rotation
 
 log = logging.getLogger(__name__)
@@ -77,6 +78,19 @@ class Sensor(Protocol):
         """Where the object's frame is now."""
 
 
+class PoseSensor(Sensor, Protocol):
+    """A sensor that can also report many objects' frames at once, without velocities.
+
+    Optional: the remote asks for this at every step to decide which objects left the deadband, and asks
+    :meth:`Sensor.track` only for those it publishes. A sensor without it is asked for a full track of
+    every object at every step.
+    """
+
+    def poses(self, truth: GroundTruth, object_ids: list[str]) -> tuple[np.ndarray, np.ndarray]:
+        """(positions (n, 3) float64 metres, quaternions (n, 4) float64 w x y z), world frame, in the order
+        of ``object_ids``: the same values :meth:`Sensor.track` would report now."""
+
+
 class SurfaceSensor:
     """Idealised sensing: uniform samples of the whole true surface, and the simulator's poses.
 
@@ -90,10 +104,32 @@ class SurfaceSensor:
         pos, quat = truth.twin.pose(object_id)  # type: ignore[attr-defined]
         return Observation(cloud.points @ rotation(quat).T + pos, None, pos, quat)
 
+    def __init__(self) -> None:
+        self._bodies: tuple[object, list[str], np.ndarray] | None = None  # (model, ids, body ids) of poses()
+
     def track(self, truth: GroundTruth, object_id: str) -> Track:
         pos, quat = truth.twin.pose(object_id)  # type: ignore[attr-defined]
         lin, ang = truth.twin.velocity(object_id)  # type: ignore[attr-defined]
         return Track(pos, quat, lin, ang)
+
+    def poses(self, truth: GroundTruth, object_ids: list[str]) -> tuple[np.ndarray, np.ndarray]:
+        """Every object's body frame from the simulator's own arrays: one gather, not a look-up per object.
+
+        Raises:
+            KeyError: an object not in the model.
+        """
+        twin = truth.twin
+        model = twin.model  # type: ignore[attr-defined]
+        cached = self._bodies
+        if cached is None or cached[0] is not model or cached[1] != object_ids:
+            # Body ids change only with the model or the objects asked for: looked up by name once.
+            joints = [free_joint(model, i) for i in object_ids]
+            missing = [i for i, j in zip(object_ids, joints, strict=True) if j < 0]
+            if missing:
+                raise KeyError(f"no object {missing[0]!r} in the model")
+            cached = self._bodies = (model, list(object_ids), np.array([model.jnt_bodyid[j] for j in joints], int))
+        data = twin.data  # type: ignore[attr-defined]
+        return data.xpos[cached[2]], data.xquat[cached[2]]
 
 
 class CameraSensor:
