@@ -54,9 +54,9 @@ from twin.debuglog import OFF, DebugLog, display_subset
 from twin.decompose import DEFAULT_SETTINGS, CoacdSettings
 from twin.hold import DEFAULT_HOLD, Hold, HoldSettings
 from twin.loop import LoopStats, run_loop
-from twin.model import EndEffectorSpec, TableSpec, add_object, new_spec, remove_object
+from twin.model import EndEffectorSpec, TableSpec, add_object, free_joint, new_spec, remove_object
 from twin.objects import DEFAULT_FRICTION, TwinObject, object_at_estimate
-from twin.poses import angle_deg, blend, quat_conj, quat_mul, rotation
+from twin.poses import blend, quat_conj, quat_mul, rotation
 from twin.sim import Twin
 from twin.trajectory import Trajectory
 from twin.workers import background_worker
@@ -208,6 +208,11 @@ class Local:
         self._latest: dict[str, Pose] = {}
         self._pose_mark: dict[str, tuple[int, int]] = {}  # id -> (epoch, seq) of the newest pose taken
         self._targets: dict[str, Pose] = {}
+        # id -> (pose message, offset, its pose on the twin's body): a target is corrected towards at every
+        # step until reached, and mapping it costs more than the correction; computed once per message.
+        self._mapped: dict[str, tuple[Pose, tuple[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]] = {}
+        self._to_correct: list[str] = []  # objects whose new pose is corrected towards at the end of _drain
+        self._joints: tuple[object, dict[str, tuple[int, int, int]]] = (None, {})  # per model: see _joint
         self.hold = Hold(settings.hold, tau=settings.correction_tau)
         self._next_sample = 0.0
         self._sent_operator: np.ndarray | None = None
@@ -258,6 +263,7 @@ class Local:
             except queue.Empty:
                 return
             self._handle(*item)
+            self._flush_corrections()
             left = deadline - self.clock.now()
 
     def iterate(self, trajectory=None) -> None:  # type: ignore[no-untyped-def]
@@ -275,9 +281,7 @@ class Local:
             # towards it pushes it back into the hand (felt as a wall). Such objects follow the twin's
             # physics until released; C's later poses then correct them.
             touched = self.hold.disturbed(self.twin.time) if self.settings.defer_touched else set()
-            for object_id in list(self._targets):
-                if object_id not in touched:
-                    self._correct(object_id)
+            self._correct_all([i for i in self._targets if i not in touched])
         target = self._operator_target(trajectory)
         if target is not None:
             self.twin.set_end_effector(target)
@@ -298,12 +302,14 @@ class Local:
         self._check_link()
 
     def _drain(self) -> None:
+        """Handle every queued message; the poses they bring are corrected towards in one batch at the end."""
         while True:
             try:
                 item = self.inbox.get_nowait()
             except queue.Empty:
-                return
+                break
             self._handle(*item)
+        self._flush_corrections()
 
     def close(self) -> None:
         if self._pool is not None:
@@ -317,7 +323,7 @@ class Local:
         latest, offset = self._latest.get(object_id), self._offsets.get(object_id)
         if latest is None or offset is None:
             return None
-        return _on_twin_body(latest, offset)
+        return self._on_body(object_id, latest, offset)
 
     @property
     def expected(self) -> int:
@@ -437,9 +443,13 @@ class Local:
                 return
             self._latest[msg.object_id] = msg
             if msg.object_id in self._offsets and self.twin.has(msg.object_id):
+                if msg.object_id in self._to_correct:
+                    self._flush_corrections()  # its earlier pose first, as if each were corrected on arrival
                 self._targets[msg.object_id] = msg
                 self._hold_at(msg.object_id)
-                self._correct(msg.object_id)
+                self._to_correct.append(msg.object_id)
+                if self.rlog.enabled:
+                    self._flush_corrections()  # keep the debug log's events in arrival order
                 self.report.pose_updates += 1
                 self.report.pose_latency.append((self.clock.stamp_ns() - msg.stamp_ns) * 1e-9)
                 if self.rlog.enabled:  # every pose passes here: no string building with rerun off
@@ -450,6 +460,7 @@ class Local:
             self._jobs[msg.object_id] = (self._submit(msg), msg, received)
             self.rlog.event(self.twin.time, f"{msg.object_id}: cloud received (seq {msg.seq}); estimating")
         elif isinstance(msg, Gone):
+            self._flush_corrections()  # poses that came before it were corrected towards before it
             mark = self._clouds.get(msg.object_id)
             if mark is not None and (msg.epoch, msg.seq) < mark:
                 self.report.out_of_order += 1  # older than the cloud the twin has: not about this object
@@ -459,6 +470,7 @@ class Local:
             self._offsets.pop(msg.object_id, None)
             self._targets.pop(msg.object_id, None)
             self._latest.pop(msg.object_id, None)
+            self._mapped.pop(msg.object_id, None)
             self._pose_mark.pop(msg.object_id, None)
             self.hold.forget(msg.object_id)
             if self.twin.has(msg.object_id):
@@ -558,27 +570,86 @@ class Local:
 
     def _correct(self, object_id: str) -> None:
         """Move the object a step towards where the remote says it is (at once if far off)."""
-        target = self._targets[object_id]
-        want_p, want_q = _on_twin_body(target, self._offsets[object_id])
-        pos, quat = self.twin.pose(object_id)
-        dist = float(np.linalg.norm(want_p - pos))
-        angle = angle_deg(quat, want_q)
-        s = self.settings
-        if dist > s.snap_distance or angle > s.snap_angle_deg:
-            alpha = 1.0
-        else:
-            alpha = 1.0 - float(np.exp(-self.twin.model.opt.timestep / s.correction_tau))
+        self._correct_all([object_id])
+
+    def _flush_corrections(self) -> None:
+        """Correct towards the poses handled since the last flush (each object once: see :meth:`_handle`)."""
+        if self._to_correct:
+            ids, self._to_correct = self._to_correct, []
+            self._correct_all([i for i in ids if i in self._targets])
+
+    def _correct_all(self, ids: list[str]) -> None:
+        """Move each object (no repeats) a step towards its target; at once where it is far off.
+
+        One pass over all objects' arrays, as :meth:`twin.hold.Hold.apply` does, and the same arithmetic as
+        one object at a time: each object reads and writes only its own rows. Batched matmul sums each row
+        as the one-vector ``np.linalg.norm``, ``np.dot`` and ``@`` do, so the result is bit for bit what the
+        per-object correction gave (checked on this machine's BLAS; a different BLAS may round differently,
+        deterministically).
+        """
+        if not ids:
+            return
+        twin, s = self.twin, self.settings
+        data, n = twin.data, len(ids)
+        rows = np.array([self._joint(i) for i in ids], dtype=np.intp).reshape(n, 3)
+        body, qpos, dof = rows[:, 0], rows[:, 1:2] + np.arange(7), rows[:, 2:3] + np.arange(6)
+        targets = [self._targets[i] for i in ids]
+        wants = [self._on_body(i, t, self._offsets[i]) for i, t in zip(ids, targets, strict=True)]
+        want_p, want_q = np.array([w[0] for w in wants]), np.array([w[1] for w in wants])
+        pos, quat = data.xpos[body], data.xquat[body]  # as of the last step, like Twin.pose
+        gap = want_p - pos
+        dist = np.sqrt(np.matmul(gap[:, None, :], gap[:, :, None])[:, 0, 0])
+        angle = 2 * np.degrees(np.arccos(np.fmin(1.0, np.abs(np.matmul(quat[:, None, :], want_q[:, :, None])[:, 0, 0]))))
+        snap = (dist > s.snap_distance) | (angle > s.snap_angle_deg)
+        alpha = np.where(snap, 1.0, 1.0 - float(np.exp(-twin.model.opt.timestep / s.correction_tau)))[:, None]
         new_p, new_q = blend(pos, quat, want_p, want_q, alpha)
-        self.twin.set_pose(object_id, new_p, new_q, forward=False)
-        lin, ang = self.twin.velocity(object_id)
-        self.twin.set_velocity(object_id, lin + alpha * (np.asarray(target.linvel) - lin),
-                               ang + alpha * (np.asarray(target.angvel) - ang))
-        if alpha == 1.0:
-            self.report.snaps += 1
-            self.rlog.event(self.twin.time, f"{object_id}: snapped {dist * 1e3:.1f} mm, {angle:.1f} deg to the "
-                                            f"remote pose", "WARN")
-        if alpha == 1.0 or (dist < 2e-4 and angle < 0.1):
+        if not (np.isfinite(new_p).all() and np.isfinite(new_q).all()):
+            bad = ids[int(np.flatnonzero(~(np.isfinite(new_p).all(1) & np.isfinite(new_q).all(1)))[0])]
+            raise ValueError(f"object {bad!r}: pose must be finite with a non-zero quaternion")
+        data.qpos[qpos[:, :3]] = new_p  # no mj_forward: the next step computes positions (as set_pose(forward=False))
+        data.qpos[qpos[:, 3:]] = new_q
+        # Velocities: linear in world axes; angular kept by MuJoCo in body axes, blended in world axes.
+        xmat = data.xmat[body].reshape(n, 3, 3)
+        lin, ang = data.qvel[dof[:, :3]], np.matmul(xmat, data.qvel[dof[:, 3:], None])[:, :, 0]
+        lin = lin + alpha * (np.array([t.linvel for t in targets]) - lin)
+        ang = ang + alpha * (np.array([t.angvel for t in targets]) - ang)
+        data.qvel[dof[:, :3]] = lin
+        data.qvel[dof[:, 3:]] = np.matmul(xmat.transpose(0, 2, 1), ang[:, :, None])[:, :, 0]
+        done = snap | ((dist < 2e-4) & (angle < 0.1))
+        for k in np.flatnonzero(done):
+            object_id = ids[k]
+            if snap[k]:
+                self.report.snaps += 1
+                self.rlog.event(self.twin.time, f"{object_id}: snapped {dist[k] * 1e3:.1f} mm, {angle[k]:.1f} deg to "
+                                                f"the remote pose", "WARN")
             del self._targets[object_id]
+
+    def _joint(self, object_id: str) -> tuple[int, int, int]:
+        """(body id, qpos address, dof address) of an object's free joint, looked up by name once per model.
+
+        Raises:
+            KeyError: no such object in the twin's model.
+        """
+        model, index = self._joints
+        if model is not self.twin.model:
+            model, index = self._joints = (self.twin.model, {})
+        found = index.get(object_id)
+        if found is None:
+            jid = free_joint(model, object_id)
+            if jid < 0:
+                raise KeyError(f"no object {object_id!r} in the model")
+            found = index[object_id] = (int(model.jnt_bodyid[jid]), int(model.jnt_qposadr[jid]),
+                                        int(model.jnt_dofadr[jid]))
+        return found
+
+    def _on_body(self, object_id: str, pose: Pose, offset: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+        """:func:`_on_twin_body` of ``pose``, computed once per (message, offset) of an object."""
+        hit = self._mapped.get(object_id)
+        if hit is not None and hit[0] is pose and hit[1] is offset:
+            return hit[2]
+        mapped = _on_twin_body(pose, offset)
+        self._mapped[object_id] = (pose, offset, mapped)
+        return mapped
 
     def _sample_divergence(self) -> None:
         for object_id in self._offsets:
