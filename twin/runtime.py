@@ -25,6 +25,7 @@ from concurrent.futures import Future, ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import Literal, overload
 
 import numpy as np
 
@@ -197,6 +198,7 @@ class Local:
         self._floor = info.table_height if info.table_size is not None else 0.0
         self.workspace = _workspace(info, operator.reach)
         self.scene_box = _scene_box(info)
+        self._box: tuple[object, list[float], list[float]] = (None, [], [])  # scene_box as floats, see _in_scene
         if info.table_size is not None:
             rlog.table(info.table_size, info.table_height)
         self._dropped_seen = 0
@@ -208,11 +210,16 @@ class Local:
         self._latest: dict[str, Pose] = {}
         self._pose_mark: dict[str, tuple[int, int]] = {}  # id -> (epoch, seq) of the newest pose taken
         self._targets: dict[str, Pose] = {}
-        # id -> (pose message, offset, its pose on the twin's body): a target is corrected towards at every
-        # step until reached, and mapping it costs more than the correction; computed once per message.
-        self._mapped: dict[str, tuple[Pose, tuple[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]] = {}
+        # id -> (pose message, offset, its pose on the twin's body, the row _correct_all reads): a target is
+        # corrected towards at every step until reached, and mapping it costs more than the correction, so it
+        # is mapped once per message.
+        self._mapped: dict[str, tuple[Pose, tuple[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray],
+                                      np.ndarray]] = {}
         self._to_correct: list[str] = []  # objects whose new pose is corrected towards at the end of _drain
         self._joints: tuple[object, dict[str, tuple[int, int, int]]] = (None, {})  # per model: see _joint
+        # per model: ids -> (body ids, (n, 7) qpos and (n, 6) qvel indices); the same objects are corrected
+        # step after step until they reach their targets
+        self._rows: tuple[object, dict[tuple[str, ...], tuple[np.ndarray, np.ndarray, np.ndarray]]] = (None, {})
         self.hold = Hold(settings.hold, tau=settings.correction_tau)
         self._next_sample = 0.0
         self._sent_operator: np.ndarray | None = None
@@ -424,10 +431,12 @@ class Local:
         """Whether an object message's position lies in the scene's box (:func:`_scene_box`: its declared
         workspace, or :data:`SCENE_REACH` around the table); one that does not is dropped and counted, never
         written into the twin."""
-        low, high = self.scene_box
-        p = np.asarray(position, dtype=float)
-        if np.all(p >= low) and np.all(p <= high):
+        box = self._box
+        if box[0] is not self.scene_box:  # its corners as floats: every pose passes here
+            box = self._box = (self.scene_box, *(np.asarray(c, dtype=float).tolist() for c in self.scene_box))
+        if all(lo <= x <= hi for x, lo, hi in zip(position, box[1], box[2], strict=True)):
             return True
+        p = np.asarray(position, dtype=float)
         self.report.out_of_scene += 1
         self.dropped_log.warning("out-of-scene", "dropped a %s of %r at %s: outside the scene", type(msg).__name__,
                                  msg.object_id, p.tolist())
@@ -591,30 +600,27 @@ class Local:
             return
         twin, s = self.twin, self.settings
         data, n = twin.data, len(ids)
-        rows = np.array([self._joint(i) for i in ids], dtype=np.intp).reshape(n, 3)
-        body, qpos, dof = rows[:, 0], rows[:, 1:2] + np.arange(7), rows[:, 2:3] + np.arange(6)
+        body, qpos, dof = self._indices(ids)
         targets = [self._targets[i] for i in ids]
-        wants = [self._on_body(i, t, self._offsets[i]) for i, t in zip(ids, targets, strict=True)]
-        want_p, want_q = np.array([w[0] for w in wants]), np.array([w[1] for w in wants])
+        want = np.array([self._on_body(i, t, self._offsets[i], row=True) for i, t in zip(ids, targets, strict=True)])
+        want_p, want_q = want[:, :3], want[:, 3:7]
         pos, quat = data.xpos[body], data.xquat[body]  # as of the last step, like Twin.pose
         gap = want_p - pos
         dist = np.sqrt(np.matmul(gap[:, None, :], gap[:, :, None])[:, 0, 0])
         angle = 2 * np.degrees(np.arccos(np.fmin(1.0, np.abs(np.matmul(quat[:, None, :], want_q[:, :, None])[:, 0, 0]))))
         snap = (dist > s.snap_distance) | (angle > s.snap_angle_deg)
         alpha = np.where(snap, 1.0, 1.0 - float(np.exp(-twin.model.opt.timestep / s.correction_tau)))[:, None]
-        new_p, new_q = blend(pos, quat, want_p, want_q, alpha)
-        if not (np.isfinite(new_p).all() and np.isfinite(new_q).all()):
-            bad = ids[int(np.flatnonzero(~(np.isfinite(new_p).all(1) & np.isfinite(new_q).all(1)))[0])]
+        new = np.concatenate(blend(pos, quat, want_p, want_q, alpha), axis=1)
+        if not np.isfinite(new).all():
+            bad = ids[int(np.flatnonzero(~np.isfinite(new).all(axis=1))[0])]
             raise ValueError(f"object {bad!r}: pose must be finite with a non-zero quaternion")
-        data.qpos[qpos[:, :3]] = new_p  # no mj_forward: the next step computes positions (as set_pose(forward=False))
-        data.qpos[qpos[:, 3:]] = new_q
+        data.qpos[qpos] = new  # no mj_forward: the next step computes positions (as set_pose(forward=False))
         # Velocities: linear in world axes; angular kept by MuJoCo in body axes, blended in world axes.
-        xmat = data.xmat[body].reshape(n, 3, 3)
-        lin, ang = data.qvel[dof[:, :3]], np.matmul(xmat, data.qvel[dof[:, 3:], None])[:, :, 0]
-        lin = lin + alpha * (np.array([t.linvel for t in targets]) - lin)
-        ang = ang + alpha * (np.array([t.angvel for t in targets]) - ang)
-        data.qvel[dof[:, :3]] = lin
-        data.qvel[dof[:, 3:]] = np.matmul(xmat.transpose(0, 2, 1), ang[:, :, None])[:, :, 0]
+        xmat, vel = data.xmat[body].reshape(n, 3, 3), data.qvel[dof]
+        lin, ang = vel[:, :3], np.matmul(xmat, vel[:, 3:, None])[:, :, 0]
+        lin = lin + alpha * (want[:, 7:10] - lin)
+        ang = ang + alpha * (want[:, 10:] - ang)
+        data.qvel[dof] = np.concatenate([lin, np.matmul(xmat.transpose(0, 2, 1), ang[:, :, None])[:, :, 0]], axis=1)
         done = snap | ((dist < 2e-4) & (angle < 0.1))
         for k in np.flatnonzero(done):
             object_id = ids[k]
@@ -642,14 +648,38 @@ class Local:
                                         int(model.jnt_dofadr[jid]))
         return found
 
-    def _on_body(self, object_id: str, pose: Pose, offset: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
-        """:func:`_on_twin_body` of ``pose``, computed once per (message, offset) of an object."""
+    def _indices(self, ids: list[str]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(body ids (n,), qpos indices (n, 7), qvel indices (n, 6)) of ``ids``' free joints in the twin's model."""
+        model, cache = self._rows
+        if model is not self.twin.model or len(cache) > 256:  # a new model, or many sets: start afresh
+            model, cache = self._rows = (self.twin.model, {})
+        key = tuple(ids)
+        found = cache.get(key)
+        if found is None:
+            rows = np.array([self._joint(i) for i in ids], dtype=np.intp).reshape(len(ids), 3)
+            found = cache[key] = (rows[:, 0], rows[:, 1:2] + np.arange(7), rows[:, 2:3] + np.arange(6))
+        return found
+
+    @overload
+    def _on_body(self, object_id: str, pose: Pose, offset: tuple[np.ndarray, np.ndarray],
+                 row: Literal[False] = ...) -> tuple[np.ndarray, np.ndarray]: ...
+
+    @overload
+    def _on_body(self, object_id: str, pose: Pose, offset: tuple[np.ndarray, np.ndarray],
+                 row: Literal[True]) -> np.ndarray: ...
+
+    def _on_body(self, object_id: str, pose: Pose, offset: tuple[np.ndarray, np.ndarray],
+                 row: bool = False) -> tuple[np.ndarray, np.ndarray] | np.ndarray:
+        """:func:`_on_twin_body` of ``pose``, computed once per (message, offset) of an object.
+
+        With ``row``: the (13,) row of position, quaternion, linear and angular velocity that
+        :meth:`_correct_all` stacks."""
         hit = self._mapped.get(object_id)
-        if hit is not None and hit[0] is pose and hit[1] is offset:
-            return hit[2]
-        mapped = _on_twin_body(pose, offset)
-        self._mapped[object_id] = (pose, offset, mapped)
-        return mapped
+        if hit is None or hit[0] is not pose or hit[1] is not offset:
+            mapped = _on_twin_body(pose, offset)
+            hit = self._mapped[object_id] = (pose, offset, mapped,
+                                             np.concatenate([*mapped, pose.linvel, pose.angvel]))
+        return hit[3] if row else hit[2]
 
     def _sample_divergence(self) -> None:
         for object_id in self._offsets:
@@ -670,7 +700,7 @@ class Local:
         self._sent_operator = target.copy()
         self._seq += 1
         self.link.put(self.keys.operator, OperatorCommand(v=VERSION, stamp_ns=self.clock.stamp_ns(), epoch=self._epoch,
-                                                          seq=self._seq, position=tuple(float(x) for x in target)))
+                                                          seq=self._seq, position=tuple(target.tolist())))
 
     def _check_link(self) -> None:
         last = self.link.counters.last_received
