@@ -280,15 +280,26 @@ class Local:
         :attr:`OperatorSettings.listen` the latest device target; the end effector stays where it is
         without either. After the step, the force is published when due (:attr:`OperatorSettings.force_rate`).
         """
-        self._drain()
+        self._drain(correct=False)
+        if self._jobs or self.twin.edits_pending:
+            # A new model may be swapped in below, carrying the state over: correct towards the poses that
+            # arrived first, on the model they arrived for.
+            self._flush_corrections()
         self._collect()
         self.twin.poll()
+        arrived = [i for i in self._to_correct if i in self._targets]
+        self._to_correct = []
         if self._targets:
             # C's pose of an object in the operator's hand is a round trip old: pulling the twin's object
             # towards it pushes it back into the hand (felt as a wall). Such objects follow the twin's
             # physics until released; C's later poses then correct them.
             touched = self.hold.disturbed(self.twin.time) if self.settings.defer_touched else set()
-            self._correct_all([i for i in self._targets if i not in touched])
+            rest = [i for i in self._targets if i not in touched]
+            # An object whose pose just arrived is corrected twice in this step: once for the arrival, once
+            # as every target is. Nothing moved it in between (no step, no new model), so the second pass
+            # writes the same pose again and only blends its velocity once more: both passes in one.
+            seen = set(arrived)
+            self._correct_all(arrived + [i for i in rest if i not in seen], twice=seen.intersection(rest))
         target = self._operator_target(trajectory)
         if target is not None:
             self.twin.set_end_effector(target)
@@ -308,15 +319,17 @@ class Local:
             self.rlog.frame(self.twin, remote={i: self.remote_pose(i) for i in self._offsets})
         self._check_link()
 
-    def _drain(self) -> None:
-        """Handle every queued message; the poses they bring are corrected towards in one batch at the end."""
+    def _drain(self, *, correct: bool = True) -> None:
+        """Handle every queued message; the poses they bring are corrected towards in one batch at the end
+        (``correct=False``: left to the caller, see :meth:`iterate`)."""
         while True:
             try:
                 item = self.inbox.get_nowait()
             except queue.Empty:
                 break
             self._handle(*item)
-        self._flush_corrections()
+        if correct:
+            self._flush_corrections()
 
     def close(self) -> None:
         if self._pool is not None:
@@ -587,8 +600,12 @@ class Local:
             ids, self._to_correct = self._to_correct, []
             self._correct_all([i for i in ids if i in self._targets])
 
-    def _correct_all(self, ids: list[str]) -> None:
+    def _correct_all(self, ids: list[str], *, twice: set[str] | frozenset[str] = frozenset()) -> None:
         """Move each object (no repeats) a step towards its target; at once where it is far off.
+
+        Objects in ``twice`` get what two corrections in a row without a step between give: the same pose
+        (both read the pose of the last step) and the velocity blended twice, unless the first reached the
+        target (it is then dropped, as after one correction).
 
         One pass over all objects' arrays, as :meth:`twin.hold.Hold.apply` does, and the same arithmetic as
         one object at a time: each object reads and writes only its own rows. Batched matmul sums each row
@@ -620,8 +637,17 @@ class Local:
         lin, ang = vel[:, :3], np.matmul(xmat, vel[:, 3:, None])[:, :, 0]
         lin = lin + alpha * (want[:, 7:10] - lin)
         ang = ang + alpha * (want[:, 10:] - ang)
-        data.qvel[dof] = np.concatenate([lin, np.matmul(xmat.transpose(0, 2, 1), ang[:, :, None])[:, :, 0]], axis=1)
+        xmat_t = xmat.transpose(0, 2, 1)
+        body_ang = np.matmul(xmat_t, ang[:, :, None])[:, :, 0]
         done = snap | ((dist < 2e-4) & (angle < 0.1))
+        if twice:
+            again = (np.array([i in twice for i in ids]) & ~done)[:, None]
+            # The second pass as it was: the angular velocity read back from body axes, then blended.
+            ang = np.matmul(xmat, body_ang[:, :, None])[:, :, 0]
+            lin = np.where(again, lin + alpha * (want[:, 7:10] - lin), lin)
+            ang = ang + alpha * (want[:, 10:] - ang)
+            body_ang = np.where(again, np.matmul(xmat_t, ang[:, :, None])[:, :, 0], body_ang)
+        data.qvel[dof] = np.concatenate([lin, body_ang], axis=1)
         for k in np.flatnonzero(done):
             object_id = ids[k]
             if snap[k]:
