@@ -747,6 +747,37 @@ def _run_remote(args: argparse.Namespace, scene, rlog) -> None:  # type: ignore[
             recorder.close()
 
 
+def _arrivals(local, every: int = 50):  # type: ignore[no-untyped-def]
+    """A loop hook (``until`` that never stops the loop) printing objects in flight to stderr: each cloud as
+    it starts estimating, each object as it becomes touchable, with the seconds since the twin started.
+    Looked at every ``every`` iterations (50 ms at 1 kHz), so the loop's step does not pay for it."""
+    t0 = time.perf_counter()
+    seen_pending: set[str] = set()
+    seen_ready: set[str] = set()
+    calls = 0
+
+    def check() -> bool:
+        nonlocal calls
+        calls += 1
+        if calls % every:
+            return False
+        pending, ready = local.pending, local.objects
+        for i in pending:
+            if i not in seen_pending:
+                seen_pending.add(i)
+                print(f"twin: {i}: cloud received, estimating ({len(pending)} in flight)", file=sys.stderr)
+        for i in ready:
+            if i not in seen_ready:
+                seen_ready.add(i)
+                seen_pending.discard(i)  # a replacement cloud of the same object is news again
+                print(f"twin: {i}: touchable after {time.perf_counter() - t0:.1f} s ({len(ready)} in the twin, "
+                      f"{len(pending)} in flight)", file=sys.stderr)
+        seen_ready.intersection_update(ready + pending)  # removed objects may come back
+        return False
+
+    return check
+
+
 def _cmd_local(args: argparse.Namespace) -> int:
     with _open_rerun(args) as rlog:
         _run_local(args, rlog)
@@ -779,7 +810,7 @@ def _run_local(args: argparse.Namespace, rlog) -> None:  # type: ignore[no-untyp
                           rlog=rlog, recorder=recorder)
         except (SyncError, ValueError) as exc:
             raise TwinError(str(exc)) from exc
-        stats = local.run(args.duration, trajectory=trajectory)
+        stats = local.run(args.duration, trajectory=trajectory, until=None if args.json else _arrivals(local))
         r, c = local.report, local.link.counters
         record = {"objects_synced": r.objects_synced, "pose_updates": r.pose_updates,
                   "dropped_malformed": c.dropped_malformed, "stale_events": r.stale_events,

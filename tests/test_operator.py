@@ -5,6 +5,7 @@ dropped and counted."""
 from __future__ import annotations
 
 import queue
+import re
 import time
 from collections import Counter
 
@@ -175,3 +176,16 @@ def test_twin_local_records_a_scripted_session(endpoint, cache, tmp_path, capsys
     # --replay-operator refuses a missing recording before it opens a session.
     assert main(["local", "--connect", endpoint, "--duration", "0.1", "--replay-operator", str(tmp_path / "no.mcap")]) == 2
     assert "no such recording" in capsys.readouterr().err
+
+
+def test_twin_local_shows_objects_in_flight_on_stderr(endpoint, cache, capsys):
+    from cli.main import main
+
+    with running_remote(endpoint, cache):
+        assert main(["local", "--connect", endpoint, "--duration", "3"]) == 0
+    err = capsys.readouterr().err
+    for object_id in ("can", "crate"):  # both clouds arrive as the twin joins
+        assert f"twin: {object_id}: cloud received, estimating" in err, err
+    for line in err.splitlines():
+        if ": touchable after " in line:
+            assert re.match(r"twin: (can|crate): touchable after \d+\.\d s \(\d in the twin, \d in flight\)$", line)
