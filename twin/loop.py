@@ -7,6 +7,7 @@ twin's runtime and ``twin run`` all use :func:`run_loop`.
 
 from __future__ import annotations
 
+import sys
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -72,10 +73,18 @@ def run_loop(body: Callable[[], None], *, rate: float, duration: float, clock: C
     pacer = Pacer(rate, clock)
     sleep = clock.sleep if wait is None else wait
     n = round(duration * rate)
-    while pacer.iterations < n and not (until is not None and until()):
-        pacer.begin()
-        body()
-        left = pacer.end()
-        if left > 0:
-            sleep(left)
+    switch = sys.getswitchinterval()
+    if clock.realtime:
+        # A thread that wants the GIL (a Zenoh callback carrying a pose) waits up to the switch interval,
+        # 5 ms by default: five periods of a 1 kHz loop. A tenth of a period bounds that wait instead.
+        sys.setswitchinterval(min(switch, pacer.period / 10))
+    try:
+        while pacer.iterations < n and not (until is not None and until()):
+            pacer.begin()
+            body()
+            left = pacer.end()
+            if left > 0:
+                sleep(left)
+    finally:
+        sys.setswitchinterval(switch)
     return pacer.stats()
