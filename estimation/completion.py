@@ -114,6 +114,41 @@ def close_bottom(points: np.ndarray, normals: np.ndarray, plane: Plane, *, cell:
     return Completion(np.concatenate(out_pts), np.concatenate(out_nrm), float(shadow.sum() * cell**2))
 
 
+@dataclass(frozen=True)
+class Closed:
+    """Observed points and the base :func:`close_bottom` added, as one cloud with per-point sensors.
+
+    Attributes:
+        points, origins, normals: (k, 3) float64, world frame, metres (normals unit, outward).
+        completed: (k,) bool, True for the added points.
+        completion: what was added.
+    """
+
+    points: np.ndarray
+    origins: np.ndarray
+    normals: np.ndarray
+    completed: np.ndarray
+    completion: Completion
+
+
+def close_on_plane(points: np.ndarray, origins: np.ndarray, normals: np.ndarray, plane: Plane | None, *,
+                   cell: float, cut: float) -> Closed:
+    """The object's observed points (with their sensors and outward normals) and its base closed on ``plane``
+    (:func:`close_bottom`; ``cell`` and ``cut`` as there; None: no plane, nothing added).
+
+    A completed point's "sensor" is a virtual one a metre outside the object along its outward normal, so
+    that whatever orients normals towards sensors keeps the completion's own orientation.
+    """
+    completion = (Completion(np.zeros((0, 3)), np.zeros((0, 3)), 0.0) if plane is None
+                  else close_bottom(points, normals, plane, cell=cell, cut=cut))
+    observed = len(points)
+    return Closed(points=np.concatenate([points, completion.points]),
+                  origins=np.concatenate([origins, completion.points + completion.normals]),
+                  normals=np.concatenate([normals, completion.normals]),
+                  completed=np.concatenate([np.zeros(observed, bool), np.ones(len(completion.points), bool)]),
+                  completion=completion)
+
+
 def coverage(vertices: np.ndarray, faces: np.ndarray, observed: np.ndarray, *, radius: float) -> tuple[float, float]:
     """How much of a closed surface some sensor saw: (observed area, total area), m^2.
 

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from estimation.completion import Completion, close_bottom, coverage, honest_bounds
+from estimation.completion import close_on_plane, coverage, honest_bounds
 from estimation.contracts import as_points
 from estimation.errors import CloudError
 from estimation.estimate import PhysicalEstimate, estimate
@@ -192,7 +192,6 @@ def estimate_views(views: list[View], density: float, *, support: Plane | str | 
                             f"point (z = {-plane.offset:.4g} m)")
     else:
         plane = support
-    completion = Completion(np.zeros((0, 3)), np.zeros((0, 3)), 0.0)
     cut = 0.0
     if plane is not None:
         h = plane.height(points)
@@ -217,14 +216,14 @@ def estimate_views(views: list[View], density: float, *, support: Plane | str | 
                             f"(another object in the views?)")
         points, origins = points[labels == 0], origins[labels == 0]
         normals = oriented_normals(points, origins)
-        completion = close_bottom(points, normals, plane, cell=point_spacing(points), cut=cut)
+        closed = close_on_plane(points, origins, normals, plane, cell=point_spacing(points), cut=cut)
+    else:
+        closed = close_on_plane(points, origins, np.full_like(points, np.nan), None, cell=0.0, cut=0.0)
+    completion = closed.completion
     observed = len(points)
-    completed = np.concatenate([np.zeros(observed, bool), np.ones(len(completion.points), bool)])
-    allp = np.concatenate([points, completion.points])
-    # A completed point's "sensor" is a virtual one outside the object along its outward normal.
-    allo = np.concatenate([origins, completion.points + completion.normals])
-    alln = np.concatenate([np.full((observed, 3), np.nan), completion.normals])
-    cloud = fused_cloud(allp, allo, completed=completed, completed_normals=alln)
+    # The observed points' normals are the fused cloud's own (NaN here): only the completion's are given.
+    alln = np.where(closed.completed[:, None], closed.normals, np.nan)
+    cloud = fused_cloud(closed.points, closed.origins, completed=closed.completed, completed_normals=alln)
     result = estimate(cloud, density, material=material)
     share, bounds = assess(result, points, noise)
     warnings.extend(result.warnings)

@@ -273,17 +273,13 @@ class CameraSensor:
 
     def _fuse(self, scan, seg, points: int, shot: int) -> Observation:  # type: ignore[no-untyped-def]
         """The segment's views as one cloud: normals towards each point's camera, the base closed."""
-        from estimation.completion import close_bottom
+        from estimation.completion import close_on_plane
         from estimation.fusion import oriented_normals
 
         pts, origins = seg.points, seg.origins
-        normals = oriented_normals(pts, origins)
-        extra = close_bottom(pts, normals, scan.plane, cell=scan.cell / 3, cut=scan.margin)
-        allp = np.concatenate([pts, extra.points])
-        alln = np.concatenate([normals, extra.normals])
-        # A completed point's "sensor" is a virtual one outside the object along its outward normal.
-        allo = np.concatenate([origins, extra.points + extra.normals])
-        completed = np.concatenate([np.zeros(len(pts), bool), np.ones(len(extra.points), bool)])
+        closed = close_on_plane(pts, origins, oriented_normals(pts, origins), scan.plane, cell=scan.cell / 3,
+                                cut=scan.margin)
+        allp, alln, allo, completed = closed.points, closed.normals, closed.origins, closed.completed
         if points and len(allp) > points:
             keep = np.sort(np.random.default_rng([self.seed, shot]).permutation(len(allp))[:points])
             allp, alln, allo, completed = allp[keep], alln[keep], allo[keep], completed[keep]
