@@ -198,6 +198,30 @@ def collision_primitive(obj: TwinObject, *, min_fill: float = PRIMITIVE_MIN_FILL
     return fit_primitive(obj.visual, min_fill=min_fill)
 
 
+def lowest_point(obj: TwinObject, primitive: Primitive | None) -> float:
+    """The lowest world z, metres, of what collides for ``obj`` at its pose: ``primitive`` where it collides
+    in place of the hulls (:func:`collision_primitive`), else the hulls. The reconstruction's own fringe
+    below a flat face (a few cells) does not collide under a primitive, so it does not count."""
+    from twin.poses import rotation
+
+    body = rotation(np.asarray(obj.quat, float))
+    if primitive is None:
+        return float(obj.position[2] + min(float((v @ body.T)[:, 2].min()) for v, _ in obj.hulls))
+    frame = body @ rotation(np.asarray(primitive.quat, float))
+    centre = float(obj.position[2] + (body @ primitive.position)[2])
+    down = np.abs(frame[2])  # |z| of the primitive's local axes in the world
+    a, b = primitive.size[0], primitive.size[1]
+    if primitive.kind == "box":
+        reach = float(down @ np.asarray(primitive.size))
+    elif primitive.kind == "sphere":
+        reach = a
+    elif primitive.kind == "capsule":
+        reach = down[2] * b + a
+    else:  # cylinder: the rim's lowest point
+        reach = down[2] * b + a * float(np.sqrt(max(0.0, 1.0 - down[2] ** 2)))
+    return centre - reach
+
+
 def decimate(vertices: np.ndarray, faces: np.ndarray, target: int = VISUAL_FACES) -> Hull:
     """Quadric decimation to about ``target`` faces (no-op when already smaller).
 
