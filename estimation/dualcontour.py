@@ -55,6 +55,12 @@ class DualSurface:
         opposed_cells: cells with sign changes facing both ways along an axis: both faces of a wall
             thinner than about a cell pass through them, and their single vertex cannot be right.
         unmeasured_area: m^2 of surface between band nodes no point reached (holes closed by the shell).
+        normals: (v, 3) float64, unit outward: each vertex's surface normal from the points' planes near
+            it (the weighted mean normal, or the quadric's dominant direction), not from the mesh.
+        smooth: (v,) bool: the planes near the vertex agree (``FLAT_AGREEMENT``: a face or a gently
+            curved patch), so the vertex is on the surface to second order. False at creases and
+            corners, on patches curved more than a cell resolves (there the quadric's vertex lies on
+            the tangent planes, outside a convex surface) and where no plane reached.
     """
 
     vertices: np.ndarray
@@ -62,6 +68,8 @@ class DualSurface:
     cells: int
     opposed_cells: int
     unmeasured_area: float
+    normals: np.ndarray
+    smooth: np.ndarray
 
 
 def contour(points: np.ndarray, normals: np.ndarray, band: Band, values: np.ndarray,
@@ -141,7 +149,7 @@ def contour(points: np.ndarray, normals: np.ndarray, band: Band, values: np.ndar
         minus = np.bincount(cell_of[on_axis], minlength=n_cells) - plus
         facing[:, ax] = plus - minus
         both_ways |= (plus > 0) & (minus > 0)
-    vertices, supported = _place_vertices(points, normals, band, cell_keys, mean, noise, facing)
+    vertices, supported, vertex_normals, smooth = _place_vertices(points, normals, band, cell_keys, mean, noise, facing)
     opposed = both_ways
 
     tri = np.concatenate([quads[:, [0, 1, 2]], quads[:, [0, 2, 3]]])
@@ -156,12 +164,20 @@ def contour(points: np.ndarray, normals: np.ndarray, band: Band, values: np.ndar
     # A quad none of whose cells any point's plane passes through is surface the cloud did not see.
     unseen = ~supported[quads].any(axis=1)
     return DualSurface(vertices=vertices, faces=tri.astype(np.int64), cells=n_cells,
-                       opposed_cells=int(opposed.sum()), unmeasured_area=float(area[unseen].sum()))
+                       opposed_cells=int(opposed.sum()), unmeasured_area=float(area[unseen].sum()),
+                       normals=vertex_normals, smooth=smooth)
 
 
 def _place_vertices(points: np.ndarray, normals: np.ndarray, band: Band, cell_keys: np.ndarray,
-                    mean: np.ndarray, noise: float, facing: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Each cell's vertex: the quadric minimiser of the planes through it, else the mean crossing."""
+                    mean: np.ndarray, noise: float,
+                    facing: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Each cell's vertex: the quadric minimiser of the planes through it, else the mean crossing.
+
+    Returns:
+        vertices (c, 3), supported (c,) bool (some plane reached the cell), normals (c, 3) unit (the
+        planes' normal there; the cell's facing where none reached) and smooth (c,) bool (see
+        ``DualSurface``).
+    """
     h = band.h
     dims = band.dims
     n_cells = len(cell_keys)
@@ -209,20 +225,44 @@ def _place_vertices(points: np.ndarray, normals: np.ndarray, band: Band, cell_ke
     flat = agree > FLAT_AGREEMENT
     vertex = mean.copy()
     plane_only = mean.copy()
+    normal_out = facing / np.maximum(np.linalg.norm(facing, axis=1, keepdims=True), np.finfo(float).tiny)
     if flat.any():
         nbar = normal_sum[flat] / np.linalg.norm(normal_sum[flat], axis=1, keepdims=True)
-        # Offset of the surface from the mean crossing along the mean normal, two ways: the mean
-        # tangent plane (sum w n_i . (p_i - m) / sum w, measured from m, not from the grid origin,
-        # where the normals' spread would lever a cell's worth of error) and the points' centroid.
-        # On a curved patch the tangent planes pass outside the surface by ~k r^2 / 2 and the
-        # centroid lies inside by as much; their mean is right to second order (smooth shapes went
-        # from +0.007..+0.02 % to under 0.002 %).
-        tangent = (acc(w * d)[flat] - np.einsum("ij,ij->i", normal_sum[flat], mean[flat])) / weight[flat]
-        centroid = np.stack([acc(w * p[:, i]) for i in range(3)], axis=1)[flat] / weight[flat][:, None]
-        chord = np.einsum("ij,ij->i", nbar, centroid - mean[flat])
-        shift = 0.5 * (tangent + chord)
-        moved = mean[flat] + nbar * shift[:, None]
+        # The surface's height along the mean normal at the points' weighted centroid c, two ways: the
+        # mean tangent plane (sum w n_i . (p_i - c) / sum w) and c itself. On a curved patch the tangent
+        # planes pass outside the surface by ~k t^2 / 2 (t: a point's distance from c along the surface)
+        # and the centroid lies inside by as much; their mean is on the surface to second order.
+        # Coordinates are taken from the cell centre, not the grid origin, where the normals' spread
+        # would lever a cell's worth of error.
+        f = flat[cell]
+        cf, wf, nf = cell[f], w[f], n[f]
+        q = p[f] - centre[f]
+
+        def acc_flat(values: np.ndarray) -> np.ndarray:
+            return np.bincount(cf, weights=values, minlength=n_cells)[flat]
+
+        wsum = weight[flat]
+        c = np.stack([acc_flat(wf * q[:, i]) for i in range(3)], axis=1) / wsum[:, None]
+        height = 0.5 * (acc_flat(wf * np.einsum("ij,ij->i", nf, q)) - np.einsum("ij,ij->i", normal_sum[flat], c)) / wsum
+        # The vertex stays at the mean crossing m along the surface (the centroid drifts from the crease
+        # of a face that ends in the cell), so the height is carried from c to m: the surface falls away
+        # from its tangent plane by mu^T S mu / 2 over a tangential step mu, S the shape operator, fitted
+        # from how the normals turn across the cell (n_i - nbar ~ S t_i, least squares).
+        tangent_proj = np.eye(3) - nbar[:, :, None] * nbar[:, None, :]
+        cov_nt = np.stack([np.stack([acc_flat(wf * nf[:, i] * q[:, j]) for j in range(3)], axis=1)
+                           for i in range(3)], axis=1) - normal_sum[flat][:, :, None] * c[:, None, :]
+        cov_tt = np.stack([np.stack([acc_flat(wf * q[:, i] * q[:, j]) for j in range(3)], axis=1)
+                           for i in range(3)], axis=1) - wsum[:, None, None] * c[:, :, None] * c[:, None, :]
+        cov_nt = tangent_proj @ cov_nt @ tangent_proj
+        cov_tt = tangent_proj @ cov_tt @ tangent_proj
+        shape = cov_nt @ np.linalg.pinv(cov_tt, rcond=QEF_RELATIVE_EIGENVALUE, hermitian=True)
+        cell_centre = band.position(_unravel(cell_keys[flat], dims)) + h / 2
+        mu = np.einsum("nij,nj->ni", tangent_proj, mean[flat] - cell_centre - c)
+        fall = 0.5 * np.einsum("ni,nij,nj->n", mu, shape, mu)
+        offset_m = height - fall - np.einsum("ij,ij->i", nbar, mean[flat] - cell_centre - c)
+        moved = mean[flat] + nbar * offset_m[:, None]
         vertex[flat] = plane_only[flat] = moved
+        normal_out[flat] = nbar
     sharp = np.flatnonzero(~flat & (weight > 0))
     if len(sharp):
         # Minimise the quadric about the mean crossing: x = m + A^+ (b - A m), small eigenvalues
@@ -233,6 +273,10 @@ def _place_vertices(points: np.ndarray, normals: np.ndarray, band: Band, cell_ke
         inv = np.where(keep & (lam > 0), 1.0 / np.where(lam > 0, lam, 1.0), 0.0)
         along = np.einsum("nji,nj->ni", vec, rhs[sharp] - np.einsum("nij,nj->ni", a_s, m_s))
         vertex[sharp] = m_s + np.einsum("nij,nj->ni", vec, inv * along)
+        # The planes' dominant direction, turned to agree with their mean: the normal at a crease is
+        # not defined, but one direction is reported.
+        top = vec[:, :, -1]
+        normal_out[sharp] = top * np.where(np.einsum("ij,ij->i", top, normal_sum[sharp]) < 0, -1.0, 1.0)[:, None]
         # The same with only the dominant direction: the fallback where a crease solution leaves the cell.
         inv1 = np.zeros_like(inv)
         inv1[:, -1] = inv[:, -1]
@@ -244,7 +288,7 @@ def _place_vertices(points: np.ndarray, normals: np.ndarray, band: Band, cell_ke
     inside_plane = ((plane_only >= low) & (plane_only <= high)).all(axis=1)
     out = np.where(inside_full[:, None], vertex, np.where(inside_plane[:, None], plane_only, mean))
     out[weight == 0] = mean[weight == 0]
-    return out, weight > 0
+    return out, weight > 0, normal_out, flat & (weight > 0)
 
 
 def _unravel(keys: np.ndarray, dims: np.ndarray) -> np.ndarray:

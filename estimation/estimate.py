@@ -258,6 +258,7 @@ def _auto_pass(cloud: PointCloud, box: OrientedBox, local: np.ndarray, spacing: 
     and reconstruct; stage seconds are added to ``stages``."""
     from scipy.spatial import cKDTree
 
+    from estimation.curvature import bulge_volumes, corrected
     from estimation.dualcontour import contour
     from estimation.grid import grid_around, occupancy
     from estimation.implicit import band_field
@@ -308,7 +309,10 @@ def _auto_pass(cloud: PointCloud, box: OrientedBox, local: np.ndarray, spacing: 
     surface = contour(points, normals, band, values, measured, noise=noise)
     t0 = lap("reconstruct", t0)
 
-    props = mass_properties(surface.vertices, surface.faces, density)
+    # The facets are chords of the surface: add back the slivers they cut off curved patches (``curvature``).
+    # The mesh stays flat; its own volume is short of ``props.volume`` by the slivers.
+    props = corrected(mass_properties(surface.vertices, surface.faces, density), surface.vertices, surface.faces,
+                      bulge_volumes(surface.vertices, surface.faces, surface.normals, surface.smooth))
     # What the cloud leaves open: unmeasured surface anywhere across the closing shell's half width,
     # and cells holding both faces of a wall anywhere from none to a whole cell of material.
     hole = surface.unmeasured_area * (occ.closing + 0.5) * coarse.cell

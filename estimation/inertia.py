@@ -67,16 +67,30 @@ def mass_properties(
         raise ReconstructionError(f"the surface encloses no positive volume ({volume:.3g} m^3)")
     # First moments: a tetrahedron's centroid is the mean of its four vertices (one is the origin).
     vertex_sum = tri.sum(axis=1)
-    com = (signed[:, None] * vertex_sum).sum(axis=0) / 4 / volume
     # Second moments, exact for a tetrahedron with a vertex at the origin:
     # integral of x x^T = V / 20 * (sum_k p_k p_k^T + s s^T), s = sum_k p_k.
     # As three (3 x f) @ (f x 3) products: BLAS, several times faster than one einsum on big meshes.
     second = sum((tri[:, k] * signed[:, None]).T @ tri[:, k] for k in range(3))
     second = second + (vertex_sum * signed[:, None]).T @ vertex_sum
     second = density * second / 20
+    return from_moments(volume, float(density), density * (signed[:, None] * vertex_sum).sum(axis=0) / 4, second,
+                        origin=apex)
+
+
+def from_moments(volume: float, density: float, first: np.ndarray, second: np.ndarray, *,
+                 origin: np.ndarray | None = None) -> MassProperties:
+    """Mass properties from the moments of the mass about ``origin``.
+
+    Args:
+        volume: m^3. density: kg/m^3.
+        first: (3,) kg m, integral of rho x. second: (3, 3) kg m^2, integral of rho x x^T.
+        origin: (3,) metres, the point the moments are about (default the frame's origin).
+    """
+    origin = np.zeros(3) if origin is None else np.asarray(origin, dtype=np.float64)
     mass = density * volume
+    com = first / mass
     # Move the second moment to the centre of mass, then I = tr(C) 1 - C.
-    second -= mass * np.outer(com, com)
+    second = second - mass * np.outer(com, com)
     inertia = np.trace(second) * np.eye(3) - second
     inertia = (inertia + inertia.T) / 2
     moments, axes = np.linalg.eigh(inertia)
@@ -86,7 +100,7 @@ def mass_properties(
         volume=volume,
         density=float(density),
         mass=mass,
-        center_of_mass=com + apex,
+        center_of_mass=com + origin,
         inertia=inertia,
         principal_moments=moments,
         principal_axes=axes,

@@ -1,0 +1,120 @@
+"""The chordal correction (estimation.curvature) against closed-form volumes of coarse meshes.
+
+A mesh with its vertices on a curved surface is an inscribed polyhedron, short of the solid by about
+area x edge^2 x curvature / 8; the quadratic-patch correction removes that term, leaving fourth order
+in the edge length: the error should fall by about an order of magnitude or more.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import trimesh
+
+from estimation.curvature import CREASE_ANGLE, bulge_volumes, corrected
+from estimation.inertia import mass_properties
+
+
+def _corrected(vertices, faces, normals, smooth=None):  # type: ignore[no-untyped-def]
+    props = mass_properties(vertices, faces, 1.0)
+    return props, corrected(props, vertices, faces, bulge_volumes(vertices, faces, normals, smooth))
+
+
+@pytest.mark.parametrize("subdivisions", [2, 3])
+def test_sphere_error_drops_by_an_order(subdivisions: int) -> None:
+    mesh = trimesh.creation.icosphere(subdivisions=subdivisions, radius=0.05)
+    v, f = np.asarray(mesh.vertices), np.asarray(mesh.faces)
+    flat, fixed = _corrected(v, f, v / np.linalg.norm(v, axis=1, keepdims=True))
+    exact = 4 / 3 * np.pi * 0.05**3
+    assert flat.volume < exact  # inscribed
+    assert abs(fixed.volume / exact - 1) < abs(flat.volume / exact - 1) / 10
+    # The inertia takes the slivers too: a solid sphere's 2/5 m r^2 (with the corrected mass).
+    sphere_i = 0.4 * exact * 0.05**2
+    assert abs(fixed.inertia[0, 0] / sphere_i - 1) < abs(flat.inertia[0, 0] / sphere_i - 1) / 10
+    np.testing.assert_allclose(fixed.center_of_mass, 0.0, atol=1e-9)
+
+
+def _cylinder(radius: float, height: float, sections: int):  # type: ignore[no-untyped-def]
+    """A closed cylinder whose rim vertices are duplicated: side copies carry radial normals, cap copies axial."""
+    angle = 2 * np.pi * np.arange(sections) / sections
+    ring = np.stack([radius * np.cos(angle), radius * np.sin(angle), np.zeros(sections)], axis=1)
+    up = np.array([0, 0, height / 2])
+    lo, hi = ring - up, ring + up
+    radial = ring / radius
+    vertices = np.concatenate([lo, hi, lo, hi, [[0, 0, -height / 2], [0, 0, height / 2]]])
+    normals = np.concatenate([radial, radial, np.tile([0, 0, -1.0], (sections, 1)),
+                              np.tile([0, 0, 1.0], (sections, 1)), [[0, 0, -1.0], [0, 0, 1.0]]])
+    i = np.arange(sections)
+    j = (i + 1) % sections
+    s, c = sections, 4 * sections
+    faces = np.concatenate([
+        np.stack([i, j, s + j], axis=1), np.stack([i, s + j, s + i], axis=1),  # side
+        np.stack([np.full(s, c), 2 * s + j, 2 * s + i], axis=1),  # bottom cap, outward -z
+        np.stack([np.full(s, c + 1), 3 * s + i, 3 * s + j], axis=1),  # top cap, outward +z
+    ])
+    return vertices, faces, normals
+
+
+@pytest.mark.parametrize("sections", [24, 48])
+def test_cylinder_error_drops_by_an_order(sections: int) -> None:
+    v, f, n = _cylinder(0.02, 0.1, sections)
+    flat, fixed = _corrected(v, f, n)
+    exact = np.pi * 0.02**2 * 0.1
+    assert abs(fixed.volume / exact - 1) < abs(flat.volume / exact - 1) / 10
+
+
+def test_cube_with_face_normals_is_unchanged() -> None:
+    # Each face's copy of a corner carries that face's normal: every edge is within a face.
+    cube = trimesh.creation.box(extents=(0.1, 0.2, 0.3))
+    tri = np.asarray(cube.vertices)[np.asarray(cube.faces)].reshape(-1, 3)
+    faces = np.arange(len(tri)).reshape(-1, 3)
+    normals = np.repeat(np.asarray(cube.face_normals), 3, axis=0)
+    assert np.abs(bulge_volumes(tri, faces, normals)).max() == 0.0
+    # One normal per corner (as a mesh's averaged normals would be): every edge crosses a crease, and
+    # is left out both by its turn and by its ends not being smooth.
+    v, f = np.asarray(cube.vertices), np.asarray(cube.faces)
+    corner = v / np.linalg.norm(v, axis=1, keepdims=True)
+    assert np.abs(bulge_volumes(v, f, corner)).max() == 0.0
+    assert np.abs(bulge_volumes(v, f, corner, smooth=np.zeros(len(v), dtype=bool))).max() == 0.0
+
+
+def test_edges_turning_past_the_crease_angle_add_nothing() -> None:
+    # A coarse icosphere's edges turn by ~37 degrees: more than a smooth patch turns within a cell.
+    mesh = trimesh.creation.icosphere(subdivisions=1)
+    v, f = np.asarray(mesh.vertices), np.asarray(mesh.faces)
+    assert np.arccos(v[f[0, 0]] @ v[f[0, 1]]) > CREASE_ANGLE
+    assert np.abs(bulge_volumes(v, f, v)).max() == 0.0
+
+
+def test_torus_is_corrected_both_ways() -> None:
+    major, minor = 0.05, 0.015
+    mesh = trimesh.creation.torus(major_radius=major, minor_radius=minor, major_sections=64, minor_sections=24)
+    v, f = np.asarray(mesh.vertices), np.asarray(mesh.faces)
+    ring = v.copy()
+    ring[:, 2] = 0
+    ring *= (major / np.linalg.norm(ring, axis=1))[:, None]
+    normals = (v - ring) / minor
+    bulge = bulge_volumes(v, f, normals)
+    # Outer half convex in both directions (bulges out), inner half saddle-shaped, and the inscribed
+    # polyhedron falls short overall: the correction is positive and brings the volume to 2 pi^2 R r^2.
+    outer = np.linalg.norm(v[f].mean(axis=1)[:, :2], axis=1) > major + minor / 2
+    inner = np.linalg.norm(v[f].mean(axis=1)[:, :2], axis=1) < major - minor / 2
+    assert bulge[outer].min() > 0
+    assert bulge[inner].sum() < bulge[outer].sum() / 2
+    exact = 2 * np.pi**2 * major * minor**2
+    flat, fixed = _corrected(v, f, normals)
+    assert flat.volume < exact
+    assert abs(fixed.volume / exact - 1) < abs(flat.volume / exact - 1) / 10
+
+
+def test_concave_surface_is_corrected_inwards() -> None:
+    # A spherical cavity: the same mesh turned inside out (normals into the sphere's centre) bulges into
+    # the solid around it, so its slivers are negative.
+    mesh = trimesh.creation.icosphere(subdivisions=3, radius=0.05)
+    v, f = np.asarray(mesh.vertices), np.asarray(mesh.faces)[:, ::-1]
+    bulge = bulge_volumes(v, f, -v / np.linalg.norm(v, axis=1, keepdims=True))
+    assert bulge.max() < 0
+    inscribed = mass_properties(v, f[:, ::-1], 1.0).volume
+    exact = 4 / 3 * np.pi * 0.05**3
+    # The cavity's volume (what the solid lacks) is its inscribed polyhedron's plus the slivers.
+    assert abs((inscribed - bulge.sum()) / exact - 1) < abs(inscribed / exact - 1) / 10
