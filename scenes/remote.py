@@ -32,7 +32,7 @@ from twin.debuglog import OFF, DebugLog
 from twin.loop import LoopStats, run_loop
 from twin.model import add_object, remove_object
 from twin.objects import TwinObject
-from twin.poses import angle_deg, rotation
+from twin.poses import rotation
 from twin.sim import Twin
 
 log = logging.getLogger(__name__)
@@ -186,7 +186,7 @@ class Remote:
             self.rlog.event(self.twin.time, f"{object_id}: cloud published ({len(cloud):,} points, {len(data):,} bytes)")
         with self._lock:
             self._replies[self.keys.object(object_id, "cloud")] = data
-        self._publish_pose(object_id, force=True)
+        self._publish_pose(object_id)
         return len(data)
 
     # -- the loop ------------------------------------------------------------------------------------
@@ -213,7 +213,7 @@ class Remote:
             # is not the true one) is pulled back even when the remote object is still.
             self._last_keyframe = now
             for object_id in self._objects:
-                self._publish_pose(object_id, force=True)
+                self._publish_pose(object_id)
         if now - self._last_heartbeat >= self.heartbeat_s:
             self._last_heartbeat = now
             self.link.put(self.keys.heartbeat, Heartbeat(v=VERSION, stamp_ns=self.clock.stamp_ns(), epoch=self.epoch,
@@ -296,7 +296,7 @@ class Remote:
         turned = 2 * np.degrees(np.arccos(cos_half))  # as twin.poses.angle_deg (fmin: as its min on NaN)
         still = (moved <= self.deadband.position) & (turned <= self.deadband.angle_deg) & last.known
         for k in np.flatnonzero(~still):
-            self._publish_pose(ids[k], track=None if tracks is None else tracks[k], force=True)
+            self._publish_pose(ids[k], track=None if tracks is None else tracks[k])
 
     def _last_published(self, ids: list[str]) -> _Published:
         """The last published poses of ``ids`` as arrays, rebuilt only when the objects change."""
@@ -305,15 +305,10 @@ class Remote:
             rows = self._rows = _Published.of(ids, self._published)
         return rows
 
-    def _publish_pose(self, object_id: str, *, track: Track | None = None, force: bool = False) -> None:
+    def _publish_pose(self, object_id: str, *, track: Track | None = None) -> None:
+        """Publish the object's pose now (the deadband is the caller's: :meth:`_publish_moved`)."""
         seen = self.sensor.track(self, object_id) if track is None else track
         pos, quat = seen.position, seen.quat
-        last = self._published.get(object_id)
-        if not force and last is not None:
-            moved = float(np.linalg.norm(pos - last[0]))
-            turned = angle_deg(quat, last[1])
-            if moved <= self.deadband.position and turned <= self.deadband.angle_deg:
-                return
         self._published[object_id] = (pos, quat)
         if self._rows is not None:
             self._rows.update(object_id, pos, quat)

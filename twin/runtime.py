@@ -161,8 +161,10 @@ DIVERGENCE_EVERY = 0.01
 
 
 def build_from_cloud(data: bytes, coacd: CoacdSettings, cache_dir: Path | None,
-                     display: bool = False, mass_scale: float = 1.0) -> tuple[TwinObject, np.ndarray | None]:
-    """Worker-process job: a cloud message's bytes -> a twin object at the estimated place.
+                     display: bool = False, mass_scale: float = 1.0,
+                     floor: float | None = None) -> tuple[TwinObject, np.ndarray | None]:
+    """Worker-process job: a cloud message's bytes -> a twin object at the estimated place, lifted clear of
+    the support at height ``floor`` (metres; None: not lifted; see :func:`clear_of_support`).
 
     With ``display``, also a subset of the cloud (world frame at capture) for the rerun view, so the
     loop's process never unpacks a cloud.
@@ -175,7 +177,27 @@ def build_from_cloud(data: bytes, coacd: CoacdSettings, cache_dir: Path | None,
     est = estimate(make_cloud(points), density, material=None if mat is None else mat.name)
     friction = DEFAULT_FRICTION if mat is None else mat.friction
     obj = object_at_estimate(msg.object_id, est, friction, coacd=coacd, cache_dir=cache_dir)
+    if floor is not None:
+        obj = clear_of_support(obj, floor)
     return obj, display_subset(points) if display else None
+
+
+def clear_of_support(obj: TwinObject, floor: float) -> TwinObject:
+    """``obj`` lifted out of the support (table top or floor) at height ``floor``, metres, if what collides
+    reaches into it.
+
+    An estimated surface can bulge a few cells past the true one; placed where the remote body rests, its
+    hulls would start inside the table and be shot out. The lift becomes part of the object's offset, so
+    later corrections keep it. Under a collision primitive only the primitive counts: lifting by the hulls'
+    fringe held a box 3.4 mm above the table, pinned there by every later correction. (Fitting the
+    primitive costs milliseconds: done here, in the worker, not on the twin's loop.)
+    """
+    lowest = lowest_point(obj, collision_primitive(obj))
+    if obj.position[2] > floor > lowest - 0.01:
+        lift = floor - lowest + 0.0005
+        if lift > 0:
+            return replace(obj, position=obj.position + np.array([0.0, 0.0, lift]))
+    return obj
 
 
 class Local:
@@ -520,7 +542,6 @@ class Local:
                 log.warning("object %r: could not estimate its cloud: %s", object_id, exc)
                 self.rlog.event(self.twin.time, f"{object_id}: could not estimate its cloud: {exc}", "ERROR")
                 continue
-            obj = self._clear_of_support(obj)
             exists = self.twin.has(object_id)
 
             def edit(spec, obj=obj, exists=exists) -> None:  # type: ignore[no-untyped-def]
@@ -561,7 +582,7 @@ class Local:
     def _submit(self, msg: Cloud) -> Future:
         """Estimate a cloud: in a worker process, or here and now when there are no workers."""
         args = (encode(msg), self.settings.coacd, self.settings.cache_dir, self.rlog.enabled,
-                self.settings.mass_scale)
+                self.settings.mass_scale, self._floor)
         if self._pool is not None:
             try:
                 return self._pool.submit(build_from_cloud, *args)
@@ -575,25 +596,6 @@ class Local:
         except Exception as exc:
             future.set_exception(exc)
         return future
-
-    def _clear_of_support(self, obj: TwinObject) -> TwinObject:
-        """Lift an object whose colliding geometry reaches into the table (or floor) out of it.
-
-        An estimated surface can bulge a few cells past the true one; placed where the remote body rests,
-        its hulls would start inside the table and be shot out. The lift becomes part of the object's
-        offset, so later corrections keep it. Under a collision primitive only the primitive counts: lifting
-        by the hulls' fringe held a box 3.4 mm above the table, pinned there by every later correction.
-        """
-        lowest = lowest_point(obj, collision_primitive(obj))
-        if obj.position[2] > self._floor > lowest - 0.01:
-            lift = self._floor - lowest + 0.0005
-            if lift > 0:
-                return replace(obj, position=obj.position + np.array([0.0, 0.0, lift]))
-        return obj
-
-    def _correct(self, object_id: str) -> None:
-        """Move the object a step towards where the remote says it is (at once if far off)."""
-        self._correct_all([object_id])
 
     def _flush_corrections(self) -> None:
         """Correct towards the poses handled since the last flush (each object once: see :meth:`_handle`)."""
