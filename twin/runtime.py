@@ -55,7 +55,7 @@ from twin.debuglog import OFF, DebugLog, display_subset
 from twin.decompose import DEFAULT_SETTINGS, CoacdSettings
 from twin.hold import DEFAULT_HOLD, Hold, HoldSettings
 from twin.loop import LoopStats, run_loop
-from twin.model import EndEffectorSpec, TableSpec, add_object, free_joint, new_spec, remove_object
+from twin.model import EndEffectorSpec, TableSpec, add_object, new_spec, remove_object
 from twin.objects import DEFAULT_FRICTION, TwinObject, collision_primitive, lowest_point, object_at_estimate
 from twin.poses import blend, quat_conj, quat_mul, rotation
 from twin.sim import Twin
@@ -238,7 +238,6 @@ class Local:
         self._mapped: dict[str, tuple[Pose, tuple[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray],
                                       np.ndarray]] = {}
         self._to_correct: list[str] = []  # objects whose new pose is corrected towards at the end of _drain
-        self._joints: tuple[object, dict[str, tuple[int, int, int]]] = (None, {})  # per model: see _joint
         # per model: ids -> (body ids, (n, 7) qpos and (n, 6) qvel indices); the same objects are corrected
         # step after step until they reach their targets
         self._rows: tuple[object, dict[tuple[str, ...], tuple[np.ndarray, np.ndarray, np.ndarray]]] = (None, {})
@@ -659,24 +658,6 @@ class Local:
                                                 f"the remote pose", "WARN")
             del self._targets[object_id]
 
-    def _joint(self, object_id: str) -> tuple[int, int, int]:
-        """(body id, qpos address, dof address) of an object's free joint, looked up by name once per model.
-
-        Raises:
-            KeyError: no such object in the twin's model.
-        """
-        model, index = self._joints
-        if model is not self.twin.model:
-            model, index = self._joints = (self.twin.model, {})
-        found = index.get(object_id)
-        if found is None:
-            jid = free_joint(model, object_id)
-            if jid < 0:
-                raise KeyError(f"no object {object_id!r} in the model")
-            found = index[object_id] = (int(model.jnt_bodyid[jid]), int(model.jnt_qposadr[jid]),
-                                        int(model.jnt_dofadr[jid]))
-        return found
-
     def _indices(self, ids: list[str]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(body ids (n,), qpos indices (n, 7), qvel indices (n, 6)) of ``ids``' free joints in the twin's model."""
         model, cache = self._rows
@@ -685,7 +666,7 @@ class Local:
         key = tuple(ids)
         found = cache.get(key)
         if found is None:
-            rows = np.array([self._joint(i) for i in ids], dtype=np.intp).reshape(len(ids), 3)
+            rows = np.array([self.twin.joint(i) for i in ids], dtype=np.intp).reshape(len(ids), 3)
             found = cache[key] = (rows[:, 0], rows[:, 1:2] + np.arange(7), rows[:, 2:3] + np.arange(6))
         return found
 

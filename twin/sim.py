@@ -52,7 +52,7 @@ class Twin:
         self._head = spec  # the spec the next edit starts from: the last one that compiled, pending included
         self._pending: deque[tuple[Future, Callable[[], None] | None, Callable[[Exception], None] | None]] = deque()
         self._ids_of, self._ids = None, []  # object_ids() of this model
-        self._index_of, self._index = None, {}  # _joint() look-ups of this model
+        self._index_of, self._index = None, {}  # joint() look-ups of this model
 
     def __enter__(self) -> Twin:
         return self
@@ -160,10 +160,10 @@ class Twin:
 
     def pose(self, object_id: str) -> tuple[np.ndarray, np.ndarray]:
         """(position, quaternion w x y z) of an object's centre of mass, world frame."""
-        body, _, _ = self._joint(object_id)
+        body, _, _ = self.joint(object_id)
         return self.data.xpos[body].copy(), self.data.xquat[body].copy()
 
-    def _joint(self, object_id: str) -> tuple[int, int, int]:
+    def joint(self, object_id: str) -> tuple[int, int, int]:
         """(body id, qpos address, dof address) of an object's free joint in the running model.
 
         Looked up by name once per model: a name look-up costs more than the arithmetic every caller does
@@ -310,12 +310,12 @@ class Twin:
         self.data.qvel[adr + 3:adr + 6] = xmat.T @ np.asarray(angular)  # MuJoCo keeps it in body axes
 
     def _dof(self, object_id: str) -> tuple[int, np.ndarray]:
-        body, _, dof = self._joint(object_id)
+        body, _, dof = self.joint(object_id)
         return dof, self.data.xmat[body].reshape(3, 3)
 
     def has(self, object_id: str) -> bool:
         try:
-            self._joint(object_id)
+            self.joint(object_id)
         except KeyError:
             return False
         return True
@@ -327,7 +327,7 @@ class Twin:
         """
         import mujoco
 
-        _, adr, _ = self._joint(object_id)
+        _, adr, _ = self.joint(object_id)
         if not (np.isfinite(position).all() and np.isfinite(quat).all() and np.linalg.norm(quat) > 0):
             raise ValueError(f"object {object_id!r}: pose must be finite with a non-zero quaternion")
         self.data.qpos[adr:adr + 3] = position
