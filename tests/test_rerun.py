@@ -224,21 +224,32 @@ def test_connect_streams_to_a_running_rerun_server(box_cloud, tmp_path, capsys):
     rerun = Path(sys.executable).parent / "rerun"
     server = subprocess.Popen([str(rerun), "--port", str(port), "--save", str(out)],
                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    wanted = {f"world/estimate/crate/{p}" for p in ("cloud", "mesh", "obb")}
+
+    def received() -> bool:  # the server streams what arrives into its file
+        try:
+            return wanted <= set(Recording(out, blueprint=False).rows)
+        except Exception:  # not there yet, or a chunk half written
+            return False
+
     try:
         deadline = time.monotonic() + 30
         while not _listening(port) and time.monotonic() < deadline:
             time.sleep(0.1)
         assert main(["estimate", str(box_cloud), "--density", "500", "--rerun", "connect", f"127.0.0.1:{port}"]) == 0
-        time.sleep(1.0)
+        deadline = time.monotonic() + 60
+        while not received() and time.monotonic() < deadline:
+            time.sleep(0.5)
     finally:
-        server.send_signal(signal.SIGINT)  # the server writes what it received and exits
+        # Asked to stop, the server flushes and exits; in two of three fresh-clone suite runs it did not
+        # within two minutes (alone it takes a second). What it received is in the file already.
+        server.send_signal(signal.SIGINT)
         try:
-            server.wait(120)  # a loaded machine (a fresh clone's CI beside another test run) took over 30 s
+            server.wait(10)
         except subprocess.TimeoutExpired:
             server.kill()
-            raise
-    rec = Recording(out, blueprint=False)
-    assert {f"world/estimate/crate/{p}" for p in ("cloud", "mesh", "obb")} <= set(rec.rows)
+            server.wait(10)
+    assert wanted <= set(Recording(out, blueprint=False).rows)
 
 
 def _listening(port: int) -> bool:
