@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import threading
+import time
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -79,3 +80,12 @@ def close_local(local: Local) -> None:
 def wait_objects(local: Local, n: int, timeout: float = 60.0) -> None:
     local.run(timeout, until=lambda: len(local.objects) >= n)
     assert len(local.objects) == n, f"only {local.objects} arrived in {timeout} s"
+
+
+def wait_until(condition, timeout: float = 30.0, what: str = "condition") -> None:  # type: ignore[no-untyped-def]
+    """Poll ``condition`` until it holds; the deadline is a failsafe for a hung side, not a measurement."""
+    deadline = time.monotonic() + timeout
+    while not condition():
+        if time.monotonic() > deadline:
+            raise AssertionError(f"timed out after {timeout} s waiting for {what}")
+        time.sleep(0.01)

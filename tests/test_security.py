@@ -25,7 +25,7 @@ from sync.keys import Keys
 from sync.messages import VERSION, Gone, OperatorCommand, Pose, SceneInfo, cloud_message, encode
 from sync.zenoh_transport import free_port, make_config, open_session
 
-from loopback import SCENE, RemoteRunner, running_remote, wait_objects
+from loopback import SCENE, RemoteRunner, running_remote, wait_objects, wait_until
 
 CONFIGS = Path(__file__).resolve().parent.parent / "configs"
 KEYS = Keys(SCENE["name"])
@@ -33,15 +33,6 @@ REMOTE_CN = "tactile-twin-remote"  # the names the configs' access_control subje
 TWIN_CN = "tactile-twin-twin"
 #: Every certificate path in the shipped configs starts with this (relative to the working folder).
 CERT_PREFIX = "configs/certs/"
-
-
-def _wait_until(condition, timeout: float = 30.0, what: str = "condition") -> None:  # type: ignore[no-untyped-def]
-    """Poll ``condition`` until it holds; the deadline is a failsafe for a hung side, not a measurement."""
-    deadline = time.monotonic() + timeout
-    while not condition():
-        if time.monotonic() > deadline:
-            raise AssertionError(f"timed out after {timeout} s waiting for {what}")
-        time.sleep(0.01)
 
 
 # -- certificates and configs -----------------------------------------------------------------------
@@ -180,10 +171,10 @@ def test_without_the_access_control_a_certified_twin_could_forge_scene_state(pki
         inbox = Inbox(victim)
         attacker = _session(pki, "twin", connect=[f"tls/localhost:{port}"], acl=False)
         try:
-            _wait_until(lambda: len(list(attacker.info.peers_zid())) == 1, what="the TLS link")
+            wait_until(lambda: len(list(attacker.info.peers_zid())) == 1, what="the TLS link")
             forged = _forgeries(1, np.zeros(3))
             _put_all(attacker, forged)
-            _wait_until(lambda: all(inbox.has(data) for _, data in forged), 10, "the forgeries")
+            wait_until(lambda: all(inbox.has(data) for _, data in forged), 10, "the forgeries")
         finally:
             inbox.close()
             attacker.close()
@@ -212,7 +203,7 @@ def test_mutual_tls_and_access_control_let_only_the_remote_speak_for_the_scene(p
         at_twin = Inbox(client)
         attacker = _session(pki, "twin", connect=[remote_ep, twin_ep])
         opened.append(attacker)
-        _wait_until(lambda: len(list(attacker.info.peers_zid())) == 2, what="the attacker's two TLS links")
+        wait_until(lambda: len(list(attacker.info.peers_zid())) == 2, what="the attacker's two TLS links")
         seen_by_attacker = Inbox(attacker)
         # It answers the late joiner's questions with a scene and an object of its own.
         fake_info = encode(SceneInfo(v=VERSION, stamp_ns=1, name="phantom", table_size=(1.0, 1.0, 0.1),
@@ -232,7 +223,7 @@ def test_mutual_tls_and_access_control_let_only_the_remote_speak_for_the_scene(p
             wait_objects(local, 2)  # the twin syncs the scene over mutual TLS
             assert local.keys.scene == SCENE["name"]  # the attacker's scene answer never reached it
             assert local.expected == 2  # nor its phantom cloud
-            _wait_until(lambda: len(seen_by_attacker.samples) > 0, what="the attacker's subscription")
+            wait_until(lambda: len(seen_by_attacker.samples) > 0, what="the attacker's subscription")
 
             # (a), (b): no link, nothing received, nothing delivered
             stranger_command = _command([0.1, 0.1, 0.6], epoch=99)
@@ -249,8 +240,8 @@ def test_mutual_tls_and_access_control_let_only_the_remote_speak_for_the_scene(p
             target = runner.remote.twin.data.mocap_pos[0] + np.array([0.05, -0.1, 0.04])
             command = _command(target)
             _put_all(attacker, [*forged, (KEYS.operator, command)])
-            _wait_until(lambda: at_twin.has(command) and at_remote.has(command), what="the allowed command")
-            _wait_until(lambda: np.allclose(runner.remote.twin.data.mocap_pos[0], target),
+            wait_until(lambda: at_twin.has(command) and at_remote.has(command), what="the allowed command")
+            wait_until(lambda: np.allclose(runner.remote.twin.data.mocap_pos[0], target),
                         what="the remote's end effector to follow the command")
             local.run(10.0, until=lambda: local.inbox.empty() and not local.adding)
             for _, data in forged:
@@ -316,7 +307,7 @@ def test_a_flood_of_garbage_and_stale_poses_is_counted_and_the_twin_runs_on(tmp_
             local = Local(ZenohTransport(session), settings=LocalSettings(cache_dir=cache))
             try:
                 wait_objects(local, 2)
-                _wait_until(lambda: len(list(flooder.info.peers_zid())) == 1, what="the flooder's link")
+                wait_until(lambda: len(list(flooder.info.peers_zid())) == 1, what="the flooder's link")
                 done = threading.Event()
                 sentinel = (KEYS.root + "/operator/flood-done", b"done")
                 seen = Inbox(session, sentinel[0])
@@ -328,7 +319,7 @@ def test_a_flood_of_garbage_and_stale_poses_is_counted_and_the_twin_runs_on(tmp_
                 # Publishers that know the twin's subscriptions: a put before they are known goes nowhere.
                 pubs = {key: flooder.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK)
                         for key in {k for k, _ in kinds.values()} | {sentinel[0]}}
-                _wait_until(lambda: all(p.matching_status.matching for p in pubs.values()),
+                wait_until(lambda: all(p.matching_status.matching for p in pubs.values()),
                             what="the twin's subscriptions to reach the flooder")
 
                 def flood() -> None:

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import time
 from pathlib import Path
 
 import numpy as np
@@ -13,7 +12,7 @@ from sync.keys import Keys
 from sync.messages import VERSION, Heartbeat, encode
 from sync.zenoh_transport import SessionError, free_port, make_config
 
-from loopback import SCENE, RemoteRunner, close_local, open_local, running_remote, wait_objects
+from loopback import SCENE, RemoteRunner, close_local, open_local, running_remote, wait_objects, wait_until
 
 
 @pytest.fixture
@@ -31,21 +30,12 @@ def _local(endpoint, tmp_path_factory, **settings):  # type: ignore[no-untyped-d
     return open_local(endpoint, tmp_path_factory.getbasetemp() / "coacd", **settings)
 
 
-def _wait_until(condition, timeout: float = 30.0, what: str = "condition") -> None:  # type: ignore[no-untyped-def]
-    """Poll ``condition`` until it holds; the deadline is a failsafe for a hung side, not a measurement."""
-    deadline = time.monotonic() + timeout
-    while not condition():
-        if time.monotonic() > deadline:
-            raise AssertionError(f"timed out after {timeout} s waiting for {what}")
-        time.sleep(0.01)
-
-
 def test_late_joiner_gets_the_whole_scene_and_follows_poses(remote, endpoint, tmp_path_factory):
     # The remote has published its info and clouds and run on (more messages, simulated time) before the
     # twin exists, so the twin must catch up through the queryable, not the live puts.
     r = remote.remote
     sent_at_start = len(SCENE["objects"]) + 1  # info + one cloud per object, published by the constructor
-    _wait_until(lambda: r.twin.time >= 0.2 and r.link.counters.messages_sent > sent_at_start, what="the remote")
+    wait_until(lambda: r.twin.time >= 0.2 and r.link.counters.messages_sent > sent_at_start, what="the remote")
     local = _local(endpoint, tmp_path_factory)
     try:
         wait_objects(local, 2)
@@ -289,16 +279,16 @@ def test_the_scene_can_be_moved_from_another_thread_while_the_remote_steps(remot
     r = remote.remote
     start, quat = r.twin.pose("crate")
     lift = np.array([0.0, 0.0, 0.05])
-    _wait_until(lambda: r.twin.time > 0.05, what="the remote to step")  # its loop thread is running
+    wait_until(lambda: r.twin.time > 0.05, what="the remote to step")  # its loop thread is running
     # A fixed number of moves, queued as fast as this thread can while the loop thread steps; in the crash
     # this guards against, mj_forward from here ran during mj_step there and the process died in seconds.
     for moves in range(3000):
         r.move("crate", start + lift * (moves % 2), quat)
     aside = start + np.array([0.05, 0.0, 0.0])  # on the table, at rest: a pose that stays once applied
     r.move("crate", aside, quat)  # the last one wins
-    _wait_until(lambda: abs(r.twin.pose("crate")[0][0] - aside[0]) < 1e-3, what="the last move")
+    wait_until(lambda: abs(r.twin.pose("crate")[0][0] - aside[0]) < 1e-3, what="the last move")
     t_applied = r.twin.time
-    _wait_until(lambda: r.twin.time > t_applied + 0.05, what="the remote to step on")  # it survived
+    wait_until(lambda: r.twin.time > t_applied + 0.05, what="the remote to step on")  # it survived
     remote.stop()
     try:
         # 50 ms after the last move it still sits where it was put: no move after it was applied.
