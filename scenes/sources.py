@@ -25,7 +25,7 @@ from estimation.materials import resolve_density
 from estimation.units import unit_scale
 from scenes.scenefile import ObjectSpec, SceneError
 from twin.decompose import DEFAULT_SETTINGS, CoacdSettings, Hull, decompose_many
-from twin.objects import DEFAULT_FRICTION, TwinObject, decimate
+from twin.objects import DEFAULT_FRICTION, TwinObject, decimate, fit_primitive
 
 log = logging.getLogger(__name__)
 
@@ -179,7 +179,7 @@ def prepare_objects(
         position = placement(s, parts, table_top, center_of_mass=est.mass.center_of_mass)
         out.append(TwinObject(id=s.id, estimate=est, friction=friction, visual=visual, hulls=tuple(parts),
                               position=position, quat=np.array([1.0, 0, 0, 0]),
-                              hull_cached=cached))
+                              hull_cached=cached, primitive=fit_primitive(visual)))
     return out
 
 

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from twin.objects import TwinObject, collision_primitive
+from twin.objects import TwinObject
 
 #: Physics step for the haptic loop: 1 kHz.
 TIMESTEP = 0.001
@@ -137,7 +137,7 @@ def add_object(spec, obj: TwinObject, *, rgba: tuple[float, float, float, float]
                primitives: bool = True) -> None:
     """Add one object body (free joint, explicit inertia, visual mesh, collision hulls) to ``spec``.
 
-    With ``primitives`` (the default), an object :func:`twin.objects.collision_primitive` fits collides
+    With ``primitives`` (the default), an object with a :attr:`~twin.objects.TwinObject.primitive` collides
     as that primitive, named ``<id>/primitive``: MuJoCo's analytic colliders cost a fraction of convex
     mesh pairs (``bench/replay.py``). Inertia is the estimate's either way, not the primitive's.
     """
@@ -161,7 +161,7 @@ def add_object(spec, obj: TwinObject, *, rgba: tuple[float, float, float, float]
                          conaffinity=0, group=VISUAL_GROUP, rgba=colour, mass=0)
     geom.info = f"object {obj.id} visual"
     friction = [obj.friction, 0.005, 0.0001]
-    primitive = collision_primitive(obj) if primitives else None
+    primitive = obj.primitive if primitives else None
     if primitive is not None:
         g = body.add_geom(name=f"{obj.id}/primitive", type=_geom_types()[primitive.kind], size=list(primitive.size),
                           pos=primitive.position.tolist(), quat=primitive.quat.tolist(), group=COLLISION_GROUP,

@@ -55,31 +55,6 @@ ROUND_SNAP = 0.02
 
 
 @dataclass(frozen=True)
-class TwinObject:
-    """One object ready for the model. Geometry is relative to the centre of mass (the body frame).
-
-    Attributes:
-        id: unique name in the scene.
-        estimate: the physical estimate (mass, inertia in the body frame's axes).
-        friction: sliding friction coefficient.
-        visual: decimated reconstruction, vertices (v, 3) metres relative to the centre of mass.
-        hulls: convex parts for collision, same frame.
-        position: (3,) world position of the centre of mass, metres.
-        quat: (4,) body orientation, w x y z (MuJoCo order).
-        hull_cached: the hulls came from the CoACD cache.
-    """
-
-    id: str
-    estimate: PhysicalEstimate
-    friction: float
-    visual: Hull
-    hulls: tuple[Hull, ...]
-    position: np.ndarray
-    quat: np.ndarray
-    hull_cached: bool = False
-
-
-@dataclass(frozen=True)
 class Primitive:
     """A MuJoCo primitive geom that contains one convex hull and nearly equals it.
 
@@ -97,6 +72,35 @@ class Primitive:
     position: np.ndarray
     quat: np.ndarray
     fill: float
+
+
+@dataclass(frozen=True)
+class TwinObject:
+    """One object ready for the model. Geometry is relative to the centre of mass (the body frame).
+
+    Attributes:
+        id: unique name in the scene.
+        estimate: the physical estimate (mass, inertia in the body frame's axes).
+        friction: sliding friction coefficient.
+        visual: decimated reconstruction, vertices (v, 3) metres relative to the centre of mass.
+        hulls: convex parts for collision, same frame.
+        position: (3,) world position of the centre of mass, metres.
+        quat: (4,) body orientation, w x y z (MuJoCo order).
+        hull_cached: the hulls came from the CoACD cache.
+        primitive: what collides in place of the hulls (:func:`collision_primitive`), or None: the hulls.
+            Fitted where the object is made, with its hulls (in a build or estimation worker), not where
+            it is added to a model.
+    """
+
+    id: str
+    estimate: PhysicalEstimate
+    friction: float
+    visual: Hull
+    hulls: tuple[Hull, ...]
+    position: np.ndarray
+    quat: np.ndarray
+    hull_cached: bool = False
+    primitive: Primitive | None = None
 
 
 def fit_primitive(mesh: Hull, *, min_fill: float = PRIMITIVE_MIN_FILL) -> Primitive | None:
@@ -189,7 +193,8 @@ def _quantile(values: np.ndarray, weight: np.ndarray, q: float) -> float:
 
 
 def collision_primitive(obj: TwinObject, *, min_fill: float = PRIMITIVE_MIN_FILL) -> Primitive | None:
-    """The primitive that may collide for the whole object (instead of its hulls), or None.
+    """The primitive that may collide for the whole object (instead of its hulls), or None: what
+    :attr:`TwinObject.primitive` holds for objects made by :func:`object_at_estimate` and the scene builder.
 
     Decided on the visual mesh (the decimated reconstruction) and its own volume: a mug or a torus fills
     its bounding cylinder far too little, whatever CoACD made of it; a box CoACD split in two is still one
@@ -198,12 +203,13 @@ def collision_primitive(obj: TwinObject, *, min_fill: float = PRIMITIVE_MIN_FILL
     return fit_primitive(obj.visual, min_fill=min_fill)
 
 
-def lowest_point(obj: TwinObject, primitive: Primitive | None) -> float:
-    """The lowest world z, metres, of what collides for ``obj`` at its pose: ``primitive`` where it collides
-    in place of the hulls (:func:`collision_primitive`), else the hulls. The reconstruction's own fringe
-    below a flat face (a few cells) does not collide under a primitive, so it does not count."""
+def lowest_point(obj: TwinObject) -> float:
+    """The lowest world z, metres, of what collides for ``obj`` at its pose: its primitive where one
+    collides in place of the hulls (:attr:`TwinObject.primitive`), else the hulls. The reconstruction's own
+    fringe below a flat face (a few cells) does not collide under a primitive, so it does not count."""
     from twin.poses import rotation
 
+    primitive = obj.primitive
     body = rotation(np.asarray(obj.quat, float))
     if primitive is None:
         return float(obj.position[2] + min(float((v @ body.T)[:, 2].min()) for v, _ in obj.hulls))
@@ -255,4 +261,5 @@ def object_at_estimate(object_id: str, est: PhysicalEstimate, friction: float, *
     visual = decimate(est.vertices - est.mass.center_of_mass, est.faces)
     hulls, cached = decompose(*visual, coacd, cache_dir=cache_dir)
     return TwinObject(id=object_id, estimate=est, friction=friction, visual=visual, hulls=tuple(hulls),
-                      position=est.mass.center_of_mass.copy(), quat=np.array([1.0, 0, 0, 0]), hull_cached=cached)
+                      position=est.mass.center_of_mass.copy(), quat=np.array([1.0, 0, 0, 0]), hull_cached=cached,
+                      primitive=fit_primitive(visual))

@@ -56,7 +56,7 @@ from twin.decompose import DEFAULT_SETTINGS, CoacdSettings
 from twin.hold import DEFAULT_HOLD, Hold, HoldSettings
 from twin.loop import LoopStats, run_loop
 from twin.model import EndEffectorSpec, TableSpec, add_object, new_spec, remove_object
-from twin.objects import DEFAULT_FRICTION, TwinObject, collision_primitive, lowest_point, object_at_estimate
+from twin.objects import DEFAULT_FRICTION, TwinObject, lowest_point, object_at_estimate
 from twin.poses import blend, quat_conj, quat_mul, rotation
 from twin.sim import Twin
 from twin.trajectory import Trajectory
@@ -189,10 +189,9 @@ def clear_of_support(obj: TwinObject, floor: float) -> TwinObject:
     An estimated surface can bulge a few cells past the true one; placed where the remote body rests, its
     hulls would start inside the table and be shot out. The lift becomes part of the object's offset, so
     later corrections keep it. Under a collision primitive only the primitive counts: lifting by the hulls'
-    fringe held a box 3.4 mm above the table, pinned there by every later correction. (Fitting the
-    primitive costs milliseconds: done here, in the worker, not on the twin's loop.)
+    fringe held a box 3.4 mm above the table, pinned there by every later correction.
     """
-    lowest = lowest_point(obj, collision_primitive(obj))
+    lowest = lowest_point(obj)
     if obj.position[2] > floor > lowest - 0.01:
         lift = floor - lowest + 0.0005
         if lift > 0:
