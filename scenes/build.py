@@ -179,6 +179,21 @@ def _build_objects(scene: SceneSpec, *, coacd: CoacdSettings, cache_dir: Path | 
     return [r for r in results if r is not None]
 
 
+#: Primitive kinds that are convex: their objects skip CoACD (:func:`twin.decompose.skips_coacd`).
+CONVEX_PRIMITIVES = frozenset({"box", "cylinder", "sphere", "capsule"})
+
+
+def start_order(specs: tuple[ObjectSpec, ...]) -> list[int]:
+    """Indices of ``specs`` in the order a build pool starts them: objects that may go to CoACD (clouds,
+    meshes, paper objects, a torus: seconds each) before convex primitives (a fraction of a second), each
+    group in scene order. Longest first: started last, one long CoACD run kept one core busy for 12 s
+    while the other sat idle (mixed100, cold, ``bench/build.py``)."""
+    def convex(s: ObjectSpec) -> bool:
+        return s.source == "primitive" and isinstance(s.value, dict) and s.value.get("type") in CONVEX_PRIMITIVES
+
+    return sorted(range(len(specs)), key=lambda i: convex(specs[i]))
+
+
 def _build_in_pool(specs: tuple[ObjectSpec, ...], top: float | None, coacd: CoacdSettings, cache_dir: Path | None,
                    workers: int, finished: Callable[[int, tuple[TwinObject, ObjectReport]], None]) -> None:
     import multiprocessing as mp
@@ -191,8 +206,8 @@ def _build_in_pool(specs: tuple[ObjectSpec, ...], top: float | None, coacd: Coac
     # workers die with this process.
     pool = ProcessPoolExecutor(workers, mp_context=mp.get_context("spawn"), initializer=background_worker)
     try:
-        pending = {pool.submit(build_object, s, table_top=top, coacd=coacd, cache_dir=cache_dir): i
-                   for i, s in enumerate(specs)}
+        pending = {pool.submit(build_object, specs[i], table_top=top, coacd=coacd, cache_dir=cache_dir): i
+                   for i in start_order(specs)}
         while pending:
             ready, _ = wait(pending, return_when=FIRST_COMPLETED)
             for future in ready:

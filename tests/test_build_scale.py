@@ -12,7 +12,7 @@ import pytest
 import trimesh
 
 from estimation.cloudfile import save_cloud
-from scenes.build import build_scene, write_scene
+from scenes.build import build_scene, start_order, write_scene
 from scenes.sampling import sample_surface
 from scenes.scenefile import SceneError, parse_scene
 from twin.decompose import DEFAULT_SETTINGS, concavity
@@ -85,6 +85,22 @@ def test_a_pool_build_writes_the_same_files_as_an_in_process_one(builds):
     for rel in files1:
         if rel.name != "estimates.json":  # it records seconds, which differ
             assert (xml1.parent / rel).read_bytes() == (xml2.parent / rel).read_bytes(), rel
+
+
+def test_objects_that_may_need_coacd_start_first_and_come_back_in_scene_order(builds):
+    built, _ = builds[2]
+    specs = built.scene.objects
+    assert [specs[i].id for i in start_order(specs)] == ["scan", "ring", "bracket", "box", "ball"]
+    assert [o.id for o in built.objects] == [s.id for s in specs]
+
+
+def test_the_collision_primitive_is_fitted_in_the_worker_and_used_in_the_model(builds):
+    built, xml = builds[2]
+    kinds = {o.id: None if o.primitive is None else o.primitive.kind for o in built.objects}
+    assert kinds == {"box": "box", "ball": "sphere", "scan": kinds["scan"], "ring": None, "bracket": None}
+    text = xml.read_text()
+    for oid, kind in kinds.items():
+        assert (f'name="{oid}/primitive"' in text) == (kind is not None), oid
 
 
 def test_concavity_known_answers():
