@@ -93,6 +93,7 @@ class Remote:
         self._actions: queue.SimpleQueue[Callable[[], None]] = queue.SimpleQueue()  # run by step()
         self._replies: dict[str, bytes] = {}  # key -> last encoded message, for late joiners
         self._operator: np.ndarray | None = None
+        self._command: tuple[int, int] | None = None  # (its stamp on the twin's clock, when it arrived here)
         self._seq = 0
         self._published: dict[str, tuple[np.ndarray, np.ndarray]] = {}
         self._rows: _Published | None = None  # _published as arrays, for the deadband check over all objects
@@ -314,7 +315,7 @@ class Remote:
             self._rows.update(object_id, pos, quat)
         msg = Pose(v=VERSION, stamp_ns=self.clock.stamp_ns(), object_id=object_id, epoch=self.epoch, seq=self._next(),
                    sim_time=self.twin.time, position=_floats(pos), quat=_floats(quat), linvel=_floats(seen.linvel),
-                   angvel=_floats(seen.angvel))
+                   angvel=_floats(seen.angvel), answers_ns=self._answers_ns())
         key = self._pose_keys.get(object_id)
         if key is None:
             key = self._pose_keys[object_id] = self.keys.object(object_id, "pose")
@@ -332,6 +333,14 @@ class Remote:
     def _on_operator(self, _key: str, msg) -> None:  # type: ignore[no-untyped-def]
         if isinstance(msg, OperatorCommand):
             self._operator = np.asarray(msg.position)
+            self._command = (msg.stamp_ns, self.clock.stamp_ns())
+
+    def _answers_ns(self) -> int:
+        """:attr:`sync.messages.Pose.answers_ns` now: the twin's time whose operator input C has applied."""
+        if self._command is None:
+            return 0
+        stamp, arrived = self._command
+        return max(0, stamp + self.clock.stamp_ns() - arrived)
 
     def _scene_info(self) -> SceneInfo:
         t, ee = self.scene.table, self.scene.end_effector

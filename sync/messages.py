@@ -99,7 +99,13 @@ class Cloud(_Msg, tag="cloud"):
 
 class Pose(_Msg, tag="pose"):
     """An object frame's pose and velocity as the remote senses it (world frame and axes; quaternion
-    w x y z; m/s and rad/s)."""
+    w x y z; m/s and rad/s).
+
+    ``answers_ns``: the time on the twin's clock whose operator input this state answers to: the stamp of
+    the latest :class:`OperatorCommand` the remote had applied, plus the remote's time since it arrived
+    (0: no command yet). The twin compares the pose with its own state at that time, not with its state
+    now, which is a round trip ahead (:mod:`twin.history`).
+    """
 
     object_id: str
     epoch: int
@@ -109,6 +115,7 @@ class Pose(_Msg, tag="pose"):
     quat: tuple[float, float, float, float]
     linvel: tuple[float, float, float]
     angvel: tuple[float, float, float]
+    answers_ns: int = 0
 
 
 class Gone(_Msg, tag="gone"):
@@ -270,6 +277,8 @@ def _check(msg: Message) -> None:
         if getattr(msg, field, 0) < 0:
             raise MessageError("bad-seq", f"{type(msg).__name__}: negative {field}")
     if isinstance(msg, Pose):
+        if msg.answers_ns < 0:
+            raise MessageError("bad-seq", f"pose {msg.object_id!r}: negative answers_ns")
         _finite(msg, msg.position, msg.linvel, msg.angvel, (msg.sim_time,))
         _coordinates(msg, msg.position)
         _unit(msg, msg.quat)

@@ -59,3 +59,31 @@ def to_xyzw(q: np.ndarray) -> np.ndarray:
     """MuJoCo's w x y z quaternion in the x y z w order that rerun and scipy use."""
     q = np.asarray(q, dtype=np.float64)
     return np.array([q[1], q[2], q[3], q[0]])
+
+
+def quat_product(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """:func:`quat_mul` over stacks: the rotations ``a`` (n, 4) after ``b`` (n, 4), w x y z."""
+    aw, ax, ay, az = np.moveaxis(np.asarray(a, dtype=np.float64), -1, 0)
+    bw, bx, by, bz = np.moveaxis(np.asarray(b, dtype=np.float64), -1, 0)
+    return np.stack([aw * bw - ax * bx - ay * by - az * bz, aw * bx + ax * bw + ay * bz - az * by,
+                     aw * by - ax * bz + ay * bw + az * bx, aw * bz + ax * by - ay * bx + az * bw], axis=-1)
+
+
+def to_rotvec(q: np.ndarray) -> np.ndarray:
+    """Rotation vectors (n, 3) (axis times angle, radians, the short way round) of quaternions (n, 4)."""
+    q = np.asarray(q, dtype=np.float64)
+    q = np.where(q[..., :1] < 0, -q, q)
+    s = np.sqrt(np.einsum("...i,...i->...", q[..., 1:], q[..., 1:]))
+    angle = 2 * np.arctan2(s, q[..., 0])
+    # angle / s tends to 2 / w as s -> 0: no division by zero for the identity
+    scale = np.where(s > 1e-12, angle / np.where(s > 1e-12, s, 1.0), 2.0 / np.maximum(q[..., 0], 1e-12))
+    return q[..., 1:] * scale[..., None]
+
+
+def from_rotvec(r: np.ndarray) -> np.ndarray:
+    """Unit quaternions (n, 4), w x y z, of rotation vectors (n, 3) (radians)."""
+    r = np.asarray(r, dtype=np.float64)
+    angle = np.sqrt(np.einsum("...i,...i->...", r, r))
+    half = angle / 2
+    sinc = np.where(angle > 1e-12, np.sin(half) / np.where(angle > 1e-12, angle, 1.0), 0.5)
+    return np.concatenate([np.cos(half)[..., None], r * sinc[..., None]], axis=-1)

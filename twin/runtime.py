@@ -53,11 +53,12 @@ from sync.recording import Recorder
 from sync.transport import Transport
 from twin.debuglog import OFF, DebugLog, display_subset
 from twin.decompose import DEFAULT_SETTINGS, CoacdSettings
+from twin.history import CORRECTION, History
 from twin.hold import DEFAULT_HOLD, Hold, HoldSettings
 from twin.loop import LoopStats, run_loop
 from twin.model import EndEffectorSpec, TableSpec, add_object, new_spec, remove_object
 from twin.objects import DEFAULT_FRICTION, TwinObject, lowest_point, object_at_estimate
-from twin.poses import blend, quat_conj, quat_mul, rotation
+from twin.poses import from_rotvec, quat_conj, quat_mul, quat_product, rotation, to_rotvec
 from twin.sim import Twin
 from twin.trajectory import Trajectory
 from twin.workers import background_worker
@@ -76,6 +77,8 @@ class LocalSettings:
     Attributes:
         stale_after: seconds without any message before the link is marked stale.
         correction_tau: time constant of the blend towards a corrected pose, seconds.
+        align_window: seconds of the twin's past kept to compare C's poses with C' at the moment they
+            answer to (:mod:`twin.history`): at least the longest round trip; 0 compares them with C' now.
         snap_distance, snap_angle_deg: a correction larger than this moves the object at once.
         operator_deadband: the operator's command is published when it moved more than this, metres.
         workers: processes estimating clouds; 0 estimates and compiles in the loop's own thread
@@ -90,6 +93,7 @@ class LocalSettings:
 
     stale_after: float = 1.0
     correction_tau: float = 0.02
+    align_window: float = 1.0
     snap_distance: float = 0.05
     snap_angle_deg: float = 20.0
     operator_deadband: float = 0.0002
@@ -230,7 +234,11 @@ class Local:
         self._offsets: dict[str, tuple[np.ndarray, np.ndarray]] = {}
         self._latest: dict[str, Pose] = {}
         self._pose_mark: dict[str, tuple[int, int]] = {}  # id -> (epoch, seq) of the newest pose taken
-        self._targets: dict[str, Pose] = {}
+        self._targets: dict[str, Pose] = {}  # id -> its newest pose from C, until measured (_measure)
+        self._errors: dict[str, tuple[np.ndarray, bool]] = {}  # id -> (correction left (12,), snap it)
+        self._history = History(round(settings.align_window / self.twin.model.opt.timestep))
+        self._history_rows: dict[str, int] = {}  # id -> its row in the history
+        self._history_for: tuple[object, int] = (None, 0)  # (model, objects) the rows were made for
         # id -> (pose message, offset, its pose on the twin's body, the row _correct_all reads): a target is
         # corrected towards at every step until reached, and mapping it costs more than the correction, so it
         # is mapped once per message.
@@ -307,19 +315,14 @@ class Local:
             self._flush_corrections()
         self._collect()
         self.twin.poll()
-        arrived = [i for i in self._to_correct if i in self._targets]
-        self._to_correct = []
-        if self._targets:
-            # C's pose of an object in the operator's hand is a round trip old: pulling the twin's object
-            # towards it pushes it back into the hand (felt as a wall). Such objects follow the twin's
-            # physics until released; C's later poses then correct them.
+        self._flush_corrections()
+        if self._errors:
+            # C's pose of an object in the operator's hand answers to the operator's input of a round trip
+            # ago; measured against C' then (twin.history), it is right, but a wrong estimate makes it
+            # differ, and pulling the object towards it is felt. Such objects follow the twin's physics
+            # until released; C's later poses then correct them.
             touched = self.hold.disturbed(self.twin.time) if self.settings.defer_touched else set()
-            rest = [i for i in self._targets if i not in touched]
-            # An object whose pose just arrived is corrected twice in this step: once for the arrival, once
-            # as every target is. Nothing moved it in between (no step, no new model), so the second pass
-            # writes the same pose again and only blends its velocity once more: both passes in one.
-            seen = set(arrived)
-            self._correct_all(arrived + [i for i in rest if i not in seen], twice=seen.intersection(rest))
+            self._apply_corrections([i for i in self._errors if i not in touched])
         target = self._operator_target(trajectory)
         if target is not None:
             self.twin.set_end_effector(target)
@@ -331,6 +334,7 @@ class Local:
             if self.rlog.enabled:
                 self.rlog.event(self.twin.time, f"{object_id}: strayed from the remote's pose on its own; held there")
         self.twin.step()
+        self._remember()
         self._feedback()
         if self.twin.time >= self._next_sample:
             self._next_sample = self.twin.time + DIVERGENCE_EVERY
@@ -485,9 +489,7 @@ class Local:
                 return
             self._latest[msg.object_id] = msg
             if msg.object_id in self._offsets and self.twin.has(msg.object_id):
-                if msg.object_id in self._to_correct:
-                    self._flush_corrections()  # its earlier pose first, as if each were corrected on arrival
-                self._targets[msg.object_id] = msg
+                self._targets[msg.object_id] = msg  # replaces an older one not yet measured
                 self._hold_at(msg.object_id)
                 self._to_correct.append(msg.object_id)
                 if self.rlog.enabled:
@@ -511,6 +513,7 @@ class Local:
             self._clouds.pop(msg.object_id, None)
             self._offsets.pop(msg.object_id, None)
             self._targets.pop(msg.object_id, None)
+            self._errors.pop(msg.object_id, None)
             self._latest.pop(msg.object_id, None)
             self._mapped.pop(msg.object_id, None)
             self._pose_mark.pop(msg.object_id, None)
@@ -552,6 +555,7 @@ class Local:
                 latest = self._latest.get(obj.id)
                 if latest is not None and latest.seq > msg.seq:
                     self._targets[obj.id] = latest
+                    self._to_correct.append(obj.id)
                 self._hold_at(obj.id)
                 self.report.objects_synced += 1
                 self.report.add_latency.append(self.clock.now() - received)
@@ -596,66 +600,112 @@ class Local:
         return future
 
     def _flush_corrections(self) -> None:
-        """Correct towards the poses handled since the last flush (each object once: see :meth:`_handle`)."""
+        """Measure the corrections the poses handled since the last flush call for (each object once, from its
+        newest pose: see :meth:`_handle`); :meth:`_apply_corrections` then applies them step by step."""
         if self._to_correct:
             ids, self._to_correct = self._to_correct, []
-            self._correct_all([i for i in ids if i in self._targets])
+            self._measure([i for i in dict.fromkeys(ids) if i in self._targets])
 
-    def _correct_all(self, ids: list[str], *, twice: set[str] | frozenset[str] = frozenset()) -> None:
-        """Move each object (no repeats) a step towards its target; at once where it is far off.
-
-        Objects in ``twice`` get what two corrections in a row without a step between give: the same pose
-        (both read the pose of the last step) and the velocity blended twice, unless the first reached the
-        target (it is then dropped, as after one correction).
-
-        One pass over all objects' arrays, as :meth:`twin.hold.Hold.apply` does, and the same arithmetic as
-        one object at a time: each object reads and writes only its own rows. Batched matmul sums each row
-        as the one-vector ``np.linalg.norm``, ``np.dot`` and ``@`` do, so the result is bit for bit what the
-        per-object correction gave (checked on this machine's BLAS; a different BLAS may round differently,
-        deterministically).
-        """
+    def _measure(self, ids: list[str]) -> None:
+        """Turn each object's newest pose from C into the correction C' still needs: C's pose and velocity
+        less C''s at the moment the pose answers to (:mod:`twin.history`), less the corrections applied
+        since. Without that moment (no operator command yet, or outside the history), C' now stands in.
+        A correction larger than the snap limits is applied at once by the next step."""
         if not ids:
             return
         twin, s = self.twin, self.settings
-        data, n = twin.data, len(ids)
-        body, qpos, dof = self._indices(ids)
-        targets = [self._targets[i] for i in ids]
-        want = np.array([self._on_body(i, t, self._offsets[i], row=True) for i, t in zip(ids, targets, strict=True)])
-        want_p, want_q = want[:, :3], want[:, 3:7]
-        pos, quat = data.xpos[body], data.xquat[body]  # as of the last step, like Twin.pose
-        gap = want_p - pos
-        dist = np.sqrt(np.matmul(gap[:, None, :], gap[:, :, None])[:, 0, 0])
-        angle = 2 * np.degrees(np.arccos(np.fmin(1.0, np.abs(np.matmul(quat[:, None, :], want_q[:, :, None])[:, 0, 0]))))
+        body, _, dof = self._indices(ids)
+        msgs = [self._targets.pop(i) for i in ids]
+        want = np.array([self._on_body(i, m, self._offsets[i], row=True) for i, m in zip(ids, msgs, strict=True)])
+        past = self._state(body, dof)
+        since = np.zeros((len(ids), CORRECTION))
+        if self._history.key == self._history_key():
+            rows = [self._history_rows.get(i) for i in ids]
+            stamps = np.array([m.answers_ns if r is not None else 0 for m, r in zip(msgs, rows, strict=True)])
+            for stamp in set(stamps.tolist()) - {0}:
+                # Within two steps: a stamp between recorded steps, never one from outside the window.
+                found = self._history.at(stamp, int(2e9 * twin.model.opt.timestep))
+                if found is not None:
+                    state, applied = found
+                    for k in np.flatnonzero(stamps == stamp):
+                        past[k], since[k] = state[rows[k]], applied[rows[k]]
+        error = np.concatenate([want[:, :3] - past[:, :3],
+                                to_rotvec(quat_product(want[:, 3:7], past[:, 3:7] * [1.0, -1, -1, -1])),
+                                want[:, 7:] - past[:, 7:]], axis=1) - since
+        dist = np.linalg.norm(error[:, :3], axis=1)
+        angle = np.degrees(np.linalg.norm(error[:, 3:6], axis=1))
         snap = (dist > s.snap_distance) | (angle > s.snap_angle_deg)
+        for k, object_id in enumerate(ids):
+            self._errors[object_id] = (error[k], bool(snap[k]))
+
+    def _apply_corrections(self, ids: list[str]) -> None:
+        """One step of each object's outstanding correction: the fraction ``1 - exp(-dt / tau)`` of what
+        is left (all of it when it snaps), on position, orientation and both velocities. A correction is
+        done when under 0.2 mm and 0.1 degrees; what is left of it then is dropped."""
+        if not ids:
+            return
+        twin, s = self.twin, self.settings
+        data = twin.data
+        body, qpos, dof = self._indices(ids)
+        error = np.array([self._errors[i][0] for i in ids])
+        snap = np.array([self._errors[i][1] for i in ids])
         alpha = np.where(snap, 1.0, 1.0 - float(np.exp(-twin.model.opt.timestep / s.correction_tau)))[:, None]
-        new = np.concatenate(blend(pos, quat, want_p, want_q, alpha), axis=1)
+        step = alpha * error
+        q = data.qpos[qpos]
+        quat = quat_product(from_rotvec(step[:, 3:6]), q[:, 3:])
+        new = np.concatenate([q[:, :3] + step[:, :3], quat / np.linalg.norm(quat, axis=1, keepdims=True)], axis=1)
         if not np.isfinite(new).all():
             bad = ids[int(np.flatnonzero(~np.isfinite(new).all(axis=1))[0])]
             raise ValueError(f"object {bad!r}: pose must be finite with a non-zero quaternion")
         data.qpos[qpos] = new  # no mj_forward: the next step computes positions (as set_pose(forward=False))
-        # Velocities: linear in world axes; angular kept by MuJoCo in body axes, blended in world axes.
-        xmat, vel = data.xmat[body].reshape(n, 3, 3), data.qvel[dof]
-        lin, ang = vel[:, :3], np.matmul(xmat, vel[:, 3:, None])[:, :, 0]
-        lin = lin + alpha * (want[:, 7:10] - lin)
-        ang = ang + alpha * (want[:, 10:] - ang)
-        xmat_t = xmat.transpose(0, 2, 1)
-        body_ang = np.matmul(xmat_t, ang[:, :, None])[:, :, 0]
-        done = snap | ((dist < 2e-4) & (angle < 0.1))
-        if twice:
-            again = (np.array([i in twice for i in ids]) & ~done)[:, None]
-            # The second pass as it was: the angular velocity read back from body axes, then blended.
-            ang = np.matmul(xmat, body_ang[:, :, None])[:, :, 0]
-            lin = np.where(again, lin + alpha * (want[:, 7:10] - lin), lin)
-            ang = ang + alpha * (want[:, 10:] - ang)
-            body_ang = np.where(again, np.matmul(xmat_t, ang[:, :, None])[:, :, 0], body_ang)
-        data.qvel[dof] = np.concatenate([lin, body_ang], axis=1)
-        for k in np.flatnonzero(done):
-            object_id = ids[k]
+        # Angular velocity: MuJoCo keeps it in body axes; the correction is in world axes.
+        xmat, vel = data.xmat[body].reshape(-1, 3, 3), data.qvel[dof]
+        ang = np.matmul(xmat, vel[:, 3:, None])[:, :, 0] + step[:, 9:]
+        data.qvel[dof] = np.concatenate([vel[:, :3] + step[:, 6:9],
+                                         np.matmul(xmat.transpose(0, 2, 1), ang[:, :, None])[:, :, 0]], axis=1)
+        if self._history.key == self._history_key():
+            rows = [self._history_rows.get(i) for i in ids]
+            mine = [k for k, r in enumerate(rows) if r is not None]
+            self._history.corrected(np.array([rows[k] for k in mine], dtype=np.intp), step[mine])
+        left = error - step
+        done = snap | ((np.linalg.norm(left[:, :3], axis=1) < 2e-4)
+                       & (np.degrees(np.linalg.norm(left[:, 3:6], axis=1)) < 0.1))
+        for k, object_id in enumerate(ids):
+            if not done[k]:
+                self._errors[object_id] = (left[k], False)
+                continue
+            del self._errors[object_id]
             if snap[k]:
                 self.report.snaps += 1
-                self.rlog.event(self.twin.time, f"{object_id}: snapped {dist[k] * 1e3:.1f} mm, {angle[k]:.1f} deg to "
-                                                f"the remote pose", "WARN")
-            del self._targets[object_id]
+                self.rlog.event(self.twin.time, f"{object_id}: snapped {np.linalg.norm(error[k, :3]) * 1e3:.1f} mm, "
+                                                f"{np.degrees(np.linalg.norm(error[k, 3:6])):.1f} deg to the remote pose",
+                                "WARN")
+
+    def _state(self, body: np.ndarray, dof: np.ndarray) -> np.ndarray:
+        """(n, 13) rows of position, quaternion, linear and angular velocity (world axes) of ``body``, as of
+        the last step (like :meth:`twin.sim.Twin.pose`)."""
+        data = self.twin.data
+        vel = data.qvel[dof]
+        ang = np.matmul(data.xmat[body].reshape(-1, 3, 3), vel[:, 3:, None])[:, :, 0]
+        return np.concatenate([data.xpos[body], data.xquat[body], vel[:, :3], ang], axis=1)
+
+    def _history_key(self) -> object:
+        """What the history's rows mean: this model, these objects in this order."""
+        return (self.twin.model, tuple(self._history_rows))
+
+    def _remember(self) -> None:
+        """Record every object's state after a step (:mod:`twin.history`)."""
+        if self._history.capacity == 0:
+            return
+        if self._history_for != (self.twin.model, len(self._offsets)):  # objects come and go with a new model
+            self._history_for = (self.twin.model, len(self._offsets))
+            self._history_rows = {i: k for k, i in enumerate(i for i in self._offsets if self.twin.has(i))}
+        if not self._history_rows:
+            return
+        ids = list(self._history_rows)
+        self._history.start(self._history_key(), len(ids))
+        body, _, dof = self._indices(ids)
+        self._history.record(self.clock.stamp_ns(), self._state(body, dof))
 
     def _indices(self, ids: list[str]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(body ids (n,), qpos indices (n, 7), qvel indices (n, 6)) of ``ids``' free joints in the twin's model."""
