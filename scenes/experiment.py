@@ -33,7 +33,7 @@ import multiprocessing as mp
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import Executor, ProcessPoolExecutor, as_completed
 from contextlib import contextmanager
-from dataclasses import asdict, dataclass, fields
+from dataclasses import asdict, dataclass, fields, replace
 from pathlib import Path
 
 import numpy as np
@@ -41,7 +41,7 @@ import numpy as np
 from estimation.errors import TwinError
 from scenes.scenefile import SceneSpec
 from sync.netem import Conditions, LinkModel, Network
-from twin.runtime import LocalSettings
+from twin.runtime import DEFAULT_LOCAL, LocalSettings
 
 #: Tasks :func:`run_experiment` knows.
 TASKS = ("push", "press")
@@ -349,9 +349,10 @@ def force_sample_bytes() -> int:
 
 
 def run_session(scene: SceneSpec, condition: Condition, *, cache_dir: Path | None = None,
-                recorded: RecordedTask | None = None) -> Trace:
+                recorded: RecordedTask | None = None, settings: LocalSettings | None = None) -> Trace:
     """One deterministic headless session of ``condition``; see the module docstring. The task
-    :data:`RECORDED` replays ``recorded``.
+    :data:`RECORDED` replays ``recorded``. ``settings``: the twin's (default :data:`twin.runtime.DEFAULT_LOCAL`),
+    its ``mass_scale`` replaced by the condition's.
 
     Raises:
         ExperimentError: as :func:`check_condition` and :func:`plan_task`; the recorded task without a recording.
@@ -361,7 +362,7 @@ def run_session(scene: SceneSpec, condition: Condition, *, cache_dir: Path | Non
     check_condition(condition)
     link = condition.conditions()
     network = Network(uplink=link, downlink=link, seed=condition.seed)
-    settings = LocalSettings(mass_scale=condition.mass_scale)
+    settings = replace(settings or DEFAULT_LOCAL, mass_scale=condition.mass_scale)
     with Headless(scene, settings=settings, network=network, cache_dir=cache_dir) as session:
         remote, local = session.remote, session.local
         dt = session.dt
