@@ -24,8 +24,8 @@ from estimation.fusion import oriented_normals
 from estimation.materials import resolve_density
 from estimation.units import unit_scale
 from scenes.scenefile import ObjectSpec, SceneError
-from twin.decompose import DEFAULT_SETTINGS, CoacdSettings, Hull, decompose_many
-from twin.objects import DEFAULT_FRICTION, TwinObject, decimate, fit_primitive
+from twin.decompose import DEFAULT_SETTINGS, CoacdSettings, decompose_many
+from twin.objects import DEFAULT_FRICTION, TwinObject, decimate, fit_primitive, lowest_point
 
 log = logging.getLogger(__name__)
 
@@ -176,14 +176,15 @@ def prepare_objects(
     hulls = decompose_many(visuals, coacd, cache_dir=cache_dir, progress=progress)
     out = []
     for s, (est, friction), visual, (parts, cached) in zip(specs, estimates, visuals, hulls, strict=True):
-        position = placement(s, parts, table_top, center_of_mass=est.mass.center_of_mass)
-        out.append(TwinObject(id=s.id, estimate=est, friction=friction, visual=visual, hulls=tuple(parts),
-                              position=position, quat=np.array([1.0, 0, 0, 0]),
-                              hull_cached=cached, primitive=fit_primitive(visual)))
+        obj = TwinObject(id=s.id, estimate=est, friction=friction, visual=visual, hulls=tuple(parts),
+                         position=np.zeros(3), quat=np.array([1.0, 0, 0, 0]), hull_cached=cached,
+                         primitive=fit_primitive(visual))
+        position = placement(s, lowest_point(obj), table_top, center_of_mass=est.mass.center_of_mass)
+        out.append(replace(obj, position=position))
     return out
 
 
-def placement(spec: ObjectSpec, hulls: list[Hull], table_top: float | None, *,
+def placement(spec: ObjectSpec, lowest: float, table_top: float | None, *,
               center_of_mass: np.ndarray | None = None) -> np.ndarray:
     """World position of the centre of mass: [x, y] rests the object on the table (or floor).
 
@@ -191,8 +192,10 @@ def placement(spec: ObjectSpec, hulls: list[Hull], table_top: float | None, *,
     metres, the estimate's: the cloud's frame in world axes) is added to it: [x, y, z] puts the cloud
     exactly where its pose says; [x, y] keeps x and y so and rests it on the table.
 
-    Rests it by its collision hulls, not its visual mesh: contact is between hulls, and a hull reaching
-    below the visual mesh would start inside the table and be kicked out.
+    ``lowest``: the lowest z, metres, of what collides (:func:`twin.objects.lowest_point` of the object
+    at the origin): its primitive where one stands in for the hulls, else the hulls; not the visual mesh.
+    A hull reaching below the visual mesh would start inside the table and be kicked out; a box resting
+    on its hulls' fringe would start a few millimetres above the table and drop.
     """
     offset = np.zeros(3)
     if spec.posed:
@@ -201,7 +204,6 @@ def placement(spec: ObjectSpec, hulls: list[Hull], table_top: float | None, *,
         offset = np.asarray(center_of_mass, dtype=np.float64)
     if len(spec.position) == 3:
         return np.asarray(spec.position, dtype=np.float64) + offset
-    lowest = float(min(v[:, 2].min() for v, _ in hulls))
     base = table_top if table_top is not None else 0.0
     return np.array([spec.position[0] + offset[0], spec.position[1] + offset[1], base - lowest + PLACEMENT_GAP])
 
