@@ -15,7 +15,6 @@ import logging
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from estimation import tolerances as tol
 from estimation.cloud import PointCloud, make_cloud
@@ -134,7 +133,8 @@ def fuse_views(views: list[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray, 
 
 def oriented_normals(points: np.ndarray, sensor_origins: np.ndarray, *, k: int = tol.NORMAL_NEIGHBOURS,
                      fixed: np.ndarray | None = None) -> np.ndarray:
-    """PCA normals (n, 3), each flipped towards the sensor that saw its point.
+    """PCA normals (n, 3) (:func:`estimation.normals.estimate_normals`), each flipped towards the sensor that
+    saw its point.
 
     Args:
         points: (n, 3) float64 metres.
@@ -146,20 +146,15 @@ def oriented_normals(points: np.ndarray, sensor_origins: np.ndarray, *, k: int =
     Raises:
         CloudError: shapes disagree or fewer than 3 points.
     """
+    from estimation.normals import estimate_normals, orient_to_viewpoint
+
     pts = as_points(points, "points")
     org = as_points(sensor_origins, "sensor_origins")
     if org.shape != pts.shape:
         raise CloudError(f"sensor_origins: expected shape {pts.shape} to match points, got {org.shape}")
     if len(pts) < 3:
         raise CloudError(f"too few points for normals: {len(pts)}")
-    k = min(k, len(pts))
-    _, nb = cKDTree(pts).query(pts, k=k)
-    local = pts[nb] - pts[nb].mean(axis=1, keepdims=True)
-    cov = np.einsum("nki,nkj->nij", local, local)
-    _, vecs = np.linalg.eigh(cov)  # ascending eigenvalues: column 0 is the normal
-    normals = vecs[:, :, 0]
-    flip = np.einsum("ij,ij->i", normals, org - pts) < 0
-    normals[flip] *= -1
+    normals = orient_to_viewpoint(pts, estimate_normals(pts, k), org)
     if fixed is not None:
         given = np.isfinite(fixed).all(axis=1)
         normals[given] = fixed[given]

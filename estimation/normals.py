@@ -144,6 +144,9 @@ def thin_wall_side(points: np.ndarray, normals: np.ndarray, tree: cKDTree,
 
 
 def orient_to_viewpoint(points: np.ndarray, normals: np.ndarray, viewpoint: np.ndarray) -> np.ndarray:
-    """Flip normals to face ``viewpoint`` ((3,) metres, same frame): a sensor sees the outside."""
+    """Flip normals to face ``viewpoint`` (metres, same frame): a sensor sees the outside.
+
+    ``viewpoint`` is (3,) for one sensor, or (n, 3) for each point's own sensor (a fused cloud).
+    """
     facing = np.einsum("ij,ij->i", normals, np.asarray(viewpoint) - points)
     return np.where(facing[:, None] < 0, -normals, normals)
