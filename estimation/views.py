@@ -221,7 +221,7 @@ def estimate_views(views: list[View], density: float, *, support: Plane | str | 
         closed = close_on_plane(points, origins, np.full_like(points, np.nan), None, cell=0.0, cut=0.0)
     completion = closed.completion
     observed = len(points)
-    # The observed points' normals are the fused cloud's own (NaN here): only the completion's are given.
+    # Observed normals are refitted (NaN here): with the base and skirt as neighbours, those near the base turn.
     alln = np.where(closed.completed[:, None], closed.normals, np.nan)
     cloud = fused_cloud(closed.points, closed.origins, completed=closed.completed, completed_normals=alln)
     result = estimate(cloud, density, material=material)
