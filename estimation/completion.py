@@ -17,6 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from estimation.contracts import as_points
+from estimation.inertia import triangle_areas
 from estimation.segmentation import Plane
 
 #: Points in the lowest band above the cut whose normal is within this cosine of horizontal are upright
@@ -163,7 +164,7 @@ def coverage(vertices: np.ndarray, faces: np.ndarray, observed: np.ndarray, *, r
     from scipy.spatial import cKDTree
 
     tri = np.asarray(vertices, dtype=np.float64)[np.asarray(faces, dtype=np.int64)]
-    area = np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1) / 2
+    area = triangle_areas(tri)
     obs = as_points(observed, "observed")
     if len(obs) == 0 or len(tri) == 0:
         return 0.0, float(area.sum())

@@ -35,7 +35,7 @@ from __future__ import annotations
 import numpy as np
 
 from estimation.dualcontour import QEF_RELATIVE_EIGENVALUE
-from estimation.inertia import MassProperties, from_moments
+from estimation.inertia import MassProperties, from_moments, triangle_areas
 
 #: Radians. Two planes at angle ``phi`` with equal weight give a quadric with eigenvalues ``(1 +- cos phi) / 2``;
 #: the contouring keeps the second (calls it a crease) when their ratio ``tan^2(phi / 2)`` exceeds
@@ -67,9 +67,7 @@ def bulge_volumes(vertices: np.ndarray, faces: np.ndarray, normals: np.ndarray,
         h = np.einsum("ij,ij->i", vertices[j] - vertices[i], nj - ni) / 8
         ok = smooth[i] & smooth[j] & (np.einsum("ij,ij->i", ni, nj) > cos_crease)
         heights += np.where(ok, h, 0.0)
-    tri = vertices[faces]
-    area = np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1) / 2
-    return area / 3 * heights
+    return triangle_areas(vertices[faces]) / 3 * heights
 
 
 def corrected(props: MassProperties, vertices: np.ndarray, faces: np.ndarray,

@@ -23,7 +23,7 @@ from estimation import tolerances as tol
 from estimation.cloud import PointCloud, check_estimable
 from estimation.downsample import voxel_downsample, voxel_subsample
 from estimation.errors import CloudError
-from estimation.inertia import MassProperties, mass_properties
+from estimation.inertia import MassProperties, mass_properties, triangle_areas
 from estimation.materials import check_density
 from estimation.obb import OrientedBox, oriented_box, oriented_box_local
 from estimation.units import units_warning
@@ -323,8 +323,7 @@ def _auto_pass(cloud: PointCloud, box: OrientedBox, local: np.ndarray, spacing: 
 
 
 def _area(surface) -> float:  # type: ignore[no-untyped-def]
-    tri = surface.vertices[surface.faces]
-    return float(np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1).sum() / 2)
+    return float(triangle_areas(surface.vertices[surface.faces]).sum())
 
 
 def _estimate_from_surface(

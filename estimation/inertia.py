@@ -43,6 +43,12 @@ def signed_volumes(triangles: np.ndarray) -> np.ndarray:
     return np.einsum("ij,ij->i", triangles[:, 0], np.cross(triangles[:, 1], triangles[:, 2])) / 6
 
 
+def triangle_areas(triangles: np.ndarray) -> np.ndarray:
+    """Area (m^2) of each triangle, (f,) float64; triangles (f, 3, 3) float64 metres (corner, coordinate)."""
+    edges = triangles[:, 1:] - triangles[:, :1]
+    return np.linalg.norm(np.cross(edges[:, 0], edges[:, 1]), axis=1) / 2
+
+
 def mass_properties(
     vertices: np.ndarray, faces: np.ndarray, density: float, *, apex: np.ndarray | None = None
 ) -> MassProperties:

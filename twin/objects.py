@@ -119,7 +119,7 @@ def fit_primitive(mesh: Hull, *, min_fill: float = PRIMITIVE_MIN_FILL) -> Primit
     import mujoco
     import trimesh
 
-    from estimation.inertia import mass_properties, signed_volumes
+    from estimation.inertia import mass_properties, signed_volumes, triangle_areas
 
     vertices, faces = mesh
     tri = vertices[faces]
@@ -127,8 +127,7 @@ def fit_primitive(mesh: Hull, *, min_fill: float = PRIMITIVE_MIN_FILL) -> Primit
     if volume <= 0:
         return None
     # Each vertex stands for a third of the area of the faces around it.
-    area = np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1) / 6
-    weight = np.bincount(faces.ravel(), weights=np.repeat(area, 3), minlength=len(vertices))
+    weight = np.bincount(faces.ravel(), weights=np.repeat(triangle_areas(tri) / 3, 3), minlength=len(vertices))
     to_origin, _ = trimesh.bounds.oriented_bounds(vertices)
     obb = (to_origin[:3, :3].T, -to_origin[:3, :3].T @ to_origin[:3, 3])  # (axes as columns, centre)
     principal = (mass_properties(vertices, faces, 1.0).principal_axes, np.zeros(3))
