@@ -25,8 +25,8 @@ STATE, CORRECTION = 13, 12
 class History:
     """A ring of the last ``capacity`` steps: (stamp on the twin's clock, ns; each object's state row).
 
-    Valid for one set of objects in one order (``key``): :meth:`start` with another key empties it, as a
-    new model or an added object changes which rows mean what.
+    Valid for one set of objects in one order (``key``, compared by identity): :meth:`start` with another
+    key empties it, as a new model or an added object changes which rows mean what.
     """
 
     def __init__(self, capacity: int) -> None:
@@ -42,7 +42,7 @@ class History:
 
     def start(self, key: object, objects: int) -> None:
         """Begin again for ``objects`` objects (rows) known by ``key``; a no-op when ``key`` is current."""
-        if key == self.key:
+        if key is self.key:
             return
         self.key = key
         self._rows = np.zeros((self.capacity, objects, STATE + CORRECTION))

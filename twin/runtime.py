@@ -239,6 +239,7 @@ class Local:
         self._history = History(round(settings.align_window / self.twin.model.opt.timestep))
         self._history_rows: dict[str, int] = {}  # id -> its row in the history
         self._history_for: tuple[object, int] = (None, 0)  # (model, objects) the rows were made for
+        self._history_meaning: tuple[object, np.ndarray | None, np.ndarray | None] = (None, None, None)  # key, rows
         # id -> (pose message, offset, its pose on the twin's body, the row _correct_all reads): a target is
         # corrected towards at every step until reached, and mapping it costs more than the correction, so it
         # is mapped once per message.
@@ -619,7 +620,7 @@ class Local:
         want = np.array([self._on_body(i, m, self._offsets[i], row=True) for i, m in zip(ids, msgs, strict=True)])
         past = self._state(body, dof)
         since = np.zeros((len(ids), CORRECTION))
-        if self._history.key == self._history_key():
+        if self._history_valid():
             rows = [self._history_rows.get(i) for i in ids]
             stamps = np.array([m.answers_ns if r is not None else 0 for m, r in zip(msgs, rows, strict=True)])
             for stamp in set(stamps.tolist()) - {0}:
@@ -663,7 +664,7 @@ class Local:
         ang = np.matmul(xmat, vel[:, 3:, None])[:, :, 0] + step[:, 9:]
         data.qvel[dof] = np.concatenate([vel[:, :3] + step[:, 6:9],
                                          np.matmul(xmat.transpose(0, 2, 1), ang[:, :, None])[:, :, 0]], axis=1)
-        if self._history.key == self._history_key():
+        if self._history_valid():
             rows = [self._history_rows.get(i) for i in ids]
             mine = [k for k, r in enumerate(rows) if r is not None]
             self._history.corrected(np.array([rows[k] for k in mine], dtype=np.intp), step[mine])
@@ -689,23 +690,28 @@ class Local:
         ang = np.matmul(data.xmat[body].reshape(-1, 3, 3), vel[:, 3:, None])[:, :, 0]
         return np.concatenate([data.xpos[body], data.xquat[body], vel[:, :3], ang], axis=1)
 
-    def _history_key(self) -> object:
-        """What the history's rows mean: this model, these objects in this order."""
-        return (self.twin.model, tuple(self._history_rows))
+    def _history_valid(self) -> bool:
+        """The history's rows are this model's objects (:meth:`_remember` has run since the last new model)."""
+        key = self._history_meaning[0]
+        return key is not None and self._history_for[0] is self.twin.model and self._history.key is key
 
     def _remember(self) -> None:
         """Record every object's state after a step (:mod:`twin.history`)."""
         if self._history.capacity == 0:
             return
-        if self._history_for != (self.twin.model, len(self._offsets)):  # objects come and go with a new model
+        if self._history_for[0] is not self.twin.model or self._history_for[1] != len(self._offsets):
+            # Objects come and go with a new model: new rows, and the history starts again.
             self._history_for = (self.twin.model, len(self._offsets))
             self._history_rows = {i: k for k, i in enumerate(i for i in self._offsets if self.twin.has(i))}
-        if not self._history_rows:
-            return
-        ids = list(self._history_rows)
-        self._history.start(self._history_key(), len(ids))
-        body, _, dof = self._indices(ids)
-        self._history.record(self.clock.stamp_ns(), self._state(body, dof))
+            ids = list(self._history_rows)
+            key = (self.twin.model, tuple(ids)) if ids else None
+            body, _, dof = self._indices(ids) if ids else (None, None, None)
+            self._history_meaning = (key, body, dof)
+            if key is not None:
+                self._history.start(key, len(ids))
+        key, body, dof = self._history_meaning
+        if key is not None:
+            self._history.record(self.clock.stamp_ns(), self._state(body, dof))
 
     def _indices(self, ids: list[str]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(body ids (n,), qpos indices (n, 7), qvel indices (n, 6)) of ``ids``' free joints in the twin's model."""
