@@ -3,6 +3,7 @@
     .venv/bin/python bench/build.py                      # the full scene, then the levers on its first 20 objects
     .venv/bin/python bench/build.py --subset 0           # the full scene only
     .venv/bin/python bench/build.py --profile 10         # cProfile of an in-process build of 10 objects
+    .venv/bin/python bench/build.py --cli 3              # `twin build` itself, cold, 3 times: wall and CPU
 
 Cold means an empty CoACD cache folder and a fresh output folder (both in a temporary folder), as
 `twin build` meets a new scene. The full build runs as `twin build` does (:func:`scenes.build.build_scene`
@@ -103,6 +104,29 @@ def _table(runs: list[Run]) -> str:
     return "\n".join(rows)
 
 
+def _cli_runs(scene_path: Path, runs: int) -> str:
+    """``twin build SCENE --out DIR --cache-dir EMPTY`` as a user runs it, ``runs`` times cold: wall seconds
+    from start to exit, and the command's CPU (its process and its workers)."""
+    import statistics
+    import subprocess
+
+    twin = Path(sys.executable).with_name("twin")
+    walls, cpus = [], []
+    for k in range(runs):
+        with tempfile.TemporaryDirectory(prefix="bench-build-cli-") as tmp:
+            before = resource.getrusage(resource.RUSAGE_CHILDREN)
+            t0 = time.perf_counter()
+            subprocess.run([str(twin), "build", str(scene_path), "--out", f"{tmp}/out", "--cache-dir", f"{tmp}/coacd"],
+                           check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+            walls.append(time.perf_counter() - t0)
+            after = resource.getrusage(resource.RUSAGE_CHILDREN)
+            cpus.append(after.ru_utime + after.ru_stime - before.ru_utime - before.ru_stime)
+            print(f"  twin build run {k + 1}: {walls[-1]:.1f} s wall, {cpus[-1]:.1f} s CPU", file=sys.stderr)
+    return (f"`twin build {scene_path.name}` cold, {runs} runs: wall median {statistics.median(walls):.1f} s "
+            f"(min {min(walls):.1f}, max {max(walls):.1f}); CPU median {statistics.median(cpus):.1f} s "
+            f"(min {min(cpus):.1f}, max {max(cpus):.1f})")
+
+
 def _profile(scene, count: int) -> str:  # type: ignore[no-untyped-def]
     import cProfile
     import io
@@ -127,8 +151,16 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--subset", type=int, default=20, help="objects for the lever comparison (0: skip it)")
     p.add_argument("--profile", type=int, default=0, help="only cProfile an in-process build of this many objects")
     p.add_argument("--quiet", action="store_true", help="no per-object lines on stderr")
+    p.add_argument("--cli", type=int, default=0, help="only time `twin build` itself this many times, cold")
     args = p.parse_args(argv)
     scene = load_scene(args.scene)
+    if args.cli:
+        line = _cli_runs(args.scene, args.cli)
+        print(line)
+        RESULTS.with_name("build_cli.txt").write_text(
+            f"# .venv/bin/python bench/build.py --cli {args.cli}\n# {time.strftime('%Y-%m-%d %H:%M')}, load average "
+            f"{' '.join(f'{x:.1f}' for x in os.getloadavg())} before the last run\n{line}\n")
+        return 0
     if args.profile:
         print(_profile(scene, args.profile))
         return 0
