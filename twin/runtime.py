@@ -262,12 +262,11 @@ class Local:
         self._blend = 1.0 - float(np.exp(-self.twin.model.opt.timestep / settings.correction_tau))  # a step's share
         self._history_for: tuple[object, int] = (None, 0)  # (model, objects) the rows were made for
         self._history_meaning: tuple[object, np.ndarray | None, np.ndarray | None] = (None, None, None)  # key, rows
-        # id -> (pose message, offset, its pose on the twin's body, the row _correct_all reads): a target is
-        # corrected towards at every step until reached, and mapping it costs more than the correction, so it
-        # is mapped once per message.
+        # id -> (pose message, offset, its pose on the twin's body, the row _measure reads): the newest pose is
+        # read again by the hold, the divergence samples and the debug log, so it is mapped once per message.
         self._mapped: dict[str, tuple[Pose, tuple[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray],
                                       np.ndarray]] = {}
-        self._to_correct: list[str] = []  # objects whose new pose is corrected towards at the end of _drain
+        self._to_correct: list[str] = []  # objects whose new pose is measured at the next flush (_measure)
         # per model: ids -> (body ids, (n, 7) qpos and (n, 6) qvel indices); the same objects are corrected
         # step after step until they reach their targets
         self._rows: tuple[object, dict[tuple[str, ...], tuple[np.ndarray, np.ndarray, np.ndarray]]] = (None, {})
@@ -763,7 +762,7 @@ class Local:
         """:func:`_on_twin_body` of ``pose``, computed once per (message, offset) of an object.
 
         With ``row``: the (13,) row of position, quaternion, linear and angular velocity that
-        :meth:`_correct_all` stacks."""
+        :meth:`_measure` stacks."""
         hit = self._mapped.get(object_id)
         if hit is None or hit[0] is not pose or hit[1] is not offset:
             mapped = _on_twin_body(pose, offset)
