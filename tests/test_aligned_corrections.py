@@ -30,22 +30,22 @@ def cache(tmp_path_factory) -> Path:
 
 def test_history_finds_the_nearest_step_within_the_tolerance_and_forgets_past_its_window():
     h, model = History(capacity=5), object()
-    h.start(model, objects=2)
+    h.start(model, ["a", "b"])
     for k in range(8):  # steps at 1, 2, ... 8 ms; the ring keeps the last five
         h.record(k * 10**6 + 10**6, np.full((2, STATE), float(k)))
     state, since = h.at(6 * 10**6 + 4 * 10**5, tolerance_ns=10**6)  # nearest: the step at 6 ms (k = 5)
     assert (state == 5.0).all() and (since == 0).all()
     assert h.at(3 * 10**6, tolerance_ns=5 * 10**5) is None  # k = 2: overwritten (k = 3 is 1 ms off)
     assert h.at(20 * 10**6, tolerance_ns=10**6) is None  # not yet (a forged stamp)
-    h.start(model, objects=2)  # same key: kept
+    h.start(model, ["a", "b"])  # same key: kept
     assert h.at(8 * 10**6, tolerance_ns=0) is not None
-    h.start(object(), objects=3)  # another key: empty
+    h.start(object(), ["a", "b", "c"])  # another key: empty
     assert h.at(8 * 10**6, tolerance_ns=10**9) is None
 
 
 def test_history_reports_the_corrections_applied_since_a_step():
     h = History(capacity=10)
-    h.start(object(), objects=2)
+    h.start(object(), ["a", "b"])
     h.record(1, np.zeros((2, STATE)))
     h.corrected(np.array([1]), np.full((1, CORRECTION), 0.5))
     h.record(2, np.zeros((2, STATE)))

@@ -14,6 +14,8 @@ window of steps; the runtime (:mod:`twin.runtime`) writes and reads it.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 
 #: Columns of a state row: position (3, m), quaternion (4, w x y z), linear and angular velocity (3 + 3,
@@ -25,8 +27,9 @@ STATE, CORRECTION = 13, 12
 class History:
     """A ring of the last ``capacity`` steps: (stamp on the twin's clock, ns; each object's state row).
 
-    Valid for one set of objects in one order (``key``, compared by identity): :meth:`start` with another
-    key empties it, as a new model or an added object changes which rows mean what.
+    Valid for one set of objects in one order (``key``, compared by identity; ``rows``: object id -> its
+    row): :meth:`start` with another key empties it, as a new model or an added object changes which rows
+    mean what.
     """
 
     def __init__(self, capacity: int) -> None:
@@ -34,19 +37,22 @@ class History:
             raise ValueError(f"history capacity must be >= 0, got {capacity}")
         self.capacity = capacity
         self.key: object = None
+        self.rows: dict[str, int] = {}
         self._stamps = np.zeros(capacity, dtype=np.int64)
         self._rows = np.zeros((capacity, 0, STATE + CORRECTION))
         self._applied = np.zeros((0, CORRECTION))  # corrections applied so far, per object (row order)
         self._count = 0
         self._next = 0
 
-    def start(self, key: object, objects: int) -> None:
-        """Begin again for ``objects`` objects (rows) known by ``key``; a no-op when ``key`` is current."""
+    def start(self, key: object, ids: Sequence[str]) -> None:
+        """Begin again for the objects ``ids`` (rows, in this order) known by ``key`` (None: none); a no-op
+        when ``key`` is current."""
         if key is self.key:
             return
         self.key = key
-        self._rows = np.zeros((self.capacity, objects, STATE + CORRECTION))
-        self._applied = np.zeros((objects, CORRECTION))
+        self.rows = {i: k for k, i in enumerate(ids)}
+        self._rows = np.zeros((self.capacity, len(ids), STATE + CORRECTION))
+        self._applied = np.zeros((len(ids), CORRECTION))
         self._count = self._next = 0
 
     def record(self, stamp_ns: int, state: np.ndarray) -> None:

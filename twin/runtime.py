@@ -256,12 +256,11 @@ class Local:
         self._targets: dict[str, Pose] = {}  # id -> its newest pose from C, until measured (_measure)
         self._errors: dict[str, tuple[np.ndarray, bool]] = {}  # id -> (correction left (12,), snap it)
         self._history = History(round(settings.align_window / self.twin.model.opt.timestep))
-        self._history_rows: dict[str, int] = {}  # id -> its row in the history
         # Within two steps of a recorded one: a stamp between steps, never one from outside the window.
         self._align_tolerance = round(2e9 * self.twin.model.opt.timestep)
         self._blend = 1.0 - float(np.exp(-self.twin.model.opt.timestep / settings.correction_tau))  # a step's share
-        self._history_for: tuple[object, int] = (None, 0)  # (model, objects) the rows were made for
-        self._history_meaning: tuple[object, np.ndarray | None, np.ndarray | None] = (None, None, None)  # key, rows
+        self._history_for: tuple[object, int] = (None, 0)  # (model, objects) the history's rows were made for
+        self._history_index: tuple[np.ndarray, np.ndarray] | None = None  # their body and qvel indices
         # id -> (pose message, offset, its pose on the twin's body, the row _measure reads): the newest pose is
         # read again by the hold, the divergence samples and the debug log, so it is mapped once per message.
         self._mapped: dict[str, tuple[Pose, tuple[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray],
@@ -642,7 +641,7 @@ class Local:
         n = len(ids)
         past, since, aligned = np.empty((n, STATE)), np.zeros((n, CORRECTION)), np.zeros(n, dtype=bool)
         if self._history_valid():
-            rows = [self._history_rows.get(i, -1) for i in ids]
+            rows = [self._history.rows.get(i, -1) for i in ids]
             stamps = [m.answers_ns if r >= 0 else 0 for m, r in zip(msgs, rows, strict=True)]
             for stamp in set(stamps) - {0}:
                 found = self._history.at(stamp, self._align_tolerance)
@@ -686,7 +685,7 @@ class Local:
         data.qvel[dof] = np.concatenate([vel[:, :3] + step[:, 6:9],
                                          np.matmul(xmat.transpose(0, 2, 1), ang[:, :, None])[:, :, 0]], axis=1)
         if self._history_valid():
-            rows = [self._history_rows.get(i, -1) for i in ids]
+            rows = [self._history.rows.get(i, -1) for i in ids]
             if min(rows) >= 0:
                 self._history.corrected(rows, step)
             else:  # objects added since the last step: not in the history yet
@@ -716,8 +715,8 @@ class Local:
 
     def _history_valid(self) -> bool:
         """The history's rows are this model's objects (:meth:`_remember` has run since the last new model)."""
-        key = self._history_meaning[0]
-        return key is not None and self._history_for[0] is self.twin.model and self._history.key is key
+        key = self._history.key
+        return key is not None and key[0] is self.twin.model  # type: ignore[index]
 
     def _remember(self) -> None:
         """Record every object's state after a step (:mod:`twin.history`)."""
@@ -726,16 +725,11 @@ class Local:
         if self._history_for[0] is not self.twin.model or self._history_for[1] != len(self._offsets):
             # Objects come and go with a new model: new rows, and the history starts again.
             self._history_for = (self.twin.model, len(self._offsets))
-            self._history_rows = {i: k for k, i in enumerate(i for i in self._offsets if self.twin.has(i))}
-            ids = list(self._history_rows)
-            key = (self.twin.model, tuple(ids)) if ids else None
-            body, _, dof = self._indices(ids) if ids else (None, None, None)
-            self._history_meaning = (key, body, dof)
-            if key is not None:
-                self._history.start(key, len(ids))
-        key, body, dof = self._history_meaning
-        if key is not None:
-            self._history.record(self.clock.stamp_ns(), self._state(body, dof))
+            ids = [i for i in self._offsets if self.twin.has(i)]
+            self._history.start((self.twin.model, tuple(ids)) if ids else None, ids)
+            self._history_index = self._indices(ids)[::2] if ids else None  # type: ignore[assignment]
+        if self._history_index is not None:
+            self._history.record(self.clock.stamp_ns(), self._state(*self._history_index))
 
     def _indices(self, ids: list[str]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(body ids (n,), qpos indices (n, 7), qvel indices (n, 6)) of ``ids``' free joints in the twin's model."""
