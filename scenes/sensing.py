@@ -164,14 +164,19 @@ class CameraSensor:
 
     @classmethod
     def for_scene(cls, scene, *, cameras: int = 3, seed: int = 0, track_period: float = 0.5,  # type: ignore[no-untyped-def]
-                  **camera: object) -> CameraSensor:
-        """The default rig for a scene file: ``cameras`` around its table, the table's workspace."""
-        from scenes.cameras import CameraFeed, table_ring, table_workspace
+                  noise=None, **camera: object) -> CameraSensor:
+        """The default rig for a scene file: ``cameras`` around its table, the table's workspace.
+
+        ``noise``: a :class:`scenes.cameras.DepthNoise` (None: the Kinect model); ``camera`` options go to
+        every :class:`scenes.cameras.Camera`.
+        """
+        from scenes.cameras import KINECT_V1, CameraFeed, table_ring, table_workspace
 
         size = None if scene.table is None else scene.table.size
         height = None if scene.table is None else scene.table.height
         rig = table_ring(size, height, count=cameras, **camera)
-        return cls(CameraFeed(rig, table_workspace(size, height), seed=seed), track_period=track_period, seed=seed)
+        feed = CameraFeed(rig, table_workspace(size, height), noise=KINECT_V1 if noise is None else noise, seed=seed)
+        return cls(feed, track_period=track_period, seed=seed)
 
     # -- the Sensor seam -------------------------------------------------------------------------
 
@@ -275,10 +280,13 @@ class CameraSensor:
         """The segment's views as one cloud: normals towards each point's camera, the base closed."""
         from estimation.completion import close_on_plane
         from estimation.fusion import oriented_normals
+        from estimation.spacing import surface_noise
 
         pts, origins = seg.points, seg.origins
+        others = [s.points for s in scan.segments if s is not seg]
         closed = close_on_plane(pts, origins, oriented_normals(pts, origins), scan.plane, cell=scan.cell / 3,
-                                cut=scan.margin)
+                                cut=scan.margin, noise=surface_noise(pts), views=scan.views or None,
+                                others=np.concatenate(others) if others else None)
         allp, alln, allo, completed = closed.points, closed.normals, closed.origins, closed.completed
         if points and len(allp) > points:
             keep = np.sort(np.random.default_rng([self.seed, shot]).permutation(len(allp))[:points])

@@ -1,0 +1,276 @@
+"""Space carving: what the depth cameras prove empty, and the solid that is left around one object.
+
+A depth pixel says more than where its surface point is: everything on its ray in front of that point is
+empty. An object's unseen faces (the side no camera faced, the part hidden behind a neighbour) lie
+somewhere in the space no ray passed through; carving every camera's free space out of a voxel grid
+around the object leaves a solid that holds the object (an upper bound, the "visual hull" with depth).
+Where rays pass close to the object (its silhouettes from several cameras, the table seen around it)
+that solid is tight; where no ray gets near (under a ball, inside a ring's hole) it is loose. So the
+solid's surface is used only where the object has nothing better: no observed point and no mirror image
+(``estimation.completion``).
+
+Conventions as in ``estimation.fusion``: pinhole cameras, OpenCV axes, depth along the camera's z,
+NaN where there was no return; world frame, metres.
+
+Noise: a voxel is free only when it lies in front of the measured depth by more than
+``FREE_SIGMAS`` of that pixel's axial noise plus ``FREE_CELLS`` of a voxel (the voxel's centre is a
+proxy for its whole extent). Edge pixels (flying pixels, ``fusion.edge_mask``) carve nothing. Pixels on
+the support plane carve down to the fitted plane itself (it is known far better than one pixel's noise),
+which is what lets the table seen around an object carve the space beside the object's base.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from estimation.contracts import as_points
+from estimation.fusion import Intrinsics, depth_to_points, edge_mask
+from estimation.segmentation import Plane
+
+#: A voxel is free when it lies this many axial noise sigmas in front of the measured depth (one camera,
+#: one pixel: at 1.5 sigma a surface voxel is carved by noise in ~7 % of pixels, and other cameras and
+#: the mirror image cover what a stray carve removes) ...
+FREE_SIGMAS = 1.5
+
+#: ... plus this many voxel sizes (the centre stands for the whole voxel, half a cell each way).
+FREE_CELLS = 0.5
+
+#: A pixel near the support plane is taken as the plane only if it is no nearer the camera than the plane
+#: by more than this many of its noise sigmas.
+PLANE_SIGMAS = 2.0
+
+#: Voxels along the object's longest extent: the carved solid's resolution. Relative to the object so that
+#: a 2 cm die and a 30 cm box cost the same (~1e5 voxels in the footprint); the carved surface is only
+#: used where nothing was observed, so its cell bounds the error of unseen faces, not of seen ones.
+CELLS_PER_EXTENT = 48
+
+#: The finest carving a caller may ask for, voxels along the longest extent (cost ~ its square: the
+#: footprint's area).
+MAX_CELLS_PER_EXTENT = 128
+
+#: The region carved: the observed points' shadow on the plane, closed over gaps of up to this many point
+#: spacings (dropouts, the sparse far side of a view) ...
+FOOTPRINT_CLOSING_SPACINGS = 2.0
+
+#: ... and grown by this many (silhouette pixels are dropped as likely flying pixels, so every view's
+#: outline is about one spacing inside the object's).
+FOOTPRINT_GROW_SPACINGS = 1.0
+
+#: Carved-surface points per boundary voxel face, per axis (2: four points a voxel, about the observed
+#: points' density, so the reconstruction sees no hole between carved and observed surface).
+SUBSAMPLE = 2
+
+
+@dataclass(frozen=True)
+class DepthView:
+    """One depth image with its camera: what carving needs of a frame.
+
+    Attributes:
+        depth: (height, width) float64, metres along the camera's z, NaN where no return.
+        sigma: (height, width) float64 metres (or a scalar): the axial noise of each pixel.
+        intrinsics: the camera's.
+        rotation: (3, 3) camera-to-world rotation; position: (3,) metres, the camera centre.
+    """
+
+    depth: np.ndarray
+    sigma: np.ndarray | float
+    intrinsics: Intrinsics
+    rotation: np.ndarray
+    position: np.ndarray
+
+
+@dataclass(frozen=True)
+class Carving:
+    """The solid the cameras leave around one object, on a grid aligned with the support plane.
+
+    Attributes:
+        solid: (nu, nv, nk) bool: voxels no camera proved empty, in the object's footprint, owned by it.
+        origin: (3,) metres, world frame: the corner of voxel (0, 0, 0) on the plane.
+        axes: (3, 3) rows e1, e2, up: the grid's axes in the world (up = the plane's normal).
+        cell: voxel size, metres.
+    """
+
+    solid: np.ndarray
+    origin: np.ndarray
+    axes: np.ndarray
+    cell: float
+
+    @property
+    def volume(self) -> float:
+        """m^3: every voxel nobody saw through counted as object (an upper bound, up to noise)."""
+        return float(self.solid.sum()) * self.cell**3
+
+    def centres(self, index: np.ndarray) -> np.ndarray:
+        """World positions (n, 3) of voxel centres ``index`` (n, 3)."""
+        return self.origin + ((np.asarray(index) + 0.5) * self.cell) @ self.axes
+
+
+def carving_views(views: Sequence[DepthView], plane: Plane | None, plane_margin: float) -> list[DepthView]:
+    """The views as carving reads them: edge pixels NaN, support-plane pixels on the plane itself.
+
+    A pixel whose point lies within ``plane_margin`` (metres) of ``plane`` takes the depth of its ray's
+    intersection with the plane and zero noise. Done once per scan; every object's carving reads the result.
+    """
+    out = []
+    for view in views:
+        sigma = np.broadcast_to(np.nan_to_num(np.asarray(view.sigma, dtype=np.float64), nan=0.0), view.depth.shape)
+        depth = np.where(edge_mask(view.depth, sigma), np.nan, view.depth)
+        sigma = sigma.copy()
+        if plane is not None:
+            pts, idx = depth_to_points(depth, view.intrinsics, view.rotation, view.position)
+            near = idx[np.abs(plane.height(pts)) <= plane_margin]
+            rays = view.intrinsics.rays()[near] @ np.asarray(view.rotation, dtype=np.float64).T
+            along = rays @ plane.normal
+            with np.errstate(divide="ignore", invalid="ignore"):
+                t = -(np.asarray(view.position, dtype=np.float64) @ plane.normal + plane.offset) / along
+            flat, noise = depth.reshape(-1), sigma.reshape(-1)
+            # A pixel on an object's wall just above the plane is near it too, but nearer the camera than
+            # the plane by more than its noise: it keeps its depth (replaced, the plane behind it would carve
+            # into the wall).
+            with np.errstate(invalid="ignore"):
+                on = (np.abs(along) > 1e-9) & (flat[near] >= t - PLANE_SIGMAS * noise[near] - 1e-6)
+            flat[near[on]] = t[on]
+            noise[near[on]] = 0.0
+        out.append(DepthView(depth, sigma, view.intrinsics, view.rotation, view.position))
+    return out
+
+
+def free_space(points: np.ndarray, views: Sequence[DepthView], *, slack: float = 0.0) -> np.ndarray:
+    """(n,) bool: which ``points`` ((n, 3) metres, world) some view saw through (empty space).
+
+    ``views`` as :func:`carving_views` returns them.
+    The depth at a point's projection is interpolated bilinearly between the four nearest pixel centres
+    (on a slanted surface the nearest pixel's depth is off by up to half a pixel's depth change); a
+    point next to a pixel without return or off every image is not free. ``slack`` (metres) is added to
+    the noise margin (see the module docstring).
+    """
+    pts = as_points(points, "points")
+    free = np.zeros(len(pts), dtype=bool)
+    for view in views:
+        depth, sigma = view.depth, np.asarray(view.sigma)
+        k = view.intrinsics
+        cam = (pts - np.asarray(view.position, dtype=np.float64)) @ np.asarray(view.rotation, dtype=np.float64)
+        z = cam[:, 2]
+        ahead = z > 1e-6
+        zs = np.where(ahead, z, 1.0)
+        # Continuous pixel coordinates with pixel centres at integers (the intrinsics put them at +0.5).
+        x = k.fx * cam[:, 0] / zs + k.cx - 0.5
+        y = k.fy * cam[:, 1] / zs + k.cy - 0.5
+        x0, y0 = np.floor(x).astype(np.int64), np.floor(y).astype(np.int64)
+        ok = ahead & (x0 >= 0) & (x0 + 1 < k.width) & (y0 >= 0) & (y0 + 1 < k.height)
+        x0, y0 = np.where(ok, x0, 0), np.where(ok, y0, 0)
+        ax, ay = x - x0, y - y0
+        d = ((1 - ax) * (1 - ay) * depth[y0, x0] + ax * (1 - ay) * depth[y0, x0 + 1]
+             + (1 - ax) * ay * depth[y0 + 1, x0] + ax * ay * depth[y0 + 1, x0 + 1])
+        s = np.maximum.reduce([sigma[y0, x0], sigma[y0, x0 + 1], sigma[y0 + 1, x0], sigma[y0 + 1, x0 + 1]])
+        with np.errstate(invalid="ignore"):
+            free |= ok & np.isfinite(d) & (z < d - FREE_SIGMAS * s - slack)
+    return free
+
+
+def carve(points: np.ndarray, views: Sequence[DepthView], plane: Plane, *, others: np.ndarray | None = None,
+          cell: float | None = None) -> Carving:
+    """The solid around one object's observed ``points`` that no view saw through.
+
+    Args:
+        points: (n, 3) metres, world frame: the object's observed points (above the plane).
+        views: the depth images that saw the scene (every camera, not only those that saw the object), as
+            :func:`carving_views` returns them.
+        plane: the support plane, normal up into the objects' side; the solid stands on it.
+        others: (m, 3) observed points of other objects: a voxel nearer to one of them than to ``points``
+            is theirs (unseen space between two objects is split between them).
+        cell: voxel size, metres; None: the longest extent over ``CELLS_PER_EXTENT``.
+    """
+    from scipy import ndimage
+    from scipy.spatial import cKDTree
+
+    from estimation.spacing import point_spacing
+
+    pts = as_points(points, "points")
+    up = np.asarray(plane.normal, dtype=np.float64)
+    # In-plane axes from the shadow's principal direction, so the grid moves with the object (a grid fixed to
+    # the world's axes gives another voxelisation, and another volume, per rotation).
+    flat = pts - np.outer(pts @ up, up)
+    centre = flat.mean(axis=0)
+    axis = np.linalg.svd(flat - centre, full_matrices=False)[2][0]
+    e1 = axis - (axis @ up) * up
+    e1 /= np.linalg.norm(e1)
+    axes = np.stack([e1, np.cross(up, e1), up])
+    local = (pts - centre) @ axes.T
+    local[:, 2] = plane.height(pts)
+    extent = float(np.ptp(local, axis=0).max())
+    if cell is None:
+        cell = max(extent / CELLS_PER_EXTENT, 1e-4)
+    spacing = point_spacing(pts)
+    closing = max(1, int(np.ceil(FOOTPRINT_CLOSING_SPACINGS * spacing / cell)))
+    grow = max(1, int(np.ceil(FOOTPRINT_GROW_SPACINGS * spacing / cell)))
+    pad = closing + grow + 1
+    lo = np.floor(local[:, :2].min(axis=0) / cell).astype(np.int64) - pad
+    hi = np.floor(local[:, :2].max(axis=0) / cell).astype(np.int64) + pad + 1
+    top = int(np.ceil(local[:, 2].max() / cell)) + 1
+    shape = (int(hi[0] - lo[0]), int(hi[1] - lo[1]), max(top, 1))
+    # The footprint: the shadow of the observed points, gaps closed, grown a little.
+    shadow = np.zeros(shape[:2], dtype=bool)
+    ij = np.floor(local[:, :2] / cell).astype(np.int64) - lo
+    shadow[ij[:, 0], ij[:, 1]] = True
+    shadow = ndimage.binary_closing(shadow, iterations=closing)
+    shadow = ndimage.binary_dilation(shadow, iterations=grow)
+    fi, fj = np.nonzero(shadow)
+    k = np.arange(shape[2])
+    index = np.stack([np.repeat(fi, shape[2]), np.repeat(fj, shape[2]), np.tile(k, len(fi))], axis=1)
+    origin = centre - plane.offset * up + (lo[0] * cell) * e1 + (lo[1] * cell) * axes[1]
+    carving = Carving(np.zeros(shape, dtype=bool), origin, axes, float(cell))
+    world = carving.centres(index)
+    keep = ~free_space(world, views, slack=FREE_CELLS * cell)
+    if others is not None and len(others):
+        mine = cKDTree(pts).query(world[keep], workers=-1)[0]
+        theirs = cKDTree(as_points(others, "others")).query(world[keep], workers=-1)[0]
+        keep[np.flatnonzero(keep)[theirs < mine]] = False
+    solid = carving.solid
+    solid[index[keep, 0], index[keep, 1], index[keep, 2]] = True
+    # Only what hangs together with the observed points is this object.
+    labels, _ = ndimage.label(solid)
+    seen = np.clip(np.floor(np.column_stack([local[:, :2] / cell - lo, local[:, 2] / cell])).astype(np.int64),
+                   0, np.array(shape) - 1)
+    ids = np.unique(labels[seen[:, 0], seen[:, 1], seen[:, 2]])
+    solid &= np.isin(labels, ids[ids > 0])
+    return carving
+
+
+def carved_surface(carving: Carving) -> tuple[np.ndarray, np.ndarray]:
+    """Points on the carved solid's surface and their outward normals, (m, 3) each, world frame.
+
+    Normals are the gradient of the solid's occupancy smoothed over a voxel; points sit on the boundary
+    voxels' outer faces less the carving margin (``FREE_CELLS``), ``SUBSAMPLE``^2 per voxel.
+    """
+    from scipy import ndimage
+
+    solid = carving.solid
+    padded = np.pad(solid, 1)  # the plane under layer 0 and the footprint's edge are boundary
+    boundary = solid & ~ndimage.binary_erosion(padded)[1:-1, 1:-1, 1:-1]
+    index = np.argwhere(boundary)
+    if len(index) == 0:
+        return np.zeros((0, 3)), np.zeros((0, 3))
+    smooth = ndimage.gaussian_filter(padded.astype(np.float64), 1.0)
+    grad = np.stack(np.gradient(smooth), axis=-1)[index[:, 0] + 1, index[:, 1] + 1, index[:, 2] + 1]
+    normal = -grad @ carving.axes  # grid axes to world
+    length = np.linalg.norm(normal, axis=1)
+    ok = length > 1e-9
+    index, normal = index[ok], normal[ok] / length[ok, None]
+    # The last solid voxel's outer face is up to FREE_CELLS of a cell in front of where the rays stopped:
+    # the face less that margin.
+    centre = carving.centres(index) + (0.5 - FREE_CELLS) * carving.cell * normal
+    # Except on the plane: the solid stands on it exactly, with no carving margin.
+    up = carving.axes[2]
+    base = (index[:, 2] == 0) & (normal @ up < -0.5)
+    centre[base] -= np.outer((centre[base] - carving.origin) @ up, up)
+    helper = np.where(np.abs(normal[:, :1]) < 0.9, np.array([[1.0, 0.0, 0.0]]), np.array([[0.0, 1.0, 0.0]]))
+    t1 = np.cross(normal, helper)
+    t1 /= np.linalg.norm(t1, axis=1, keepdims=True)
+    t2 = np.cross(normal, t1)
+    steps = (np.arange(SUBSAMPLE) + 0.5) / SUBSAMPLE - 0.5
+    out = [centre + carving.cell * (a * t1 + b * t2) for a in steps for b in steps]
+    return np.concatenate(out), np.tile(normal, (SUBSAMPLE * SUBSAMPLE, 1))

@@ -1,0 +1,103 @@
+"""Closing what no camera saw: space carving from depth images and the mirror image.
+
+Carving runs on real ray-cast depth images of a MuJoCo table with a box (tests/test_cameras.py's scene);
+the mirror test on exact synthetic clouds of shapes that are and are not their own horizontal mirror image.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from estimation.carving import carve, carved_surface, carving_views, free_space
+from estimation.completion import mirror_image
+from estimation.segmentation import Plane
+from scenes.cameras import EXACT, CameraFeed
+from tests.test_cameras import BOX, TABLE_TOP, VOLUME, WORKSPACE, _model, _rig
+
+FLOOR = Plane(np.array([0.0, 0.0, 1.0]), 0.0, 0.0, 0)
+
+
+def _scan(count: int, noise=EXACT):  # type: ignore[no-untyped-def]
+    model, data = _model({"a": (0.02, 0.01)})
+    return CameraFeed(_rig(count), WORKSPACE, noise=noise).scan(model, data)
+
+
+def _inside_box(points: np.ndarray) -> np.ndarray:
+    lo = np.array([0.02 - BOX[0] / 2, 0.01 - BOX[1] / 2, TABLE_TOP])
+    return ((points >= lo) & (points <= lo + BOX)).all(axis=1)
+
+
+def test_free_space_is_empty_space_and_never_the_object():
+    scan = _scan(3)
+    rng = np.random.default_rng(0)
+    lo = np.array([-0.1, -0.1, TABLE_TOP + 0.003])
+    probe = lo + rng.random((20000, 3)) * [0.24, 0.22, 0.1]
+    free = free_space(probe, scan.views, slack=0.002)  # about a pixel's footprint
+    inside = _inside_box(probe)
+    assert not free[inside].any()  # nothing inside the box is carved (exact depth)
+    # Around the box at 3 cameras, most of the empty space is seen through.
+    assert free[~inside].mean() > 0.8
+
+
+@pytest.mark.parametrize("count", [2, 3])
+def test_the_carved_solid_holds_the_object_and_not_much_more(count: int):
+    scan = _scan(count)
+    seg = scan.segments[0]
+    carving = carve(seg.points, scan.views, scan.plane)
+    solid = carving.centres(np.argwhere(carving.solid))
+    # An upper bound: a voxel centre of the box is solid unless it lies within a voxel of the box's faces.
+    assert carving.volume >= 0.9 * VOLUME
+    assert carving.volume <= 1.5 * VOLUME
+    assert _inside_box(solid).mean() > 0.6
+    points, normals = carved_surface(carving)
+    assert len(points) and np.allclose(np.linalg.norm(normals, axis=1), 1.0)
+    # The base lies on the plane, its normals down.
+    base = np.abs(points[:, 2] - TABLE_TOP) < 1e-6
+    assert base.any() and (normals[base, 2] < -0.5).mean() > 0.9
+
+
+def test_an_empty_view_carves_nothing():
+    scan = _scan(1)
+    blank = [type(v)(np.full_like(v.depth, np.nan), v.sigma, v.intrinsics, v.rotation, v.position)
+             for v in scan.views]
+    probe = np.array([[0.0, 0.0, TABLE_TOP + 0.2]])
+    assert not free_space(probe, carving_views(blank, FLOOR, 0.0)).any()
+
+
+def _sphere(n: int, radius: float, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    d = rng.normal(size=(n, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    return radius * d + [0, 0, radius], d
+
+
+def _cone(n: int, radius: float, height: float, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    t = rng.random(n)
+    h = height * (1 - np.sqrt(t))  # uniform over the lateral surface
+    a = rng.random(n) * 2 * np.pi
+    r = radius * (1 - h / height)
+    points = np.stack([r * np.cos(a), r * np.sin(a), h], axis=1)
+    slope = radius / height
+    normals = np.stack([np.cos(a), np.sin(a), np.full(n, slope)], axis=1)
+    return points, normals / np.linalg.norm(normals, axis=1, keepdims=True)
+
+
+def test_a_ball_seen_from_above_gets_its_underside_from_the_mirror_image():
+    rng = np.random.default_rng(1)
+    radius = 0.04
+    points, normals = _sphere(20000, radius, rng)
+    seen = points[:, 2] > 0.3 * radius  # the lowest 30 % of its height hidden
+    image = mirror_image(points[seen], normals[seen], FLOOR, cut=0.002, noise=0.0, cell=0.002)
+    assert image is not None
+    mirrored, mirrored_normals, share = image
+    assert share > 0.95
+    # The image lies on the sphere, its normals outward, and covers the hidden cap.
+    assert np.abs(np.linalg.norm(mirrored - [0, 0, radius], axis=1) - radius).max() < 0.002
+    assert (np.einsum("ij,ij->i", mirrored_normals, mirrored - [0, 0, radius]) > 0).all()
+    assert mirrored[:, 2].min() < 0.05 * radius
+
+
+def test_a_cone_is_not_its_own_mirror_image():
+    rng = np.random.default_rng(2)
+    points, normals = _cone(20000, 0.05, 0.08, rng)
+    assert mirror_image(points, normals, FLOOR, cut=0.002, noise=0.0, cell=0.002) is None
