@@ -181,11 +181,10 @@ def carve(points: np.ndarray, views: Sequence[DepthView], plane: Plane, *, other
             :func:`carving_views` returns them.
         plane: the support plane, normal up into the objects' side; the solid stands on it.
         others: (m, 3) observed points of other objects: a voxel nearer to one of them than to ``points``
-            is theirs (unseen space between two objects is split between them).
+            is theirs (unseen space between two objects is split between them; distances on the grid).
         cell: voxel size, metres; None: the longest extent over ``CELLS_PER_EXTENT``.
     """
     from scipy import ndimage
-    from scipy.spatial import cKDTree
 
     from estimation.spacing import point_spacing
 
@@ -225,19 +224,34 @@ def carve(points: np.ndarray, views: Sequence[DepthView], plane: Plane, *, other
     carving = Carving(np.zeros(shape, dtype=bool), origin, axes, float(cell))
     world = carving.centres(index)
     keep = ~free_space(world, views, slack=FREE_CELLS * cell)
-    if others is not None and len(others):
-        mine = cKDTree(pts).query(world[keep], workers=-1)[0]
-        theirs = cKDTree(as_points(others, "others")).query(world[keep], workers=-1)[0]
-        keep[np.flatnonzero(keep)[theirs < mine]] = False
     solid = carving.solid
     solid[index[keep, 0], index[keep, 1], index[keep, 2]] = True
+    seen = _voxels(local, lo, cell, shape)
+    if others is not None and len(others):
+        # Unseen space between two objects is split by the nearest observed point, on the grid (a distance
+        # transform): other objects' points outside the grid are too far to claim a voxel of the footprint.
+        theirs = as_points(others, "others")
+        there = (theirs - centre) @ axes.T
+        there[:, 2] = plane.height(theirs)
+        ijk = np.floor(np.column_stack([there[:, :2] / cell - lo, there[:, 2] / cell])).astype(np.int64)
+        ijk = ijk[((ijk >= 0) & (ijk < np.array(shape))).all(axis=1)]
+        if len(ijk):
+            mine_far = np.ones(shape, dtype=bool)
+            mine_far[seen[:, 0], seen[:, 1], seen[:, 2]] = False
+            their_far = np.ones(shape, dtype=bool)
+            their_far[ijk[:, 0], ijk[:, 1], ijk[:, 2]] = False
+            solid &= ndimage.distance_transform_edt(mine_far) <= ndimage.distance_transform_edt(their_far)
     # Only what hangs together with the observed points is this object.
     labels, _ = ndimage.label(solid)
-    seen = np.clip(np.floor(np.column_stack([local[:, :2] / cell - lo, local[:, 2] / cell])).astype(np.int64),
-                   0, np.array(shape) - 1)
     ids = np.unique(labels[seen[:, 0], seen[:, 1], seen[:, 2]])
     solid &= np.isin(labels, ids[ids > 0])
     return carving
+
+
+def _voxels(local: np.ndarray, lo: np.ndarray, cell: float, shape: tuple[int, int, int]) -> np.ndarray:
+    """Voxel indices (n, 3) of plane-frame points ``local`` (u, v, height), clipped to the grid."""
+    ijk = np.floor(np.column_stack([local[:, :2] / cell - lo, local[:, 2] / cell])).astype(np.int64)
+    return np.clip(ijk, 0, np.array(shape) - 1)
 
 
 def carved_surface(carving: Carving) -> tuple[np.ndarray, np.ndarray]:
