@@ -14,9 +14,11 @@ NaN where there was no return; world frame, metres.
 
 Noise: a voxel is free only when it lies in front of the measured depth by more than
 ``FREE_SIGMAS`` of that pixel's axial noise plus ``FREE_CELLS`` of a voxel (the voxel's centre is a
-proxy for its whole extent). Edge pixels (flying pixels, ``fusion.edge_mask``) carve nothing. Pixels on
-the support plane carve down to the fitted plane itself (it is known far better than one pixel's noise),
-which is what lets the table seen around an object carve the space beside the object's base.
+proxy for its whole extent). Edge pixels (flying pixels, ``fusion.edge_mask``) carve up to their nearest
+neighbour's depth: left out, each silhouette casts a pixel-wide wedge nobody carves, and two views of an
+L-bracket kept its concave corner (+11 % with exact depth). Pixels on the support plane carve down to the
+fitted plane itself (it is known far better than one pixel's noise), which is what lets the table seen
+around an object carve the space beside the object's base.
 """
 
 from __future__ import annotations
@@ -109,15 +111,22 @@ class Carving:
 
 
 def carving_views(views: Sequence[DepthView], plane: Plane | None, plane_margin: float) -> list[DepthView]:
-    """The views as carving reads them: edge pixels NaN, support-plane pixels on the plane itself.
+    """The views as carving reads them: edge pixels at their nearest neighbour's depth, support-plane pixels on
+    the plane itself.
 
     A pixel whose point lies within ``plane_margin`` (metres) of ``plane`` takes the depth of its ray's
     intersection with the plane and zero noise. Done once per scan; every object's carving reads the result.
     """
+    from scipy import ndimage
+
     out = []
     for view in views:
         sigma = np.broadcast_to(np.nan_to_num(np.asarray(view.sigma, dtype=np.float64), nan=0.0), view.depth.shape)
-        depth = np.where(edge_mask(view.depth, sigma), np.nan, view.depth)
+        # An edge pixel's depth may be a mix of the two sides (a flying pixel), but nothing lies nearer than
+        # the nearest of its neighbours: it carves up to that.
+        nearest = ndimage.minimum_filter(np.where(np.isfinite(view.depth), view.depth, np.inf), size=3)
+        depth = np.where(edge_mask(view.depth, sigma), nearest, view.depth)
+        depth = np.where(np.isfinite(depth), depth, np.nan)
         sigma = sigma.copy()
         if plane is not None:
             pts, idx = depth_to_points(depth, view.intrinsics, view.rotation, view.position)

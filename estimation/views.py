@@ -20,6 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from estimation.carving import DepthView
 from estimation.completion import close_on_plane, coverage, honest_bounds
 from estimation.contracts import as_points
 from estimation.errors import CloudError
@@ -63,11 +64,14 @@ class View:
         points: (n, 3) float64, metres, world frame (n may be 0: reported, not fused).
         origin: (3,) float64 metres, world frame: the sensor centre; None when unknown.
         name: where it came from (a file name), for messages.
+        depth: the depth image the points came from, if any: with one for every view, the space the
+            cameras saw through is carved (``estimation.carving``) to close what none of them saw.
     """
 
     points: np.ndarray
     origin: np.ndarray | None
     name: str = ""
+    depth: DepthView | None = None
 
 
 @dataclass(frozen=True)
@@ -214,9 +218,19 @@ def estimate_views(views: list[View], density: float, *, support: Plane | str | 
         if (others := int((labels > 0).sum())) > OTHER_CLUSTERS_SHARE * len(points):
             warnings.append(f"{others} points above the support plane lie apart from the object and were dropped "
                             f"(another object in the views?)")
+        others = points[labels > 0]
         points, origins = points[labels == 0], origins[labels == 0]
         normals = oriented_normals(points, origins)
-        closed = close_on_plane(points, origins, normals, plane, cell=point_spacing(points), cut=cut)
+        carving = None
+        if all(v.depth is not None for v in views):
+            from dataclasses import replace
+
+            from estimation.carving import carving_views
+
+            # A file does not say its sensor's noise: the fused points' own, for every pixel.
+            carving = carving_views([replace(v.depth, sigma=noise) for v in views], plane, cut)  # type: ignore[type-var]
+        closed = close_on_plane(points, origins, normals, plane, cell=point_spacing(points), cut=cut, noise=noise,
+                                views=carving, others=others)
     else:
         closed = close_on_plane(points, origins, np.full_like(points, np.nan), None, cell=0.0, cut=0.0)
     completion = closed.completion
@@ -249,7 +263,12 @@ def assess(result: PhysicalEstimate, observed: np.ndarray, noise: float) -> tupl
         observed: (n, 3) float64 metres, same frame: the points a sensor returned (no completed ones).
         noise: metres, the observed points' sigma (``spacing.surface_noise``).
     """
-    seen, total = coverage(result.vertices, result.faces, observed, radius=2 * result.cell)
+    from estimation.spacing import point_spacing
+
+    # A face between two measured points is observed: the radius follows the observed points' spacing
+    # when the reconstruction's cell is finer (completed points can make it so).
+    radius = 2 * max(result.cell, point_spacing(observed) if len(observed) > 1 else 0.0)
+    seen, total = coverage(result.vertices, result.faces, observed, radius=radius)
     share = seen / total if total > 0 else 0.0
     return share, honest_bounds(result.volume, result.volume_bounds_m3, total - seen, total, noise=noise,
                                 extent=float(result.obb.extents.min()))
