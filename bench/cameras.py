@@ -10,7 +10,8 @@ Two sensors: the Kinect-v1 model of scenes/cameras.py at 640 x 480 (both scenes)
 "sigma 1 mm" condition (scenes.cameras.SIGMA_1MM) at 1280 x 720, the D400 cameras' largest depth
 resolution, 42 degrees vertical field of view (the clutter). Then the scene is
 stepped for one tracking period (at rest), scanned again with fresh noise, and every object's ICP track is
-compared with its (unmoved) frame. Each estimate's coverage and volume interval are those ``twin estimate``
+compared with its (unmoved) frame, and with the uncertainty ICP reports for it (estimation.fusion.Registration:
+the noise's part only). Each estimate's coverage and volume interval are those ``twin estimate``
 reports for views (``estimation.views.assess``); the table counts how often the interval holds the truth.
 """
 
@@ -78,14 +79,16 @@ def run_scene(name: str, cameras: int, noise_name: str = "KINECT_V1", camera: di
             unseen.append(f"{spec.id} ({exc})")
         est_s += time.perf_counter() - t1
     remote.twin.step(round(sensor.track_period / remote.twin.model.opt.timestep) + 1)
-    track_mm, track_deg = [], []
+    track_mm, track_deg, sigma_mm, sigma_deg = [], [], [], []
     for object_id, frame in frames.items():
         tr = sensor.track(remote, object_id)
         track_mm.append(1000 * float(np.linalg.norm(tr.position - frame)))
         track_deg.append(angle_deg(tr.quat, np.array([1.0, 0, 0, 0])))
+        sigma_mm.append(1000 * tr.position_sigma)
+        sigma_deg.append(float(np.degrees(tr.angle_sigma)))
     remote.close()
     return {"errors": errors, "held": held, "coverage": coverage, "width": width, "unseen": unseen, "check": scan.check, "seconds": scan.seconds, "fuse": fuse_s,
-            "estimate": est_s, "track_mm": track_mm, "track_deg": track_deg, "stats": sensor.feed.stats,
+            "estimate": est_s, "track_mm": track_mm, "track_deg": track_deg, "sigma_mm": sigma_mm, "sigma_deg": sigma_deg, "stats": sensor.feed.stats,
             "sigma": float(np.nanmedian(np.concatenate([f.sigma.ravel() for f in scan.frames])))}
 
 
@@ -94,7 +97,7 @@ def main() -> int:
     summary = Table(title="camera feed: volume error over objects (auto, normals to each point's camera, base closed)")
     for col in ("scene", "sensor", "cams", "median sigma mm", "objects", "median |err| %", "max |err| %", "coverage p50",
                 "truth in interval", "interval p50 x truth", "unseen",
-                "track p50/max mm", "track max deg", "render s", "segment s", "fuse s", "estimate s"):
+                "track p50/max mm", "track max deg", "ICP sigma p50 mm/deg", "error/sigma p50", "render s", "segment s", "fuse s", "estimate s"):
         summary.add_column(col, justify="right")
     detail: dict[str, dict[int, dict]] = {}
     for (name, label), (noise_name, camera) in CONDITIONS.items():
@@ -110,6 +113,9 @@ def main() -> int:
                             str(len(r["unseen"])),
                             f"{np.median(r['track_mm']):.2f}/{max(r['track_mm']):.2f}" if r["track_mm"] else "-",
                             f"{max(r['track_deg']):.2f}" if r["track_deg"] else "-",
+                            f"{np.median(r['sigma_mm']):.2f}/{np.median(r['sigma_deg']):.2f}" if r["sigma_mm"] else "-",
+                            f"{np.median(np.array(r['track_mm']) / np.maximum(r['sigma_mm'], 1e-9)):.1f}"
+                            if r["sigma_mm"] else "-",
                             f"{r['seconds']['render']:.2f}", f"{r['seconds'].get('segment', 0):.2f}",
                             f"{r['fuse']:.2f}", f"{r['estimate']:.2f}")
             console.print(f"{name} {label} x{k}: {r['stats']}")

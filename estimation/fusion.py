@@ -189,11 +189,36 @@ class Registration:
         transform: (4, 4) float64.
         fitness: share of source points with a correspondence within the distance (0-1).
         rmse: metres, RMS distance of those correspondences.
+        covariance: (6, 6) of the motion's rotation (radians, about x y z) and translation (metres), in
+            that order: ``rmse^2`` times the inverse of the correspondences' information matrix (Open3D's
+            ``get_information_matrix_from_point_clouds``). It counts the noise only, not what partial
+            overlap and a changed view do to ICP: at rest the tracked error runs well above it
+            (``bench/cameras.py`` prints both).
     """
 
     transform: np.ndarray
     fitness: float
     rmse: float
+    covariance: np.ndarray | None = None
+
+    def position_sigma(self, point: np.ndarray) -> float:
+        """Metres: the standard deviation, along its worst direction, of where the motion puts ``point``
+        ((3,) metres, world frame, after the motion); 0 when not known. A small motion moves it by
+        ``omega x point + t``, so the rotation's uncertainty counts with the point's distance from the origin."""
+        if self.covariance is None:
+            return 0.0
+        p = np.asarray(point, dtype=np.float64)
+        jacobian = np.hstack([-np.array([[0, -p[2], p[1]], [p[2], 0, -p[0]], [-p[1], p[0], 0]]), np.eye(3)])
+        return _worst_sigma(jacobian @ self.covariance @ jacobian.T)
+
+    @property
+    def angle_sigma(self) -> float:
+        """Radians: the standard deviation of the rotation about its worst axis (0: not known)."""
+        return 0.0 if self.covariance is None else _worst_sigma(self.covariance[:3, :3])
+
+
+def _worst_sigma(covariance: np.ndarray) -> float:
+    return float(np.sqrt(max(float(np.linalg.eigvalsh(covariance).max()), 0.0)))
 
 
 def register(source: np.ndarray, target: np.ndarray, *, init: np.ndarray, max_distance: float,
@@ -222,4 +247,9 @@ def register(source: np.ndarray, target: np.ndarray, *, init: np.ndarray, max_di
     out = reg.registration_icp(a, b, max_distance, np.asarray(init, dtype=np.float64),
                                reg.TransformationEstimationPointToPlane(),
                                reg.ICPConvergenceCriteria(max_iteration=iterations))
-    return Registration(np.asarray(out.transformation).copy(), float(out.fitness), float(out.inlier_rmse))
+    transform = np.asarray(out.transformation).copy()
+    information = np.asarray(reg.get_information_matrix_from_point_clouds(a, b, max_distance, transform))
+    covariance = None
+    if out.fitness > 0 and np.isfinite(information).all() and np.linalg.matrix_rank(information) == 6:
+        covariance = float(out.inlier_rmse) ** 2 * np.linalg.inv(information)
+    return Registration(transform, float(out.fitness), float(out.inlier_rmse), covariance)

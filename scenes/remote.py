@@ -315,7 +315,8 @@ class Remote:
             self._rows.update(object_id, pos, quat)
         msg = Pose(v=VERSION, stamp_ns=self.clock.stamp_ns(), object_id=object_id, epoch=self.epoch, seq=self._next(),
                    sim_time=self.twin.time, position=_floats(pos), quat=_floats(quat), linvel=_floats(seen.linvel),
-                   angvel=_floats(seen.angvel), answers_ns=self._answers_ns())
+                   angvel=_floats(seen.angvel), answers_ns=self._answers_ns(),
+                   position_sigma=float(seen.position_sigma), angle_sigma=float(seen.angle_sigma))
         key = self._pose_keys.get(object_id)
         if key is None:
             key = self._pose_keys[object_id] = self.keys.object(object_id, "pose")

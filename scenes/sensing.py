@@ -51,12 +51,18 @@ class Observation:
 
 @dataclass(frozen=True)
 class Track:
-    """An object frame's pose and velocity as sensed: world frame; quaternion w x y z; m/s, rad/s."""
+    """An object frame's pose and velocity as sensed: world frame; quaternion w x y z; m/s, rad/s.
+
+    ``position_sigma`` (m) and ``angle_sigma`` (rad): the standard deviation of the pose along its worst
+    direction, as the sensor reports it (0: exact, the simulator's own state).
+    """
 
     position: np.ndarray
     quat: np.ndarray
     linvel: np.ndarray
     angvel: np.ndarray
+    position_sigma: float = 0.0
+    angle_sigma: float = 0.0
 
 
 class GroundTruth(Protocol):
@@ -214,7 +220,7 @@ class CameraSensor:
             target = scan.segments[k].points
             reg = register(model, target, init=self._motion[object_id], max_distance=max(3 * scan.cell, 0.01))
             if reg.fitness >= MIN_FITNESS:
-                result = reg.transform
+                result = reg
             else:
                 self.feed.stats.lost_tracks += 1
                 log.warning("%s: ICP lost the object (fitness %.2f); keeping the last pose", object_id, reg.fitness)
@@ -222,9 +228,10 @@ class CameraSensor:
             last = self._tracked.get(object_id)
             track = last[1] if last is not None else Track(centre, np.array([1.0, 0, 0, 0]), np.zeros(3), np.zeros(3))
         else:
-            self._motion[object_id] = result
-            position = result[:3, :3] @ centre + result[:3, 3]
-            track = Track(position, _quat(result[:3, :3]), np.zeros(3), np.zeros(3))
+            motion = self._motion[object_id] = result.transform
+            position = motion[:3, :3] @ centre + motion[:3, 3]
+            track = Track(position, _quat(motion[:3, :3]), np.zeros(3), np.zeros(3),
+                          result.position_sigma(position), result.angle_sigma)
             self._last[object_id] = position
         self._tracked[object_id] = (scan.time, track)
         return track

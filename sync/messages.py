@@ -105,6 +105,9 @@ class Pose(_Msg, tag="pose"):
     the latest :class:`OperatorCommand` the remote had applied, plus the remote's time since it arrived
     (0: no command yet). The twin compares the pose with its own state at that time, not with its state
     now, which is a round trip ahead (:mod:`twin.history`).
+
+    ``position_sigma`` (m) and ``angle_sigma`` (rad): the pose's standard deviation along its worst
+    direction as the remote's sensor reports it (ICP on depth cameras); 0 for the simulator's own state.
     """
 
     object_id: str
@@ -116,6 +119,8 @@ class Pose(_Msg, tag="pose"):
     linvel: tuple[float, float, float]
     angvel: tuple[float, float, float]
     answers_ns: int = 0
+    position_sigma: float = 0.0
+    angle_sigma: float = 0.0
 
 
 class Gone(_Msg, tag="gone"):
@@ -279,9 +284,11 @@ def _check(msg: Message) -> None:
     if isinstance(msg, Pose):
         if msg.answers_ns < 0:
             raise MessageError("bad-seq", f"pose {msg.object_id!r}: negative answers_ns")
-        _finite(msg, msg.position, msg.linvel, msg.angvel, (msg.sim_time,))
+        _finite(msg, msg.position, msg.linvel, msg.angvel, (msg.sim_time, msg.position_sigma, msg.angle_sigma))
         _coordinates(msg, msg.position)
         _unit(msg, msg.quat)
+        if msg.position_sigma < 0 or msg.angle_sigma < 0 or msg.position_sigma > MAX_COORDINATE:
+            raise MessageError("out-of-range", f"pose {msg.object_id!r}: sigma outside [0, {MAX_COORDINATE:g}]")
     elif isinstance(msg, Cloud):
         _check_cloud(msg)
     elif isinstance(msg, OperatorCommand | OperatorTarget):

@@ -177,3 +177,5 @@ def test_tracking_at_rest_is_within_2_mm_and_1_degree():
     assert sensor.feed.stats.scans == 2
     assert np.linalg.norm(track.position - seen.frame_position) < 0.002
     assert angle_deg(track.quat, np.array([1.0, 0, 0, 0])) < 1.0
+    # ICP's own uncertainty comes with the track (the noise's part only: smaller than the error at rest).
+    assert 0 < track.position_sigma < 0.002 and 0 < track.angle_sigma < np.radians(1.0)

@@ -71,6 +71,9 @@ def test_a_good_pose_passes_unchanged():
     ({"seq": -1}, "bad-seq"),
     ({"epoch": -5}, "bad-seq"),
     ({"v": VERSION + 1}, "version"),
+    ({"position_sigma": -0.001}, "out-of-range"),
+    ({"angle_sigma": float("nan")}, "non-finite"),
+    ({"position_sigma": 1e9}, "out-of-range"),
 ])
 def test_decode_rejects_poses_no_sender_could_mean(fields, reason):
     with pytest.raises(MessageError) as err:
