@@ -93,7 +93,7 @@ def run_scene(name: str, cameras: int, noise_name: str = "KINECT_V1", camera: di
 
 
 def main() -> int:
-    console = Console(record=True, width=200)
+    console = Console(record=True, width=280)
     summary = Table(title="camera feed: volume error over objects (auto, normals to each point's camera, base closed)")
     for col in ("scene", "sensor", "cams", "median sigma mm", "objects", "median |err| %", "max |err| %", "coverage p50",
                 "truth in interval", "interval p50 x truth", "unseen",
