@@ -105,21 +105,11 @@ def test_a_cone_is_not_its_own_mirror_image():
 
 def _bracket_views(noise=EXACT):  # type: ignore[no-untyped-def]
     """Two depth views of tests/test_views.py's L-bracket on its table, with their depth images."""
-    import mujoco
-
     from estimation.views import View
     from scenes.cameras import render
-    from tests.test_views import FOOT, TOP, UPRIGHT, _cameras
+    from tests.test_views import _cameras, bracket_model
 
-    spec = mujoco.MjSpec()
-    spec.worldbody.add_geom(type=mujoco.mjtGeom.mjGEOM_BOX, size=[0.4, 0.3, 0.02], pos=[0, 0, TOP - 0.02])
-    body = spec.worldbody.add_body(name="bracket", pos=[0.01, 0.02, TOP])
-    body.add_geom(type=mujoco.mjtGeom.mjGEOM_BOX, size=[s / 2 for s in FOOT], pos=[0, 0, FOOT[2] / 2])
-    body.add_geom(type=mujoco.mjtGeom.mjGEOM_BOX, size=[s / 2 for s in UPRIGHT],
-                  pos=[(UPRIGHT[0] - FOOT[0]) / 2, 0, FOOT[2] + UPRIGHT[2] / 2])
-    model = spec.compile()
-    data = mujoco.MjData(model)
-    mujoco.mj_forward(model, data)
+    model, data = bracket_model()
     frames = [render(model, data, cam, noise=noise, rng=np.random.default_rng(0)) for cam in _cameras()]
     return [View(f.points()[0], np.asarray(f.camera.position, float), f.camera.name, f.view()) for f in frames]
 

@@ -25,12 +25,9 @@ def _cameras():  # type: ignore[no-untyped-def]
     return [Camera(f"c{k}", pos, (0.0, 0.0, TOP), width=320, height=240) for k, pos in enumerate(CAMERAS)]
 
 
-@pytest.fixture(scope="module")
-def frames():  # type: ignore[no-untyped-def]
-    """Two noisy depth frames of the bracket (a real MuJoCo model, ray cast)."""
+def bracket_model():  # type: ignore[no-untyped-def]
+    """The bracket on a table: a real MuJoCo model and its data, positions computed."""
     import mujoco
-
-    from scenes.cameras import KINECT_V1, render
 
     spec = mujoco.MjSpec()
     spec.worldbody.add_geom(type=mujoco.mjtGeom.mjGEOM_BOX, size=[0.4, 0.3, 0.02], pos=[0, 0, TOP - 0.02])
@@ -41,6 +38,15 @@ def frames():  # type: ignore[no-untyped-def]
     model = spec.compile()
     data = mujoco.MjData(model)
     mujoco.mj_forward(model, data)
+    return model, data
+
+
+@pytest.fixture(scope="module")
+def frames():  # type: ignore[no-untyped-def]
+    """Two noisy depth frames of the bracket (ray cast)."""
+    from scenes.cameras import KINECT_V1, render
+
+    model, data = bracket_model()
     rng = np.random.default_rng(0)
     return [render(model, data, cam, noise=KINECT_V1, rng=rng) for cam in _cameras()]
 
