@@ -3,8 +3,9 @@
 An object at rest on a table hides its base. Where its walls come down to the plane upright (a box, a
 can, a cone), the base is the plane itself inside the object's outline: we add points there, marked as
 completed, plus a skirt up the wall through the band the plane removal cut away. Where the walls curve
-in towards the plane (a ball, a lying capsule, a torus), the base is not flat and nothing is added: the
-estimator closes that hole itself, and the result rests on less evidence (reported as less coverage).
+in towards the plane (a ball, a lying capsule, a torus), the base is not flat and it adds nothing: the
+mirror image below may, or else the estimator closes that hole itself, and the result rests on less
+evidence (reported as less coverage).
 
 The outline is the object's own top-down shadow (its points projected on the plane), so a ring's hole
 stays open and a box seen from one side still gets its whole base (its top face casts the full shadow).
@@ -248,8 +249,7 @@ def close_on_plane(points: np.ndarray, origins: np.ndarray, normals: np.ndarray,
     that whatever orients normals towards sensors keeps the completion's own orientation.
     """
     pts = as_points(points, "points")
-    empty = Completion(np.zeros((0, 3)), np.zeros((0, 3)), 0.0)
-    completion = empty
+    completion = Completion(np.zeros((0, 3)), np.zeros((0, 3)), 0.0)
     if plane is not None and len(pts):
         completion = _complete(pts, np.asarray(normals, dtype=np.float64), plane, cell=cell, cut=cut, noise=noise,
                                views=views, others=others)

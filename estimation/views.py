@@ -16,7 +16,7 @@ points" is horizontal), as in MuJoCo's world.
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -223,8 +223,6 @@ def estimate_views(views: list[View], density: float, *, support: Plane | str | 
         normals = oriented_normals(points, origins)
         carving = None
         if all(v.depth is not None for v in views):
-            from dataclasses import replace
-
             from estimation.carving import carving_views
 
             # A file does not say its sensor's noise: the fused points' own, for every pixel.

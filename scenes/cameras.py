@@ -36,6 +36,7 @@ import logging
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 
@@ -356,7 +357,6 @@ class Scan:
         margin: height above the plane below which points went with the plane, metres.
         seconds: wall time per stage ("render", "segment").
         check: the clustering against the simulator's segmentation image (estimation.segmentation.SegmentCheck).
-        views: every frame as carving reads it (``estimation.carving.carving_views``; empty without a plane).
     """
 
     time: float
@@ -367,7 +367,15 @@ class Scan:
     margin: float
     seconds: dict[str, float]
     check: object | None
-    views: tuple[DepthView, ...] = ()
+
+    @cached_property
+    def views(self) -> tuple[DepthView, ...]:
+        """Every frame as carving reads it (``estimation.carving.carving_views``; none without a plane).
+
+        Worked out when first asked for: only fusing an object's views carves, tracking does not."""
+        if self.plane is None:
+            return ()
+        return tuple(carving_views([f.view() for f in self.frames], self.plane, self.margin))  # type: ignore[arg-type]
 
 
 @dataclass(frozen=True)
@@ -446,6 +454,5 @@ class CameraFeed:
         segments = tuple(Segment(pts[seg.labels == k], origins[seg.labels == k], geom[seg.labels == k])
                          for k in range(seg.count))
         check = check_segments(seg.labels, geom, list(expected)) if expected else None
-        views = tuple(carving_views([f.view() for f in frames], seg.plane, seg.margin))
         seconds["segment"] = wall.perf_counter() - t1
-        return Scan(time, tuple(frames), segments, seg.plane, seg.cell, seg.margin, seconds, check, views)
+        return Scan(time, tuple(frames), segments, seg.plane, seg.cell, seg.margin, seconds, check)
