@@ -25,7 +25,7 @@ from estimation.inertia import signed_volumes
 from scenes.sampling import sample_surface
 from scenes.shapes import make_shapes
 from twin.decompose import DEFAULT_SETTINGS, concavity
-from twin.objects import decimate
+from twin.objects import visual_mesh
 
 RESULTS = Path(__file__).parent / "results" / "convexity.txt"
 #: A true mesh is convex when its hull adds less than this to its volume (faceting and rounding only).
@@ -55,7 +55,7 @@ def primitives(rng: np.random.Generator, count: int) -> list[tuple[str, trimesh.
 def measure(name: str, mesh: trimesh.Trimesh, points: int, noise: float, seed: int) -> dict:
     cloud = sample_surface(mesh, points, seed=seed, noise_sigma=noise, with_normals=noise == 0)
     est = estimate(cloud, 1000.0)
-    v, f = decimate(est.vertices - est.mass.center_of_mass, est.faces)
+    v, f = visual_mesh(est)
     return {"name": name, "points": points, "noise": noise, "true": concavity(mesh.vertices, mesh.faces),
             "true_excess": volume_excess(mesh.vertices, mesh.faces), "est": concavity(v, f),
             "est_excess": volume_excess(v, f)}

@@ -25,7 +25,7 @@ from estimation.materials import resolve_density
 from estimation.units import unit_scale
 from scenes.scenefile import ObjectSpec, SceneError
 from twin.decompose import DEFAULT_SETTINGS, CoacdSettings, decompose_many
-from twin.objects import DEFAULT_FRICTION, TwinObject, decimate, fit_primitive, lowest_point
+from twin.objects import DEFAULT_FRICTION, TwinObject, fit_primitive, lowest_point, visual_mesh
 
 log = logging.getLogger(__name__)
 
@@ -172,7 +172,7 @@ def prepare_objects(
     """
     if estimates is None:
         estimates = [estimate_object(s) for s in specs]
-    visuals = [decimate(est.vertices - est.mass.center_of_mass, est.faces) for est, _ in estimates]
+    visuals = [visual_mesh(est) for est, _ in estimates]
     hulls = decompose_many(visuals, coacd, cache_dir=cache_dir, progress=progress)
     out = []
     for s, (est, friction), visual, (parts, cached) in zip(specs, estimates, visuals, hulls, strict=True):

@@ -130,3 +130,23 @@ def test_a_box_in_the_synchronised_twin_rests_where_the_remote_box_rests():
         twin_z = session.local.twin.pose("crate")[0][2]
         remote_z = session.remote.twin.pose("crate")[0][2]
     assert abs(twin_z - remote_z) < 5e-4, (twin_z, remote_z)
+
+
+def test_specks_of_noise_are_left_out_of_the_visual_mesh_and_parts_are_not():
+    from twin.objects import without_specks
+
+    body = trimesh.creation.icosphere(subdivisions=3, radius=0.05)
+    speck = trimesh.creation.icosphere(subdivisions=1, radius=0.005)
+    speck.apply_translation([0.08, 0, 0])
+    part = trimesh.creation.box(extents=[0.06, 0.06, 0.06])
+    part.apply_translation([0.0, 0.15, 0])
+    whole = trimesh.util.concatenate([body, speck, part])
+    v, f = without_specks(np.asarray(whole.vertices), np.asarray(whole.faces))
+    kept = trimesh.Trimesh(v, f)
+    # The speck (1 % of the body's area) is gone; the box (a part, 73 % of it) stays.
+    assert kept.area == pytest.approx(body.area + part.area, rel=1e-9)
+    assert len(kept.split(only_watertight=False)) == 2
+    # One piece: the very same arrays back (CoACD's cache key does not change).
+    v1, f1 = np.asarray(body.vertices), np.asarray(body.faces)
+    out = without_specks(v1, f1)
+    assert out[0] is v1 and out[1] is f1
