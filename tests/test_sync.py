@@ -72,6 +72,26 @@ def test_malformed_messages_are_dropped_counted_and_survived(remote, endpoint, t
         close_local(local)
 
 
+def test_a_dead_estimation_worker_is_replaced_and_its_clouds_estimated_again(remote, endpoint, tmp_path_factory):
+    # The remote sends each cloud once: a worker killed while estimating (out of memory, a native crash)
+    # must not leave the object out of the twin.
+    local = _local(endpoint, tmp_path_factory, workers=1)
+    try:
+        def estimating() -> bool:
+            pool = local._pool
+            return bool(local._jobs) and pool is not None and bool(pool._processes)
+
+        local.run(30.0, until=estimating)
+        assert estimating(), "no estimation job reached a worker"
+        for process in list(local._pool._processes.values()):  # type: ignore[union-attr]
+            process.kill()
+        wait_objects(local, 2)
+        assert local.report.worker_retries >= 1
+        assert local.report.estimation_errors == 0
+    finally:
+        close_local(local)
+
+
 def test_remote_silence_marks_stale_then_recovers(remote, endpoint, tmp_path_factory):
     local = _local(endpoint, tmp_path_factory, stale_after=0.3)
     try:

@@ -166,6 +166,7 @@ class LocalReport:
     stale_events: int = 0
     recoveries: int = 0
     estimation_errors: int = 0
+    worker_retries: int = 0  # clouds estimated again because their worker process died
     failed_edits: int = 0  # objects whose model did not compile: the twin went on without them
     out_of_order: int = 0  # messages older than what the twin already had from the remote
     out_of_scene: int = 0  # poses and clouds placed outside the scene's box (its workspace, or SCENE_REACH around the table)
@@ -249,6 +250,7 @@ class Local:
         self.inbox: queue.SimpleQueue = queue.SimpleQueue()
         self.stale = False
         self._jobs: dict[str, tuple[Future, Cloud, float]] = {}
+        self._retried: set[tuple[int, int]] = set()  # (epoch, seq) of clouds whose worker died once
         self._clouds: dict[str, tuple[int, int]] = {}  # id -> (epoch, seq) of the cloud in (or going into) the twin
         self._offsets: dict[str, tuple[np.ndarray, np.ndarray]] = {}
         self._latest: dict[str, Pose] = {}
@@ -552,11 +554,18 @@ class Local:
             del self._jobs[object_id]
             try:
                 obj, display = future.result()
-            except BrokenProcessPool as exc:  # a worker died (killed, out of memory): replace the pool
-                self.report.estimation_errors += 1
-                log.error("object %r: the estimation worker died (%s); starting a new one", object_id, exc)
+            except BrokenProcessPool as exc:  # a worker died (killed, out of memory, a native crash)
                 self.rlog.event(self.twin.time, f"{object_id}: the estimation worker died", "ERROR")
-                self._pool = self._new_pool()
+                if (msg.epoch, msg.seq) not in self._retried:
+                    # The cloud is at hand and the remote sends it only once: one more try (every job of a
+                    # broken pool fails with it, not only the one that killed it; _submit replaces the pool).
+                    self._retried.add((msg.epoch, msg.seq))
+                    self.report.worker_retries += 1
+                    log.error("object %r: the estimation worker died (%s); estimating it again", object_id, exc)
+                    self._jobs[object_id] = (self._submit(msg), msg, received)
+                    continue
+                self.report.estimation_errors += 1
+                log.error("object %r: the estimation worker died again (%s); going on without it", object_id, exc)
                 self._clouds.pop(object_id, None)  # the next cloud for it is taken again
                 continue
             except Exception as exc:  # a cloud the estimator rejects: the twin goes on without it
