@@ -109,6 +109,10 @@ class Carving:
         """World positions (n, 3) of voxel centres ``index`` (n, 3)."""
         return self.origin + ((np.asarray(index) + 0.5) * self.cell) @ self.axes
 
+    def index_of(self, points: np.ndarray) -> np.ndarray:
+        """Voxel indices (n, 3) int64 of world ``points`` (n, 3), metres; outside the grid as they fall."""
+        return np.floor((np.asarray(points) - self.origin) @ self.axes.T / self.cell).astype(np.int64)
+
 
 def carving_views(views: Sequence[DepthView], plane: Plane | None, plane_margin: float) -> list[DepthView]:
     """The views as carving reads them: edge pixels at their nearest neighbour's depth, support-plane pixels on
@@ -220,47 +224,36 @@ def carve(points: np.ndarray, views: Sequence[DepthView], plane: Plane, *, other
     hi = np.floor(local[:, :2].max(axis=0) / cell).astype(np.int64) + pad + 1
     top = int(np.ceil(local[:, 2].max() / cell)) + 1
     shape = (int(hi[0] - lo[0]), int(hi[1] - lo[1]), max(top, 1))
+    origin = centre - plane.offset * up + (lo[0] * cell) * e1 + (lo[1] * cell) * axes[1]
+    carving = Carving(np.zeros(shape, dtype=bool), origin, axes, float(cell))
+    seen = np.clip(carving.index_of(pts), 0, np.array(shape) - 1)
     # The footprint: the shadow of the observed points, gaps closed, grown a little.
     shadow = np.zeros(shape[:2], dtype=bool)
-    ij = np.floor(local[:, :2] / cell).astype(np.int64) - lo
-    shadow[ij[:, 0], ij[:, 1]] = True
+    shadow[seen[:, 0], seen[:, 1]] = True
     shadow = ndimage.binary_closing(shadow, iterations=closing)
     shadow = ndimage.binary_dilation(shadow, iterations=grow)
     fi, fj = np.nonzero(shadow)
     k = np.arange(shape[2])
     index = np.stack([np.repeat(fi, shape[2]), np.repeat(fj, shape[2]), np.tile(k, len(fi))], axis=1)
-    origin = centre - plane.offset * up + (lo[0] * cell) * e1 + (lo[1] * cell) * axes[1]
-    carving = Carving(np.zeros(shape, dtype=bool), origin, axes, float(cell))
-    world = carving.centres(index)
-    keep = ~free_space(world, views, slack=FREE_CELLS * cell)
+    keep = ~free_space(carving.centres(index), views, slack=FREE_CELLS * cell)
     solid = carving.solid
     solid[index[keep, 0], index[keep, 1], index[keep, 2]] = True
-    seen = _voxels(local, lo, cell, shape)
     if others is not None and len(others):
         # Unseen space between two objects is split by the nearest observed point, on the grid (a distance
         # transform): other objects' points outside the grid are too far to claim a voxel of the footprint.
-        theirs = as_points(others, "others")
-        there = (theirs - centre) @ axes.T
-        there[:, 2] = plane.height(theirs)
-        ijk = np.floor(np.column_stack([there[:, :2] / cell - lo, there[:, 2] / cell])).astype(np.int64)
-        ijk = ijk[((ijk >= 0) & (ijk < np.array(shape))).all(axis=1)]
-        if len(ijk):
+        theirs = carving.index_of(as_points(others, "others"))
+        theirs = theirs[((theirs >= 0) & (theirs < np.array(shape))).all(axis=1)]
+        if len(theirs):
             mine_far = np.ones(shape, dtype=bool)
             mine_far[seen[:, 0], seen[:, 1], seen[:, 2]] = False
             their_far = np.ones(shape, dtype=bool)
-            their_far[ijk[:, 0], ijk[:, 1], ijk[:, 2]] = False
+            their_far[theirs[:, 0], theirs[:, 1], theirs[:, 2]] = False
             solid &= ndimage.distance_transform_edt(mine_far) <= ndimage.distance_transform_edt(their_far)
     # Only what hangs together with the observed points is this object.
     labels, _ = ndimage.label(solid)
     ids = np.unique(labels[seen[:, 0], seen[:, 1], seen[:, 2]])
     solid &= np.isin(labels, ids[ids > 0])
     return carving
-
-
-def _voxels(local: np.ndarray, lo: np.ndarray, cell: float, shape: tuple[int, int, int]) -> np.ndarray:
-    """Voxel indices (n, 3) of plane-frame points ``local`` (u, v, height), clipped to the grid."""
-    ijk = np.floor(np.column_stack([local[:, :2] / cell - lo, local[:, 2] / cell])).astype(np.int64)
-    return np.clip(ijk, 0, np.array(shape) - 1)
 
 
 def carved_surface(carving: Carving) -> tuple[np.ndarray, np.ndarray]:
