@@ -260,8 +260,10 @@ SPECK_AREA_FRACTION = 0.1
 
 def visual_mesh(est: PhysicalEstimate) -> Hull:
     """The estimate's surface as the twin shows and decomposes it: object frame (origin at the centre of
-    mass), specks of noise left out (``SPECK_AREA_FRACTION``), decimated (:func:`decimate`)."""
-    return decimate(*without_specks(est.vertices - est.mass.center_of_mass, est.faces))
+    mass), decimated (:func:`decimate`), specks of noise left out (``SPECK_AREA_FRACTION``). The specks are
+    found after decimation: on the ~3000 faces, not the reconstruction's 50-80k (10-50 ms against 120-150
+    ms, in every build and estimation worker)."""
+    return without_specks(*decimate(est.vertices - est.mass.center_of_mass, est.faces))
 
 
 def without_specks(vertices: np.ndarray, faces: np.ndarray) -> Hull:
