@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import logging
 import zlib
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Protocol
 
 import numpy as np
@@ -54,7 +54,11 @@ class Track:
     """An object frame's pose and velocity as sensed: world frame; quaternion w x y z; m/s, rad/s.
 
     ``position_sigma`` (m) and ``angle_sigma`` (rad): the standard deviation of the pose along its worst
-    direction, as the sensor reports it (0: exact, the simulator's own state).
+    direction, as the sensor reports it (0: exact, the simulator's own state). ``seen`` is False when the
+    latest measurement did not find the object (out of view, lost): the pose is then the last one seen,
+    and the remote does not publish it again (a stale pose would pull the twin back to where the object was).
+    ``time``: the remote's simulated time of the measurement, seconds (None: now), so that a pose measured
+    earlier is compared with the twin's state at that moment, not now.
     """
 
     position: np.ndarray
@@ -63,6 +67,8 @@ class Track:
     angvel: np.ndarray
     position_sigma: float = 0.0
     angle_sigma: float = 0.0
+    seen: bool = True
+    time: float | None = None
 
 
 class GroundTruth(Protocol):
@@ -149,11 +155,18 @@ class CameraSensor:
     sensor origins, orients normals towards each point's camera, closes the base on the support plane
     (``estimation.completion``) and reports the segment's centroid with the world's axes as the object
     frame. :meth:`track` registers the object's first fused cloud to the current segment (point-to-plane
-    ICP) and reports that motion applied to the frame, with zero velocity. Scans happen at most every
-    ``track_period`` simulated seconds; in between, the last track is reported.
+    ICP) and reports that motion applied to the frame, with the velocity between its last two tracks.
+    Scans happen at most every ``track_period`` simulated seconds; in between, the last track is reported,
+    with the scan's time.
+
+    Between scans an object is predicted at constant velocity (from its last two tracks), and ICP starts
+    from that prediction and, when the segment is the object's alone, from the segment's centroid; the
+    better fit wins. An object not found near its prediction is looked for again, in segments no other
+    object claims, within how far it could have moved since it was last seen (``MAX_SPEED``).
 
     Nothing the cameras see raises: an object in no segment, two objects in one segment, a lost ICP are
-    logged and counted in ``self.feed.stats``; the last good observation or track is returned.
+    logged and counted in ``self.feed.stats``; the last good observation or track is returned, a track
+    marked ``seen=False``.
     """
 
     def __init__(self, feed, *, track_period: float = 0.5, seed: int = 0) -> None:  # type: ignore[no-untyped-def]
@@ -167,6 +180,9 @@ class CameraSensor:
         self._motion: dict[str, np.ndarray] = {}  # id -> (4, 4) motion since the model's capture
         self._observed: dict[str, Observation] = {}
         self._tracked: dict[str, tuple[float, Track]] = {}
+        self._seen_at: dict[str, float] = {}  # id -> scan time of its last good observation or track
+        self._velocity: dict[str, tuple[np.ndarray, np.ndarray]] = {}  # id -> (linear, angular) between two tracks
+        self._gates: dict[str, int] | None = None  # id -> segment at its prediction, in the current scan
 
     @classmethod
     def for_scene(cls, scene, *, cameras: int = 3, seed: int = 0, track_period: float = 0.5,  # type: ignore[no-untyped-def]
@@ -201,7 +217,10 @@ class CameraSensor:
         self._model[object_id] = (model, seen.frame_position)
         self._motion[object_id] = np.eye(4)
         self._observed[object_id] = seen
-        self._tracked[object_id] = (scan.time, Track(seen.frame_position, seen.frame_quat, np.zeros(3), np.zeros(3)))
+        self._tracked[object_id] = (scan.time, Track(seen.frame_position, seen.frame_quat, np.zeros(3), np.zeros(3),
+                                                     time=scan.time))
+        self._last[object_id], self._seen_at[object_id] = seen.frame_position, scan.time
+        self._velocity.pop(object_id, None)
         return seen
 
     def track(self, truth: GroundTruth, object_id: str) -> Track:
@@ -215,24 +234,22 @@ class CameraSensor:
         model, centre = self._model.get(object_id, (np.zeros((0, 3)), self._last.get(object_id, np.zeros(3))))
         result = None
         if k is not None and len(model) >= 3:
-            from estimation.fusion import register
-
-            target = scan.segments[k].points
-            reg = register(model, target, init=self._motion[object_id], max_distance=max(3 * scan.cell, 0.01))
-            if reg.fitness >= MIN_FITNESS:
-                result = reg
-            else:
+            result = self._register(scan, k, object_id, model)
+            if result.fitness < MIN_FITNESS:
                 self.feed.stats.lost_tracks += 1
-                log.warning("%s: ICP lost the object (fitness %.2f); keeping the last pose", object_id, reg.fitness)
+                log.warning("%s: ICP lost the object (fitness %.2f); keeping the last pose", object_id, result.fitness)
+                result = None
         if result is None:
             last = self._tracked.get(object_id)
-            track = last[1] if last is not None else Track(centre, np.array([1.0, 0, 0, 0]), np.zeros(3), np.zeros(3))
+            kept = last[1] if last is not None else Track(centre, np.array([1.0, 0, 0, 0]), np.zeros(3), np.zeros(3))
+            track = replace(kept, seen=False)
         else:
+            before = self._motion[object_id]
             motion = self._motion[object_id] = result.transform
             position = motion[:3, :3] @ centre + motion[:3, 3]
-            track = Track(position, _quat(motion[:3, :3]), np.zeros(3), np.zeros(3),
-                          result.position_sigma(position), result.angle_sigma)
-            self._last[object_id] = position
+            linvel, angvel = self._update_velocity(object_id, position, motion[:3, :3] @ before[:3, :3].T, scan.time)
+            track = Track(position, _quat(motion[:3, :3]), linvel, angvel,
+                          result.position_sigma(position), result.angle_sigma, time=scan.time)
         self._tracked[object_id] = (scan.time, track)
         return track
 
@@ -251,30 +268,32 @@ class CameraSensor:
         expected = [g for i in twin.object_ids()  # type: ignore[attr-defined]
                     if (g := mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, f"{i}/visual")) >= 0]
         self._scan = self.feed.scan(model, twin.data, time=now, expected=expected)  # type: ignore[attr-defined]
-        self._claims = {}
+        self._claims, self._gates = {}, None
         return self._scan
 
     def _associate(self, truth: GroundTruth, scan, object_id: str) -> int | None:  # type: ignore[no-untyped-def]
-        """Index of the segment that is ``object_id`` in ``scan``, or None (logged and counted)."""
+        """Index of the segment that is ``object_id`` in ``scan``, or None (logged and counted).
+
+        The segment around the object's predicted position; failing that, the nearest segment no other object
+        is predicted in, within the distance the object could have moved since it was last seen.
+        """
         if object_id not in self._last:
             # Labelling, once: which segment is this object. See the class docstring.
             self._last[object_id] = np.asarray(truth.twin.pose(object_id)[0], float)  # type: ignore[attr-defined]
+            self._seen_at[object_id] = scan.time
         if not scan.segments:
             self.feed.stats.unseen += 1
             log.warning("%s: the scan at t=%.3f has no segments", object_id, scan.time)
             return None
-        here = self._last[object_id]
-        centroids = np.array([s.centroid for s in scan.segments])
-        dist = np.linalg.norm(centroids - here, axis=1)
-        k = int(np.argmin(dist))
-        # Inside the segment's box grown by the radius: a large object's centroid (of what was seen) can be
-        # far from its frame.
-        seg = scan.segments[k]
-        lo, hi = seg.points.min(axis=0) - ASSOCIATION_RADIUS, seg.points.max(axis=0) + ASSOCIATION_RADIUS
-        if not ((here >= lo) & (here <= hi)).all():
+        gates = self._gated(scan)
+        k = gates.get(object_id)
+        if k is None:
+            k = self._search(scan, object_id, taken=set(gates.values()))
+        if k is None:
             self.feed.stats.unseen += 1
-            log.warning("%s: no segment within %.0f mm of its last position (nearest centroid %.0f mm); not seen",
-                        object_id, 1000 * ASSOCIATION_RADIUS, 1000 * dist[k])
+            since = scan.time - self._seen_at.get(object_id, scan.time)
+            log.warning("%s: no free segment within %.0f mm of where it was %.1f s ago; not seen", object_id,
+                        1000 * self._reach(since), since)
             return None
         owners = self._claims.setdefault(k, set())
         owners.add(object_id)
@@ -282,6 +301,104 @@ class CameraSensor:
             self.feed.stats.merged += 1
             log.warning("segment %d of the scan at t=%.3f holds %s: merged", k, scan.time, ", ".join(sorted(owners)))
         return k
+
+    def _predicted(self, object_id: str, time: float) -> np.ndarray:
+        """Where the object's frame centre is expected at ``time``: its last position moved at its velocity."""
+        velocity = self._velocity.get(object_id)
+        last = self._last[object_id]
+        return last if velocity is None else last + velocity[0] * (time - self._seen_at.get(object_id, time))
+
+    def _gated(self, scan) -> dict[str, int]:  # type: ignore[no-untyped-def]
+        """Every labelled object's segment at its prediction in ``scan`` (computed once per scan).
+
+        The segment is the one with the nearest centroid, if the prediction lies inside its box grown by
+        ``ASSOCIATION_RADIUS`` (a large object's centroid, of what was seen, can be far from its frame).
+        """
+        if self._gates is not None:
+            return self._gates
+        centroids = np.array([seg.centroid for seg in scan.segments])
+        lows = np.array([seg.points.min(axis=0) for seg in scan.segments]) - ASSOCIATION_RADIUS
+        highs = np.array([seg.points.max(axis=0) for seg in scan.segments]) + ASSOCIATION_RADIUS
+        gates: dict[str, int] = {}
+        for object_id in self._last:
+            here = self._predicted(object_id, scan.time)
+            k = int(np.argmin(np.linalg.norm(centroids - here, axis=1)))
+            if ((here >= lows[k]) & (here <= highs[k])).all():
+                gates[object_id] = k
+        self._gates = gates
+        return gates
+
+    def _search(self, scan, object_id: str, *, taken: set[int]) -> int | None:  # type: ignore[no-untyped-def]
+        """The nearest segment no object is predicted in, within reach of where ``object_id`` was last seen."""
+        last = self._last[object_id]
+        reach = self._reach(scan.time - self._seen_at.get(object_id, scan.time))
+        best, best_d = None, np.inf
+        for k, seg in enumerate(scan.segments):
+            if k in taken:
+                continue
+            # Distance from the last position to the segment's box: a box, not the centroid, for the reason
+            # in _gated.
+            d = float(np.linalg.norm(np.maximum(0.0, np.maximum(seg.points.min(axis=0) - last,
+                                                                 last - seg.points.max(axis=0)))))
+            if d <= reach and d < best_d:
+                best, best_d = k, d
+        return best
+
+    @staticmethod
+    def _reach(since: float) -> float:
+        """Metres an object may have moved in ``since`` seconds unseen."""
+        return ASSOCIATION_RADIUS + MAX_SPEED * max(since, 0.0)
+
+    def _register(self, scan, k: int, object_id: str, model: np.ndarray):  # type: ignore[no-untyped-def]
+        """ICP of the object's model to segment ``k``: the best fit from the predicted motion and, when the
+        segment is the object's alone, from the segment's centroid (a few turns about the vertical)."""
+        from estimation.fusion import register
+
+        target = scan.segments[k].points
+        motion = self._motion[object_id]
+        starts = [motion]  # still
+        if object_id in self._velocity:  # moved on as it moved
+            predicted = motion.copy()
+            predicted[:3, 3] += self._predicted(object_id, scan.time) - self._last[object_id]
+            starts.append(predicted)
+        alone = [i for i, g in self._gated(scan).items() if g == k] in ([], [object_id])
+        if alone:
+            moved = model @ motion[:3, :3].T + motion[:3, 3]
+            pivot = moved.mean(axis=0)
+            shift = scan.segments[k].centroid - pivot
+            for turn in CENTROID_TURNS:
+                c, s = np.cos(turn), np.sin(turn)
+                yaw = np.eye(4)
+                yaw[:3, :3] = [[c, -s, 0], [s, c, 0], [0, 0, 1]]
+                yaw[:3, 3] = pivot + shift - yaw[:3, :3] @ pivot
+                starts.append(yaw @ motion)
+        distance = max(3 * scan.cell, 0.01)
+        best = None
+        for start in starts:
+            # A coarse pass reaches an object that moved further than the fine distance, then a fine one.
+            coarse = register(model, target, init=start, max_distance=COARSE_FACTOR * distance)
+            reg = register(model, target, init=coarse.transform, max_distance=distance)
+            if best is None or (reg.fitness, -reg.rmse) > (best.fitness, -best.rmse):
+                best = reg
+        return best
+
+    def _update_velocity(self, object_id: str, position: np.ndarray, turn: np.ndarray,
+                         time: float) -> tuple[np.ndarray, np.ndarray]:
+        """The frame's (linear m/s, angular rad/s) velocity, world frame, from the last track to this one at
+        ``position`` turned by ``turn`` (3, 3); zero when the last is older than ``VELOCITY_WINDOW``."""
+        from scipy.spatial.transform import Rotation
+
+        before, since = self._last.get(object_id), time - self._seen_at.get(object_id, time)
+        if before is not None and 0 < since <= VELOCITY_WINDOW:
+            linear = (position - before) / since
+            speed = float(np.linalg.norm(linear))
+            if speed > MAX_SPEED:
+                linear = linear * (MAX_SPEED / speed)
+            self._velocity[object_id] = (linear, Rotation.from_matrix(turn).as_rotvec() / since)
+        else:
+            self._velocity.pop(object_id, None)
+        self._last[object_id], self._seen_at[object_id] = position, time
+        return self._velocity.get(object_id, (np.zeros(3), np.zeros(3)))
 
     def _fuse(self, scan, seg, points: int, shot: int) -> Observation:  # type: ignore[no-untyped-def]
         """The segment's views as one cloud: normals towards each point's camera, the base closed."""
@@ -311,6 +428,20 @@ ASSOCIATION_RADIUS = 0.08
 
 #: ICP matching fewer of the model's points than this share has lost the object.
 MIN_FITNESS = 0.3
+
+#: The fastest an object is expected to move, m/s: what a teleoperated arm pushes or carries across a table.
+#: An object lost for t seconds is looked for within ``ASSOCIATION_RADIUS + MAX_SPEED t`` of where it was.
+MAX_SPEED = 1.0
+
+#: Seconds over which two tracks give a velocity to predict with; further apart, none (a stale difference
+#: says little about the motion now).
+VELOCITY_WINDOW = 1.5
+
+#: Turns about the vertical (radians) tried from the segment's centroid: a pushed object turns.
+CENTROID_TURNS = (0.0, np.pi / 2, np.pi, -np.pi / 2)
+
+#: The first ICP pass's correspondence distance, in fine distances.
+COARSE_FACTOR = 3.0
 
 
 def _quat(matrix: np.ndarray) -> np.ndarray:

@@ -179,3 +179,65 @@ def test_tracking_at_rest_is_within_2_mm_and_1_degree():
     assert angle_deg(track.quat, np.array([1.0, 0, 0, 0])) < 1.0
     # ICP's own uncertainty comes with the track (the noise's part only: smaller than the error at rest).
     assert 0 < track.position_sigma < 0.002 and 0 < track.angle_sigma < np.radians(1.0)
+
+
+def _move(model, data, name: str, x: float, y: float) -> None:  # type: ignore[no-untyped-def]
+    import mujoco
+
+    adr = model.jnt_qposadr[model.joint(f"{name}/free").id]
+    data.qpos[adr:adr + 2] = (x, y)
+    mujoco.mj_forward(model, data)
+
+
+def _tracked_error(sensor, truth, name: str, seen, start) -> float:  # type: ignore[no-untyped-def]
+    """How far the track of ``name`` is from the frame the observation ``seen`` put on it, moved as the truth."""
+    now = truth.twin.pose(name)[0]
+    return float(np.linalg.norm(sensor.track(truth, name).position - (seen.frame_position + now - start)))
+
+
+def test_an_object_moved_further_than_the_association_radius_between_scans_is_found_again():
+    from scenes.sensing import ASSOCIATION_RADIUS
+
+    model, data = _model({"a": (-0.2, 0.0), "b": (0.2, 0.15)})
+    sensor, truth = CameraSensor(CameraFeed(_rig(3), WORKSPACE, seed=3)), _Truth(model, data)
+    start = truth.twin.pose("a")[0]
+    seen = sensor.observe(truth, "a", 0, shot=1)  # type: ignore[arg-type]
+    sensor.observe(truth, "b", 0, shot=1)  # type: ignore[arg-type]
+    _move(model, data, "a", 0.0, -0.05)  # 21 cm in half a second: pushed hard
+    truth.twin.time = 0.5
+    assert np.linalg.norm(truth.twin.pose("a")[0] - start) > 2 * ASSOCIATION_RADIUS
+    track = sensor.track(truth, "a")  # type: ignore[arg-type]
+    assert track.seen and track.time == 0.5
+    assert _tracked_error(sensor, truth, "a", seen, start) < 0.003
+    # the velocity between the two tracks comes with the second
+    assert np.linalg.norm(track.linvel) == pytest.approx(np.linalg.norm(truth.twin.pose("a")[0] - start) / 0.5, rel=0.05)
+    assert sensor.feed.stats.unseen == 0 and sensor.feed.stats.lost_tracks == 0
+
+
+def test_an_object_that_left_the_view_is_reported_unseen_at_its_last_pose():
+    model, data = _model({"a": (0.0, 0.0)})
+    sensor, truth = CameraSensor(CameraFeed(_rig(3), WORKSPACE, seed=4)), _Truth(model, data)
+    sensor.observe(truth, "a", 0, shot=1)  # type: ignore[arg-type]
+    before = sensor.track(truth, "a")  # type: ignore[arg-type]
+    _move(model, data, "a", 3.0, 0.0)  # off the table, out of every camera's workspace
+    truth.twin.time = 0.5
+    track = sensor.track(truth, "a")  # type: ignore[arg-type]
+    assert not track.seen
+    assert np.array_equal(track.position, before.position)
+    assert sensor.feed.stats.unseen == 1
+
+
+def test_objects_pushed_together_are_tracked_through_the_merged_segment():
+    # a moves towards b at a steady 12 cm/s (6 cm a scan); at the third scan their faces touch and the
+    # segments merge: only the prediction brings ICP close enough.
+    model, data = _model({"a": (-0.10, 0.0), "b": (0.1, 0.0)})
+    sensor, truth = CameraSensor(CameraFeed(_rig(3), WORKSPACE, seed=5)), _Truth(model, data)
+    start = {i: truth.twin.pose(i)[0] for i in "ab"}
+    seen = {i: sensor.observe(truth, i, 0, shot=1) for i in "ab"}  # type: ignore[arg-type]
+    for t, x in [(0.5, -0.04), (1.0, 0.02)]:  # at 0.02 its face is at 0.06, b's at 0.06
+        _move(model, data, "a", x, 0.0)
+        truth.twin.time = t
+        errors = {i: _tracked_error(sensor, truth, i, seen[i], start[i]) for i in "ab"}
+        assert max(errors.values()) < 0.004, (t, errors)
+    assert sensor.feed.stats.merged >= 1  # the last scan did merge them
+    assert sensor.feed.stats.lost_tracks == 0
