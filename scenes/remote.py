@@ -101,6 +101,8 @@ class Remote:
         self._objects: dict[str, _Truth] = {}
         self._cache_dir = cache_dir
         self.pose_updates = 0
+        self.unseen_reports = 0  # times the sensor lost an object (Track.seen False), each said once on the wire
+        self._unseen: set[str] = set()  # objects lost and said so: nothing more is published of them until found
         top = scene.table.height if scene.table else None
         truth = prepare_objects(scene.objects, table_top=top, cache_dir=cache_dir, progress=progress,
                                 estimates=[reference_estimate(s) for s in scene.objects])
@@ -296,6 +298,8 @@ class Remote:
         cos_half = np.fmin(1.0, np.abs(np.matmul(quat[:, None, :], last.quat[:, :, None])[:, 0, 0]))
         turned = 2 * np.degrees(np.arccos(cos_half))  # as twin.poses.angle_deg (fmin: as its min on NaN)
         still = (moved <= self.deadband.position) & (turned <= self.deadband.angle_deg) & last.known
+        if self._unseen:  # asked every step: found again, it is published at once, moved or not
+            still &= ~np.isin(ids, list(self._unseen))
         for k in np.flatnonzero(~still):
             self._publish_pose(ids[k], track=None if tracks is None else tracks[k])
 
@@ -307,16 +311,32 @@ class Remote:
         return rows
 
     def _publish_pose(self, object_id: str, *, track: Track | None = None) -> None:
-        """Publish the object's pose now (the deadband is the caller's: :meth:`_publish_moved`)."""
+        """Publish the object's pose now (the deadband is the caller's: :meth:`_publish_moved`).
+
+        When the sensor has lost the object, that is said once (``Pose.seen`` False, the last pose seen) and
+        nothing more is published of it until it is found: the twin simulates it alone meanwhile, rather
+        than being pulled back to, or held at, where it was last seen.
+        """
         seen = self.sensor.track(self, object_id) if track is None else track
+        if not seen.seen:
+            if object_id in self._unseen:
+                return
+            self._unseen.add(object_id)
+            self.unseen_reports += 1
+        else:
+            self._unseen.discard(object_id)
         pos, quat = seen.position, seen.quat
         self._published[object_id] = (pos, quat)
         if self._rows is not None:
             self._rows.update(object_id, pos, quat)
+        # A pose measured earlier (a camera scan) answers to the operator's input of then: while commands
+        # stream, the answered time runs with the clock, so it is the answer now less the measurement's age.
+        age = 0.0 if seen.time is None else max(0.0, self.twin.time - seen.time)
+        answers = self._answers_ns()
         msg = Pose(v=VERSION, stamp_ns=self.clock.stamp_ns(), object_id=object_id, epoch=self.epoch, seq=self._next(),
-                   sim_time=self.twin.time, position=_floats(pos), quat=_floats(quat), linvel=_floats(seen.linvel),
-                   angvel=_floats(seen.angvel), answers_ns=self._answers_ns(),
-                   position_sigma=float(seen.position_sigma), angle_sigma=float(seen.angle_sigma))
+                   sim_time=self.twin.time - age, position=_floats(pos), quat=_floats(quat), linvel=_floats(seen.linvel),
+                   angvel=_floats(seen.angvel), answers_ns=max(0, answers - round(age * 1e9)) if answers else 0,
+                   position_sigma=float(seen.position_sigma), angle_sigma=float(seen.angle_sigma), seen=seen.seen)
         key = self._pose_keys.get(object_id)
         if key is None:
             key = self._pose_keys[object_id] = self.keys.object(object_id, "pose")

@@ -108,6 +108,11 @@ class Pose(_Msg, tag="pose"):
 
     ``position_sigma`` (m) and ``angle_sigma`` (rad): the pose's standard deviation along its worst
     direction as the remote's sensor reports it (ICP on depth cameras); 0 for the simulator's own state.
+
+    ``seen`` False: the remote's sensor has lost the object (out of view, not found); the pose is the last
+    one seen, and no other comes until it is found again. The twin then simulates the object on its own:
+    it neither corrects towards that pose nor holds the object there (the remote's silence no longer means
+    the object is still).
     """
 
     object_id: str
@@ -121,6 +126,7 @@ class Pose(_Msg, tag="pose"):
     answers_ns: int = 0
     position_sigma: float = 0.0
     angle_sigma: float = 0.0
+    seen: bool = True
 
 
 class Gone(_Msg, tag="gone"):

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -10,6 +11,7 @@ import pytest
 from scenes.headless import Headless
 from scenes.remote import Remote
 from scenes.scenefile import load_scene
+from scenes.sensing import SurfaceSensor, Track
 from sync.keys import Keys
 from sync.link import Link
 from sync.messages import VERSION, Pose
@@ -107,3 +109,32 @@ def test_a_pose_far_outside_the_scene_is_dropped_and_counted(cache):
         session.run(0.2)
         assert session.local.report.out_of_scene == 1
         assert np.linalg.norm(session.local.twin.pose("crate")[0] - before) < 0.002
+
+
+class _Losing(SurfaceSensor):
+    """The surface sensor, losing the objects in ``hidden`` (``Track.seen`` False) while they are there."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.hidden: set[str] = set()
+
+    def track(self, truth, object_id: str) -> Track:  # type: ignore[no-untyped-def]
+        track = super().track(truth, object_id)
+        return replace(track, seen=False) if object_id in self.hidden else track
+
+
+def test_an_object_the_sensor_lost_is_left_to_the_twin_until_it_is_found(cache):
+    sensor = _Losing()
+    with Headless(load_scene(SMALL), cache_dir=cache, sensor=sensor) as session:
+        session.run(1.0)
+        kept = session.local.twin.pose("crate")[0].copy()
+        sensor.hidden.add("crate")
+        position, quat = session.remote.twin.pose("crate")
+        session.remote.twin.set_pose("crate", position + np.array([0.0, 0.1, 0.0]), quat)  # where no one sees
+        session.run(2.5)  # two keyframes: neither says where the crate was last seen, nor where it is
+        assert session.remote.unseen_reports == 1 and session.local.report.unseen == 1
+        assert np.linalg.norm(session.local.twin.pose("crate")[0] - kept) < 0.002
+        sensor.hidden.clear()
+        session.run(0.05)  # found again: published at once, though C's crate has not moved since
+        assert np.linalg.norm(session.local.twin.pose("crate")[0] - session.remote.twin.pose("crate")[0]) < 0.005
+        assert session.local.report.divergence["crate"][-1] < 0.005  # sampled again once C's pose is known

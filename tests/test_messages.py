@@ -55,6 +55,13 @@ def test_cloud_codec_round_trip_and_ratio():
 
 def test_a_good_pose_passes_unchanged():
     assert decode(encode(_pose())) == _pose()
+    assert decode(encode(_pose(seen=False))).seen is False
+
+
+def test_a_pose_whose_seen_flag_is_not_a_bool_is_rejected():
+    with pytest.raises(MessageError) as err:
+        decode(encode(_pose(seen="yes")))
+    assert err.value.reason == "undecodable"
 
 
 @pytest.mark.parametrize(("fields", "reason"), [

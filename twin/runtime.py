@@ -170,6 +170,7 @@ class LocalReport:
     failed_edits: int = 0  # objects whose model did not compile: the twin went on without them
     out_of_order: int = 0  # messages older than what the twin already had from the remote
     out_of_scene: int = 0  # poses and clouds placed outside the scene's box (its workspace, or SCENE_REACH around the table)
+    unseen: int = 0  # times the remote's sensor lost an object (Pose.seen False): the twin simulated it alone
     holds: int = 0  # times an object strayed from the remote's pose on its own and was pinned to it
     snaps: int = 0  # corrections too large to blend in: the object was moved at once
     operator_targets: int = 0  # device targets taken (OperatorSettings.listen)
@@ -254,6 +255,7 @@ class Local:
         self._clouds: dict[str, tuple[int, int]] = {}  # id -> (epoch, seq) of the cloud in (or going into) the twin
         self._offsets: dict[str, tuple[np.ndarray, np.ndarray]] = {}
         self._latest: dict[str, Pose] = {}
+        self._unseen: set[str] = set()  # objects the remote's sensor has lost (Pose.seen False)
         self._pose_mark: dict[str, tuple[int, int]] = {}  # id -> (epoch, seq) of the newest pose taken
         self._targets: dict[str, Pose] = {}  # id -> its newest pose from C, until measured (_measure)
         self._errors: dict[str, tuple[np.ndarray, bool]] = {}  # id -> (correction left (12,), snap it)
@@ -511,6 +513,10 @@ class Local:
             if not self._in_scene(msg, msg.position) or not self._newer(self._pose_mark, msg):
                 return
             self._latest[msg.object_id] = msg
+            if not msg.seen:
+                self._on_unseen(msg.object_id)
+                return
+            self._unseen.discard(msg.object_id)
             if msg.object_id in self._offsets and self.twin.has(msg.object_id):
                 self._targets[msg.object_id] = msg  # replaces an older one not yet measured
                 self._hold_at(msg.object_id)
@@ -540,6 +546,7 @@ class Local:
             self._latest.pop(msg.object_id, None)
             self._mapped.pop(msg.object_id, None)
             self._pose_mark.pop(msg.object_id, None)
+            self._unseen.discard(msg.object_id)
             self.hold.forget(msg.object_id)
             if self.twin.has(msg.object_id):
                 self.twin.edit_async(lambda spec, i=msg.object_id: remove_object(spec, i))
@@ -583,7 +590,7 @@ class Local:
             def done(obj=obj, msg=msg, received=received, display=display) -> None:  # type: ignore[no-untyped-def]
                 self._offsets[obj.id] = _offset(obj, msg)
                 latest = self._latest.get(obj.id)
-                if latest is not None and latest.seq > msg.seq:
+                if latest is not None and latest.seq > msg.seq and latest.seen:
                     self._targets[obj.id] = latest
                     self._to_correct.append(obj.id)
                 self._hold_at(obj.id)
@@ -773,8 +780,19 @@ class Local:
                                              np.concatenate([*mapped, pose.linvel, pose.angvel]))
         return hit[3] if row else hit[2]
 
+    def _on_unseen(self, object_id: str) -> None:
+        """The remote lost sight of the object: the twin simulates it alone (no hold at a stale pose)."""
+        if object_id in self._unseen:
+            return
+        self._unseen.add(object_id)
+        self.report.unseen += 1
+        self.hold.forget(object_id)
+        self.rlog.event(self.twin.time, f"{object_id}: the remote's sensor lost it; simulated here alone", "WARN")
+
     def _sample_divergence(self) -> None:
         for object_id in self._offsets:
+            if object_id in self._unseen:  # C's pose of it is not known
+                continue
             remote = self.remote_pose(object_id)
             if remote is not None and self.twin.has(object_id):
                 gap = float(np.linalg.norm(self.twin.pose(object_id)[0] - remote[0]))
@@ -783,7 +801,7 @@ class Local:
     def _hold_at(self, object_id: str) -> None:
         """Tell the hold where the remote last had the object (mapped onto the twin's body)."""
         pose, latest = self.remote_pose(object_id), self._latest.get(object_id)
-        if pose is not None and latest is not None:
+        if pose is not None and latest is not None and latest.seen:
             self.hold.target(object_id, *pose, latest.linvel, latest.angvel, now=self.twin.time)
 
     def _publish_operator(self, target: np.ndarray) -> None:
