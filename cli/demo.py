@@ -30,12 +30,13 @@ def default_scene() -> Path:
 
 def remote_sensor(name: str, scene):  # type: ignore[no-untyped-def]
     """The remote's sensor for ``--sensor name``: None (the Remote's default, the surface sensor) or the
-    scene's default camera rig (:meth:`scenes.sensing.CameraSensor.for_scene`)."""
+    scene's default camera rig (:meth:`scenes.sensing.CameraSensor.for_scene`), scanning in the background
+    (these remotes run live)."""
     if name == "surface":
         return None
     from scenes.sensing import CameraSensor
 
-    return CameraSensor.for_scene(scene)
+    return CameraSensor.for_scene(scene, background=True)
 
 
 def _remote_main(scene_path: str, endpoint: str, zenoh_config: str | None, ready, stop, results,  # type: ignore[no-untyped-def]

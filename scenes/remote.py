@@ -236,6 +236,9 @@ class Remote:
 
     def close(self) -> None:
         self.link.close()
+        close = getattr(self.sensor, "close", None)
+        if close is not None:
+            close()
         self.twin.close()
 
     # -- internals -----------------------------------------------------------------------------------
@@ -300,6 +303,8 @@ class Remote:
         still = (moved <= self.deadband.position) & (turned <= self.deadband.angle_deg) & last.known
         if self._unseen:  # asked every step: found again, it is published at once, moved or not
             still &= ~np.isin(ids, list(self._unseen))
+        if tracks is not None and not all(t.seen for t in tracks):  # and lost: said at once, not at a keyframe
+            still &= ~np.array([not t.seen for t in tracks])
         for k in np.flatnonzero(~still):
             self._publish_pose(ids[k], track=None if tracks is None else tracks[k])
 

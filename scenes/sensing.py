@@ -12,7 +12,9 @@ no noise) and the simulator's own poses. Camera-based sensors plug in here.
 from __future__ import annotations
 
 import logging
+import threading
 import zlib
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, replace
 from typing import Protocol
 
@@ -167,9 +169,16 @@ class CameraSensor:
     Nothing the cameras see raises: an object in no segment, two objects in one segment, a lost ICP are
     logged and counted in ``self.feed.stats``; the last good observation or track is returned, a track
     marked ``seen=False``.
+
+    With ``background``, :meth:`track` never scans in the caller's thread: when a scan is due it copies
+    the simulation's state and scans and tracks every object in a thread of its own, and answers with the
+    last tracks done meanwhile (each with its scan's time), so a live remote's loop is not held up for the
+    second a scan takes. MuJoCo's ray casting and Open3D release the GIL. :meth:`observe` still scans at
+    once (and waits for a scan in progress). Without it (the default), runs are repeatable bit for bit.
     """
 
-    def __init__(self, feed, *, track_period: float = 0.5, seed: int = 0) -> None:  # type: ignore[no-untyped-def]
+    def __init__(self, feed, *, track_period: float = 0.5, seed: int = 0,  # type: ignore[no-untyped-def]
+                 background: bool = False) -> None:
         self.feed = feed
         self.track_period = track_period
         self.seed = seed
@@ -183,14 +192,18 @@ class CameraSensor:
         self._seen_at: dict[str, float] = {}  # id -> scan time of its last good observation or track
         self._velocity: dict[str, tuple[np.ndarray, np.ndarray]] = {}  # id -> (linear, angular) between two tracks
         self._gates: dict[str, int] | None = None  # id -> segment at its prediction, in the current scan
+        self._lock = threading.Lock()  # the tracker's state: one scan-and-track at a time
+        self._pool = ThreadPoolExecutor(1, thread_name_prefix="cameras") if background else None
+        self._job: Future | None = None
+        self._submitted = -np.inf  # simulated time of the last background scan's state
 
     @classmethod
     def for_scene(cls, scene, *, cameras: int = 3, seed: int = 0, track_period: float = 0.5,  # type: ignore[no-untyped-def]
-                  noise=None, **camera: object) -> CameraSensor:
+                  noise=None, background: bool = False, **camera: object) -> CameraSensor:
         """The default rig for a scene file: ``cameras`` around its table, the table's workspace.
 
         ``noise``: a :class:`scenes.cameras.DepthNoise` (None: the Kinect model); ``camera`` options go to
-        every :class:`scenes.cameras.Camera`.
+        every :class:`scenes.cameras.Camera`; ``background``: see the class.
         """
         from scenes.cameras import KINECT_V1, CameraFeed, table_ring, table_workspace
 
@@ -198,11 +211,28 @@ class CameraSensor:
         height = None if scene.table is None else scene.table.height
         rig = table_ring(size, height, count=cameras, **camera)
         feed = CameraFeed(rig, table_workspace(size, height), noise=KINECT_V1 if noise is None else noise, seed=seed)
-        return cls(feed, track_period=track_period, seed=seed)
+        return cls(feed, track_period=track_period, seed=seed, background=background)
 
     # -- the Sensor seam -------------------------------------------------------------------------
 
     def observe(self, truth: GroundTruth, object_id: str, points: int, *, shot: int) -> Observation:
+        with self._lock:
+            return self._observe(truth, object_id, points, shot)
+
+    def track(self, truth: GroundTruth, object_id: str) -> Track:
+        if self._pool is not None:
+            return self._track_behind(truth, object_id)
+        with self._lock:
+            return self._track_now(truth, object_id)
+
+    def close(self) -> None:
+        """Wait for a background scan in progress and stop its thread."""
+        if self._pool is not None:
+            self._pool.shutdown(wait=True)
+
+    # -- internals -------------------------------------------------------------------------------
+
+    def _observe(self, truth: GroundTruth, object_id: str, points: int, shot: int) -> Observation:
         scan = self._current(truth, force=object_id not in self._observed)
         k = self._associate(truth, scan, object_id)
         if k is None:
@@ -223,9 +253,9 @@ class CameraSensor:
         self._velocity.pop(object_id, None)
         return seen
 
-    def track(self, truth: GroundTruth, object_id: str) -> Track:
+    def _track_now(self, truth: GroundTruth, object_id: str) -> Track:
         if object_id not in self._model:
-            self.observe(truth, object_id, 0, shot=0)
+            self._observe(truth, object_id, 0, shot=0)
         scan = self._current(truth)
         done = self._tracked.get(object_id)
         if done is not None and done[0] == scan.time:
@@ -253,7 +283,26 @@ class CameraSensor:
         self._tracked[object_id] = (scan.time, track)
         return track
 
-    # -- internals -------------------------------------------------------------------------------
+    def _track_behind(self, truth: GroundTruth, object_id: str) -> Track:
+        """:meth:`track` with ``background``: the last track done; a scan of a copy of now started if due."""
+        if object_id not in self._model:
+            self.observe(truth, object_id, 0, shot=0)
+        job = self._job
+        if job is not None and job.done():
+            self._job = None
+            if job.exception() is not None:  # a bug, not something the cameras saw: said, and tried again later
+                self.feed.stats.failed_scans += 1
+                log.error("a background scan failed: %r", job.exception())
+        now = float(truth.twin.time)  # type: ignore[attr-defined]
+        if self._job is None and now - self._submitted >= self.track_period:
+            self._submitted = now
+            self._job = self._pool.submit(self._track_all, _Still(truth.twin), list(self._model))  # type: ignore[union-attr]
+        return self._tracked[object_id][1]
+
+    def _track_all(self, truth: GroundTruth, ids: list[str]) -> None:
+        with self._lock:
+            for object_id in ids:
+                self._track_now(truth, object_id)
 
     def _current(self, truth: GroundTruth, *, force: bool = False):  # type: ignore[no-untyped-def]
         """The scan of now, or the last one if younger than ``track_period`` (unless ``force``)."""
@@ -442,6 +491,27 @@ CENTROID_TURNS = (0.0, np.pi / 2, np.pi, -np.pi / 2)
 
 #: The first ICP pass's correspondence distance, in fine distances.
 COARSE_FACTOR = 3.0
+
+
+class _Still:
+    """The remote's simulation frozen at one instant, for a scan in another thread: what a
+    :class:`CameraSensor` reads of a :class:`GroundTruth` (its ``twin``'s model, data, time, objects and
+    their poses). The model is shared (scans only read it, and hide the end effector from rays, which no
+    step reads); the state is a copy."""
+
+    def __init__(self, twin) -> None:  # type: ignore[no-untyped-def]
+        import copy
+
+        self.twin = self
+        self.model, self.data, self.time = twin.model, copy.copy(twin.data), float(twin.time)
+        self._ids = list(twin.object_ids())
+
+    def object_ids(self) -> list[str]:
+        return self._ids
+
+    def pose(self, object_id: str) -> tuple[np.ndarray, np.ndarray]:
+        body = self.model.jnt_bodyid[free_joint(self.model, object_id)]
+        return self.data.xpos[body].copy(), self.data.xquat[body].copy()
 
 
 def _quat(matrix: np.ndarray) -> np.ndarray:

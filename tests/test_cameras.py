@@ -241,3 +241,24 @@ def test_objects_pushed_together_are_tracked_through_the_merged_segment():
         assert max(errors.values()) < 0.004, (t, errors)
     assert sensor.feed.stats.merged >= 1  # the last scan did merge them
     assert sensor.feed.stats.lost_tracks == 0
+
+
+def test_in_the_background_a_scan_is_of_the_state_when_it_was_due_and_the_caller_never_waits():
+    model, data = _model({"a": (0.0, 0.0)})
+    sensor, truth = CameraSensor(CameraFeed(_rig(3), WORKSPACE, seed=6), background=True), _Truth(model, data)
+    try:
+        start = truth.twin.pose("a")[0]
+        seen = sensor.observe(truth, "a", 0, shot=1)  # type: ignore[arg-type]
+        _move(model, data, "a", 0.05, 0.0)
+        truth.twin.time = 0.5
+        first = sensor.track(truth, "a")  # type: ignore[arg-type]
+        assert first.time == 0.0  # the last track done; the scan of now has just started
+        due = truth.twin.pose("a")[0]
+        _move(model, data, "a", 0.1, 0.1)  # after the scan was due: not in it
+        truth.twin.time = 0.6
+        sensor._job.result(timeout=60)  # type: ignore[union-attr]
+        track = sensor.track(truth, "a")  # type: ignore[arg-type]
+        assert track.seen and track.time == 0.5
+        assert np.linalg.norm(track.position - (seen.frame_position + due - start)) < 0.003
+    finally:
+        sensor.close()
