@@ -190,6 +190,7 @@ class CameraSensor:
         self._observed: dict[str, Observation] = {}
         self._tracked: dict[str, tuple[float, Track]] = {}
         self._seen_at: dict[str, float] = {}  # id -> scan time of its last good observation or track
+        self._previous: dict[str, np.ndarray] = {}  # id -> its frame's position then (world, m)
         self._velocity: dict[str, tuple[np.ndarray, np.ndarray]] = {}  # id -> (linear, angular) between two tracks
         self._gates: dict[str, int] | None = None  # id -> segment at its prediction, in the current scan
         self._lock = threading.Lock()  # the tracker's state: one scan-and-track at a time
@@ -249,7 +250,9 @@ class CameraSensor:
         self._observed[object_id] = seen
         self._tracked[object_id] = (scan.time, Track(seen.frame_position, seen.frame_quat, np.zeros(3), np.zeros(3),
                                                      time=scan.time))
-        self._last[object_id], self._seen_at[object_id] = seen.frame_position, scan.time
+        # _last stays where association found the object (the label, the first time): the fused frame's
+        # centre is that of the segment, which two touching objects share.
+        self._previous[object_id], self._seen_at[object_id] = seen.frame_position, scan.time
         self._velocity.pop(object_id, None)
         return seen
 
@@ -330,6 +333,7 @@ class CameraSensor:
             # Labelling, once: which segment is this object. See the class docstring.
             self._last[object_id] = np.asarray(truth.twin.pose(object_id)[0], float)  # type: ignore[attr-defined]
             self._seen_at[object_id] = scan.time
+            self._gates = None  # one more object to gate
         if not scan.segments:
             self.feed.stats.unseen += 1
             log.warning("%s: the scan at t=%.3f has no segments", object_id, scan.time)
@@ -437,7 +441,7 @@ class CameraSensor:
         ``position`` turned by ``turn`` (3, 3); zero when the last is older than ``VELOCITY_WINDOW``."""
         from scipy.spatial.transform import Rotation
 
-        before, since = self._last.get(object_id), time - self._seen_at.get(object_id, time)
+        before, since = self._previous.get(object_id), time - self._seen_at.get(object_id, time)
         if before is not None and 0 < since <= VELOCITY_WINDOW:
             linear = (position - before) / since
             speed = float(np.linalg.norm(linear))
@@ -446,7 +450,8 @@ class CameraSensor:
             self._velocity[object_id] = (linear, Rotation.from_matrix(turn).as_rotvec() / since)
         else:
             self._velocity.pop(object_id, None)
-        self._last[object_id], self._seen_at[object_id] = position, time
+        self._last[object_id] = self._previous[object_id] = position
+        self._seen_at[object_id] = time
         return self._velocity.get(object_id, (np.zeros(3), np.zeros(3)))
 
     def _fuse(self, scan, seg, points: int, shot: int) -> Observation:  # type: ignore[no-untyped-def]

@@ -262,3 +262,12 @@ def test_in_the_background_a_scan_is_of_the_state_when_it_was_due_and_the_caller
         assert np.linalg.norm(track.position - (seen.frame_position + due - start)) < 0.003
     finally:
         sensor.close()
+
+
+def test_touching_objects_first_seen_in_one_scan_are_both_observed():
+    # Labelled one after the other in the same scan: the second must not find its segment taken by the first.
+    model, data = _model({"a": (-0.04, 0.0), "b": (0.04, 0.0)})  # faces touching: one segment
+    sensor, truth = CameraSensor(CameraFeed(_rig(3), WORKSPACE, seed=7)), _Truth(model, data)
+    seen = [sensor.observe(truth, i, 0, shot=1) for i in "ab"]  # type: ignore[arg-type]
+    assert all(len(s.points) > 0 for s in seen)
+    assert sensor.feed.stats.merged == 1 and sensor.feed.stats.unseen == 0
