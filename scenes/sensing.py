@@ -403,19 +403,25 @@ class CameraSensor:
         return ASSOCIATION_RADIUS + MAX_SPEED * max(since, 0.0)
 
     def _register(self, scan, k: int, object_id: str, model: np.ndarray):  # type: ignore[no-untyped-def]
-        """ICP of the object's model to segment ``k``: the best fit from the predicted motion and, when the
-        segment is the object's alone, from the segment's centroid (a few turns about the vertical)."""
+        """ICP of the object's model to segment ``k``, from where it was (the fit kept if ``GOOD_FITNESS``);
+        failing that, the best fit also from its predicted motion and, when the segment is the object's
+        alone, from the segment's centroid at a few turns about the vertical (each a coarse pass, then a
+        fine one). Best: the lowest RMSE among the fits within ``FITNESS_TIE`` of the highest fitness."""
         from estimation.fusion import register
 
         target = scan.segments[k].points
         motion = self._motion[object_id]
-        starts = [motion]  # still
+        distance = max(3 * scan.cell, 0.01)
+        still = register(model, target, init=motion, max_distance=distance)
+        if still.fitness >= GOOD_FITNESS:
+            # Not only cheaper: a symmetric object fits as well turned, and noise would pick a turn.
+            return still
+        starts = []
         if object_id in self._velocity:  # moved on as it moved
             predicted = motion.copy()
             predicted[:3, 3] += self._predicted(object_id, scan.time) - self._last[object_id]
             starts.append(predicted)
-        alone = [i for i, g in self._gated(scan).items() if g == k] in ([], [object_id])
-        if alone:
+        if [i for i, g in self._gated(scan).items() if g == k] in ([], [object_id]):  # the segment is its alone
             moved = model @ motion[:3, :3].T + motion[:3, 3]
             pivot = moved.mean(axis=0)
             shift = scan.segments[k].centroid - pivot
@@ -425,15 +431,13 @@ class CameraSensor:
                 yaw[:3, :3] = [[c, -s, 0], [s, c, 0], [0, 0, 1]]
                 yaw[:3, 3] = pivot + shift - yaw[:3, :3] @ pivot
                 starts.append(yaw @ motion)
-        distance = max(3 * scan.cell, 0.01)
-        best = None
+        fits = [still]
         for start in starts:
             # A coarse pass reaches an object that moved further than the fine distance, then a fine one.
             coarse = register(model, target, init=start, max_distance=COARSE_FACTOR * distance)
-            reg = register(model, target, init=coarse.transform, max_distance=distance)
-            if best is None or (reg.fitness, -reg.rmse) > (best.fitness, -best.rmse):
-                best = reg
-        return best
+            fits.append(register(model, target, init=coarse.transform, max_distance=distance))
+        top = max(f.fitness for f in fits)
+        return min((f for f in fits if f.fitness >= top - FITNESS_TIE), key=lambda f: f.rmse)
 
     def _update_velocity(self, object_id: str, position: np.ndarray, turn: np.ndarray,
                          time: float) -> tuple[np.ndarray, np.ndarray]:
@@ -496,6 +500,13 @@ CENTROID_TURNS = (0.0, np.pi / 2, np.pi, -np.pi / 2)
 
 #: The first ICP pass's correspondence distance, in fine distances.
 COARSE_FACTOR = 3.0
+
+#: A fit from where the object was that matches this share of its model is kept without trying others.
+GOOD_FITNESS = 0.95
+
+#: Fits within this much of the best fitness are told apart by their RMSE (fitness saturates at 1 when the
+#: correspondence distance is several noise sigmas).
+FITNESS_TIE = 0.02
 
 
 class _Still:
