@@ -164,16 +164,8 @@ def free_space(points: np.ndarray, views: Sequence[DepthView], *, slack: float =
     free = np.zeros(len(pts), dtype=bool)
     for view in views:
         depth, sigma = view.depth, np.asarray(view.sigma)
-        k = view.intrinsics
-        cam = (pts - np.asarray(view.position, dtype=np.float64)) @ np.asarray(view.rotation, dtype=np.float64)
-        z = cam[:, 2]
-        ahead = z > 1e-6
-        zs = np.where(ahead, z, 1.0)
-        # Continuous pixel coordinates with pixel centres at integers (the intrinsics put them at +0.5).
-        x = k.fx * cam[:, 0] / zs + k.cx - 0.5
-        y = k.fy * cam[:, 1] / zs + k.cy - 0.5
+        ok, x, y, z = _pixels(pts, view)
         x0, y0 = np.floor(x).astype(np.int64), np.floor(y).astype(np.int64)
-        ok = ahead & (x0 >= 0) & (x0 + 1 < k.width) & (y0 >= 0) & (y0 + 1 < k.height)
         x0, y0 = np.where(ok, x0, 0), np.where(ok, y0, 0)
         ax, ay = x - x0, y - y0
         d = ((1 - ax) * (1 - ay) * depth[y0, x0] + ax * (1 - ay) * depth[y0, x0 + 1]
@@ -182,6 +174,35 @@ def free_space(points: np.ndarray, views: Sequence[DepthView], *, slack: float =
         with np.errstate(invalid="ignore"):
             free |= ok & np.isfinite(d) & (z < d - FREE_SIGMAS * s - slack)
     return free
+
+
+def view_sigma(points: np.ndarray, views: Sequence[DepthView]) -> float:
+    """Metres: the median depth sigma the views give at the pixels ``points`` ((n, 3) metres, world) fall
+    on, over every view that has them in its image (NaN when none does)."""
+    pts = as_points(points, "points")
+    found = []
+    for view in views:
+        ok, x, y, _ = _pixels(pts, view)
+        s = np.asarray(view.sigma)[np.floor(y[ok]).astype(np.int64), np.floor(x[ok]).astype(np.int64)]
+        found.append(s[np.isfinite(s)])
+    values = np.concatenate(found) if found else np.zeros(0)
+    return float(np.median(values)) if len(values) else float("nan")
+
+
+def _pixels(pts: np.ndarray, view: DepthView) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(ok, x, y, z): which points are ahead of ``view`` with their 2 x 2 pixel neighbourhood in its image,
+    their continuous pixel coordinates (pixel centres at integers) and their depths (metres)."""
+    k = view.intrinsics
+    cam = (pts - np.asarray(view.position, dtype=np.float64)) @ np.asarray(view.rotation, dtype=np.float64)
+    z = cam[:, 2]
+    ahead = z > 1e-6
+    zs = np.where(ahead, z, 1.0)
+    # The intrinsics put pixel centres at +0.5.
+    x = k.fx * cam[:, 0] / zs + k.cx - 0.5
+    y = k.fy * cam[:, 1] / zs + k.cy - 0.5
+    x0, y0 = np.floor(x), np.floor(y)
+    ok = ahead & (x0 >= 0) & (x0 + 1 < k.width) & (y0 >= 0) & (y0 + 1 < k.height)
+    return ok, x, y, z
 
 
 def carve(points: np.ndarray, views: Sequence[DepthView], plane: Plane, *, others: np.ndarray | None = None,

@@ -16,9 +16,16 @@ its top turned over: when the visible part of the lower half matches the upper h
 (:func:`mirror_image`, ``MIRROR_SHARE`` of its points), the reflected upper half fills what no camera saw
 below. A cone or a mug on its base fails the test and gets no mirror image.
 
-With depth images (:mod:`estimation.carving`), what is still open after the observed points and the mirror
-image is filled from the solid the cameras did not carve away (an unseen side face lies on it), and a
-mirrored point the cameras saw through is dropped. Without them, the base is closed as above.
+Half-turn symmetry: seen from one side only (one camera), a box, a can, a bottle or a ball shows its back
+as its front turned half a turn about a vertical axis through its middle (any shape whose footprint is
+centrally symmetric: a rectangle seen at a corner too). :func:`half_turn_axis` finds that axis from the
+silhouette and the space the cameras saw through, and the observed points (and their mirror image) so
+turned fill the back. An object that is not so symmetric (a mug's handle, an L-bracket) gets a wrong back
+this way; its coverage says how much of it was guessed.
+
+With depth images (:mod:`estimation.carving`), what is still open after the observed points and the
+images is filled from the solid the cameras did not carve away (an unseen side face lies on it), and a
+mirrored or turned point the cameras saw through is dropped. Without them, the base is closed as above.
 """
 
 from __future__ import annotations
@@ -35,6 +42,27 @@ from estimation.segmentation import Plane
 
 if TYPE_CHECKING:
     from estimation.carving import DepthView
+
+#: Half-turn image (:func:`half_turn_axis`): the views are one-sided when the mean of the unit horizontal
+#: directions from the cameras to the points is at least this long (1: all from one direction; two cameras
+#: 90 degrees apart give 0.71).
+ONE_SIDED = 0.9
+
+#: The silhouette's sides, as percentiles of the points across the view (robust to a stray point).
+SILHOUETTE_PERCENTILE = 0.5
+
+#: Largest share of the turned points that may lie in seen-through space at the best axis (noise, and the
+#: odd point a neighbour hid).
+TURN_FREE_SHARE = 0.1
+
+#: The half turn is tried only when the cameras' depth sigma at the object is at most this share of its
+#: width across the view. The axis is placed to about that sigma (the free-space test's resolution), and
+#: an axis off by d puts the back 2 d off: about 4 d / width of the volume (10 % at this share).
+TURN_NOISE_SHARE = 0.025
+
+#: Slack of the axis search's free-space test, in cells: an exact surface point, interpolated between
+#: pixels, must not count as seen through (a whole cell blurs where the test starts to bite).
+TURN_SLACK = 0.5
 
 #: Points in the lowest band above the cut whose normal is within this cosine of horizontal are upright
 #: wall (|cos| to the plane normal below 0.3: within ~17 degrees of vertical, a box's or can's side; a
@@ -98,6 +126,7 @@ class Completion:
         base_area: m^2, area of the closed base (0: the walls do not meet the plane upright, or the base
             came from the mirror image or the carved solid).
         mirrored: how many of ``points`` are the upper half's mirror image.
+        turned: how many are the observed side turned half a turn (:func:`half_turn_axis`).
         carved: how many lie on the carved solid's surface.
         carved_volume: m^3, the carved solid's volume (an upper bound up to noise), None without depth images.
     """
@@ -106,6 +135,7 @@ class Completion:
     normals: np.ndarray
     base_area: float
     mirrored: int = 0
+    turned: int = 0
     carved: int = 0
     carved_volume: float | None = None
 
@@ -224,13 +254,81 @@ def mirror_image(points: np.ndarray, normals: np.ndarray, plane: Plane, *, cut: 
     return out, nrm[upper] - 2.0 * (nrm[upper] @ up)[:, None] * up, share
 
 
+def half_turn_axis(points: np.ndarray, origins: np.ndarray, plane: Plane, views: Sequence[DepthView], *,
+                   cut: float, cell: float) -> np.ndarray | None:
+    """A point (3,) on the vertical axis about which an object seen from one side, turned half a turn,
+    shows its back (a box, a can, a bottle, a ball are their own image so turned: see the module
+    docstring); None when that cannot be told.
+
+    The axis is found in the horizontal plane: across the view, midway between the silhouette's two sides;
+    along it, where the fewest turned points fall into space some camera saw through (the object's own
+    top bounds it from the front, the table seen beyond it from behind), to a fraction of a cell by a
+    parabola through the least and its neighbours. None when the views surround the object
+    (``ONE_SIDED``), when the cameras' sigma there is more than ``TURN_NOISE_SHARE`` of the width, or when
+    even the best axis puts more than ``TURN_FREE_SHARE`` of the turned points in seen-through space.
+
+    Args:
+        points, origins: (n, 3) float64, world frame: observed points and each one's sensor origin (metres).
+        plane: the support plane. views: as :func:`estimation.carving.carving_views` returns them.
+        cut: metres: points below this height were removed with the plane. cell: metres, about the spacing.
+    """
+    from estimation.carving import free_space, view_sigma
+
+    pts, org = as_points(points, "points"), as_points(origins, "origins")
+    up = plane.normal
+    above = plane.height(pts) > cut
+    pts, org = pts[above], org[above]
+    if len(pts) < MIRROR_MIN_POINTS:
+        return None
+    rays = pts - org
+    rays -= (rays @ up)[:, None] * up
+    lengths = np.linalg.norm(rays, axis=1)
+    ok = lengths > 0
+    mean = (rays[ok] / lengths[ok, None]).mean(axis=0) if ok.any() else np.zeros(3)
+    if float(np.linalg.norm(mean)) < ONE_SIDED:
+        return None
+    along = mean / np.linalg.norm(mean)  # horizontal, away from the cameras
+    across = np.cross(up, along)
+    a, b = pts @ across, pts @ along
+    lo, hi = np.percentile(a, [SILHOUETTE_PERCENTILE, 100 - SILHOUETTE_PERCENTILE])
+    if not view_sigma(pts, views) <= TURN_NOISE_SHARE * (hi - lo):  # NaN too
+        return None
+    band = 2.0 * cell
+    middle_b = 0.5 * (float(np.median(b[a <= lo + band])) + float(np.median(b[a >= hi - band])))
+    centre = 0.5 * (lo + hi) * across + middle_b * along
+    reach = 0.5 * float(np.ptp(b)) + cell
+    shifts = np.arange(-reach, reach + 1e-12, cell)
+    shares = np.array([free_space(half_turn(pts, centre + shift * along, up), views, slack=TURN_SLACK * cell).mean()
+                       for shift in shifts])
+    if shares.min() > TURN_FREE_SHARE:
+        return None
+    best = int(np.argmin(shares))
+    shift = shifts[best]
+    if 0 < best < len(shifts) - 1:  # the parabola through the least and its neighbours: finer than a cell
+        left, mid, right = shares[best - 1:best + 2]
+        curve = left - 2 * mid + right
+        if curve > 0:
+            shift += 0.5 * cell * (left - right) / curve
+    return centre + shift * along
+
+
+def half_turn(vectors: np.ndarray, axis: np.ndarray | None, up: np.ndarray) -> np.ndarray:
+    """(n, 3) ``vectors`` turned half a turn about the vertical (``up``) line through ``axis``: points
+    (metres, world frame); with ``axis`` None, directions (normals)."""
+    flat = np.eye(3) - np.outer(up, up)
+    if axis is None:
+        return vectors - 2.0 * vectors @ flat
+    return vectors + 2.0 * (axis - vectors) @ flat
+
+
 def close_on_plane(points: np.ndarray, origins: np.ndarray, normals: np.ndarray, plane: Plane | None, *,
                    cell: float, cut: float, noise: float = 0.0, views: Sequence[DepthView] | None = None,
                    others: np.ndarray | None = None) -> Closed:
     """The object's observed points (with their sensors and outward normals) and what closes them.
 
     Added, in order, each only where nothing is yet (``NEW_SURFACE_CELLS``): the mirror image of the upper
-    half (:func:`mirror_image`); then, with ``views``, the carved solid's surface
+    half (:func:`mirror_image`); then, with ``views``, the half-turned image of one-sided views
+    (:func:`half_turn_axis`; not into ``others``) and the carved solid's surface
     (:func:`estimation.carving.carve`, ``others`` as there), else the base on the plane
     (:func:`close_bottom`). With ``views``, mirrored points some camera saw through are dropped.
 
@@ -251,8 +349,8 @@ def close_on_plane(points: np.ndarray, origins: np.ndarray, normals: np.ndarray,
     pts = as_points(points, "points")
     completion = Completion(np.zeros((0, 3)), np.zeros((0, 3)), 0.0)
     if plane is not None and len(pts):
-        completion = _complete(pts, np.asarray(normals, dtype=np.float64), plane, cell=cell, cut=cut, noise=noise,
-                               views=views, others=others)
+        completion = _complete(pts, np.asarray(normals, dtype=np.float64), np.asarray(origins, dtype=np.float64),
+                               plane, cell=cell, cut=cut, noise=noise, views=views, others=others)
     observed = len(pts)
     return Closed(points=np.concatenate([pts, completion.points]),
                   origins=np.concatenate([origins, completion.points + completion.normals]),
@@ -261,8 +359,8 @@ def close_on_plane(points: np.ndarray, origins: np.ndarray, normals: np.ndarray,
                   completion=completion)
 
 
-def _complete(points: np.ndarray, normals: np.ndarray, plane: Plane, *, cell: float, cut: float, noise: float,
-              views: Sequence[DepthView] | None, others: np.ndarray | None) -> Completion:
+def _complete(points: np.ndarray, normals: np.ndarray, origins: np.ndarray, plane: Plane, *, cell: float, cut: float,
+              noise: float, views: Sequence[DepthView] | None, others: np.ndarray | None) -> Completion:
     """What :func:`close_on_plane` adds (arguments as there)."""
     from scipy.spatial import cKDTree
 
@@ -279,6 +377,24 @@ def _complete(points: np.ndarray, normals: np.ndarray, plane: Plane, *, cell: fl
         mirrored = mirrored[0][~seen_through], mirrored[1][~seen_through]
     have_p.append(mirrored[0])
     have_n.append(mirrored[1])
+    turned = np.zeros((0, 3)), np.zeros((0, 3))
+    if views is not None and np.isfinite(normals).all():
+        axis = half_turn_axis(points, origins, plane, views, cut=cut, cell=cell)
+        if axis is not None:
+            from estimation.carving import free_space
+
+            # The mirror image turned too: the back's underside.
+            both, both_n = np.concatenate(have_p), np.concatenate(have_n)
+            above = plane.height(both) > cut
+            turned = _new(half_turn(both[above], axis, plane.normal), half_turn(both_n[above], None, plane.normal),
+                          both, NEW_SURFACE_CELLS * cell)
+            keep = ~free_space(turned[0], views, slack=cell)
+            if others is not None and len(others) and len(turned[0]):
+                # Not into a neighbour: its seen surface is in the way.
+                keep &= cKDTree(others).query(turned[0], workers=-1)[0] > NEW_SURFACE_CELLS * cell
+            turned = turned[0][keep], turned[1][keep]
+    have_p.append(turned[0])
+    have_n.append(turned[1])
     if views is None:
         bottom = close_bottom(points, normals, plane, cell=cell, cut=cut)
         base = _new(bottom.points, bottom.normals, np.concatenate(have_p), NEW_SURFACE_CELLS * cell)
@@ -290,7 +406,7 @@ def _complete(points: np.ndarray, normals: np.ndarray, plane: Plane, *, cell: fl
 
     extent = float(np.ptp(points, axis=0).max())
     voxel = min(extent / CELLS_PER_EXTENT, max(0.5 * cut, extent / MAX_CELLS_PER_EXTENT))
-    carving = carve(points, views, plane, others=others, cell=voxel)
+    carving = carve(np.concatenate([points, turned[0]]), views, plane, others=others, cell=voxel)
     surface, surface_n = carved_surface(carving)
     have = np.concatenate(have_p)
     have_normals = np.concatenate(have_n)
@@ -308,8 +424,9 @@ def _complete(points: np.ndarray, normals: np.ndarray, plane: Plane, *, cell: fl
 
         kept = voxel_subsample(surface, cell)
         surface, surface_n = surface[kept], surface_n[kept]
-    return Completion(np.concatenate([mirrored[0], surface]), np.concatenate([mirrored[1], surface_n]), 0.0,
-                      mirrored=len(mirrored[0]), carved=len(surface), carved_volume=carving.volume)
+    return Completion(np.concatenate([mirrored[0], turned[0], surface]),
+                      np.concatenate([mirrored[1], turned[1], surface_n]), 0.0, mirrored=len(mirrored[0]),
+                      turned=len(turned[0]), carved=len(surface), carved_volume=carving.volume)
 
 
 def _new(points: np.ndarray, normals: np.ndarray, have: np.ndarray, distance: float) -> tuple[np.ndarray, np.ndarray]:
