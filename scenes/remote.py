@@ -101,6 +101,7 @@ class Remote:
         self._objects: dict[str, _Truth] = {}
         self._cache_dir = cache_dir
         self.pose_updates = 0
+        self.cloud_updates = 0  # clouds published again because the sensor saw the object better
         self.unseen_reports = 0  # times the sensor lost an object (Track.seen False), each said once on the wire
         self._unseen: set[str] = set()  # objects lost and said so: nothing more is published of them until found
         top = scene.table.height if scene.table else None
@@ -210,6 +211,12 @@ class Remote:
         if self.rlog.due(self.twin.time):
             self.rlog.frame(self.twin, side="remote")
         self._publish_moved()
+        refreshed = getattr(self.sensor, "refreshed", None)
+        if refreshed is not None:
+            for object_id in refreshed():  # a turned object showed the cameras another side
+                if object_id in self._objects:
+                    self.publish_cloud(object_id)
+                    self.cloud_updates += 1
         now = self.clock.now()
         if self.keyframe_s > 0 and now - self._last_keyframe >= self.keyframe_s:
             # Every pose now and then, moved or not: a twin that drifted on its own (its estimated shape

@@ -193,6 +193,8 @@ class CameraSensor:
         self._previous: dict[str, np.ndarray] = {}  # id -> its frame's position then (world, m)
         self._velocity: dict[str, tuple[np.ndarray, np.ndarray]] = {}  # id -> (linear, angular) between two tracks
         self._gates: dict[str, int] | None = None  # id -> segment at its prediction, in the current scan
+        self._reviewed: dict[str, np.ndarray] = {}  # id -> motion when it was last fused (see refreshed)
+        self._better: dict[str, tuple[Observation, np.ndarray]] = {}  # id -> (a better view, motion then)
         self._lock = threading.Lock()  # the tracker's state: one scan-and-track at a time
         self._pool = ThreadPoolExecutor(1, thread_name_prefix="cameras") if background else None
         self._job: Future | None = None
@@ -233,7 +235,24 @@ class CameraSensor:
 
     # -- internals -------------------------------------------------------------------------------
 
+    def refreshed(self) -> list[str]:
+        """Objects a later scan saw better than the cloud :meth:`observe` last gave (once each): the remote
+        publishes their cloud again, and :meth:`observe` then gives that view.
+
+        An object is looked at again when it rests, alone in its segment, turned ``REVIEW_TURN_DEG`` or
+        moved ``REVIEW_SHIFT`` from where it was last looked at (another side faces the cameras); the view
+        is better when its completed share is ``REVIEW_GAIN`` below the last one's. The new cloud is in the
+        object's frame as tracked now, so the poses before and after it agree. Empty while a background
+        scan runs (it holds the state :meth:`observe` needs).
+        """
+        if not self._better or (self._job is not None and not self._job.done()):
+            return []
+        return sorted(self._better)
+
     def _observe(self, truth: GroundTruth, object_id: str, points: int, shot: int) -> Observation:
+        better = self._better.pop(object_id, None)
+        if better is not None:
+            return self._adopt(object_id, *better, points=points, shot=shot)
         scan = self._current(truth, force=object_id not in self._observed)
         k = self._associate(truth, scan, object_id)
         if k is None:
@@ -242,11 +261,11 @@ class CameraSensor:
                 return last
             empty = np.zeros((0, 3))
             return Observation(empty, empty, self._last.get(object_id, np.zeros(3)), np.array([1.0, 0, 0, 0]))
-        seen = self._fuse(scan, scan.segments[k], points, shot)
+        seen = self._subsample(self._fuse(scan, scan.segments[k]), points, shot)
         observed = seen.points[~seen.completed]  # type: ignore[index]
         model = observed[np.random.default_rng([self.seed, shot]).permutation(len(observed))[:MODEL_POINTS_CAP]]
         self._model[object_id] = (model, seen.frame_position)
-        self._motion[object_id] = np.eye(4)
+        self._motion[object_id] = self._reviewed[object_id] = np.eye(4)
         self._observed[object_id] = seen
         self._tracked[object_id] = (scan.time, Track(seen.frame_position, seen.frame_quat, np.zeros(3), np.zeros(3),
                                                      time=scan.time))
@@ -255,6 +274,42 @@ class CameraSensor:
         self._previous[object_id], self._seen_at[object_id] = seen.frame_position, scan.time
         self._velocity.pop(object_id, None)
         return seen
+
+    def _adopt(self, object_id: str, seen: Observation, motion: np.ndarray, points: int, shot: int) -> Observation:
+        """A later, better view of a tracked object as its observation, in its frame as tracked (``motion``,
+        (4, 4), since the first capture): its model is the new view moved back by that motion, so the
+        tracks go on unchanged."""
+        seen = self._subsample(seen, points, shot)
+        observed = seen.points[~seen.completed]  # type: ignore[index]
+        back = observed - motion[:3, 3]
+        back = back @ motion[:3, :3]  # R^T (x - t), row-wise
+        model = back[np.random.default_rng([self.seed, shot]).permutation(len(back))[:MODEL_POINTS_CAP]]
+        self._model[object_id] = (model, self._model[object_id][1])
+        self._observed[object_id] = seen
+        return seen
+
+    def _review(self, scan, k: int, object_id: str, motion: np.ndarray, linvel: np.ndarray) -> None:  # type: ignore[no-untyped-def]
+        """Fuse the object's segment again if it rests, turned or moved since it was last looked at, alone in
+        its segment; keep that view for :meth:`refreshed` if it leaves less to completion."""
+        from twin.poses import angle_deg
+
+        last = self._reviewed.get(object_id, np.eye(4))
+        turned = angle_deg(_quat(motion[:3, :3] @ last[:3, :3].T), np.array([1.0, 0, 0, 0]))
+        moved = float(np.linalg.norm(motion[:3, 3] - last[:3, 3]))
+        if float(np.linalg.norm(linvel)) > REVIEW_REST_SPEED or (turned < REVIEW_TURN_DEG and moved < REVIEW_SHIFT):
+            return
+        if [i for i, g in self._gated(scan).items() if g == k] != [object_id]:
+            return  # merged, or not where predicted: look again when it is alone
+        self._reviewed[object_id] = motion
+        current = self._observed.get(object_id)
+        candidate = self._fuse(scan, scan.segments[k])
+        if current is None or _completed_share(candidate) <= _completed_share(current) - REVIEW_GAIN:
+            centre = self._model[object_id][1]
+            frame = Observation(candidate.points, candidate.sensor_origins, motion[:3, :3] @ centre + motion[:3, 3],
+                                _quat(motion[:3, :3]), candidate.normals, candidate.completed)
+            self._better[object_id] = (frame, motion.copy())
+            log.info("%s: seen better at t=%.3f (%.0f %% completed, was %.0f %%)", object_id, scan.time,
+                     100 * _completed_share(candidate), 100 * _completed_share(current) if current else 100)
 
     def _track_now(self, truth: GroundTruth, object_id: str) -> Track:
         if object_id not in self._model:
@@ -268,6 +323,13 @@ class CameraSensor:
         result = None
         if k is not None and len(model) >= 3:
             result = self._register(scan, k, object_id, model)
+            if result.fitness < MIN_FITNESS:
+                # Predicted into a segment that is not it (another object's, where it was): look further.
+                free = self._search(scan, object_id, taken=set(self._gated(scan).values()) | {k})
+                retry = None if free is None else self._register(scan, free, object_id, model)
+                if retry is not None and retry.fitness >= MIN_FITNESS:
+                    result, k = retry, free
+                    self._claims.setdefault(k, set()).add(object_id)
             if result.fitness < MIN_FITNESS:
                 self.feed.stats.lost_tracks += 1
                 log.warning("%s: ICP lost the object (fitness %.2f); keeping the last pose", object_id, result.fitness)
@@ -283,6 +345,7 @@ class CameraSensor:
             linvel, angvel = self._update_velocity(object_id, position, motion[:3, :3] @ before[:3, :3].T, scan.time)
             track = Track(position, _quat(motion[:3, :3]), linvel, angvel,
                           result.position_sigma(position), result.angle_sigma, time=scan.time)
+            self._review(scan, k, object_id, motion, linvel)
         self._tracked[object_id] = (scan.time, track)
         return track
 
@@ -458,7 +521,7 @@ class CameraSensor:
         self._seen_at[object_id] = time
         return self._velocity.get(object_id, (np.zeros(3), np.zeros(3)))
 
-    def _fuse(self, scan, seg, points: int, shot: int) -> Observation:  # type: ignore[no-untyped-def]
+    def _fuse(self, scan, seg) -> Observation:  # type: ignore[no-untyped-def]
         """The segment's views as one cloud: normals towards each point's camera, the base closed."""
         from estimation.completion import close_on_plane
         from estimation.fusion import oriented_normals
@@ -469,13 +532,34 @@ class CameraSensor:
         closed = close_on_plane(pts, origins, oriented_normals(pts, origins), scan.plane, cell=scan.cell / 3,
                                 cut=scan.margin, noise=surface_noise(pts), views=scan.views or None,
                                 others=np.concatenate(others) if others else None)
-        allp, alln, allo, completed = closed.points, closed.normals, closed.origins, closed.completed
-        if points and len(allp) > points:
-            keep = np.sort(np.random.default_rng([self.seed, shot]).permutation(len(allp))[:points])
-            allp, alln, allo, completed = allp[keep], alln[keep], allo[keep], completed[keep]
-        centre = allp.mean(axis=0)
-        return Observation(allp, allo, centre, np.array([1.0, 0.0, 0.0, 0.0]), alln, completed)
+        centre = closed.points.mean(axis=0)
+        return Observation(closed.points, closed.origins, centre, np.array([1.0, 0.0, 0.0, 0.0]), closed.normals,
+                           closed.completed)
 
+    def _subsample(self, seen: Observation, points: int, shot: int) -> Observation:
+        """At most ``points`` of ``seen``'s points (0: all), drawn from the seed and ``shot``; the frame kept."""
+        if not points or len(seen.points) <= points:
+            return seen
+        keep = np.sort(np.random.default_rng([self.seed, shot]).permutation(len(seen.points))[:points])
+        return replace(seen, points=seen.points[keep], sensor_origins=seen.sensor_origins[keep],  # type: ignore[index]
+                       normals=seen.normals[keep], completed=seen.completed[keep])  # type: ignore[index]
+
+
+def _completed_share(seen: Observation) -> float:
+    """The share of an observation's points no camera saw (1 when it has none)."""
+    if seen.completed is None or not len(seen.points):
+        return 0.0 if seen.completed is None else 1.0
+    return float(np.mean(seen.completed))
+
+
+#: An object is fused again when it rests (m/s) after turning this much (degrees) or moving this far
+#: (metres) since it was last fused: another side may face the cameras (see CameraSensor.refreshed).
+REVIEW_REST_SPEED = 0.01
+REVIEW_TURN_DEG = 30.0
+REVIEW_SHIFT = 0.1
+
+#: ... and its new view replaces the published one when its completed share is this much smaller.
+REVIEW_GAIN = 0.05
 
 #: Points of an object's first fused cloud kept as its ICP model.
 MODEL_POINTS_CAP = 4000

@@ -271,3 +271,30 @@ def test_touching_objects_first_seen_in_one_scan_are_both_observed():
     seen = [sensor.observe(truth, i, 0, shot=1) for i in "ab"]  # type: ignore[arg-type]
     assert all(len(s.points) > 0 for s in seen)
     assert sensor.feed.stats.merged == 1 and sensor.feed.stats.unseen == 0
+
+
+def test_an_object_moved_out_from_behind_another_is_seen_better_and_its_cloud_refreshed():
+    # One camera; a stands behind b and is mostly hidden. Moved clear of b it shows more of itself: once at
+    # rest the sensor offers the better view (refreshed), in the frame it tracks, and goes on tracking.
+    from scenes.cameras import SIGMA_1MM
+
+    model, data = _model({"a": (0.0, 0.0), "b": (0.0, -0.09)})
+    sensor, truth = CameraSensor(CameraFeed(_rig(1), WORKSPACE, seed=8, noise=SIGMA_1MM)), _Truth(model, data)
+    first = sensor.observe(truth, "a", 0, shot=1)  # type: ignore[arg-type]
+    sensor.observe(truth, "b", 0, shot=1)  # type: ignore[arg-type]
+    _move(model, data, "a", 0.15, 0.05)  # clear of b, in one jump: found again beside the segment it left
+    refreshed = []
+    for t in (0.5, 1.0, 1.5, 2.0):
+        truth.twin.time = t
+        track = sensor.track(truth, "a")  # type: ignore[arg-type]
+        assert track.seen
+        refreshed += sensor.refreshed()
+        if refreshed:
+            break
+    assert refreshed == ["a"]
+    again = sensor.observe(truth, "a", 0, shot=2)  # type: ignore[arg-type]
+    assert again.completed.mean() <= first.completed.mean() - 0.05  # type: ignore[union-attr]
+    assert np.linalg.norm(again.frame_position - track.position) < 1e-9  # the tracked frame, continued
+    assert sensor.refreshed() == []
+    truth.twin.time += 0.5
+    assert np.linalg.norm(sensor.track(truth, "a").position - track.position) < 0.01  # type: ignore[arg-type]

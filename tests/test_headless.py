@@ -138,3 +138,28 @@ def test_an_object_the_sensor_lost_is_left_to_the_twin_until_it_is_found(cache):
         session.run(0.05)  # found again: published at once, though C's crate has not moved since
         assert np.linalg.norm(session.local.twin.pose("crate")[0] - session.remote.twin.pose("crate")[0]) < 0.005
         assert session.local.report.divergence["crate"][-1] < 0.005  # sampled again once C's pose is known
+
+
+class _Refreshing(SurfaceSensor):
+    """The surface sensor, saying once that it saw the crate better."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.pending: list[str] = []
+
+    def refreshed(self) -> list[str]:
+        out, self.pending = self.pending, []
+        return out
+
+
+def test_a_better_view_is_published_again_and_the_twin_replaces_the_object_in_place(cache):
+    sensor = _Refreshing()
+    with Headless(load_scene(SMALL), cache_dir=cache, sensor=sensor) as session:
+        session.run(0.5)
+        synced, before = session.local.report.objects_synced, session.local.twin.pose("crate")[0].copy()
+        sensor.pending = ["crate"]
+        session.run(0.5)
+        assert session.remote.cloud_updates == 1
+        assert session.local.report.objects_synced == synced + 1  # estimated again and swapped in
+        assert sorted(session.local.objects) == ["can", "crate"]
+        assert np.linalg.norm(session.local.twin.pose("crate")[0] - before) < 0.003
