@@ -298,8 +298,8 @@ class CameraSensor:
         moved = float(np.linalg.norm(motion[:3, 3] - last[:3, 3]))
         if float(np.linalg.norm(linvel)) > REVIEW_REST_SPEED or (turned < REVIEW_TURN_DEG and moved < REVIEW_SHIFT):
             return
-        if [i for i, g in self._gated(scan).items() if g == k] != [object_id]:
-            return  # merged, or not where predicted: look again when it is alone
+        if not self._alone(scan, k, object_id):
+            return  # merged: look again when it is alone
         self._reviewed[object_id] = motion
         current = self._observed.get(object_id)
         candidate = self._fuse(scan, scan.segments[k])
@@ -460,6 +460,10 @@ class CameraSensor:
                 best, best_d = k, d
         return best
 
+    def _alone(self, scan, k: int, object_id: str) -> bool:  # type: ignore[no-untyped-def]
+        """No other object is predicted in segment ``k`` of ``scan``."""
+        return all(i == object_id for i, g in self._gated(scan).items() if g == k)
+
     @staticmethod
     def _reach(since: float) -> float:
         """Metres an object may have moved in ``since`` seconds unseen."""
@@ -484,7 +488,7 @@ class CameraSensor:
             predicted = motion.copy()
             predicted[:3, 3] += self._predicted(object_id, scan.time) - self._last[object_id]
             starts.append(predicted)
-        if [i for i, g in self._gated(scan).items() if g == k] in ([], [object_id]):  # the segment is its alone
+        if self._alone(scan, k, object_id):
             moved = model @ motion[:3, :3].T + motion[:3, 3]
             pivot = moved.mean(axis=0)
             shift = scan.segments[k].centroid - pivot
