@@ -176,6 +176,7 @@ def run_demo(*, duration: float = 5.0, scene_path: Path | None = None, zenoh_con
         "divergence_max_mm": float(gaps.max()),
         "divergence_max_mm_by_object": {i: round(max(g) * 1e3, 2) for i, g in report.divergence.items() if g},
         "snaps": report.snaps,
+        "lost_by_sensor": report.unseen,
         "holds": report.holds,
         "session_s": session_s,
         "twin_minus_remote_m": drift,
@@ -192,7 +193,9 @@ def run_demo(*, duration: float = 5.0, scene_path: Path | None = None, zenoh_con
         f"an object was being added {out['worst_step_while_adding_ms']:.1f} ms\n"
         f"twin - remote (every 10 ms, all objects): p50 {out['divergence_p50_mm']:.1f} mm, p99 "
         f"{out['divergence_p99_mm']:.1f} mm, max {out['divergence_max_mm']:.1f} mm; {out['snaps']} snaps, "
-        f"{out['holds']} holds")
+        f"{out['holds']} holds"
+        + (f"\nthe remote's sensor lost sight of objects {out['lost_by_sensor']} time(s); the twin simulated them "
+           f"alone from then (not in the divergence)" if out["lost_by_sensor"] else ""))
     return out
 
 
