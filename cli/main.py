@@ -740,8 +740,8 @@ def _run_remote(args: argparse.Namespace, scene, rlog) -> None:  # type: ignore[
         stats = remote.run(args.duration)
         c = remote.link.counters
         print(f"ran {stats.steps} steps; sent {c.messages_sent} messages, {c.bytes_sent:,} bytes; "
-              f"{remote.pose_updates} pose updates" + (f", {remote.unseen_poses} held back (object not seen)"
-                                                        if remote.unseen_poses else ""))
+              f"{remote.pose_updates} pose updates" + (f"; the sensor lost sight of objects {remote.unseen_reports} "
+                                                        "time(s)" if remote.unseen_reports else ""))
         remote.close()
     finally:
         session.close()

@@ -355,3 +355,14 @@ def test_listening_beyond_loopback_in_plain_text_needs_insecure(capsys):
     scene = str(Path(__file__).parent / "data" / "small.toml")
     assert main(["remote", scene, "--listen", "tcp/0.0.0.0:0", "--duration", "0.1"]) == 2
     assert "--insecure" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("sensor", ["surface", "cameras"])
+def test_twin_remote_runs_for_its_duration_and_reports(sensor, capsys):
+    from cli.main import main
+
+    scene = str(Path(__file__).parent / "data" / "small.toml")
+    # Long enough for the cameras' background scan to start: closing waits for it.
+    assert main(["remote", scene, "--listen", f"tcp/127.0.0.1:{free_port()}", "--duration", "0.7",
+                 "--sensor", sensor]) == 0
+    assert "pose updates" in capsys.readouterr().out
