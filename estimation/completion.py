@@ -364,37 +364,26 @@ def _complete(points: np.ndarray, normals: np.ndarray, origins: np.ndarray, plan
     """What :func:`close_on_plane` adds (arguments as there)."""
     from scipy.spatial import cKDTree
 
-    have_p, have_n = [points], [normals]
-    mirrored = np.zeros((0, 3)), np.zeros((0, 3))
-    if np.isfinite(normals).all():
+    oriented = bool(np.isfinite(normals).all())
+    mirrored = turned = np.zeros((0, 3)), np.zeros((0, 3))
+    if oriented:
         image = mirror_image(points, normals, plane, cut=cut, noise=noise, cell=cell)
         if image is not None:
-            mirrored = _new(image[0], image[1], points, NEW_SURFACE_CELLS * cell)
-    if views is not None and len(mirrored[0]):
-        from estimation.carving import free_space
-
-        seen_through = free_space(mirrored[0], views, slack=cell)
-        mirrored = mirrored[0][~seen_through], mirrored[1][~seen_through]
-    have_p.append(mirrored[0])
-    have_n.append(mirrored[1])
-    turned = np.zeros((0, 3)), np.zeros((0, 3))
-    if views is not None and np.isfinite(normals).all():
-        axis = half_turn_axis(points, origins, plane, views, cut=cut, cell=cell)
-        if axis is not None:
-            from estimation.carving import free_space
-
-            # The mirror image turned too: the back's underside.
-            both, both_n = np.concatenate(have_p), np.concatenate(have_n)
-            above = plane.height(both) > cut
-            turned = _new(half_turn(both[above], axis, plane.normal), half_turn(both_n[above], None, plane.normal),
-                          both, NEW_SURFACE_CELLS * cell)
-            keep = ~free_space(turned[0], views, slack=cell)
-            if others is not None and len(others) and len(turned[0]):
-                # Not into a neighbour: its seen surface is in the way.
-                keep &= cKDTree(others).query(turned[0], workers=-1)[0] > NEW_SURFACE_CELLS * cell
-            turned = turned[0][keep], turned[1][keep]
-    have_p.append(turned[0])
-    have_n.append(turned[1])
+            mirrored = _not_seen_through(_new(image[0], image[1], points, NEW_SURFACE_CELLS * cell), views, cell)
+    axis = None if views is None or not oriented else half_turn_axis(points, origins, plane, views, cut=cut,
+                                                                        cell=cell)
+    if axis is not None:
+        # The mirror image turned too: the back's underside.
+        both, both_n = np.concatenate([points, mirrored[0]]), np.concatenate([normals, mirrored[1]])
+        above = plane.height(both) > cut
+        turned = _not_seen_through(_new(half_turn(both[above], axis, plane.normal),
+                                        half_turn(both_n[above], None, plane.normal), both, NEW_SURFACE_CELLS * cell),
+                                   views, cell)
+        if others is not None and len(others) and len(turned[0]):
+            # Not into a neighbour: its seen surface is in the way.
+            clear = cKDTree(others).query(turned[0], workers=-1)[0] > NEW_SURFACE_CELLS * cell
+            turned = turned[0][clear], turned[1][clear]
+    have_p, have_n = [points, mirrored[0], turned[0]], [normals, mirrored[1], turned[1]]
     if views is None:
         bottom = close_bottom(points, normals, plane, cell=cell, cut=cut)
         base = _new(bottom.points, bottom.normals, np.concatenate(have_p), NEW_SURFACE_CELLS * cell)
@@ -427,6 +416,17 @@ def _complete(points: np.ndarray, normals: np.ndarray, origins: np.ndarray, plan
     return Completion(np.concatenate([mirrored[0], turned[0], surface]),
                       np.concatenate([mirrored[1], turned[1], surface_n]), 0.0, mirrored=len(mirrored[0]),
                       turned=len(turned[0]), carved=len(surface), carved_volume=carving.volume)
+
+
+def _not_seen_through(image: tuple[np.ndarray, np.ndarray], views: Sequence[DepthView] | None,
+                      cell: float) -> tuple[np.ndarray, np.ndarray]:
+    """``image`` (points, normals) less the points some camera saw through, a cell's slack (all: no views)."""
+    if views is None or not len(image[0]):
+        return image
+    from estimation.carving import free_space
+
+    keep = ~free_space(image[0], views, slack=cell)
+    return image[0][keep], image[1][keep]
 
 
 def _new(points: np.ndarray, normals: np.ndarray, have: np.ndarray, distance: float) -> tuple[np.ndarray, np.ndarray]:
