@@ -24,6 +24,7 @@ from scenes.sources import estimate_object, prepare_objects
 from twin.decompose import DEFAULT_SETTINGS, CoacdSettings, ProgressBar, concavity, skips_coacd
 from twin.model import DEFAULT_PHYSICS, PhysicsSettings, add_object
 from twin.objects import TwinObject
+from twin.poses import matrix_quat
 
 
 class BuildError(TwinError, RuntimeError):
@@ -428,9 +429,6 @@ def _source_rotation(spec: ObjectSpec) -> np.ndarray:
 
 
 def _quat_wxyz(rotation: np.ndarray) -> list[float]:
-    """A rotation matrix as a unit quaternion, w x y z (MuJoCo's order, via MuJoCo's own conversion)."""
-    import mujoco
-
-    q = np.zeros(4)
-    mujoco.mju_mat2Quat(q, np.ascontiguousarray(rotation, dtype=np.float64).ravel())
+    """A rotation matrix as a unit quaternion, w x y z (MuJoCo's order), w >= 0."""
+    q = matrix_quat(rotation)
     return (q if q[0] >= 0 else -q).tolist()

@@ -339,9 +339,14 @@ class Segment:
     origins: np.ndarray
     geom: np.ndarray  # (n,) int32 true geom ids (checks only)
 
-    @property
+    @cached_property
     def centroid(self) -> np.ndarray:
         return self.points.mean(axis=0)
+
+    @cached_property
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """(low, high) corners of the points' axis-aligned box, metres, world frame."""
+        return self.points.min(axis=0), self.points.max(axis=0)
 
 
 @dataclass(frozen=True)

@@ -22,7 +22,7 @@ import numpy as np
 
 from scenes.sampling import sample_surface
 from twin.model import free_joint
-from twin.poses import rotation
+from twin.poses import matrix_quat, rotation, to_rotvec
 
 log = logging.getLogger(__name__)
 
@@ -233,8 +233,6 @@ class CameraSensor:
         if self._pool is not None:
             self._pool.shutdown(wait=True)
 
-    # -- internals -------------------------------------------------------------------------------
-
     def refreshed(self) -> list[str]:
         """Objects a later scan saw better than the cloud :meth:`observe` last gave (once each): the remote
         publishes their cloud again, and :meth:`observe` then gives that view.
@@ -248,6 +246,8 @@ class CameraSensor:
         if not self._better or (self._job is not None and not self._job.done()):
             return []
         return sorted(self._better)
+
+    # -- internals -------------------------------------------------------------------------------
 
     def _observe(self, truth: GroundTruth, object_id: str, points: int, shot: int) -> Observation:
         better = self._better.pop(object_id, None)
@@ -263,8 +263,7 @@ class CameraSensor:
             return Observation(empty, empty, self._last.get(object_id, np.zeros(3)), np.array([1.0, 0, 0, 0]))
         seen = self._subsample(self._fuse(scan, scan.segments[k]), points, shot)
         observed = seen.points[~seen.completed]  # type: ignore[index]
-        model = observed[np.random.default_rng([self.seed, shot]).permutation(len(observed))[:MODEL_POINTS_CAP]]
-        self._model[object_id] = (model, seen.frame_position)
+        self._model[object_id] = (self._icp_model(observed, shot), seen.frame_position)
         self._motion[object_id] = self._reviewed[object_id] = np.eye(4)
         self._observed[object_id] = seen
         self._tracked[object_id] = (scan.time, Track(seen.frame_position, seen.frame_quat, np.zeros(3), np.zeros(3),
@@ -280,11 +279,8 @@ class CameraSensor:
         (4, 4), since the first capture): its model is the new view moved back by that motion, so the
         tracks go on unchanged."""
         seen = self._subsample(seen, points, shot)
-        observed = seen.points[~seen.completed]  # type: ignore[index]
-        back = observed - motion[:3, 3]
-        back = back @ motion[:3, :3]  # R^T (x - t), row-wise
-        model = back[np.random.default_rng([self.seed, shot]).permutation(len(back))[:MODEL_POINTS_CAP]]
-        self._model[object_id] = (model, self._model[object_id][1])
+        back = (seen.points[~seen.completed] - motion[:3, 3]) @ motion[:3, :3]  # type: ignore[index]  # R^T (x - t)
+        self._model[object_id] = (self._icp_model(back, shot), self._model[object_id][1])
         self._observed[object_id] = seen
         return seen
 
@@ -294,7 +290,7 @@ class CameraSensor:
         from twin.poses import angle_deg
 
         last = self._reviewed.get(object_id, np.eye(4))
-        turned = angle_deg(_quat(motion[:3, :3] @ last[:3, :3].T), np.array([1.0, 0, 0, 0]))
+        turned = angle_deg(matrix_quat(motion[:3, :3] @ last[:3, :3].T), np.array([1.0, 0, 0, 0]))
         moved = float(np.linalg.norm(motion[:3, 3] - last[:3, 3]))
         if float(np.linalg.norm(linvel)) > REVIEW_REST_SPEED or (turned < REVIEW_TURN_DEG and moved < REVIEW_SHIFT):
             return
@@ -306,7 +302,7 @@ class CameraSensor:
         if current is None or _completed_share(candidate) <= _completed_share(current) - REVIEW_GAIN:
             centre = self._model[object_id][1]
             frame = Observation(candidate.points, candidate.sensor_origins, motion[:3, :3] @ centre + motion[:3, 3],
-                                _quat(motion[:3, :3]), candidate.normals, candidate.completed)
+                                matrix_quat(motion[:3, :3]), candidate.normals, candidate.completed)
             self._better[object_id] = (frame, motion.copy())
             log.info("%s: seen better at t=%.3f (%.0f %% completed, was %.0f %%)", object_id, scan.time,
                      100 * _completed_share(candidate), 100 * _completed_share(current) if current else 100)
@@ -343,7 +339,7 @@ class CameraSensor:
             motion = self._motion[object_id] = result.transform
             position = motion[:3, :3] @ centre + motion[:3, 3]
             linvel, angvel = self._update_velocity(object_id, position, motion[:3, :3] @ before[:3, :3].T, scan.time)
-            track = Track(position, _quat(motion[:3, :3]), linvel, angvel,
+            track = Track(position, matrix_quat(motion[:3, :3]), linvel, angvel,
                           result.position_sigma(position), result.angle_sigma, time=scan.time)
             self._review(scan, k, object_id, motion, linvel)
         self._tracked[object_id] = (scan.time, track)
@@ -433,8 +429,8 @@ class CameraSensor:
         if self._gates is not None:
             return self._gates
         centroids = np.array([seg.centroid for seg in scan.segments])
-        lows = np.array([seg.points.min(axis=0) for seg in scan.segments]) - ASSOCIATION_RADIUS
-        highs = np.array([seg.points.max(axis=0) for seg in scan.segments]) + ASSOCIATION_RADIUS
+        lows = np.array([seg.bounds[0] for seg in scan.segments]) - ASSOCIATION_RADIUS
+        highs = np.array([seg.bounds[1] for seg in scan.segments]) + ASSOCIATION_RADIUS
         gates: dict[str, int] = {}
         for object_id in self._last:
             here = self._predicted(object_id, scan.time)
@@ -454,8 +450,8 @@ class CameraSensor:
                 continue
             # Distance from the last position to the segment's box: a box, not the centroid, for the reason
             # in _gated.
-            d = float(np.linalg.norm(np.maximum(0.0, np.maximum(seg.points.min(axis=0) - last,
-                                                                 last - seg.points.max(axis=0)))))
+            low, high = seg.bounds
+            d = float(np.linalg.norm(np.maximum(0.0, np.maximum(low - last, last - high))))
             if d <= reach and d < best_d:
                 best, best_d = k, d
         return best
@@ -510,15 +506,13 @@ class CameraSensor:
                          time: float) -> tuple[np.ndarray, np.ndarray]:
         """The frame's (linear m/s, angular rad/s) velocity, world frame, from the last track to this one at
         ``position`` turned by ``turn`` (3, 3); zero when the last is older than ``VELOCITY_WINDOW``."""
-        from scipy.spatial.transform import Rotation
-
         before, since = self._previous.get(object_id), time - self._seen_at.get(object_id, time)
         if before is not None and 0 < since <= VELOCITY_WINDOW:
             linear = (position - before) / since
             speed = float(np.linalg.norm(linear))
             if speed > MAX_SPEED:
                 linear = linear * (MAX_SPEED / speed)
-            self._velocity[object_id] = (linear, Rotation.from_matrix(turn).as_rotvec() / since)
+            self._velocity[object_id] = (linear, to_rotvec(matrix_quat(turn)[None])[0] / since)
         else:
             self._velocity.pop(object_id, None)
         self._last[object_id] = self._previous[object_id] = position
@@ -540,6 +534,10 @@ class CameraSensor:
         return Observation(closed.points, closed.origins, centre, np.array([1.0, 0.0, 0.0, 0.0]), closed.normals,
                            closed.completed)
 
+    def _icp_model(self, observed: np.ndarray, shot: int) -> np.ndarray:
+        """At most ``MODEL_POINTS_CAP`` of ``observed`` (n, 3), drawn from the seed and ``shot``: an ICP model."""
+        return observed[np.random.default_rng([self.seed, shot]).permutation(len(observed))[:MODEL_POINTS_CAP]]
+
     def _subsample(self, seen: Observation, points: int, shot: int) -> Observation:
         """At most ``points`` of ``seen``'s points (0: all), drawn from the seed and ``shot``; the frame kept."""
         if not points or len(seen.points) <= points:
@@ -550,7 +548,7 @@ class CameraSensor:
 
 
 def _completed_share(seen: Observation) -> float:
-    """The share of an observation's points no camera saw (1 when it has none)."""
+    """The share of an observation's points no camera saw: 0 without completion flags, 1 without points."""
     if seen.completed is None or not len(seen.points):
         return 0.0 if seen.completed is None else 1.0
     return float(np.mean(seen.completed))
@@ -616,12 +614,3 @@ class _Still:
     def pose(self, object_id: str) -> tuple[np.ndarray, np.ndarray]:
         body = self.model.jnt_bodyid[free_joint(self.model, object_id)]
         return self.data.xpos[body].copy(), self.data.xquat[body].copy()
-
-
-def _quat(matrix: np.ndarray) -> np.ndarray:
-    """w x y z quaternion of a rotation matrix (MuJoCo's order)."""
-    import mujoco
-
-    q = np.empty(4)
-    mujoco.mju_mat2Quat(q, np.ascontiguousarray(matrix, dtype=np.float64).ravel())
-    return q

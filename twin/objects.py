@@ -116,10 +116,10 @@ def fit_primitive(mesh: Hull, *, min_fill: float = PRIMITIVE_MIN_FILL) -> Primit
     Args:
         mesh: vertices (v, 3) float64 metres, body frame; faces (f, 3) int, a closed outward surface.
     """
-    import mujoco
     import trimesh
 
     from estimation.inertia import mass_properties, signed_volumes, triangle_areas
+    from twin.poses import matrix_quat
 
     vertices, faces = mesh
     tri = vertices[faces]
@@ -138,9 +138,8 @@ def fit_primitive(mesh: Hull, *, min_fill: float = PRIMITIVE_MIN_FILL) -> Primit
                                             key=lambda c: abs(np.log(c[0])))
     if not min_fill <= fill <= 1 / min_fill:
         return None
-    quat = np.empty(4)
-    mujoco.mju_mat2Quat(quat, np.ascontiguousarray(frame).ravel())
-    return Primitive(kind=kind, size=size, position=_on_centre(kind, position, frame[:, 2], size[0]), quat=quat,
+    return Primitive(kind=kind, size=size, position=_on_centre(kind, position, frame[:, 2], size[0]),
+                     quat=matrix_quat(frame),
                      fill=fill)
 
 

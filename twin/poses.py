@@ -15,6 +15,15 @@ def rotation(q: np.ndarray) -> np.ndarray:
     return m.reshape(3, 3)
 
 
+def matrix_quat(matrix: np.ndarray) -> np.ndarray:
+    """The unit quaternion (4,), w x y z, of a 3x3 rotation matrix (MuJoCo's conversion; either sign)."""
+    import mujoco
+
+    q = np.empty(4)
+    mujoco.mju_mat2Quat(q, np.ascontiguousarray(matrix, dtype=np.float64).ravel())
+    return q
+
+
 def quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """The rotation ``a`` after ``b``."""
     import mujoco
