@@ -42,6 +42,11 @@ WEIGHT_CELLS = 1.0
 #: face: their vertex needs no eigen-decomposition.
 FLAT_AGREEMENT = 0.995
 
+#: A cell's quadric keeps a second direction (a crease) only where its share exceeds the noise's by
+#: this many times the normals' mean tilt variance: the share along one tangent direction of
+#: noise-tilted normals is about that variance, and the larger of two such shares runs above it.
+NOISE_TILT_FACTOR = 3.0
+
 #: A vertex may leave its cell by this much (cells) before it falls back to the mean crossing.
 VERTEX_SLACK_CELLS = 0.5
 
@@ -73,13 +78,15 @@ class DualSurface:
 
 
 def contour(points: np.ndarray, normals: np.ndarray, band: Band, values: np.ndarray,
-            measured: np.ndarray, *, noise: float = 0.0) -> DualSurface:
+            measured: np.ndarray, *, noise: float = 0.0, tilt: np.ndarray | None = None) -> DualSurface:
     """Dual-contour the sign of ``values`` on ``band`` with vertices from the oriented points' planes.
 
     Args:
         points: (n, 3) float64 metres (band frame); normals: (n, 3) unit, outward.
         band: the narrow band; values: (band.size,) float32, negative inside; measured: (band.size,) bool.
         noise: standard deviation of the points about the surface, metres.
+        tilt: (n,) variance of each normal's tilt from noise, radians^2 (``normals.fit_normals``); None:
+            the normals are exact.
     """
     h = band.h
     far = FAR_CELLS * h
@@ -149,7 +156,7 @@ def contour(points: np.ndarray, normals: np.ndarray, band: Band, values: np.ndar
         minus = np.bincount(cell_of[on_axis], minlength=n_cells) - plus
         facing[:, ax] = plus - minus
         both_ways |= (plus > 0) & (minus > 0)
-    vertices, supported, vertex_normals, smooth = _place_vertices(points, normals, band, cell_keys, mean, noise, facing)
+    vertices, supported, vertex_normals, smooth = _place_vertices(points, normals, band, cell_keys, mean, noise, facing, tilt)
     opposed = both_ways
 
     tri = np.concatenate([quads[:, [0, 1, 2]], quads[:, [0, 2, 3]]])
@@ -170,7 +177,8 @@ def contour(points: np.ndarray, normals: np.ndarray, band: Band, values: np.ndar
 
 def _place_vertices(points: np.ndarray, normals: np.ndarray, band: Band, cell_keys: np.ndarray,
                     mean: np.ndarray, noise: float,
-                    facing: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+                    facing: np.ndarray, tilt: np.ndarray | None = None
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Each cell's vertex: the quadric minimiser of the planes through it, else the mean crossing.
 
     Returns:
@@ -201,7 +209,7 @@ def _place_vertices(points: np.ndarray, normals: np.ndarray, band: Band, cell_ke
     # side of a thin gap): they would pull the vertex into the wall. A crease's two faces both face
     # the cell's way, down to a knife edge of ~20 degrees.
     ok = (np.abs(offset) <= reach) & (np.einsum("ij,ij->i", n, facing[cell]) > 0)
-    cell, p, n, centre, offset = cell[ok], p[ok], n[ok], centre[ok], offset[ok]
+    cell, p, n, centre, offset, src = cell[ok], p[ok], n[ok], centre[ok], offset[ok], src[ok]
     # Weight by the distance along the plane only: along the normal it is noise, and weighting it would
     # favour points that the noise moved towards the cell, again a bias.
     w = np.exp(-(((p - centre) ** 2).sum(axis=1) - offset**2) / (WEIGHT_CELLS * h) ** 2)
@@ -223,6 +231,21 @@ def _place_vertices(points: np.ndarray, normals: np.ndarray, band: Band, cell_ke
     # need the eigen-decomposition.
     agree = np.linalg.norm(normal_sum, axis=1) / np.maximum(weight, np.finfo(float).tiny)
     flat = agree > FLAT_AGREEMENT
+    rest = np.flatnonzero(~flat & (weight > 0))
+    lam, vec = np.linalg.eigh(a[rest])
+    # A second direction is a crease only beyond what noise tilting the normals puts there: the
+    # weighted mean tilt variance is the quadric's share along a tangent direction on a noisy face.
+    share = np.full(len(rest), QEF_RELATIVE_EIGENVALUE)
+    if tilt is not None:
+        share += NOISE_TILT_FACTOR * acc(w * tilt[src])[rest] / weight[rest]
+    keep = lam > share[:, None] * lam[:, -1:]
+    # A quadric with one direction left is a face too, whose normals wobble more than FLAT_AGREEMENT
+    # allows (estimated on noisy points they do everywhere). Minimising it would put the vertex on the
+    # mean tangent plane, outside a convex surface by k t^2 / 2: noisy curved shapes came out twice as
+    # far outside as the noise itself moves the points.
+    one = keep.sum(axis=1) == 1
+    flat[rest[one]] = True
+    sharp, lam, vec, keep = rest[~one], lam[~one], vec[~one], keep[~one]
     vertex = mean.copy()
     plane_only = mean.copy()
     normal_out = facing / np.maximum(np.linalg.norm(facing, axis=1, keepdims=True), np.finfo(float).tiny)
@@ -259,17 +282,19 @@ def _place_vertices(points: np.ndarray, normals: np.ndarray, band: Band, cell_ke
         cell_centre = band.position(_unravel(cell_keys[flat], dims)) + h / 2
         mu = np.einsum("nij,nj->ni", tangent_proj, mean[flat] - cell_centre - c)
         fall = 0.5 * np.einsum("ni,nij,nj->n", mu, shape, mu)
-        offset_m = height - fall - np.einsum("ij,ij->i", nbar, mean[flat] - cell_centre - c)
+        # Noise along the surface lifts the points off a curved one: a point moved by t along the
+        # tangent plane sits k t^2 / 2 above the surface, so isotropic noise of sigma puts the points'
+        # mean sigma^2 H outside (H = (k1 + k2) / 2, the trace of the shape operator over 2). The
+        # spread about the planes (``noise``) is taken as the spread along them too.
+        lift = noise**2 * 0.5 * np.einsum("nii->n", shape)
+        offset_m = height - fall - lift - np.einsum("ij,ij->i", nbar, mean[flat] - cell_centre - c)
         moved = mean[flat] + nbar * offset_m[:, None]
         vertex[flat] = plane_only[flat] = moved
         normal_out[flat] = nbar
-    sharp = np.flatnonzero(~flat & (weight > 0))
     if len(sharp):
         # Minimise the quadric about the mean crossing: x = m + A^+ (b - A m), small eigenvalues
         # dropped (the directions the planes do not pin down keep the mean).
         a_s, m_s = a[sharp], mean[sharp]
-        lam, vec = np.linalg.eigh(a_s)
-        keep = lam > QEF_RELATIVE_EIGENVALUE * lam[:, -1:]
         inv = np.where(keep & (lam > 0), 1.0 / np.where(lam > 0, lam, 1.0), 0.0)
         along = np.einsum("nji,nj->ni", vec, rhs[sharp] - np.einsum("nij,nj->ni", a_s, m_s))
         vertex[sharp] = m_s + np.einsum("nij,nj->ni", vec, inv * along)

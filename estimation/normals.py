@@ -63,17 +63,32 @@ def estimate_normals(points: np.ndarray, k: int = tol.NORMAL_NEIGHBOURS, *,
         neighbours: (n, >= k) int, each point's nearest neighbours by distance (itself first), when a
             ``cKDTree.query`` already found them; the first ``k`` columns are used.
     """
+    return fit_normals(points, k, neighbours=neighbours)[0]
+
+
+def fit_normals(points: np.ndarray, k: int = tol.NORMAL_NEIGHBOURS, *,
+                neighbours: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`estimate_normals`, and how far noise may have tilted each: (normals (n, 3), tilt (n,)).
+
+    ``tilt`` is the variance (radians^2) of the normal's tilt towards the patch's narrower tangent
+    direction: a plane fitted to k points spread ``lambda_1 / k`` along it, each ``residual`` off it,
+    has a slope variance of ``residual / lambda_1``. Noise tilts normals on a flat face; the contouring
+    must not read that as a crease (``dualcontour``).
+    """
     k = min(k, len(points))
     if neighbours is None:
         neighbours = cKDTree(points).query(points, k=k, workers=-1)[1]
     neighbours = neighbours[:, :k]
     normals = np.empty_like(points)
+    tilt = np.empty(len(points))
     for start in range(0, len(points), NORMAL_BLOCK):
         patch = points[neighbours[start:start + NORMAL_BLOCK]]
         patch -= patch.mean(axis=1, keepdims=True)
         # eigh sorts eigenvalues ascending: column 0 is the direction of least spread.
-        normals[start:start + NORMAL_BLOCK] = np.linalg.eigh(np.einsum("nki,nkj->nij", patch, patch))[1][:, :, 0]
-    return normals
+        lam, vec = np.linalg.eigh(np.einsum("nki,nkj->nij", patch, patch))
+        normals[start:start + NORMAL_BLOCK] = vec[:, :, 0]
+        tilt[start:start + NORMAL_BLOCK] = np.maximum(lam[:, 0], 0.0) / (k * np.maximum(lam[:, 1], np.finfo(float).tiny))
+    return normals, tilt
 
 
 def orient_outward(
