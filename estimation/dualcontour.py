@@ -210,13 +210,21 @@ def _place_vertices(points: np.ndarray, normals: np.ndarray, band: Band, cell_ke
     # the cell's way, down to a knife edge of ~20 degrees.
     ok = (np.abs(offset) <= reach) & (np.einsum("ij,ij->i", n, facing[cell]) > 0)
     cell, p, n, centre, offset, src = cell[ok], p[ok], n[ok], centre[ok], offset[ok], src[ok]
-    # Weight by the distance along the plane only: along the normal it is noise, and weighting it would
-    # favour points that the noise moved towards the cell, again a bias.
-    w = np.exp(-(((p - centre) ** 2).sum(axis=1) - offset**2) / (WEIGHT_CELLS * h) ** 2)
+    # Weight by the distance along the surface only: along the normal it is noise, and weighting it would
+    # favour points that the noise moved towards the cell, again a bias. Along the cell's mean plane, not
+    # each point's own: where the normals turn across the cell (a curved patch, near an edge), a point's
+    # own plane mixes its offset along the normal into that distance, and favoured the points the noise
+    # moved outward (a 15 mm sphere at sigma 0.5 mm came out +0.14 to +0.18 %, now within 0.02 %).
+    rel = p - centre
+    w = np.exp(-((rel**2).sum(axis=1) - offset**2) / (WEIGHT_CELLS * h) ** 2)
     d = np.einsum("ij,ij->i", n, p)
 
     def acc(values: np.ndarray) -> np.ndarray:
         return np.bincount(cell, weights=values, minlength=n_cells)
+
+    along = np.stack([acc(w * n[:, i]) for i in range(3)], axis=1)
+    along /= np.maximum(np.linalg.norm(along, axis=1, keepdims=True), np.finfo(float).tiny)
+    w = np.exp(-((rel**2).sum(axis=1) - np.einsum("ij,ij->i", along[cell], rel) ** 2) / (WEIGHT_CELLS * h) ** 2)
 
     a = np.empty((n_cells, 3, 3))
     for i in range(3):
