@@ -62,8 +62,9 @@ class DualSurface:
         unmeasured_area: m^2 of surface between band nodes no point reached (holes closed by the shell).
         normals: (v, 3) float64, unit outward: each vertex's surface normal from the points' planes near
             it (the weighted mean normal, or the quadric's dominant direction), not from the mesh.
-        smooth: (v,) bool: the planes near the vertex agree (``FLAT_AGREEMENT``: a face or a gently
-            curved patch), so the vertex is on the surface to second order. False at creases and
+        smooth: (v,) bool: the planes near the vertex agree (``FLAT_AGREEMENT``, or their quadric has
+            one direction beyond what noise tilts the normals: a face or a gently curved patch), so the
+            vertex is on the surface to second order. False at creases and
             corners, on patches curved more than a cell resolves (there the quadric's vertex lies on
             the tangent planes, outside a convex surface) and where no plane reached.
     """
@@ -222,9 +223,9 @@ def _place_vertices(points: np.ndarray, normals: np.ndarray, band: Band, cell_ke
     def acc(values: np.ndarray) -> np.ndarray:
         return np.bincount(cell, weights=values, minlength=n_cells)
 
-    along = np.stack([acc(w * n[:, i]) for i in range(3)], axis=1)
-    along /= np.maximum(np.linalg.norm(along, axis=1, keepdims=True), np.finfo(float).tiny)
-    w = np.exp(-((rel**2).sum(axis=1) - np.einsum("ij,ij->i", along[cell], rel) ** 2) / (WEIGHT_CELLS * h) ** 2)
+    plane = np.stack([acc(w * n[:, i]) for i in range(3)], axis=1)  # each cell's mean normal
+    plane /= np.maximum(np.linalg.norm(plane, axis=1, keepdims=True), np.finfo(float).tiny)
+    w = np.exp(-((rel**2).sum(axis=1) - np.einsum("ij,ij->i", plane[cell], rel) ** 2) / (WEIGHT_CELLS * h) ** 2)
 
     a = np.empty((n_cells, 3, 3))
     for i in range(3):
