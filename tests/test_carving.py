@@ -97,6 +97,32 @@ def test_a_ball_seen_from_above_gets_its_underside_from_the_mirror_image():
     assert mirrored[:, 2].min() < 0.05 * radius
 
 
+def test_a_flat_ring_under_noise_is_mirrored_about_its_true_middle():
+    # A nut-sized torus (14 mm tall) whose lowest 6 mm went with the table, seen through 1 mm of noise:
+    # few points are near its curved top, so the points' own heights read the top 1.5 mm low and the
+    # reflected underside came out short (or was refused for want of points below the middle).
+    import trimesh
+
+    rng = np.random.default_rng(3)
+    major, minor, sigma = 0.015, 0.007, 0.001
+    ring = trimesh.creation.torus(major, minor, major_sections=96, minor_sections=48)
+    points, faces = trimesh.sample.sample_surface_even(ring, 4000, seed=3)
+    points = points + [0.0, 0.0, minor]
+    normals = ring.face_normals[faces]
+    seen = (points[:, 2] > 0.006) & (normals[:, 2] > -0.3)
+    noisy = points[seen] + rng.normal(0.0, sigma, (int(seen.sum()), 3))
+    image = mirror_image(noisy, normals[seen], FLOOR, cut=0.006, noise=sigma, cell=0.001)
+    assert image is not None
+    mirrored = image[0]
+    assert mirrored[:, 2].min() >= 0.0  # nothing below the table
+    # The image lies on the torus's underside (to the noise), not lifted off it.
+    rho = np.linalg.norm(mirrored[:, :2], axis=1)
+    distance = np.hypot(rho - major, mirrored[:, 2] - minor) - minor
+    low = mirrored[:, 2] < 0.003
+    assert low.sum() > 30
+    assert abs(float(np.median(distance[low]))) < 0.2 * sigma  # the old estimate: 0.4 sigma out
+
+
 def test_a_cone_is_not_its_own_mirror_image():
     rng = np.random.default_rng(2)
     points, normals = _cone(20000, 0.05, 0.08, rng)
