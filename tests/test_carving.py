@@ -99,8 +99,8 @@ def test_a_ball_seen_from_above_gets_its_underside_from_the_mirror_image():
 
 def test_a_flat_ring_under_noise_is_mirrored_about_its_true_middle():
     # A nut-sized torus (14 mm tall) whose lowest 6 mm went with the table, seen through 1 mm of noise:
-    # few points are near its curved top, so the points' own heights read the top 1.5 mm low and the
-    # reflected underside came out short (or was refused for want of points below the middle).
+    # few points are near its curved top, so the points' own heights (less the full noise's quantile) read
+    # it low and the reflected underside came out short.
     import trimesh
 
     rng = np.random.default_rng(3)
