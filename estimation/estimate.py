@@ -323,9 +323,10 @@ def _auto_pass(cloud: PointCloud, box: OrientedBox, local: np.ndarray, spacing: 
     props = corrected(mass_properties(surface.vertices, surface.faces, density), surface.vertices, surface.faces,
                       bulge_volumes(surface.vertices, surface.faces, surface.normals, surface.smooth))
     # What the cloud leaves open: unmeasured surface anywhere across the closing shell's half width,
-    # and cells holding both faces of a wall anywhere from none to a whole cell of material.
+    # and cells holding both faces of a wall anywhere from none to a whole cell of material (whatever
+    # the mesh put there, the truth may differ by up to the cell).
     hole = surface.unmeasured_area * (occ.closing + 0.5) * coarse.cell
-    thin = surface.opposed_cells * h**3 / 2
+    thin = surface.opposed_cells * h**3
     lap("mass_properties", t0)
     return _AutoPass(points=points, normals=normals, h=h, surface=surface, props=props, closing=occ.closing,
                      hole=hole, thin=thin)

@@ -7,8 +7,15 @@ spacings thick keeps nodes of the right sign on both faces: the far face's point
 ``exp(-(2 h)^2 / h^2) ~ 2 %`` against the near face's. (The old fixed 128-cell grid made cells
 wider than thin walls, and then the far face's planes outvoted the near face's: walls thickened.)
 
-Band nodes no point reached take the sign of their neighbours, spreading in from the reached nodes
-and from the coarse flood fill, so every node has a sign and the zero level is closed. Only the sign
+A plane says little far from its point: beyond a convex crease, the planes of the other face's points
+extend past the edge and read the outside as inside. With exact normals a 60 mm cube grew spikes up to
+3 mm along its edges from such nodes (a few points at the corner of a node's reach outvoting none from
+the face below it). So a node's value is trusted only where its nearest point is within the value's
+own distance plus a cell (``EXTRAPOLATION_CELLS``), as it is for any node beside a sampled surface: on
+a face the nearest point is at most about a spacing (<= a cell) along it from the node's foot.
+
+Band nodes no point reached (or reached only by extrapolated planes) take the sign of their
+neighbours, spreading in from the trusted nodes and from the coarse flood fill, so every node has a sign and the zero level is closed. Only the sign
 is used downstream: the surface's position comes from the points' own planes
 (``estimation.dualcontour``), not from interpolating this field.
 """
@@ -26,6 +33,13 @@ KERNEL_CELLS = 1.0
 #: measured values. Beyond 1.5 cells no edge crossing can be interpolated anyway.
 FAR_CELLS = 1.5
 
+#: A node's plane value is trusted when its nearest point lies within ``|value| + EXTRAPOLATION_CELLS``
+#: cells of it (module doc): further, the value extends planes past their points.
+EXTRAPOLATION_CELLS = 1.0
+
+#: Rounds of majority voting that settle the spread signs (``_spread_signs``).
+SETTLE_ROUNDS = 8
+
 #: Neighbour offsets of a node (the 27 around it, itself included), a cell's 8 corners from its lowest,
 #: and a node's 6 face neighbours.
 NEIGHBOURS_27 = np.array([(i, j, k) for i in (-1, 0, 1) for j in (-1, 0, 1) for k in (-1, 0, 1)])
@@ -42,7 +56,8 @@ def band_field(points: np.ndarray, normals: np.ndarray, band: Band) -> tuple[np.
 
     Returns:
         values (band.size,) float32, and measured (band.size,) bool: True where points were within
-        reach (the value is an IMLS distance), False where the sign was spread from neighbours.
+        reach and the value is trusted (an IMLS distance), False where the sign was spread from
+        neighbours.
     """
     h = band.h
     # Each point reaches the 27 nodes around its nearest node: every node within 1.5 cells (per axis).
@@ -54,15 +69,25 @@ def band_field(points: np.ndarray, normals: np.ndarray, band: Band) -> tuple[np.
     along = r[:, :, None] + h * steps  # (n, axis, offset): node minus point, metres
     w = np.exp(-(along / (KERNEL_CELLS * h)) ** 2)
     d = normals[:, :, None] * along
+    a2 = along**2
     weight = (w[:, 0, :, None, None] * w[:, 1, None, :, None] * w[:, 2, None, None, :]).reshape(-1)
     plane = (d[:, 0, :, None, None] + d[:, 1, None, :, None] + d[:, 2, None, None, :]).reshape(-1)
+    distance2 = (a2[:, 0, :, None, None] + a2[:, 1, None, :, None] + a2[:, 2, None, None, :]).reshape(-1)
     target = _locate_27(band, base)
     weight_sum = np.bincount(target, weights=weight, minlength=band.size + 1)[:-1]
     value_sum = np.bincount(target, weights=weight * plane, minlength=band.size + 1)[:-1]
+    # Trust (module doc): some point's foot on its plane lies within a cell of it, and the nearest point
+    # is no more than a cell further than the value says.
+    nearest2 = np.full(band.size + 1, np.inf)
+    np.minimum.at(nearest2, target, distance2)
+    foot2 = np.full(band.size + 1, np.inf)
+    np.minimum.at(foot2, target, distance2 - plane**2)
     measured = weight_sum > 0
     far = FAR_CELLS * h
     values = np.zeros(band.size, dtype=np.float32)
     values[measured] = np.clip(value_sum[measured] / weight_sum[measured], -far, far)
+    reach = EXTRAPOLATION_CELLS * h
+    measured &= (foot2[:-1] <= reach**2) & (np.sqrt(nearest2[:-1]) <= np.abs(values) + reach)
     _spread_signs(values, measured, band, far)
     return values, measured
 
@@ -93,10 +118,11 @@ def _spread_signs(values: np.ndarray, measured: np.ndarray, band: Band, far: flo
     Nodes outside the band count with the coarse flood fill's answer. Repeats until nothing changes;
     a node with no signed neighbour at the end (an island of the band no point reached) is outside.
     """
-    pending = np.flatnonzero(~measured)
+    spread = np.flatnonzero(~measured)
+    pending = spread
     known = measured.copy()
     # The six neighbours of every pending node, once: (position or -1, coarse inside where -1).
-    steps = [band.step(pending, axis, direction) for axis in range(3) for direction in (1, -1)]
+    all_steps = steps = [band.step(pending, axis, direction) for axis in range(3) for direction in (1, -1)]
     while len(pending):
         votes = np.zeros(len(pending))
         for at, far_inside in steps:
@@ -113,3 +139,19 @@ def _spread_signs(values: np.ndarray, measured: np.ndarray, band: Band, far: flo
         known[pending[decided]] = True
         pending = pending[~decided]
         steps = [(at[~decided], far_inside[~decided]) for at, far_inside in steps]
+    # The rounds above sign a node from whichever neighbours were signed first; a node beside one
+    # wrongly measured node (near a crease) took its sign though most of its neighbours, signed
+    # later, disagree. Let every spread node follow the majority of all six until none changes,
+    # measured neighbours voting by how far they are from the surface (a node a tenth of a cell
+    # inside is a weak vote).
+    for _ in range(SETTLE_ROUNDS):
+        votes = np.zeros(len(spread))
+        for at, far_inside in all_steps:
+            in_band = at >= 0
+            vote = np.where(far_inside, -far, far)
+            vote[in_band] = values[at[in_band]]
+            votes += vote
+        flip = np.flatnonzero(votes * values[spread] < 0)
+        if not len(flip):
+            break
+        values[spread[flip]] = -values[spread[flip]]

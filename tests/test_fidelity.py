@@ -46,14 +46,7 @@ def test_mass_com_inertia_match_the_true_mesh(fidelity, oid):
     assert f.inertia_error < 0.02
 
 
-#: Known misses, each named: the paper's stack rests on an edge (a knife-edge equilibrium); with the
-#: crease-keeping reconstruction (a25dac4) its CoACD hulls (7 against the reference's 4) tip it 41.5 mm
-#: and 6.5 degrees from the reference's rest (bench/fidelity.py), past both bounds.
-KNOWN_MISSES = {"stack": "rests on an edge; the estimated hulls tip it past the bound since a25dac4"}
-
-
-@pytest.mark.parametrize("oid", [pytest.param(i, marks=pytest.mark.xfail(strict=True, reason=KNOWN_MISSES[i]))
-                                 if i in KNOWN_MISSES else i for i in IDS])
+@pytest.mark.parametrize("oid", IDS)
 def test_dropped_object_rests_like_the_reference(fidelity, oid):
     f = fidelity[oid]
     assert f.rest_distance < POSITION_FRACTION * f.size

@@ -119,7 +119,11 @@ def test_without_the_plane_the_unseen_base_is_not_closed_and_coverage_says_so(ca
     assert found["support_plane"][:3] == [0, 0, 1] and -found["support_plane"][3] == pytest.approx(TOP, abs=0.01)
     assert bare["coverage"] < closed["coverage"] + 0.05
     assert not any("support plane" in w for w in bare["warnings"])
-    assert abs(closed["volume_m3"] / VOLUME - 1) < abs(bare["volume_m3"] / VOLUME - 1)
+    # Without the plane the base could be anywhere below the seen part: the interval says so. (Which of
+    # the two volumes is nearer the truth depends on the noise draw: over four draws the bare one was
+    # 1.7 to 7.7 % off and the closed one 1.5 to 4.7 %.)
+    (bare_low, bare_high), (closed_low, closed_high) = bare["volume_bounds_m3"], closed["volume_bounds_m3"]
+    assert bare_high - bare_low > 1.5 * (closed_high - closed_low)
 
 
 def test_depth_images_read_like_the_clouds(capsys, tmp_path, frames, pcds):
