@@ -10,14 +10,16 @@ wider than thin walls, and then the far face's planes outvoted the near face's: 
 A plane says little far from its point: beyond a convex crease, the planes of the other face's points
 extend past the edge and read the outside as inside. With exact normals a 60 mm cube grew spikes up to
 3 mm along its edges from such nodes (a few points at the corner of a node's reach outvoting none from
-the face below it). So a node's value is trusted only where its nearest point is within the value's
-own distance plus a cell (``EXTRAPOLATION_CELLS``), as it is for any node beside a sampled surface: on
-a face the nearest point is at most about a spacing (<= a cell) along it from the node's foot.
+the face below it). So a node's value is trusted only where some point's foot on its own plane lies
+within a cell of that point, and the nearest point is no more than a cell further than the value says
+(``EXTRAPOLATION_CELLS``), as for any node beside a sampled surface: on a face the nearest point is at
+most about a spacing (<= a cell) along it from the node's foot.
 
 Band nodes no point reached (or reached only by extrapolated planes) take the sign of their
-neighbours, spreading in from the trusted nodes and from the coarse flood fill, so every node has a sign and the zero level is closed. Only the sign
-is used downstream: the surface's position comes from the points' own planes
-(``estimation.dualcontour``), not from interpolating this field.
+neighbours, spreading in from the trusted nodes and from the coarse flood fill, then settling to their
+neighbours' majority, so every node has a sign and the zero level is closed. Only the sign is used
+downstream: the surface's position comes from the points' own planes (``estimation.dualcontour``), not
+from interpolating this field.
 """
 
 from __future__ import annotations
@@ -33,8 +35,8 @@ KERNEL_CELLS = 1.0
 #: measured values. Beyond 1.5 cells no edge crossing can be interpolated anyway.
 FAR_CELLS = 1.5
 
-#: A node's plane value is trusted when its nearest point lies within ``|value| + EXTRAPOLATION_CELLS``
-#: cells of it (module doc): further, the value extends planes past their points.
+#: How far (cells) a point's plane is read past the point: a node's value is trusted where some point's
+#: foot lies within this of it and the nearest point within ``|value|`` plus this (module doc).
 EXTRAPOLATION_CELLS = 1.0
 
 #: Rounds of majority voting that settle the spread signs (``_spread_signs``).
@@ -117,6 +119,8 @@ def _spread_signs(values: np.ndarray, measured: np.ndarray, band: Band, far: flo
 
     Nodes outside the band count with the coarse flood fill's answer. Repeats until nothing changes;
     a node with no signed neighbour at the end (an island of the band no point reached) is outside.
+    Then the spread nodes settle: each takes the majority of all six neighbours, for up to
+    ``SETTLE_ROUNDS`` rounds.
     """
     spread = np.flatnonzero(~measured)
     pending = spread

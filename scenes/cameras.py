@@ -316,13 +316,11 @@ def render(model, data, camera: Camera, *, noise: DepthNoise = KINECT_V1,  # typ
 # -- the feed: frames -> segments -> objects ---------------------------------------------------------------
 
 #: RANSAC inlier distance for the support plane, metres: ~3 sigma of the noise model at 1.2 m. Scans
-#: whose points are noisier (a far table) use PLANE_SIGMAS times their median sigma instead: with a fixed
-#: 6 mm, a table seen at ~3 m (sigma ~17 mm) kept most of its points and came out as one segment holding
-#: it and the objects on it (bench/cameras.py, paper_table).
+#: whose points are noisier (a far table) use ``estimation.views.PLANE_NOISE_SIGMAS`` times their median
+#: sigma instead, as ``twin estimate --support-plane auto`` does: with a fixed 6 mm, a table seen at ~3 m
+#: (sigma ~17 mm) kept most of its points and came out as one segment holding it and the objects on it
+#: (bench/cameras.py, paper_table).
 PLANE_THRESHOLD = 0.006
-
-#: The support plane's inlier distance in noise sigmas (see PLANE_THRESHOLD).
-PLANE_SIGMAS = 3.0
 
 
 @dataclass
@@ -433,6 +431,7 @@ class CameraFeed:
 
         from estimation.errors import CloudError
         from estimation.segmentation import check_segments, segment
+        from estimation.views import PLANE_NOISE_SIGMAS
 
         t0 = wall.perf_counter()
         rng = np.random.default_rng([self.seed, self.stats.scans])
@@ -459,7 +458,7 @@ class CameraFeed:
             log.warning("scan at t=%.3f: %d points in the workspace; no segments", time, len(pts))
             return Scan(time, tuple(frames), (), None, 0.0, 0.0, seconds, None)
         try:
-            threshold = max(PLANE_THRESHOLD, PLANE_SIGMAS * float(np.nanmedian(sigma)) if len(sigma) else 0.0)
+            threshold = max(PLANE_THRESHOLD, PLANE_NOISE_SIGMAS * float(np.nanmedian(sigma)))
             seg = segment(pts, toward=origins.mean(axis=0), rng=rng, plane_threshold=threshold)
         except CloudError as exc:
             self.stats.failed_scans += 1
