@@ -61,6 +61,11 @@ def camera_estimates(scene, noise_name: str, camera: dict) -> list:  # type: ign
     return out
 
 
+def _collides_as(obj) -> str:  # type: ignore[no-untyped-def]
+    """'box (0.012)': the primitive that collides and its misfit, or 'hulls (n)' (twin.objects)."""
+    return f"{obj.primitive.kind} ({obj.primitive.misfit:.3f})" if obj.primitive else f"hulls ({len(obj.hulls)})"
+
+
 def main() -> int:
     from scenes.fidelity import compare
     from scenes.scenefile import load_scene
@@ -81,7 +86,8 @@ def main() -> int:
             built = prepare_objects(scene.objects, table_top=top, cache_dir=Path(cache), progress=False,
                                     estimates=estimates)
             per = Table(title=f"{label}: per object")
-            for col in ("object", "mass %", "COM mm", "inertia %", "rest mm (% size)", "rest deg", "rests"):
+            for col in ("object", "mass %", "COM mm", "inertia %", "collides as (misfit)", "rest mm (% size)",
+                        "rest deg", "rests"):
                 per.add_column(col, justify="right")
             rows = []
             for est, ref in zip(built, reference, strict=True):
@@ -89,7 +95,7 @@ def main() -> int:
                 ok = f.rest_distance < POSITION_FRACTION * f.size and f.rest_angle < ANGLE_DEG
                 rows.append((f, ok))
                 per.add_row(est.id, f"{100 * f.mass_error:+.1f}", f"{1000 * f.com_error:.1f}",
-                            f"{100 * f.inertia_error:.1f}",
+                            f"{100 * f.inertia_error:.1f}", _collides_as(est),
                             f"{1000 * f.rest_distance:.1f} ({100 * f.rest_distance / f.size:.1f})",
                             f"{f.rest_angle:.1f}", "yes" if ok else "NO")
             mass = np.abs([100 * f.mass_error for f, _ in rows])

@@ -158,13 +158,14 @@ def _timed(step: Callable[..., None], total: list[float]) -> Callable[..., None]
 
 
 def fills(console: Console, cache: Path) -> None:
-    """Each object's best primitive and fill, estimated and true (clutter20 and the paper scene)."""
+    """Each object's best primitive, fill and misfit, estimated and true (clutter20 and the paper scene)."""
     from scenes.sources import estimate_object, prepare_objects, reference_estimate
-    from twin.objects import PRIMITIVE_MIN_FILL, collision_primitive
+    from twin.objects import PRIMITIVE_MAX_MISFIT, PRIMITIVE_MIN_FILL, collision_primitive
 
-    table = Table(title=f"best primitive and fill (object volume / primitive volume; accepted in "
-                        f"[{PRIMITIVE_MIN_FILL:g}, {1 / PRIMITIVE_MIN_FILL:.3f}])")
-    for col in ("scene", "object", "estimated", "fill", "true mesh", "fill "):
+    table = Table(title=f"best primitive, fill (object volume / primitive volume; accepted in "
+                        f"[{PRIMITIVE_MIN_FILL:g}, {1 / PRIMITIVE_MIN_FILL:.3f}]) and misfit (at most "
+                        f"{PRIMITIVE_MAX_MISFIT:g})")
+    for col in ("scene", "object", "estimated", "fill", "misfit", "true mesh", "fill ", "misfit "):
         table.add_column(col, justify="right")
     for name in ("clutter20", "paper_table"):
         scene = load_scene(str(resources.files("scenes").joinpath(f"data/{name}.toml")))
@@ -175,9 +176,12 @@ def fills(console: Console, cache: Path) -> None:
         for est, ref in zip(*sides, strict=True):
             row = [name, est.id]
             for obj in (est, ref):
-                fit = collision_primitive(obj, min_fill=1e-9)  # the best fit, accepted or not
-                ok = fit is not None and PRIMITIVE_MIN_FILL <= fit.fill <= 1 / PRIMITIVE_MIN_FILL
-                row += [f"{fit.kind}{'' if ok else ' (no)'}" if fit else "-", f"{fit.fill:.3f}" if fit else "-"]
+                # The fit used, or the best one refused.
+                fit = collision_primitive(obj)
+                ok = fit is not None
+                fit = fit or collision_primitive(obj, min_fill=1e-9, max_misfit=float("inf"))
+                row += ([f"{fit.kind}{'' if ok else ' (no)'}", f"{fit.fill:.3f}", f"{fit.misfit:.3f}"] if fit
+                        else ["-", "-", "-"])
             table.add_row(*row)
     console.print(table)
 

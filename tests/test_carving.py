@@ -107,7 +107,7 @@ def test_a_flat_ring_under_noise_is_mirrored_about_its_true_middle():
     major, minor, sigma = 0.015, 0.007, 0.001
     ring = trimesh.creation.torus(major, minor, major_sections=96, minor_sections=48)
     points, faces = trimesh.sample.sample_surface_even(ring, 4000, seed=3)
-    points = points + [0.0, 0.0, minor]
+    points = points + np.array([0.0, 0.0, minor])
     normals = ring.face_normals[faces]
     seen = (points[:, 2] > 0.006) & (normals[:, 2] > -0.3)
     noisy = points[seen] + rng.normal(0.0, sigma, (int(seen.sum()), 3))
