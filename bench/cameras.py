@@ -60,7 +60,7 @@ def run_scene(name: str, cameras: int, noise_name: str = "KINECT_V1", camera: di
     scan = sensor._current(remote, force=True)
     errors, unseen, fuse_s, est_s = {}, [], 0.0, 0.0
     held, coverage, width = {}, {}, {}  # truth inside the interval; observed share; interval width / truth
-    frames = {}
+    frames, rest = {}, {}
     for spec in scene.objects:
         t0 = time.perf_counter()
         seen = sensor.observe(remote, spec.id, 0, shot=1)
@@ -70,6 +70,7 @@ def run_scene(name: str, cameras: int, noise_name: str = "KINECT_V1", camera: di
             unseen.append(spec.id)
             continue
         frames[spec.id] = seen.frame_position
+        rest[spec.id] = remote.twin.pose(spec.id)[1]
         try:
             truth = reference_estimate(spec)[0].volume
             result = estimate(make_cloud(seen.points, seen.normals if normals else None),
@@ -84,15 +85,17 @@ def run_scene(name: str, cameras: int, noise_name: str = "KINECT_V1", camera: di
         est_s += time.perf_counter() - t1
     remote.twin.step(round(sensor.track_period / remote.twin.model.opt.timestep) + 1)
     track_mm, track_deg, sigma_mm, sigma_deg = [], [], [], []
+    turns = {}  # object -> (tracked turn at rest, true turn over the same time), degrees
     for object_id, frame in frames.items():
         tr = sensor.track(remote, object_id)
         track_mm.append(1000 * float(np.linalg.norm(tr.position - frame)))
         track_deg.append(angle_deg(tr.quat, np.array([1.0, 0, 0, 0])))
+        turns[object_id] = (track_deg[-1], angle_deg(remote.twin.pose(object_id)[1], rest[object_id]))
         sigma_mm.append(1000 * tr.position_sigma)
         sigma_deg.append(float(np.degrees(tr.angle_sigma)))
     remote.close()
     return {"errors": errors, "held": held, "coverage": coverage, "width": width, "unseen": unseen, "check": scan.check, "seconds": scan.seconds, "fuse": fuse_s,
-            "estimate": est_s, "track_mm": track_mm, "track_deg": track_deg, "sigma_mm": sigma_mm, "sigma_deg": sigma_deg, "stats": sensor.feed.stats,
+            "estimate": est_s, "turns": turns, "track_mm": track_mm, "track_deg": track_deg, "sigma_mm": sigma_mm, "sigma_deg": sigma_deg, "stats": sensor.feed.stats,
             "sigma": float(np.nanmedian(np.concatenate([f.sigma.ravel() for f in scan.frames])))}
 
 
@@ -131,10 +134,15 @@ def main() -> int:
         per.add_column("object")
         for k in RIGS:
             per.add_column(f"{k} cam", justify="right")
-        for obj in detail[name][RIGS[-1]]["errors"].keys() | set().union(*(d["errors"].keys() for d in detail[name].values())):
+        for obj in dict.fromkeys(o for d in detail[name].values() for o in d["errors"]):  # scene order
             per.add_row(obj, *(f"{100 * detail[name][k]['errors'][obj]:+.1f}" if obj in detail[name][k]["errors"]
                                else "unseen" for k in RIGS))
         console.print(per)
+    for name in detail:
+        for k, r in detail[name].items():
+            top = sorted(r["turns"].items(), key=lambda t: -t[1][0])[:3]
+            console.print(f"{name} x{k}: largest tracked turns at rest (deg, true turn in brackets): "
+                          + ", ".join(f"{o} {a:.2f} ({b:.2f})" for o, (a, b) in top))
     held = [h for d in detail.values() for r in d.values() for h in r["held"].values()]
     console.print(f"true volume inside the reported interval (estimation.views.assess): {sum(held)} of {len(held)} "
                   f"estimates ({100 * np.mean(held):.0f} %), merged segments included")
