@@ -381,7 +381,8 @@ class Scan:
     def views(self) -> tuple[DepthView, ...]:
         """Every frame as carving reads it (``estimation.carving.carving_views``; none without a plane).
 
-        Worked out when first asked for: only fusing an object's views carves, tracking does not."""
+        Worked out when first asked for: fusing an object's views carves with them, and tracking checks a
+        fit against them only where objects share a segment (scenes.sensing.MAX_SEEN_THROUGH)."""
         if self.plane is None:
             return ()
         return tuple(carving_views([f.view() for f in self.frames], self.plane, self.margin))  # type: ignore[arg-type]

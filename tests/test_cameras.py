@@ -259,6 +259,64 @@ def test_objects_pushed_together_are_tracked_through_the_merged_segment():
     assert sensor.feed.stats.lost_tracks == 0
 
 
+PUSHED_INTO_A_CAN = """name = "into_the_can"
+[table]
+size = [1.0, 0.6, 0.04]
+height = 0.5
+[end_effector]
+radius = 0.02
+position = [-0.3, 0.0, 0.53]
+[[objects]]
+id = "crate"
+primitive = { type = "box", size = [0.12, 0.08, 0.06] }
+material = "wood_pine"
+position = [0.0, 0.0]
+points = 20000
+[[objects]]
+id = "can"
+primitive = { type = "cylinder", size = [0.03, 0.1] }
+density = 700
+position = [0.22, 0.03]
+points = 20000
+"""
+
+
+def test_a_track_that_fits_a_neighbours_surface_is_not_said_found(tmp_path):
+    """A crate pushed into a taller can, the two one segment: ICP from where the can was fitted the crate's
+    surface there, and the track was said found 73-130 mm from the can for 5 scans. A fit that puts its
+    model where the cameras see through is refused (scenes.sensing.MAX_SEEN_THROUGH): every track said
+    found is where its object is."""
+    from scenes.headless import Headless
+    from scenes.scenefile import load_scene
+    from twin.poses import rotation
+    from twin.trajectory import push_trajectory
+
+    path = tmp_path / "scene.toml"
+    path.write_text(PUSHED_INTO_A_CAN, encoding="utf-8")
+    scene = load_scene(path)
+    sensor = CameraSensor.for_scene(scene)
+    with Headless(scene, sensor=sensor) as session:
+        session.run(0.5)
+        start = {i: session.remote.twin.pose(i) for i in ("crate", "can")}
+        frames = {i: sensor.track(session.remote, i).position for i in start}
+        ee = session.local.twin.data.mocap_pos[0].copy()
+        push = push_trajectory(ee, ee + np.array([0.52, 0.0, 0.0]), 5.2, start_time=session.local.twin.time)
+        errors, scans = [], sensor.feed.stats.scans
+        for _ in range(round(6.5 / session.dt)):
+            session.tick(push)
+            if sensor.feed.stats.scans == scans:
+                continue
+            scans = sensor.feed.stats.scans
+            for i, (c0, q0) in start.items():
+                track = sensor.track(session.remote, i)
+                if track.seen:
+                    c, q = session.remote.twin.pose(i)
+                    truth = rotation(q) @ rotation(q0).T @ (frames[i] - c0) + c
+                    errors.append((session.remote.twin.time, i, float(np.linalg.norm(track.position - truth))))
+    assert sensor.feed.stats.merged >= 3  # the push did put them in one segment
+    assert max(e for _, _, e in errors) < 0.02, [e for e in errors if e[2] >= 0.02]
+
+
 def test_in_the_background_a_scan_is_of_the_state_when_it_was_due_and_the_caller_never_waits():
     model, data = _model({"a": (0.0, 0.0)})
     sensor, truth = CameraSensor(CameraFeed(_rig(3), WORKSPACE, seed=6), background=True), _Truth(model, data)
