@@ -259,41 +259,21 @@ def test_objects_pushed_together_are_tracked_through_the_merged_segment():
     assert sensor.feed.stats.lost_tracks == 0
 
 
-PUSHED_INTO_A_CAN = """name = "into_the_can"
-[table]
-size = [1.0, 0.6, 0.04]
-height = 0.5
-[end_effector]
-radius = 0.02
-position = [-0.3, 0.0, 0.53]
-[[objects]]
-id = "crate"
-primitive = { type = "box", size = [0.12, 0.08, 0.06] }
-material = "wood_pine"
-position = [0.0, 0.0]
-points = 20000
-[[objects]]
-id = "can"
-primitive = { type = "cylinder", size = [0.03, 0.1] }
-density = 700
-position = [0.22, 0.03]
-points = 20000
-"""
 
 
-def test_a_track_that_fits_a_neighbours_surface_is_not_said_found(tmp_path):
+def test_a_track_that_fits_a_neighbours_surface_is_not_said_found():
     """A crate pushed into a taller can, the two one segment: ICP from where the can was fitted the crate's
     surface there, and the track was said found 73-130 mm from the can for 5 scans. A fit that puts its
     model where the cameras see through is refused (scenes.sensing.MAX_SEEN_THROUGH): every track said
     found is where its object is."""
+    from importlib import resources
+
     from scenes.headless import Headless
     from scenes.scenefile import load_scene
     from twin.poses import rotation
     from twin.trajectory import push_trajectory
 
-    path = tmp_path / "scene.toml"
-    path.write_text(PUSHED_INTO_A_CAN, encoding="utf-8")
-    scene = load_scene(path)
+    scene = load_scene(str(resources.files("scenes").joinpath("data/crate_and_can.toml")))
     sensor = CameraSensor.for_scene(scene)
     with Headless(scene, sensor=sensor) as session:
         session.run(0.5)
