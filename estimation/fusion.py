@@ -181,6 +181,77 @@ def fused_cloud(points: np.ndarray, sensor_origins: np.ndarray, *, completed: np
     return make_cloud(pts, normals, sensor_origins=sensor_origins)
 
 
+#: Neighbours whose spread gives a model point's normal for :func:`unseen_motions`: more than for a
+#: reconstruction's normals (``tolerances.NORMAL_NEIGHBOURS``), as the test needs the normals' direction
+#: averaged over a millimetre of noise, not sharp edges.
+MOTION_NORMAL_NEIGHBOURS = 40
+
+#: A motion (turns scaled by the points' RMS radius) whose point-to-plane information is under this share of
+#: the best-seen motion's moves the surface along itself. ``tests/test_cameras.py`` checks the split on
+#: noisy models (sigma 1 mm): a ball's three turns and a can's or a ring's turn about its axis fall under it,
+#: the flat box's weakest turn and every motion of a box, a brick or a bracket stay above.
+UNSEEN_MOTION_SHARE = 0.02
+
+
+@dataclass(frozen=True)
+class SurfaceMotions:
+    """The motions of a rigid surface its own points cannot show (:func:`unseen_motions`).
+
+    Attributes:
+        centre: (3,) the points' centroid, metres (the turns are about it).
+        scale: metres, the points' RMS distance from it (turns are scaled by it to compare with shifts).
+        basis: (6, m) orthonormal columns in (turn x scale, shift) coordinates; m = 0 for a surface that
+            shows every motion, 3 for a ball, 1 for a can or a ring (its turn about its axis).
+    """
+
+    centre: np.ndarray
+    scale: float
+    basis: np.ndarray
+
+    def without(self, step: np.ndarray) -> np.ndarray:
+        """``step`` (4, 4), a rigid motion of the points' frame, less its part along :attr:`basis`: what the
+        surface can show of it (a ball's turns about its centre removed, its centre's shift kept)."""
+        from scipy.spatial.transform import Rotation
+
+        if not self.basis.shape[1]:
+            return step
+        rot, t = step[:3, :3], step[:3, 3]
+        turn = Rotation.from_matrix(rot).as_rotvec()
+        shift = rot @ self.centre + t - self.centre  # the centre's own motion
+        xi = np.concatenate([turn * self.scale, shift])
+        # Of the motions that look the same (xi plus any mix of the basis), the least turned: weighed so,
+        # a ball keeps its orientation and moves with its centre, and a can keeps its axis where it is.
+        weight = np.array([1e3, 1e3, 1e3, 1.0, 1.0, 1.0])
+        mix = np.linalg.lstsq(self.basis * weight[:, None], xi * weight, rcond=None)[0]
+        xi = xi - self.basis @ mix
+        out = np.eye(4)
+        out[:3, :3] = Rotation.from_rotvec(xi[:3] / self.scale).as_matrix()
+        out[:3, 3] = self.centre + xi[3:] - out[:3, :3] @ self.centre
+        return out
+
+
+def unseen_motions(points: np.ndarray, *, k: int = MOTION_NORMAL_NEIGHBOURS,
+                   share: float = UNSEEN_MOTION_SHARE) -> SurfaceMotions:
+    """The rigid motions that slide a surface, sampled by ``points`` ((n, 3) metres), along itself.
+
+    The eigenvectors of the point-to-plane information matrix (the sum of ``[(q x n) / scale, n]`` outer
+    products, ``q`` a point about the centroid, ``n`` its PCA normal from ``k`` neighbours) whose eigenvalue
+    is under ``share`` of the largest: ICP cannot see motion along them, so what it reports there is noise.
+    """
+    from estimation.normals import estimate_normals
+
+    pts = as_points(points, "points")
+    centre = pts.mean(axis=0)
+    q = pts - centre
+    scale = float(np.sqrt((q**2).sum(axis=1).mean()))
+    if len(pts) < 3 or scale <= 0:
+        return SurfaceMotions(centre, max(scale, 1.0), np.zeros((6, 0)))
+    normals = estimate_normals(pts, min(k, len(pts)))
+    rows = np.hstack([np.cross(q, normals) / scale, normals])
+    values, vectors = np.linalg.eigh(rows.T @ rows)
+    return SurfaceMotions(centre, scale, vectors[:, values < share * values.max()])
+
+
 @dataclass(frozen=True)
 class Registration:
     """A rigid motion found by ICP: ``x -> transform[:3, :3] x + transform[:3, 3]``, world frame.

@@ -20,6 +20,7 @@ from typing import Protocol
 
 import numpy as np
 
+from estimation.fusion import SurfaceMotions
 from scenes.sampling import sample_surface
 from twin.model import free_joint
 from twin.poses import matrix_quat, rotation, to_rotvec
@@ -187,6 +188,7 @@ class CameraSensor:
         self._last: dict[str, np.ndarray] = {}  # object id -> last known position (world, m)
         self._model: dict[str, tuple[np.ndarray, np.ndarray]] = {}  # id -> (ICP model points, frame centre)
         self._motion: dict[str, np.ndarray] = {}  # id -> (4, 4) motion since the model's capture
+        self._unseen: dict[str, tuple[np.ndarray, SurfaceMotions]] = {}  # id -> (its model, what it cannot show)
         self._observed: dict[str, Observation] = {}
         self._tracked: dict[str, tuple[float, Track]] = {}
         self._seen_at: dict[str, float] = {}  # id -> scan time of its last good observation or track
@@ -343,7 +345,10 @@ class CameraSensor:
             track = replace(kept, seen=False)
         else:
             before = self._motion[object_id]
-            motion = self._motion[object_id] = result.transform
+            # What the model's surface cannot show (a ball's turns, a can's about its axis) stays as it was:
+            # ICP's answer there is noise, and it went out as corrections of objects at rest.
+            step = self._surface_motions(object_id, model).without(np.linalg.inv(before) @ result.transform)
+            motion = self._motion[object_id] = before @ step
             position = motion[:3, :3] @ centre + motion[:3, 3]
             linvel, angvel = self._update_velocity(object_id, position, motion[:3, :3] @ before[:3, :3].T, scan.time)
             track = Track(position, matrix_quat(motion[:3, :3]), linvel, angvel,
@@ -508,6 +513,15 @@ class CameraSensor:
             fits.append(register(model, target, init=coarse.transform, max_distance=distance))
         top = max(f.fitness for f in fits)
         return min((f for f in fits if f.fitness >= top - FITNESS_TIE), key=lambda f: f.rmse)
+
+    def _surface_motions(self, object_id: str, model: np.ndarray) -> SurfaceMotions:
+        """:func:`estimation.fusion.unseen_motions` of the object's ICP model (worked out once per model)."""
+        from estimation.fusion import unseen_motions
+
+        cached = self._unseen.get(object_id)
+        if cached is None or cached[0] is not model:
+            cached = self._unseen[object_id] = (model, unseen_motions(model))
+        return cached[1]
 
     def _update_velocity(self, object_id: str, position: np.ndarray, turn: np.ndarray,
                          time: float) -> tuple[np.ndarray, np.ndarray]:

@@ -352,3 +352,56 @@ def test_an_object_moved_out_from_behind_another_is_seen_better_and_its_cloud_re
     assert sensor.refreshed() == []
     truth.twin.time += 0.5
     assert np.linalg.norm(sensor.track(truth, "a").position - track.position) < 0.01  # type: ignore[arg-type]
+
+
+def _seen_from_above(mesh, count: int, seed: int) -> np.ndarray:  # type: ignore[no-untyped-def]
+    """``count`` points of ``mesh``'s surface that cameras above a table see (not its underside), sigma
+    1 mm."""
+    from scenes.sampling import sample_surface
+
+    cloud = sample_surface(mesh, 2 * count, seed=seed, noise_sigma=0.001)
+    return cloud.points[cloud.normals[:, 2] > -0.5][:count]
+
+
+@pytest.mark.parametrize(("shape", "unseen"), [
+    ("ball", 3), ("can", 1), ("ring", 1), ("crate", 0), ("book", 0), ("bracket", 0),
+])
+def test_the_motions_a_surface_cannot_show_are_its_symmetries(shape, unseen):
+    import trimesh
+    from scipy.spatial.transform import Rotation
+
+    from estimation.fusion import unseen_motions
+
+    bracket = trimesh.creation.box(extents=(0.1, 0.03, 0.01)).union(
+        trimesh.creation.box(extents=(0.01, 0.03, 0.06)).apply_translation((0.045, 0, 0.035)))
+    mesh = {"ball": trimesh.creation.icosphere(subdivisions=4, radius=0.035),
+            "can": trimesh.creation.cylinder(radius=0.033, height=0.12, sections=96),
+            "ring": trimesh.creation.torus(major_radius=0.015, minor_radius=0.007),
+            "crate": trimesh.creation.box(extents=(0.12, 0.08, 0.06)),
+            "book": trimesh.creation.box(extents=(0.22, 0.15, 0.03)),
+            "bracket": bracket}[shape]
+    turn = Rotation.from_euler("xyz", [20, -35, 50], degrees=True).as_matrix()
+    # As many points as a 3-camera scan keeps of such an object (scenes.sensing.MODEL_POINTS_CAP, or ~1000
+    # of a 4 cm ring), anywhere, turned any way.
+    points = _seen_from_above(mesh, 1000 if shape == "ring" else 4000, seed=1) @ turn.T + [0.3, -0.2, 0.8]
+    motions = unseen_motions(points)
+    assert motions.basis.shape[1] == unseen
+    # A noisy turn about every axis and a 2 mm shift: what the surface cannot show goes, the rest stays.
+    step = np.eye(4)
+    step[:3, :3] = Rotation.from_rotvec([0.02, -0.03, 0.04]).as_matrix()
+    step[:3, 3] = [0.002, 0.0, -0.001]
+    kept = motions.without(step)
+    if unseen:
+        assert not np.allclose(kept, step, atol=1e-6)
+    else:
+        np.testing.assert_allclose(kept, step, atol=1e-12)
+    if shape == "ball":  # every turn about its centre unseen: the centre moves as the step moves it, unturned
+        centre = np.array([0.3, -0.2, 0.8])
+        np.testing.assert_allclose(kept[:3, :3] @ centre + kept[:3, 3], step[:3, :3] @ centre + step[:3, 3],
+                                   atol=1e-4)
+        np.testing.assert_allclose(kept[:3, :3], np.eye(3), atol=1e-3)
+    if shape in ("can", "ring"):  # the turn about the axis goes, the tilt stays
+        axis = turn[:, 2]
+        before, after = (Rotation.from_matrix(m[:3, :3]).as_rotvec() for m in (step, kept))
+        assert abs(after @ axis) < 2e-3 < abs(before @ axis)
+        np.testing.assert_allclose(np.cross(after, axis), np.cross(before, axis), atol=2e-3)
