@@ -213,8 +213,8 @@ class SurfaceMotions:
     Attributes:
         centre: (3,) the points' centroid, metres (the turns are about it).
         scale: metres, the points' RMS distance from it (turns are scaled by it to compare with shifts).
-        basis: (6, m) orthonormal columns in (turn x scale, shift) coordinates; m = 0 for a surface that
-            shows every motion, 3 for a ball, 1 for a can or a ring (its turn about its axis).
+        basis: (6, m) columns in (turn x scale, shift) coordinates, each a pure turn about some axis; m = 0
+            for a surface that shows every motion, 3 for a ball, 1 for a can or a ring (about its axis).
     """
 
     centre: np.ndarray
@@ -250,6 +250,9 @@ def unseen_motions(points: np.ndarray, *, k: int = MOTION_NORMAL_NEIGHBOURS,
     products, ``q`` a point about the centroid, ``n`` its PCA normal from ``k`` neighbours) whose eigenvalue
     is under ``share`` of the largest: ICP cannot see motion along them, so what it reports there is noise.
     """
+    from scipy.spatial import cKDTree
+    from scipy.spatial.transform import Rotation
+
     from estimation.normals import estimate_normals
 
     pts = as_points(points, "points")
@@ -258,9 +261,6 @@ def unseen_motions(points: np.ndarray, *, k: int = MOTION_NORMAL_NEIGHBOURS,
     scale = float(np.sqrt((q**2).sum(axis=1).mean()))
     if len(pts) < 3 or scale <= 0:
         return SurfaceMotions(centre, max(scale, 1.0), np.zeros((6, 0)))
-    from scipy.spatial import cKDTree
-    from scipy.spatial.transform import Rotation
-
     normals = estimate_normals(pts, min(k, len(pts)))
     rows = np.hstack([np.cross(q, normals) / scale, normals])
     values, vectors = np.linalg.eigh(rows.T @ rows)

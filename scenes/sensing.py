@@ -20,7 +20,7 @@ from typing import Protocol
 
 import numpy as np
 
-from estimation.fusion import SurfaceMotions
+from estimation.fusion import SurfaceMotions, unseen_motions
 from scenes.sampling import sample_surface
 from twin.model import free_joint
 from twin.poses import matrix_quat, rotation, to_rotvec
@@ -516,8 +516,6 @@ class CameraSensor:
 
     def _surface_motions(self, object_id: str, model: np.ndarray) -> SurfaceMotions:
         """:func:`estimation.fusion.unseen_motions` of the object's ICP model (worked out once per model)."""
-        from estimation.fusion import unseen_motions
-
         cached = self._unseen.get(object_id)
         if cached is None or cached[0] is not model:
             cached = self._unseen[object_id] = (model, unseen_motions(model))
