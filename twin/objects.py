@@ -64,11 +64,12 @@ FACE_CONE_DEG = 60.0
 #: The most of its volume, as area times the distance between surface and primitive summed over patches,
 #: a median-fitted box or sphere may get wrong in and out together (the fill only sees the net). Each box
 #: face is cut into 3 x 3 patches and a sphere into 24; a patch's distance is its median (noise averages
-#: out, shape does not). Measured: camera-built boxes and spheres (bench/camera_fidelity.py) 0.008-0.028 at
-#: sigma 1 mm, 0.016-0.059 with Kinect noise (the dice 0.09); an ellipsoid with axes 1 : 1 : 0.95 as a
-#: sphere 0.037, 1 : 1 : 0.9 0.073 (tests/test_primitives.py); cylinders, jars and bottles as boxes 0.09-0.13
-#: (their fill 0.89-0.93), an octagonal prism 0.14. The same tolerance as the fill's: the primitive is
-#: within 6 % of the object, net and gross.
+#: out, shape does not). Measured: camera-built boxes and spheres 0.005-0.028 at sigma 1 mm and 0.019-0.050
+#: with the Kinect model where accepted (``bench/camera_fidelity.py``'s "collides as"; the Kinect dice and
+#: tennis ball are refused); cylinders, jars and bottles as boxes 0.12-0.13 at fills of 0.91-0.92, the
+#: paper's cone 0.28-0.31 at 0.94-0.95 (``bench/replay.py --fills``). tests/test_primitives.py refuses an
+#: octagonal prism and an ellipsoid with axes 1 : 1 : 0.9, whose fills alone would pass. The same tolerance
+#: as the fill's: the primitive is within 6 % of the object, net and gross.
 PRIMITIVE_MAX_MISFIT = 1.0 - PRIMITIVE_MIN_FILL
 
 #: A round primitive whose centre (sphere) or axis (cylinder, capsule) misses the centre of mass by less
