@@ -49,8 +49,8 @@ PRIMITIVE_TRIM = 0.01
 
 #: Boxes and spheres are fitted to the median of the surface, not to its outer quantiles: a camera-built
 #: surface is rough by the sensor's noise, and a box reaching its 1 % quantiles held a Kinect-scanned
-#: 120 x 80 x 60 mm crate as 123 x 85 x 62 mm (fill 0.88: refused, so it collided as CoACD hulls and turned
-#: when pushed). The median says where the surface is, not how rough it is; whether it is the primitive's
+#: 120 x 80 x 60 mm crate as 123 x 85 x 62 mm (looked at by hand; fill 0.88: refused, so it collided as
+#: CoACD hulls and turned when pushed). The median says where the surface is, not how rough it is; whether it is the primitive's
 #: shape is then :data:`PRIMITIVE_MAX_MISFIT`'s question. Samples are spread uniformly over the area (seeded:
 #: the same mesh gives the same fit).
 FIT_SAMPLES = 20_000
