@@ -87,7 +87,7 @@ def main() -> int:
                                     estimates=estimates)
             per = Table(title=f"{label}: per object")
             for col in ("object", "mass %", "COM mm", "inertia %", "collides as (misfit)", "rest mm (% size)",
-                        "rest deg", "rests"):
+                        "rest deg", "off symmetry deg", "rests"):
                 per.add_column(col, justify="right")
             rows = []
             for est, ref in zip(built, reference, strict=True):
@@ -97,7 +97,7 @@ def main() -> int:
                 per.add_row(est.id, f"{100 * f.mass_error:+.1f}", f"{1000 * f.com_error:.1f}",
                             f"{100 * f.inertia_error:.1f}", _collides_as(est),
                             f"{1000 * f.rest_distance:.1f} ({100 * f.rest_distance / f.size:.1f})",
-                            f"{f.rest_angle:.1f}", "yes" if ok else "NO")
+                            f"{f.rest_angle:.1f}", f"{f.rest_angle_off_symmetry:.1f}", "yes" if ok else "NO")
             mass = np.abs([100 * f.mass_error for f, _ in rows])
             com = np.array([1000 * f.com_error for f, _ in rows])
             inertia = np.array([100 * f.inertia_error for f, _ in rows])

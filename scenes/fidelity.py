@@ -10,10 +10,11 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from estimation.fusion import SurfaceMotions, unseen_motions
 from scenes.scenefile import SceneSpec
 from twin.model import add_object
 from twin.objects import TwinObject
-from twin.poses import angle_deg
+from twin.poses import angle_deg, matrix_quat, rotation
 from twin.sim import Twin
 
 #: Drop height above the resting placement, metres, and how long to let it settle, seconds.
@@ -31,6 +32,9 @@ class Fidelity:
         rest_distance: distance between the two resting centres of mass, metres.
         rest_angle: angle between the two resting orientations, degrees.
         size: the reference's largest extent, metres (for tolerances relative to size).
+        rest_angle_off_symmetry: ``rest_angle`` less any turn about the reference's axes of symmetry
+            (:func:`estimation.fusion.unseen_motions` of its surface), degrees: a can lying on another facet
+            of its hull, turned about its own axis, looks and rests the same.
     """
 
     mass_error: float
@@ -39,6 +43,7 @@ class Fidelity:
     rest_distance: float
     rest_angle: float
     size: float
+    rest_angle_off_symmetry: float
 
 
 def rest_pose(scene: SceneSpec, obj: TwinObject, *, height: float = DROP_HEIGHT,
@@ -55,6 +60,9 @@ def compare(scene: SceneSpec, twin_obj: TwinObject, reference: TwinObject) -> Fi
     """Mass-property errors and the rest-pose difference of ``twin_obj`` against ``reference``."""
     est, ref = twin_obj.estimate.mass, reference.estimate.mass
     (p_est, q_est), (p_ref, q_ref) = rest_pose(scene, twin_obj), rest_pose(scene, reference)
+    turn = np.eye(4)
+    turn[:3, :3] = rotation(q_ref).T @ rotation(q_est)  # from the reference's rest to the twin's, body frame
+    off = symmetry_of(reference).without(turn)
     return Fidelity(
         mass_error=est.mass / ref.mass - 1,
         com_error=float(np.linalg.norm(est.center_of_mass - ref.center_of_mass)),
@@ -62,4 +70,13 @@ def compare(scene: SceneSpec, twin_obj: TwinObject, reference: TwinObject) -> Fi
         rest_distance=float(np.linalg.norm(p_est - p_ref)),
         rest_angle=angle_deg(q_est, q_ref),
         size=float(np.ptp(reference.estimate.vertices, axis=0).max()),
+        rest_angle_off_symmetry=angle_deg(matrix_quat(off[:3, :3]), np.array([1.0, 0.0, 0.0, 0.0])),
     )
+
+
+def symmetry_of(obj: TwinObject, points: int = 4000) -> SurfaceMotions:
+    """The turns that leave ``obj``'s visual surface (body frame) on itself: its axes of symmetry."""
+    import trimesh
+
+    mesh = trimesh.Trimesh(*obj.visual, process=False)
+    return unseen_motions(trimesh.sample.sample_surface(mesh, points, seed=0)[0])

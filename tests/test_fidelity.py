@@ -58,3 +58,31 @@ def test_reference_refuses_a_cloud_source(tmp_path):
     scene = parse_scene({"name": "s", "objects": [{"id": "c", "cloud": "c.xyz"}]}, base=tmp_path)
     with pytest.raises(SceneError, match="no true mesh"):
         reference_estimate(scene.objects[0])
+
+
+def test_a_turn_about_an_objects_axis_of_symmetry_is_not_counted_off_it(tmp_path):
+    """A can lying on another facet of its hull, turned about its own axis, rests as it did:
+    ``Fidelity.rest_angle_off_symmetry`` takes such turns out (scenes.fidelity.symmetry_of); a tilt stays."""
+    import numpy as np
+    import trimesh
+    from scipy.spatial.transform import Rotation
+
+    from estimation import from_mesh
+    from scenes.fidelity import symmetry_of
+    from twin.objects import object_at_estimate
+
+    can = trimesh.creation.cylinder(radius=0.03, height=0.1, sections=64)
+    obj = object_at_estimate("can", from_mesh(can.vertices, can.faces, 700.0), 0.5, cache_dir=tmp_path)
+    symmetry = symmetry_of(obj)
+    assert symmetry.basis.shape[1] == 1
+
+    def left(axis: str) -> float:  # degrees of a 20-degree turn about ``axis`` that are not symmetry
+        turn = np.eye(4)
+        turn[:3, :3] = Rotation.from_euler(axis, 20, degrees=True).as_matrix()
+        return float(np.degrees(np.linalg.norm(Rotation.from_matrix(symmetry.without(turn)[:3, :3]).as_rotvec())))
+
+    assert left("z") < 0.5  # about the can's own axis
+    assert left("x") == pytest.approx(20.0, abs=0.5)
+    box = trimesh.creation.box(extents=(0.12, 0.08, 0.06))
+    crate = object_at_estimate("crate", from_mesh(box.vertices, box.faces, 500.0), 0.5, cache_dir=tmp_path)
+    assert symmetry_of(crate).basis.shape[1] == 0
