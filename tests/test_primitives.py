@@ -42,7 +42,7 @@ def test_exact_primitive_meshes_are_recognised_with_their_size(mesh, kind, size)
 
 @pytest.mark.parametrize("make", [
     lambda: trimesh.creation.cone(radius=0.05, height=0.1, sections=64),
-    # Fitted, but left to its hulls (twin.objects.PRIMITIVE_KINDS says why).
+    # Not fitted as a cylinder (twin.objects.PRIMITIVE_KINDS says why), and no box, capsule or sphere fits it.
     lambda: trimesh.creation.cylinder(radius=0.04, height=0.2, sections=64),
     lambda: trimesh.creation.torus(major_radius=0.05, minor_radius=0.015),
     lambda: paper_object("chunk"),  # a box with a corner cut off: the nearest miss we know (fill ~0.92)
