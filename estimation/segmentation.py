@@ -26,11 +26,6 @@ RANSAC_ITERATIONS = 200
 #: Points within this many plane-noise sigmas (RMS of the inliers' distances) of the plane are the plane.
 PLANE_SIGMAS = 3.0
 
-#: RANSAC inlier distance for a support plane (:func:`plane_threshold`), in noise sigmas and at least
-#: ``PLANE_SPACINGS`` point spacings: a table scanned at 1 mm noise is a slab ~6 mm thick.
-PLANE_NOISE_SIGMAS = 3.0
-PLANE_SPACINGS = 1.5
-
 #: Clustering cell, in median point spacings: objects closer than ~2 cells merge, so this trades merging
 #: touching objects against splitting one object along a sparsely seen strip. 3 spacings bridges the
 #: gaps a 1 % dropout and a dropped edge pixel leave.
@@ -66,16 +61,6 @@ class Plane:
     def as_abcd(self) -> tuple[float, float, float, float]:
         """(A, B, C, D) with ``A x + B y + C z + D = 0``, the CLI's convention."""
         return (*(float(v) for v in self.normal), float(self.offset))
-
-
-def plane_threshold(noise: float, spacing: float) -> float:
-    """RANSAC inlier distance for a support plane, metres, from its points' noise sigma and spacing (m).
-
-    From the data, not a constant: a fixed 6 mm (3 sigma of a Kinect at 1.2 m) kept most of a table seen
-    at 3 m above the cut, and cut the lowest 6 mm off every object seen at 1 mm noise (a 14 mm-tall ring
-    kept too little of its lower half to show it is its own mirror image).
-    """
-    return max(PLANE_NOISE_SIGMAS * noise, PLANE_SPACINGS * spacing)
 
 
 def fit_plane(points: np.ndarray, *, threshold: float, toward: np.ndarray, rng: np.random.Generator,

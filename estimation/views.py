@@ -26,10 +26,14 @@ from estimation.contracts import as_points
 from estimation.errors import CloudError
 from estimation.estimate import PhysicalEstimate, estimate
 from estimation.fusion import fuse_views, fused_cloud, oriented_normals
-from estimation.segmentation import (CLUSTER_SPACINGS, PLANE_SIGMAS, Plane, cluster, fit_plane, median_spacing,
-                                     plane_threshold)
+from estimation.segmentation import CLUSTER_SPACINGS, PLANE_SIGMAS, Plane, cluster, fit_plane, median_spacing
 
 log = logging.getLogger(__name__)
+
+#: RANSAC inlier distance for a plane found in a file, in noise sigmas (``spacing.surface_noise``) and at
+#: least ``PLANE_SPACINGS`` point spacings: a table scanned at 1 mm noise is a slab ~6 mm thick.
+PLANE_NOISE_SIGMAS = 3.0
+PLANE_SPACINGS = 1.5
 
 #: A plane found by RANSAC is the support only if it holds at least this share of the points (a table
 #: around an object shows as a good part of a tabletop scan; a stray face of the object does not count)...
@@ -179,7 +183,7 @@ def estimate_views(views: list[View], density: float, *, support: Plane | str | 
     points, origins = fuse_views([(v.points, v.origin) for v in views])
     spacing = point_spacing(points)
     noise = surface_noise(points)
-    threshold = plane_threshold(noise, spacing)  # noise: spacing.surface_noise
+    threshold = max(PLANE_NOISE_SIGMAS * noise, PLANE_SPACINGS * spacing)
     warnings: list[str] = []
     plane: Plane | None
     if isinstance(support, str):

@@ -315,6 +315,13 @@ def render(model, data, camera: Camera, *, noise: DepthNoise = KINECT_V1,  # typ
 
 # -- the feed: frames -> segments -> objects ---------------------------------------------------------------
 
+#: RANSAC inlier distance for the support plane, metres: ~3 sigma of the noise model at 1.2 m. Scans
+#: whose points are noisier (a far table) use ``estimation.views.PLANE_NOISE_SIGMAS`` times their median
+#: sigma instead, as ``twin estimate --support-plane auto`` does: with a fixed 6 mm, a table seen at ~3 m
+#: (sigma ~17 mm) kept most of its points and came out as one segment holding it and the objects on it
+#: (bench/cameras.py, paper_table).
+PLANE_THRESHOLD = 0.006
+
 
 @dataclass
 class FeedStats:
@@ -424,12 +431,13 @@ class CameraFeed:
         import time as wall
 
         from estimation.errors import CloudError
-        from estimation.segmentation import check_segments, plane_threshold, segment
+        from estimation.segmentation import check_segments, segment
+        from estimation.views import PLANE_NOISE_SIGMAS
 
         t0 = wall.perf_counter()
         rng = np.random.default_rng([self.seed, self.stats.scans])
         self.stats.scans += 1
-        frames, views, pitches = [], [], []
+        frames, views = [], []
         for cam in self.cameras:
             frame = render(model, data, cam, noise=self.noise, rng=rng)
             frames.append(frame)
@@ -440,9 +448,6 @@ class CameraFeed:
                 log.warning("camera %s: no point in the workspace", cam.name)
             views.append((pts[keep], frame.geom.ravel()[idx[keep]], np.asarray(cam.position, float),
                           frame.sigma.ravel()[idx[keep]]))
-            # Neighbouring pixels' rays are this far apart at a point (its spacing across the ray).
-            pitches.append(np.linalg.norm(pts[keep] - np.asarray(cam.position, float), axis=1)
-                           * np.radians(cam.fov_y_deg) / cam.height)
         t1 = wall.perf_counter()
         seconds = {"render": t1 - t0}
         pts = np.concatenate([p for p, _, _, _ in views])
@@ -454,10 +459,7 @@ class CameraFeed:
             log.warning("scan at t=%.3f: %d points in the workspace; no segments", time, len(pts))
             return Scan(time, tuple(frames), (), None, 0.0, 0.0, seconds, None)
         try:
-            # The support plane's inlier distance from the scan's own noise (its axial sigma and the depth
-            # unit's rounding) and spacing, the rule ``twin estimate --support-plane auto`` follows.
-            noise = float(np.sqrt(np.nanmedian(sigma) ** 2 + self.noise.quantum**2 / 12.0))
-            threshold = plane_threshold(noise, float(np.median(np.concatenate(pitches))))
+            threshold = max(PLANE_THRESHOLD, PLANE_NOISE_SIGMAS * float(np.nanmedian(sigma)))
             seg = segment(pts, toward=origins.mean(axis=0), rng=rng, plane_threshold=threshold)
         except CloudError as exc:
             self.stats.failed_scans += 1
