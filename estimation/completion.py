@@ -225,7 +225,7 @@ class Closed:
     completion: Completion
 
 
-def mirror_image(points: np.ndarray, normals: np.ndarray, plane: Plane, *, cut: float, noise: float,
+def mirror_image(points: np.ndarray, normals: np.ndarray, plane: Plane, *, noise: float,
                  cell: float) -> tuple[np.ndarray, np.ndarray, float] | None:
     """The upper half of an object resting on ``plane``, reflected in the plane at half its height, if the
     visible lower half supports it (see the module docstring).
@@ -233,7 +233,6 @@ def mirror_image(points: np.ndarray, normals: np.ndarray, plane: Plane, *, cut: 
     Args:
         points, normals: (n, 3) float64, world frame: observed points (metres) and unit outward normals.
         plane: the support plane, normal up into the object's side.
-        cut: metres: points below this height were removed with the plane (not tested).
         noise: metres, the points' sigma. cell: metres, about the point spacing.
 
     Returns:
@@ -252,7 +251,7 @@ def mirror_image(points: np.ndarray, normals: np.ndarray, plane: Plane, *, cut: 
     centroids = plane.height(pts[tree.query(pts, k, workers=-1)[1].reshape(len(pts), k)].mean(axis=1))
     top = float(np.percentile(centroids, TOP_PERCENTILE)) - TOP_NOISE_SIGMAS * noise / np.sqrt(k)
     middle = 0.5 * max(top, 0.0)
-    lower = (h > cut) & (h < middle)
+    lower = h < middle  # whatever the plane's removal left of it
     if lower.sum() < MIRROR_MIN_POINTS:
         return None
     reflected = pts[lower] + 2.0 * (middle - h[lower])[:, None] * up
@@ -380,7 +379,7 @@ def _complete(points: np.ndarray, normals: np.ndarray, origins: np.ndarray, plan
     oriented = bool(np.isfinite(normals).all())
     mirrored = turned = np.zeros((0, 3)), np.zeros((0, 3))
     if oriented:
-        image = mirror_image(points, normals, plane, cut=cut, noise=noise, cell=cell)
+        image = mirror_image(points, normals, plane, noise=noise, cell=cell)
         if image is not None:
             mirrored = _not_seen_through(_new(image[0], image[1], points, NEW_SURFACE_CELLS * cell), views, cell)
     axis = None if views is None or not oriented else half_turn_axis(points, origins, plane, views, cut=cut,

@@ -264,7 +264,7 @@ class CameraSensor:
             empty = np.zeros((0, 3))
             return Observation(empty, empty, self._last.get(object_id, np.zeros(3)), np.array([1.0, 0, 0, 0]))
         seen = self._subsample(self._fuse(scan, scan.segments[k]), points, shot)
-        observed = seen.points[~seen.completed]  # type: ignore[index]
+        observed = scan.trackable(seen.points[~seen.completed])  # type: ignore[index]
         self._model[object_id] = (self._icp_model(observed, shot), seen.frame_position)
         self._motion[object_id] = self._reviewed[object_id] = np.eye(4)
         self._observed[object_id] = seen
@@ -281,7 +281,8 @@ class CameraSensor:
         (4, 4), since the first capture): its model is the new view moved back by that motion, so the
         tracks go on unchanged."""
         seen = self._subsample(seen, points, shot)
-        back = (seen.points[~seen.completed] - motion[:3, 3]) @ motion[:3, :3]  # type: ignore[index]  # R^T (x - t)
+        observed = self._scan.trackable(seen.points[~seen.completed])  # type: ignore[union-attr,index]
+        back = (observed - motion[:3, 3]) @ motion[:3, :3]  # R^T (x - t)
         self._model[object_id] = (self._icp_model(back, shot), self._model[object_id][1])
         self._observed[object_id] = seen
         return seen
@@ -484,7 +485,7 @@ class CameraSensor:
         fine one). Best: the lowest RMSE among the fits within ``FITNESS_TIE`` of the highest fitness."""
         from estimation.fusion import register
 
-        target = scan.segments[k].points
+        target = scan.trackable(scan.segments[k].points)
         motion = self._motion[object_id]
         distance = max(3 * scan.cell, 0.01)
         still = register(model, target, init=motion, max_distance=distance)
@@ -546,8 +547,10 @@ class CameraSensor:
 
         pts, origins = seg.points, seg.origins
         others = [s.points for s in scan.segments if s is not seg]
+        # The segment holds its lowest band too (below the clustering cut, see Scan.cut); completion starts at
+        # the cut as before (the skirt, the carving grid's cell), and the mirror test reads the band.
         closed = close_on_plane(pts, origins, oriented_normals(pts, origins), scan.plane, cell=scan.cell / 3,
-                                cut=scan.margin, noise=surface_noise(pts), views=scan.views or None,
+                                cut=scan.cut, noise=surface_noise(pts), views=scan.views or None,
                                 others=np.concatenate(others) if others else None)
         centre = closed.points.mean(axis=0)
         return Observation(closed.points, closed.origins, centre, np.array([1.0, 0.0, 0.0, 0.0]), closed.normals,

@@ -87,7 +87,7 @@ def test_a_ball_seen_from_above_gets_its_underside_from_the_mirror_image():
     radius = 0.04
     points, normals = _sphere(20000, radius, rng)
     seen = points[:, 2] > 0.3 * radius  # the lowest 30 % of its height hidden
-    image = mirror_image(points[seen], normals[seen], FLOOR, cut=0.002, noise=0.0, cell=0.002)
+    image = mirror_image(points[seen], normals[seen], FLOOR, noise=0.0, cell=0.002)
     assert image is not None
     mirrored, mirrored_normals, share = image
     assert share > 0.95
@@ -111,7 +111,7 @@ def test_a_flat_ring_under_noise_is_mirrored_about_its_true_middle():
     normals = ring.face_normals[faces]
     seen = (points[:, 2] > 0.006) & (normals[:, 2] > -0.3)
     noisy = points[seen] + rng.normal(0.0, sigma, (int(seen.sum()), 3))
-    image = mirror_image(noisy, normals[seen], FLOOR, cut=0.006, noise=sigma, cell=0.001)
+    image = mirror_image(noisy, normals[seen], FLOOR, noise=sigma, cell=0.001)
     assert image is not None
     mirrored = image[0]
     assert mirrored[:, 2].min() >= 0.0  # nothing below the table
@@ -126,7 +126,7 @@ def test_a_flat_ring_under_noise_is_mirrored_about_its_true_middle():
 def test_a_cone_is_not_its_own_mirror_image():
     rng = np.random.default_rng(2)
     points, normals = _cone(20000, 0.05, 0.08, rng)
-    assert mirror_image(points, normals, FLOOR, cut=0.002, noise=0.0, cell=0.002) is None
+    assert mirror_image(points, normals, FLOOR, noise=0.0, cell=0.002) is None
 
 
 def _bracket_views(noise=EXACT):  # type: ignore[no-untyped-def]
