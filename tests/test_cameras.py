@@ -195,6 +195,12 @@ def test_tracking_at_rest_is_within_2_mm_and_1_degree():
     assert angle_deg(track.quat, np.array([1.0, 0, 0, 0])) < 1.0
     # ICP's own uncertainty comes with the track (the noise's part only: smaller than the error at rest).
     assert 0 < track.position_sigma < 0.002 and 0 < track.angle_sigma < np.radians(1.0)
+    # The box's lowest band (between the plane's 3 sigma and the cut) is in its cloud, not in what ICP reads.
+    scan = sensor._scan  # type: ignore[attr-defined]
+    band = (scan.plane.height(seen.points) > scan.margin) & (scan.plane.height(seen.points) <= scan.cut)
+    assert scan.margin < scan.cut and band[~seen.completed].sum() > 20  # type: ignore[index]
+    model = sensor._model["a"][0]  # type: ignore[attr-defined]
+    assert len(model) and (scan.plane.height(model) > scan.cut).all()
 
 
 def _move(model, data, name: str, x: float, y: float) -> None:  # type: ignore[no-untyped-def]
