@@ -1,13 +1,15 @@
 """The camera feed end to end: volume error by number of cameras, segmentation, tracking at rest, timings.
 
     .venv/bin/python bench/cameras.py            # both scenes, 1-3 cameras; output in bench/results/cameras.txt
-    .venv/bin/python bench/cameras.py --points-only   # estimated from the points alone, as the twin gets them
-                                                      # (the wire's Cloud carries no normals); cameras_points_only.txt
+    .venv/bin/python bench/cameras.py --points-only   # the same without the normals (a sender that has
+                                                      # none, and the twin before they went on the wire);
+                                                      # output in bench/results/cameras_points_only.txt
 
 For each scene (the paper's objects, the 20-object clutter) and rig (1, 2, 3 cameras around the table), the
 remote settles, the rig scans once, every object is segmented, fused, closed where no camera saw it
-(mirror image, carved solid: estimation.completion) and estimated ('auto', normals oriented to each
-point's camera); the volume is compared with the true mesh's (scenes.sources.reference_estimate).
+(mirror image, carved solid: estimation.completion), sent through the wire's codec as the twin receives
+it (sync.messages: points on a 0.1 mm grid, normals oriented to each point's camera in a byte per axis)
+and estimated ('auto'); the volume is compared with the true mesh's (scenes.sources.reference_estimate).
 Two sensors: the Kinect-v1 model of scenes/cameras.py at 640 x 480 (both scenes), and the issue's
 "sigma 1 mm" condition (scenes.cameras.SIGMA_1MM) at 1280 x 720, the D400 cameras' largest depth
 resolution, 42 degrees vertical field of view (the clutter). Then the scene is
@@ -51,6 +53,7 @@ def run_scene(name: str, cameras: int, noise_name: str = "KINECT_V1", camera: di
     from scenes.sources import reference_estimate
     from sync.clock import SimClock
     from sync.inprocess import InProcessBus
+    from sync.messages import cloud_message, decode, encode, unpack_normals, unpack_points
     from twin.poses import angle_deg
 
     scene = load_scene(ROOT / "scenes" / "data" / f"{name}.toml")
@@ -73,7 +76,12 @@ def run_scene(name: str, cameras: int, noise_name: str = "KINECT_V1", camera: di
         rest[spec.id] = remote.twin.pose(spec.id)[1]
         try:
             truth = reference_estimate(spec)[0].volume
-            result = estimate(make_cloud(seen.points, seen.normals if normals else None),
+            # As the twin gets it: through the wire's codec (points on a 0.1 mm grid, normals a byte per axis).
+            sent = decode(encode(cloud_message(spec.id, seen.points, stamp_ns=0, epoch=0, seq=1, material=None,
+                                               density=1.0, frame_position=seen.frame_position,
+                                               frame_quat=seen.frame_quat,
+                                               normals=seen.normals if normals else None)))
+            result = estimate(make_cloud(unpack_points(sent), unpack_normals(sent)),
                               reference_estimate(spec)[0].mass.mass / truth)
             errors[spec.id] = result.volume / truth - 1
             observed = seen.points if seen.completed is None else seen.points[~seen.completed]

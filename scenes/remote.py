@@ -181,7 +181,8 @@ class Remote:
         seen = self.sensor.observe(self, object_id, points or self.points or spec.points, shot=seq)
         cloud, pos, quat = seen.points, seen.frame_position, seen.frame_quat
         msg = cloud_message(object_id, cloud, stamp_ns=self.clock.stamp_ns(), epoch=self.epoch, seq=seq,
-                            material=spec.material, density=spec.density, frame_position=pos, frame_quat=quat)
+                            material=spec.material, density=spec.density, frame_position=pos, frame_quat=quat,
+                            normals=seen.normals)
         data = self.link.put(self.keys.object(object_id, "cloud"), msg)
         if self.rlog.enabled:
             # The truth's estimate frame is the true mesh's: body frame + COM.

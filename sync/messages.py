@@ -13,7 +13,8 @@ drop such a message, count it per reason and log it.
 
 Clouds are quantised on a grid of ``quantum`` metres relative to their minimum corner (16 bits per axis
 while the extent fits, else 32), sorted so neighbouring points have similar bytes, split into byte planes
-and compressed with zstd. Point order carries no meaning for estimation.
+and compressed with zstd. Point order carries no meaning for estimation. Normals, where the sender has them,
+follow in the same order, one signed byte per axis (unit vector x 127, under half a degree), zstd too.
 """
 
 from __future__ import annotations
@@ -95,6 +96,9 @@ class Cloud(_Msg, tag="cloud"):
     density: float | None
     frame_position: tuple[float, float, float]
     frame_quat: tuple[float, float, float, float]
+    #: The points' unit outward normals (:func:`unpack_normals`), or empty: a camera-based sensor's, turned
+    #: towards the camera that saw each point, which the estimate cannot recover from the points alone.
+    normals: bytes = b""
 
 
 class Pose(_Msg, tag="pose"):
@@ -237,8 +241,10 @@ def decode(data: bytes) -> Message:
     return msg
 
 
-def pack_points(points: np.ndarray, quantum: float = CLOUD_QUANTUM) -> tuple[int, int, tuple[float, float, float], bytes]:
-    """(count, bits, origin, compressed bytes) of an (n, 3) cloud in metres."""
+def pack_points(points: np.ndarray, quantum: float = CLOUD_QUANTUM
+                ) -> tuple[int, int, tuple[float, float, float], bytes, np.ndarray]:
+    """(count, bits, origin, compressed bytes, order) of an (n, 3) cloud in metres; ``order`` (n,) is the
+    permutation the points were sent in (normals follow it)."""
     import zstandard
 
     points = np.asarray(points, dtype=np.float64)
@@ -246,11 +252,43 @@ def pack_points(points: np.ndarray, quantum: float = CLOUD_QUANTUM) -> tuple[int
     q = np.round((points - origin) / quantum)
     bits = 16 if q.max() < 2**16 else 32
     q = q.astype(np.uint16 if bits == 16 else np.uint32)
-    q = q[np.lexsort((q[:, 2], q[:, 1], q[:, 0]))]
+    order = np.lexsort((q[:, 2], q[:, 1], q[:, 0]))
+    q = q[order]
     # Byte planes: all high bytes together, then the low ones; sorted columns make runs zstd finds.
     planes = np.ascontiguousarray(q.T).view(np.uint8).reshape(3, len(q), bits // 8).transpose(0, 2, 1)
     data = zstandard.ZstdCompressor(level=_ZSTD_LEVEL).compress(np.ascontiguousarray(planes).tobytes())
-    return len(points), bits, (float(origin[0]), float(origin[1]), float(origin[2])), data
+    return len(points), bits, (float(origin[0]), float(origin[1]), float(origin[2])), data, order
+
+
+def pack_normals(normals: np.ndarray) -> bytes:
+    """(n, 3) unit vectors as one signed byte per axis (x 127), axis planes, zstd."""
+    import zstandard
+
+    q = np.clip(np.round(np.asarray(normals, dtype=np.float64) * 127.0), -127, 127).astype(np.int8)
+    return zstandard.ZstdCompressor(level=_ZSTD_LEVEL).compress(np.ascontiguousarray(q.T).tobytes())
+
+
+def unpack_normals(msg: Cloud) -> np.ndarray | None:
+    """The (n, 3) unit normals of a :class:`Cloud` message in :func:`unpack_points`' order, or None.
+
+    Raises:
+        MessageError: a payload that does not inflate to one byte per axis and point, or a zero vector.
+    """
+    import zstandard
+
+    if not msg.normals:
+        return None
+    try:
+        raw = zstandard.ZstdDecompressor().decompress(msg.normals, max_output_size=3 * msg.count)
+    except zstandard.ZstdError as exc:
+        raise MessageError("bad-payload", f"cloud {msg.object_id!r}: corrupt normals ({exc})") from exc
+    if len(raw) != 3 * msg.count:
+        raise MessageError("bad-payload", f"cloud {msg.object_id!r}: {len(raw)} normal bytes for {msg.count} points")
+    normals = np.frombuffer(raw, np.int8).reshape(3, msg.count).T.astype(np.float64)
+    length = np.linalg.norm(normals, axis=1, keepdims=True)
+    if not (length > 0).all():
+        raise MessageError("bad-payload", f"cloud {msg.object_id!r}: a zero normal")
+    return normals / length
 
 
 def unpack_points(msg: Cloud) -> np.ndarray:
@@ -271,12 +309,14 @@ def unpack_points(msg: Cloud) -> np.ndarray:
 
 def cloud_message(object_id: str, points: np.ndarray, *, stamp_ns: int, epoch: int, seq: int,
                   material: str | None, density: float | None, frame_position: np.ndarray,
-                  frame_quat: np.ndarray, quantum: float = CLOUD_QUANTUM) -> Cloud:
-    """A :class:`Cloud` of ``points`` ((n, 3) metres, world frame), quantised and compressed."""
-    count, bits, origin, data = pack_points(points, quantum)
+                  frame_quat: np.ndarray, quantum: float = CLOUD_QUANTUM, normals: np.ndarray | None = None) -> Cloud:
+    """A :class:`Cloud` of ``points`` ((n, 3) metres, world frame), quantised and compressed, with their
+    ``normals`` ((n, 3) unit, outward) when given."""
+    count, bits, origin, data, order = pack_points(points, quantum)
+    packed = b"" if normals is None else pack_normals(np.asarray(normals)[order])
     return Cloud(v=VERSION, stamp_ns=stamp_ns, object_id=object_id, epoch=epoch, seq=seq, count=count, bits=bits,
                  quantum=quantum, origin=origin, data=data, material=material, density=density,
-                 frame_position=_vec(frame_position, 3), frame_quat=_vec(frame_quat, 4))
+                 frame_position=_vec(frame_position, 3), frame_quat=_vec(frame_quat, 4), normals=packed)
 
 
 def _check(msg: Message) -> None:
@@ -346,6 +386,14 @@ def _check_cloud(msg: Cloud) -> None:
     if size != 3 * (msg.bits // 8) * msg.count:
         raise MessageError("bad-payload", f"cloud {msg.object_id!r}: payload holds {size} bytes, the header "
                                           f"claims {msg.count} points of {msg.bits} bits")
+    if msg.normals:
+        try:
+            size = zstandard.frame_content_size(msg.normals)
+        except zstandard.ZstdError as exc:
+            raise MessageError("bad-payload", f"cloud {msg.object_id!r}: normals not a zstd frame ({exc})") from exc
+        if size != 3 * msg.count:
+            raise MessageError("bad-payload", f"cloud {msg.object_id!r}: normals hold {size} bytes for "
+                                              f"{msg.count} points")
 
 
 def _finite(msg: Message, *groups) -> None:  # type: ignore[no-untyped-def]

@@ -23,6 +23,7 @@ from sync.messages import (
     cloud_message,
     decode,
     encode,
+    unpack_normals,
     unpack_points,
 )
 
@@ -51,6 +52,37 @@ def test_cloud_codec_round_trip_and_ratio():
     # Order is not kept; the set of points is, to half a quantum per axis.
     assert np.abs(np.sort(back, axis=0) - np.sort(points, axis=0)).max() <= msg.quantum / 2 + 1e-12
     assert len(encode(msg)) < points.size * 4 / 2  # better than half of float32 even for random points
+
+
+def test_normals_travel_with_their_points_and_a_cloud_without_has_none():
+    rng = np.random.default_rng(3)
+    directions = rng.normal(size=(20_000, 3))
+    directions /= np.linalg.norm(directions, axis=1, keepdims=True)
+    points = 0.05 * directions + [0.3, -0.2, 0.8]  # a 5 cm ball; its normals point away from its centre
+    msg = decode(encode(cloud_message("o", points, stamp_ns=0, epoch=0, seq=1, material=None, density=1000.0,
+                                      frame_position=np.zeros(3), frame_quat=IDENTITY, normals=directions)))
+    back, normals = unpack_points(msg), unpack_normals(msg)
+    assert normals is not None and normals.shape == back.shape
+    # The points were reordered on the wire; each normal still belongs to its point (one byte per axis).
+    out = back - [0.3, -0.2, 0.8]
+    out /= np.linalg.norm(out, axis=1, keepdims=True)
+    assert np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", out, normals), -1, 1))).max() < 1.0
+    assert unpack_normals(_cloud()) is None
+
+
+def test_normals_that_do_not_match_the_points_are_rejected():
+    good = _cloud(100, normals=np.tile([0.0, 0.0, 1.0], (100, 1)))
+    short = zstandard.ZstdCompressor().compress(np.zeros(3 * 99, np.int8).tobytes())
+    with pytest.raises(MessageError) as err:
+        decode(encode(replace(good, normals=short)))
+    assert err.value.reason == "bad-payload"
+    with pytest.raises(MessageError) as err:
+        decode(encode(replace(good, normals=b"not zstd")))
+    assert err.value.reason == "bad-payload"
+    zero = zstandard.ZstdCompressor().compress(np.zeros(3 * 100, np.int8).tobytes())
+    with pytest.raises(MessageError) as err:
+        unpack_normals(decode(encode(replace(good, normals=zero))))
+    assert err.value.reason == "bad-payload"
 
 
 def test_a_good_pose_passes_unchanged():

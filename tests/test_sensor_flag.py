@@ -19,6 +19,7 @@ def test_the_camera_sensor_of_the_flag_builds_every_object_headless(tmp_path):
     from scenes.headless import Headless
     from scenes.scenefile import load_scene
     from scenes.sensing import CameraSensor
+    from sync.messages import decode, unpack_normals
 
     scene = load_scene(SMALL)
     sensor = remote_sensor("cameras", scene)
@@ -31,6 +32,10 @@ def test_the_camera_sensor_of_the_flag_builds_every_object_headless(tmp_path):
             est = session.local.twin.model.body(object_id).mass[0]
             true = session.remote.twin.model.body(object_id).mass[0]
             assert 0.5 < est / true < 2.0 and est != pytest.approx(true, rel=1e-3)
+            # The cameras' normals (turned towards each point's camera) went with the cloud.
+            sent = decode(session.remote._replies[session.remote.keys.object(object_id, "cloud")])  # type: ignore[attr-defined]
+            normals = unpack_normals(sent)
+            assert normals is not None and normals.shape == (sent.count, 3)
 
 
 @pytest.mark.slow

@@ -395,3 +395,25 @@ def test_a_non_finite_object_is_put_back_and_the_rest_of_the_twin_runs_on(built,
             twin.set_pose("crate", np.zeros(3), np.zeros(4))
         with pytest.raises(ValueError, match="finite"):
             twin.set_end_effector(np.array([0.0, np.inf, 0.0]))
+
+
+def test_the_twin_estimates_a_cloud_with_the_normals_that_came_with_it(tmp_path):
+    # A noisy ball: its normals as sent (one byte per axis) give the estimate a side the points alone do not.
+    from estimation import estimate, make_cloud
+    from sync.messages import cloud_message, decode, encode, unpack_normals, unpack_points
+    from twin.runtime import build_from_cloud
+
+    rng = np.random.default_rng(4)
+    directions = rng.normal(size=(4000, 3))
+    directions /= np.linalg.norm(directions, axis=1, keepdims=True)
+    points = 0.04 * directions + rng.normal(0.0, 0.001, directions.shape) + [0.0, 0.0, 0.6]
+    data = encode(cloud_message("ball", points, stamp_ns=0, epoch=0, seq=1, material=None, density=1000.0,
+                                frame_position=np.array([0.0, 0.0, 0.6]), frame_quat=np.array([1.0, 0, 0, 0]),
+                                normals=directions))
+    obj, _ = build_from_cloud(data, CoacdSettings(max_convex_hull=4), tmp_path)
+    msg = decode(data)
+    sent = unpack_points(msg)
+    with_normals = estimate(make_cloud(sent, unpack_normals(msg)), 1000.0).volume
+    points_only = estimate(make_cloud(sent), 1000.0).volume
+    assert with_normals != points_only
+    assert obj.estimate.volume == with_normals

@@ -46,6 +46,7 @@ from sync.messages import (
     SceneInfo,
     decode,
     encode,
+    unpack_normals,
     unpack_points,
 )
 from sync.ratelimit import RateLimitedLog
@@ -199,7 +200,9 @@ def build_from_cloud(data: bytes, coacd: CoacdSettings, cache_dir: Path | None,
     density, mat = resolve_density(msg.material, msg.density)  # an unknown material raises: no guess
     density *= mass_scale  # uniform density: mass and inertia scale together
     points = unpack_points(msg)
-    est = estimate(make_cloud(points), density, material=None if mat is None else mat.name)
+    # A camera's normals, turned towards the camera that saw each point, say which side is out where the
+    # points alone do not (a thin part, a partial view closed by completion).
+    est = estimate(make_cloud(points, unpack_normals(msg)), density, material=None if mat is None else mat.name)
     friction = DEFAULT_FRICTION if mat is None else mat.friction
     obj = object_at_estimate(msg.object_id, est, friction, coacd=coacd, cache_dir=cache_dir)
     if floor is not None:
