@@ -311,9 +311,17 @@ def cloud_message(object_id: str, points: np.ndarray, *, stamp_ns: int, epoch: i
                   material: str | None, density: float | None, frame_position: np.ndarray,
                   frame_quat: np.ndarray, quantum: float = CLOUD_QUANTUM, normals: np.ndarray | None = None) -> Cloud:
     """A :class:`Cloud` of ``points`` ((n, 3) metres, world frame), quantised and compressed, with their
-    ``normals`` ((n, 3) unit, outward) when given."""
+    ``normals`` ((n, 3) unit, outward) when given and every one of them is finite and not zero (else the
+    cloud goes without: a receiver would refuse it)."""
     count, bits, origin, data, order = pack_points(points, quantum)
-    packed = b"" if normals is None else pack_normals(np.asarray(normals)[order])
+    packed = b""
+    if normals is not None:
+        normals = np.asarray(normals, dtype=np.float64)
+        if normals.shape != (count, 3):
+            raise ValueError(f"cloud {object_id!r}: normals of shape {normals.shape} for {count} points")
+        length = np.linalg.norm(normals, axis=1)
+        if np.isfinite(length).all() and (length > 0).all():
+            packed = pack_normals(normals[order] / length[order, None])
     return Cloud(v=VERSION, stamp_ns=stamp_ns, object_id=object_id, epoch=epoch, seq=seq, count=count, bits=bits,
                  quantum=quantum, origin=origin, data=data, material=material, density=density,
                  frame_position=_vec(frame_position, 3), frame_quat=_vec(frame_quat, 4), normals=packed)

@@ -68,6 +68,10 @@ def test_normals_travel_with_their_points_and_a_cloud_without_has_none():
     out /= np.linalg.norm(out, axis=1, keepdims=True)
     assert np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", out, normals), -1, 1))).max() < 1.0
     assert unpack_normals(_cloud()) is None
+    bad = directions.copy()
+    bad[7] = np.nan
+    assert unpack_normals(cloud_message("o", points, stamp_ns=0, epoch=0, seq=1, material=None, density=1.0,
+                                        frame_position=np.zeros(3), frame_quat=IDENTITY, normals=bad)) is None
 
 
 def test_normals_that_do_not_match_the_points_are_rejected():
