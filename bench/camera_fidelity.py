@@ -3,7 +3,8 @@
     .venv/bin/python bench/camera_fidelity.py      # clutter20; output in bench/results/camera_fidelity.txt
 
 The clutter settles, a rig scans it once (scenes.cameras.SIGMA_1MM at 1280 x 720, and the Kinect model at
-640 x 480; 3 cameras each), and every object's fused, closed cloud is estimated as the twin would. To
+640 x 480; 3 cameras each), and every object's fused, closed cloud goes through the wire's codec (points
+on a 0.1 mm grid, normals a byte per axis: sync.messages) and is estimated as the twin would. To
 compare with the reference built from the true mesh (scenes.sources.reference_estimate), the cloud is put
 into the mesh's frame with the simulator's true pose (truth used only to evaluate, as the issue asks).
 Both then go the same way (decimation, CoACD, MjSpec) and are dropped alone onto the table
@@ -42,6 +43,7 @@ def camera_estimates(scene, noise_name: str, camera: dict) -> list:  # type: ign
     from scenes.sources import reference_estimate
     from sync.clock import SimClock
     from sync.inprocess import InProcessBus
+    from sync.messages import cloud_message, decode, encode, unpack_normals, unpack_points
     from twin.poses import rotation
 
     clock = SimClock()
@@ -53,8 +55,12 @@ def camera_estimates(scene, noise_name: str, camera: dict) -> list:  # type: ign
         pos, quat = remote.twin.pose(spec.id)
         rot = rotation(quat)
         reference, friction = reference_estimate(spec)
-        points = (seen.points - pos) @ rot + reference.mass.center_of_mass
-        normals = None if seen.normals is None else seen.normals @ rot
+        sent = decode(encode(cloud_message(spec.id, seen.points, stamp_ns=0, epoch=0, seq=1, material=None,
+                                           density=1.0, frame_position=seen.frame_position,
+                                           frame_quat=seen.frame_quat, normals=seen.normals)))
+        received = unpack_normals(sent)
+        points = (unpack_points(sent) - pos) @ rot + reference.mass.center_of_mass
+        normals = None if received is None else received @ rot
         result = estimate(make_cloud(points, normals), reference.mass.density, material=reference.material)
         out.append((result, friction))
     remote.close()
