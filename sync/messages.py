@@ -274,16 +274,9 @@ def unpack_normals(msg: Cloud) -> np.ndarray | None:
     Raises:
         MessageError: a payload that does not inflate to one byte per axis and point, or a zero vector.
     """
-    import zstandard
-
     if not msg.normals:
         return None
-    try:
-        raw = zstandard.ZstdDecompressor().decompress(msg.normals, max_output_size=3 * msg.count)
-    except zstandard.ZstdError as exc:
-        raise MessageError("bad-payload", f"cloud {msg.object_id!r}: corrupt normals ({exc})") from exc
-    if len(raw) != 3 * msg.count:
-        raise MessageError("bad-payload", f"cloud {msg.object_id!r}: {len(raw)} normal bytes for {msg.count} points")
+    raw = _inflate(msg, msg.normals, 3 * msg.count, "normals")
     normals = np.frombuffer(raw, np.int8).reshape(3, msg.count).T.astype(np.float64)
     length = np.linalg.norm(normals, axis=1, keepdims=True)
     if not (length > 0).all():
@@ -293,18 +286,38 @@ def unpack_normals(msg: Cloud) -> np.ndarray | None:
 
 def unpack_points(msg: Cloud) -> np.ndarray:
     """The (n, 3) float64 cloud of a :class:`Cloud` message, metres."""
-    import zstandard
-
     width = msg.bits // 8
-    try:
-        raw = zstandard.ZstdDecompressor().decompress(msg.data, max_output_size=3 * width * msg.count)
-    except zstandard.ZstdError as exc:
-        raise MessageError("bad-payload", f"cloud {msg.object_id!r}: corrupt compressed data ({exc})") from exc
-    if len(raw) != 3 * width * msg.count:
-        raise MessageError("bad-payload", f"cloud {msg.object_id!r}: {len(raw)} bytes for {msg.count} points")
+    raw = _inflate(msg, msg.data, 3 * width * msg.count, "points")
     planes = np.frombuffer(raw, np.uint8).reshape(3, width, msg.count).transpose(0, 2, 1)
     q = np.ascontiguousarray(planes).view(np.uint16 if width == 2 else np.uint32).reshape(3, msg.count).T
     return q.astype(np.float64) * msg.quantum + np.asarray(msg.origin)
+
+
+def _inflate(msg: Cloud, payload: bytes, size: int, what: str) -> bytes:
+    """``payload`` (a zstd frame of ``msg``'s ``what``) inflated to exactly ``size`` bytes, never more."""
+    import zstandard
+
+    try:
+        raw = zstandard.ZstdDecompressor().decompress(payload, max_output_size=size)
+    except zstandard.ZstdError as exc:
+        raise MessageError("bad-payload", f"cloud {msg.object_id!r}: corrupt compressed {what} ({exc})") from exc
+    if len(raw) != size:
+        raise MessageError("bad-payload", f"cloud {msg.object_id!r}: {len(raw)} bytes of {what} for {msg.count} "
+                                          f"points")
+    return raw
+
+
+def _framed_size(msg: Cloud, payload: bytes, size: int, what: str) -> None:
+    """Check that ``payload``'s zstd frame header states ``size`` bytes, without inflating it."""
+    import zstandard
+
+    try:
+        stated = zstandard.frame_content_size(payload)
+    except zstandard.ZstdError as exc:
+        raise MessageError("bad-payload", f"cloud {msg.object_id!r}: {what} not a zstd frame ({exc})") from exc
+    if stated != size:
+        raise MessageError("bad-payload", f"cloud {msg.object_id!r}: {what} hold {stated} bytes, the header "
+                                          f"claims {msg.count} points ({size} bytes)")
 
 
 def cloud_message(object_id: str, points: np.ndarray, *, stamp_ns: int, epoch: int, seq: int,
@@ -384,24 +397,10 @@ def _check_cloud(msg: Cloud) -> None:
     _unit(msg, msg.frame_quat)
     if (msg.density is not None and not (math.isfinite(msg.density) and msg.density > 0)):
         raise MessageError("non-finite", f"cloud {msg.object_id!r}: density {msg.density}")
-    import zstandard
-
-    # The frame header states the decompressed size: check it against the point count without inflating.
-    try:
-        size = zstandard.frame_content_size(msg.data)
-    except zstandard.ZstdError as exc:
-        raise MessageError("bad-payload", f"cloud {msg.object_id!r}: not a zstd frame ({exc})") from exc
-    if size != 3 * (msg.bits // 8) * msg.count:
-        raise MessageError("bad-payload", f"cloud {msg.object_id!r}: payload holds {size} bytes, the header "
-                                          f"claims {msg.count} points of {msg.bits} bits")
+    # The frame headers state the decompressed sizes: checked against the point count without inflating.
+    _framed_size(msg, msg.data, 3 * (msg.bits // 8) * msg.count, "points")
     if msg.normals:
-        try:
-            size = zstandard.frame_content_size(msg.normals)
-        except zstandard.ZstdError as exc:
-            raise MessageError("bad-payload", f"cloud {msg.object_id!r}: normals not a zstd frame ({exc})") from exc
-        if size != 3 * msg.count:
-            raise MessageError("bad-payload", f"cloud {msg.object_id!r}: normals hold {size} bytes for "
-                                              f"{msg.count} points")
+        _framed_size(msg, msg.normals, 3 * msg.count, "normals")
 
 
 def _finite(msg: Message, *groups) -> None:  # type: ignore[no-untyped-def]
