@@ -43,7 +43,7 @@ def camera_estimates(scene, noise_name: str, camera: dict) -> list:  # type: ign
     from scenes.sources import reference_estimate
     from sync.clock import SimClock
     from sync.inprocess import InProcessBus
-    from sync.messages import cloud_message, decode, encode, unpack_normals, unpack_points
+    from sync.messages import as_received
     from twin.poses import rotation
 
     clock = SimClock()
@@ -55,12 +55,9 @@ def camera_estimates(scene, noise_name: str, camera: dict) -> list:  # type: ign
         pos, quat = remote.twin.pose(spec.id)
         rot = rotation(quat)
         reference, friction = reference_estimate(spec)
-        sent = decode(encode(cloud_message(spec.id, seen.points, stamp_ns=0, epoch=0, seq=1, material=None,
-                                           density=1.0, frame_position=seen.frame_position,
-                                           frame_quat=seen.frame_quat, normals=seen.normals)))
-        received = unpack_normals(sent)
-        points = (unpack_points(sent) - pos) @ rot + reference.mass.center_of_mass
-        normals = None if received is None else received @ rot
+        received, received_normals = as_received(seen.points, seen.normals)
+        points = (received - pos) @ rot + reference.mass.center_of_mass
+        normals = None if received_normals is None else received_normals @ rot
         result = estimate(make_cloud(points, normals), reference.mass.density, material=reference.material)
         out.append((result, friction))
     remote.close()

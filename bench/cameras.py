@@ -53,7 +53,7 @@ def run_scene(name: str, cameras: int, noise_name: str = "KINECT_V1", camera: di
     from scenes.sources import reference_estimate
     from sync.clock import SimClock
     from sync.inprocess import InProcessBus
-    from sync.messages import cloud_message, decode, encode, unpack_normals, unpack_points
+    from sync.messages import as_received
     from twin.poses import angle_deg
 
     scene = load_scene(ROOT / "scenes" / "data" / f"{name}.toml")
@@ -77,11 +77,7 @@ def run_scene(name: str, cameras: int, noise_name: str = "KINECT_V1", camera: di
         try:
             truth = reference_estimate(spec)[0].volume
             # As the twin gets it: through the wire's codec (points on a 0.1 mm grid, normals a byte per axis).
-            sent = decode(encode(cloud_message(spec.id, seen.points, stamp_ns=0, epoch=0, seq=1, material=None,
-                                               density=1.0, frame_position=seen.frame_position,
-                                               frame_quat=seen.frame_quat,
-                                               normals=seen.normals if normals else None)))
-            result = estimate(make_cloud(unpack_points(sent), unpack_normals(sent)),
+            result = estimate(make_cloud(*as_received(seen.points, seen.normals if normals else None)),
                               reference_estimate(spec)[0].mass.mass / truth)
             errors[spec.id] = result.volume / truth - 1
             observed = seen.points if seen.completed is None else seen.points[~seen.completed]

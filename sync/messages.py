@@ -340,6 +340,16 @@ def cloud_message(object_id: str, points: np.ndarray, *, stamp_ns: int, epoch: i
                  frame_position=_vec(frame_position, 3), frame_quat=_vec(frame_quat, 4), normals=packed)
 
 
+def as_received(points: np.ndarray, normals: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray | None]:
+    """``points`` ((n, 3) metres) and their ``normals`` as a receiver decodes them from a :class:`Cloud`:
+    on the ``CLOUD_QUANTUM`` grid, reordered, normals to a byte per axis (benches: what the twin gets)."""
+    msg = decode(encode(cloud_message("o", points, stamp_ns=0, epoch=0, seq=0, material=None, density=1.0,
+                                      frame_position=np.zeros(3), frame_quat=np.array([1.0, 0.0, 0.0, 0.0]),
+                                      normals=normals)))
+    assert isinstance(msg, Cloud)
+    return unpack_points(msg), unpack_normals(msg)
+
+
 def _check(msg: Message) -> None:
     """Raise :class:`MessageError` for values no honest sender produces."""
     name = msg.object_id if hasattr(msg, "object_id") else getattr(msg, "name", None)

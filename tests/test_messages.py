@@ -20,6 +20,7 @@ from sync.messages import (
     OperatorCommand,
     Pose,
     SceneInfo,
+    as_received,
     cloud_message,
     decode,
     encode,
@@ -68,6 +69,8 @@ def test_normals_travel_with_their_points_and_a_cloud_without_has_none():
     out /= np.linalg.norm(out, axis=1, keepdims=True)
     assert np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", out, normals), -1, 1))).max() < 1.0
     assert unpack_normals(_cloud()) is None
+    again = as_received(points, directions)  # the benches' shortcut for the same round trip
+    assert np.array_equal(again[0], back) and np.array_equal(again[1], normals)
     bad = directions.copy()
     bad[7] = np.nan
     assert unpack_normals(cloud_message("o", points, stamp_ns=0, epoch=0, seq=1, material=None, density=1.0,
