@@ -51,6 +51,9 @@ OTHER_CLUSTERS_SHARE = 0.05
 #: sigma for Gaussian noise; heavier-tailed real sensors, flying pixels left over).
 PLANE_TAIL_SHARE = 0.01
 
+#: Planes tried, largest first, before the data is said to hold no support plane.
+PLANE_CANDIDATES = 3
+
 #: A given plane with more than this share of the points more than a cut below it is refused: its normal
 #: most likely points into the table, or the numbers are for another frame.
 MAX_BELOW_GIVEN = 0.1
@@ -126,33 +129,44 @@ def plane_below(points: np.ndarray) -> Plane:
 
 def find_support_plane(points: np.ndarray, origins: np.ndarray, *, threshold: float,
                        rng: np.random.Generator) -> Plane | None:
-    """The support plane in the data (RANSAC), or None when the largest plane is not one.
+    """The support plane in the data (RANSAC), or None when none of the largest planes is one.
 
-    The largest plane is the support when it holds at least ``MIN_PLANE_SHARE`` of the points and almost
-    all the others (``1 - MAX_BELOW_SHARE``, besides the plane's own noise tail) lie on its sensors' side:
-    an object's own face has the rest of the object behind it.
+    A plane is the support when it holds at least ``MIN_PLANE_SHARE`` of the points and almost all the
+    others (``1 - MAX_BELOW_SHARE``, besides the plane's own noise tail) lie on its sensors' side: an
+    object's own face has the rest of the object behind it. The largest plane is tried first; when it is
+    refused, its points are set aside and the next largest is tried, up to ``PLANE_CANDIDATES`` planes: in a
+    crop close around a box or a book, the object's top outweighs the ring of table around it.
 
     Args:
         points: (n, 3) float64 metres, world frame. origins: (n, 3) the sensor of each point.
         threshold: RANSAC inlier distance, metres. rng: for RANSAC's draws.
     """
-    if len(points) < 3:
-        return None
-    try:
-        plane = fit_plane(points, threshold=threshold, toward=origins.mean(axis=0), rng=rng)
-    except CloudError:
-        return None
-    h = plane.height(points)
-    margin = max(PLANE_SIGMAS * plane.rms, threshold)
+    rest = np.arange(len(points))
+    toward = origins.mean(axis=0)
+    for _ in range(PLANE_CANDIDATES):
+        if len(rest) < MIN_PLANE_SHARE * len(points) or len(rest) < 3:
+            return None
+        try:
+            plane = fit_plane(points[rest], threshold=threshold, toward=toward, rng=rng)
+        except CloudError:
+            return None
+        h = plane.height(points)
+        inliers = int((np.abs(h) < threshold).sum())
+        if inliers < MIN_PLANE_SHARE * len(points):
+            return None  # the next ones are smaller still
+        if _supports(h, max(PLANE_SIGMAS * plane.rms, threshold), inliers):
+            return plane
+        rest = rest[np.abs(h[rest]) >= threshold]
+    return None
+
+
+def _supports(h: np.ndarray, margin: float, inliers: int) -> bool:
+    """Whether a plane with heights ``h`` (m, every point) and ``inliers`` points can be the support."""
     off = np.abs(h) > margin
-    if plane.inliers < MIN_PLANE_SHARE * len(points) or not off.any():
-        return None
     # The plane's own noise tail below the margin grows with the plane, not with the object: on a large
     # table next to a small object it alone was 5.0 % of the off-plane points (the bracket's depth images).
     # An object's face has the rest of the object behind it, far more than its own tail.
-    if (h < -margin).sum() > MAX_BELOW_SHARE * off.sum() + PLANE_TAIL_SHARE * plane.inliers:
-        return None
-    return plane
+    return bool(off.any()) and (h < -margin).sum() <= MAX_BELOW_SHARE * off.sum() + PLANE_TAIL_SHARE * inliers
 
 
 def estimate_views(views: list[View], density: float, *, support: Plane | str | None = None,
