@@ -26,7 +26,15 @@ from estimation.contracts import as_points
 from estimation.errors import CloudError
 from estimation.estimate import PhysicalEstimate, estimate
 from estimation.fusion import fuse_views, fused_cloud, oriented_normals
-from estimation.segmentation import CLUSTER_SPACINGS, PLANE_SIGMAS, Plane, cluster, fit_plane, median_spacing
+from estimation.segmentation import (
+    CLUSTER_SPACINGS,
+    MIN_CLUSTER_POINTS,
+    PLANE_SIGMAS,
+    Plane,
+    cluster,
+    fit_plane,
+    median_spacing,
+)
 
 log = logging.getLogger(__name__)
 
@@ -169,6 +177,88 @@ def _supports(h: np.ndarray, margin: float, inliers: int) -> bool:
     return bool(off.any()) and (h < -margin).sum() <= MAX_BELOW_SHARE * off.sum() + PLANE_TAIL_SHARE * inliers
 
 
+#: Times the support may move up to a plane that what stands on it holds (floor -> table -> tray).
+STANDING_ROUNDS = 2
+
+#: What stands on the support is itself a support when one plane in it, parallel to the first (within
+#: ``PARALLEL_DEGREES``), holds at least this share of its points and carries at least
+#: ``segmentation.MIN_CLUSTER_POINTS`` points standing clear of it (above twice its noise margin) inside its
+#: own extent, with almost nothing below it there. A whole table seen from above is almost all top (0.96 of
+#: it under a bar of soap); an object's own top face (a book's) carries nothing, the foot of the L-bracket
+#: of tests/test_views.py holds 0.44-0.56 of it, and a tray's rim stands at the edge of its extent.
+STANDING_PLANE_SHARE = 0.8
+PARALLEL_DEGREES = 15.0
+
+#: Points below a plane count against it only this many RANSAC thresholds inside its extent (its edge: a
+#: table's side face projects onto the edge, within the sensor's noise and a flying pixel or two).
+EXTENT_MARGIN_THRESHOLDS = 2.0
+
+
+def _largest_above(points: np.ndarray, h: np.ndarray, cut: float) -> tuple[np.ndarray, np.ndarray]:
+    """(object, others): (n,) bool masks of the largest connected cluster more than ``cut`` above the plane
+    (heights ``h``, metres) and of the other clusters.
+
+    Raises:
+        CloudError: fewer than 3 points above the cut, or no cluster among them.
+    """
+    keep = np.flatnonzero(h > cut)
+    if len(keep) < 3:
+        raise CloudError(f"only {len(keep)} points lie above the support plane")
+    # What the cut leaves of the plane (its noise tail, edge pixels) is scattered over the whole table;
+    # the object is the largest connected cluster above it.
+    labels = cluster(points[keep], cell=CLUSTER_SPACINGS * median_spacing(points[keep]))
+    if (labels == 0).sum() < 3:
+        raise CloudError("no object above the support plane (only scattered points)")
+    obj, others = np.zeros(len(points), dtype=bool), np.zeros(len(points), dtype=bool)
+    obj[keep[labels == 0]] = True
+    others[keep[labels > 0]] = True
+    return obj, others
+
+
+def _standing_support(points: np.ndarray, plane: Plane, *, threshold: float, toward: np.ndarray,
+                      rng: np.random.Generator) -> Plane | None:
+    """The plane that ``points`` (what stands on ``plane``, metres) are mostly made of, if it is a support
+    with something standing on it (``STANDING_PLANE_SHARE``); else None."""
+    if len(points) < MIN_CLUSTER_POINTS:
+        return None
+    try:
+        candidate = fit_plane(points, threshold=threshold, toward=toward, rng=rng)
+    except CloudError:
+        return None
+    if float(candidate.normal @ plane.normal) < np.cos(np.radians(PARALLEL_DEGREES)):
+        return None
+    h = candidate.height(points)
+    inliers = np.abs(h) < threshold
+    if inliers.sum() < STANDING_PLANE_SHARE * len(points):
+        return None
+    margin = max(PLANE_SIGMAS * candidate.rms, threshold)
+    within = _within_extent(points, candidate, inliers, EXTENT_MARGIN_THRESHOLDS * threshold)
+    below = within & (h < -margin)
+    standing = within & (h > 2 * margin)
+    # Below it, besides its own noise tail: only what lies beyond its edge (the table's sides, the floor).
+    allowed = MAX_BELOW_SHARE * (within & (np.abs(h) > margin)).sum() + PLANE_TAIL_SHARE * inliers.sum()
+    if standing.sum() < MIN_CLUSTER_POINTS or below.sum() > allowed:
+        return None
+    return candidate
+
+
+def _within_extent(points: np.ndarray, plane: Plane, inliers: np.ndarray, margin: float) -> np.ndarray:
+    """(n,) bool: the points whose foot on ``plane`` lies inside the convex hull of the ``inliers``' feet, at
+    least ``margin`` metres from its edge."""
+    from scipy.spatial import ConvexHull, QhullError
+
+    n = plane.normal
+    u = np.cross(n, [1.0, 0.0, 0.0] if abs(n[0]) < 0.9 else [0.0, 1.0, 0.0])
+    u /= np.linalg.norm(u)
+    flat = np.stack([points @ u, points @ np.cross(n, u)], axis=1)
+    try:
+        hull = ConvexHull(flat[inliers])
+    except (QhullError, ValueError):
+        return np.zeros(len(points), dtype=bool)
+    # Facet equations a . x + b <= 0 inside, a unit: -(a . x + b) is the distance inside.
+    return (flat @ hull.equations[:, :2].T + hull.equations[:, 2] <= -margin).all(axis=1)
+
+
 def estimate_views(views: list[View], density: float, *, support: Plane | str | None = None,
                    material: str | None = None, seed: int = 0) -> ViewsEstimate:
     """Fuse ``views`` of one object, close its base on the support plane, estimate, and say how sure.
@@ -220,20 +310,27 @@ def estimate_views(views: list[View], density: float, *, support: Plane | str | 
         if below > MAX_BELOW_GIVEN:
             raise CloudError(f"support plane: {100 * below:.0f} % of the points lie more than {1000 * cut:.2g} mm "
                              f"below it (its normal must point up into the object's side)")
-        keep = h > cut
-        points, origins = points[keep], origins[keep]
-        if len(points) < 3:
-            raise CloudError(f"only {len(points)} points lie above the support plane")
-        # What the cut leaves of the plane (its noise tail, edge pixels) is scattered over the whole table;
-        # the object is the largest connected cluster above it.
-        labels = cluster(points, cell=CLUSTER_SPACINGS * median_spacing(points))
-        if (labels == 0).sum() < 3:
-            raise CloudError("no object above the support plane (only scattered points)")
-        if (others := int((labels > 0).sum())) > OTHER_CLUSTERS_SHARE * len(points):
-            warnings.append(f"{others} points above the support plane lie apart from the object and were dropped "
+        obj, others = _largest_above(points, h, cut)
+        if isinstance(support, str) and not warnings:  # a plane found in the data, not the fallback
+            # Whole frames of a tabletop hold the floor too, a plane with everything above it: the "object"
+            # above the floor is then the table with the object standing on it. Its own support is the table.
+            for _ in range(STANDING_ROUNDS):
+                higher = _standing_support(points[obj], plane, threshold=threshold, toward=origins.mean(axis=0),
+                                           rng=np.random.default_rng(seed))
+                if higher is None:
+                    break
+                plane = higher
+                h = plane.height(points)
+                cut = max(PLANE_SIGMAS * plane.rms, threshold)
+                obj, others = _largest_above(points, h, cut)
+                warnings.append(f"what stood on the first plane found was itself mostly a plane with something "
+                                f"standing on it (a table on the floor?): took that plane (z = {-plane.offset:.4g} "
+                                f"m where level) as the support")
+        if (n_others := int(others.sum())) > OTHER_CLUSTERS_SHARE * int((obj | others).sum()):
+            warnings.append(f"{n_others} points above the support plane lie apart from the object and were dropped "
                             f"(another object in the views?)")
-        others = points[labels > 0]
-        points, origins = points[labels == 0], origins[labels == 0]
+        others = points[others]
+        points, origins = points[obj], origins[obj]
         normals = oriented_normals(points, origins)
         carving = None
         if all(v.depth is not None for v in views):

@@ -172,8 +172,8 @@ def test_a_tight_crop_around_a_flat_object_still_finds_the_table():
     (Before, the views fell back to the plane through their lowest point and the estimate lost 65 %.)"""
     import mujoco
 
-    from scenes.cameras import SIGMA_1MM, render
     from estimation.views import View, estimate_views
+    from scenes.cameras import SIGMA_1MM, render
 
     size = (0.24, 0.17, 0.03)
     spec = mujoco.MjSpec()
@@ -194,6 +194,35 @@ def test_a_tight_crop_around_a_flat_object_still_finds_the_table():
     assert result.plane.normal == pytest.approx([0, 0, 1], abs=0.01)
     assert -result.plane.offset == pytest.approx(TOP, abs=2e-3)
     assert not any("no support plane" in w for w in result.warnings)
+    assert result.estimate.volume == pytest.approx(float(np.prod(size)), rel=0.05)
+
+
+def test_whole_frames_with_the_floor_in_view_take_the_table_not_the_floor():
+    """Whole camera frames of a box on a table see the floor around the table: the floor is a plane with
+    everything above it, and what stands on it is the table with the box on top. The table, almost all of
+    that and carrying the box, becomes the support. (Before, the "object" was the table: +1000 % and more.)"""
+    import mujoco
+
+    from estimation.views import View, estimate_views
+    from scenes.cameras import SIGMA_1MM, render
+
+    size = (0.08, 0.06, 0.05)
+    spec = mujoco.MjSpec()
+    spec.worldbody.add_geom(type=mujoco.mjtGeom.mjGEOM_PLANE, size=[3, 3, 0.1])
+    spec.worldbody.add_geom(type=mujoco.mjtGeom.mjGEOM_BOX, size=[0.4, 0.3, 0.02], pos=[0, 0, TOP - 0.02])
+    spec.worldbody.add_geom(type=mujoco.mjtGeom.mjGEOM_BOX, size=[s / 2 for s in size], pos=[0.05, 0, TOP + size[2] / 2])
+    model = spec.compile()
+    data = mujoco.MjData(model)
+    mujoco.mj_forward(model, data)
+    rng = np.random.default_rng(0)
+    views = []
+    for cam in _cameras():
+        points, _ = render(model, data, cam, noise=SIGMA_1MM, rng=rng).points()
+        views.append(View(points, np.asarray(cam.position, float)))
+    assert min(float(v.points[:, 2].min()) for v in views) < 0.1  # the floor is in view
+    result = estimate_views(views, 1000.0, support="auto")
+    assert result.plane is not None and -result.plane.offset == pytest.approx(TOP, abs=2e-3)
+    assert any("a table on the floor?" in w for w in result.warnings)
     assert result.estimate.volume == pytest.approx(float(np.prod(size)), rel=0.05)
 
 
