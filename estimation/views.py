@@ -232,12 +232,10 @@ def _standing_support(points: np.ndarray, plane: Plane, *, threshold: float, tow
     if inliers.sum() < STANDING_PLANE_SHARE * len(points):
         return None
     margin = max(PLANE_SIGMAS * candidate.rms, threshold)
+    # Below it, only what lies beyond its edge (the table's sides, the floor) may be more than its noise tail.
     within = _within_extent(points, candidate, inliers, EXTENT_MARGIN_THRESHOLDS * threshold)
-    below = within & (h < -margin)
     standing = within & (h > 2 * margin)
-    # Below it, besides its own noise tail: only what lies beyond its edge (the table's sides, the floor).
-    allowed = MAX_BELOW_SHARE * (within & (np.abs(h) > margin)).sum() + PLANE_TAIL_SHARE * inliers.sum()
-    if standing.sum() < MIN_CLUSTER_POINTS or below.sum() > allowed:
+    if standing.sum() < MIN_CLUSTER_POINTS or not _supports(h[within], margin, int(inliers.sum())):
         return None
     return candidate
 
