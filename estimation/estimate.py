@@ -208,10 +208,26 @@ def _estimate_auto(
     t0 = time.perf_counter()
     props, surface, h = run.props, run.surface, run.h
     bounds = (max(0.0, props.volume - run.hole - run.thin), props.volume + run.hole + run.thin)
+    unmeasured = surface.unmeasured_area / max(_area(surface), 1e-30)
     if run.hole > tol.VOLUME_DOUBT_FRACTION * props.volume:
-        warnings.append(f"{100 * surface.unmeasured_area / max(_area(surface), 1e-30):.1f} % of the surface "
+        warnings.append(f"{100 * unmeasured:.1f} % of the surface "
                         f"was not measured (holes closed by a {run.closing}-cell shell): the volume is "
                         f"only known to {bounds[0]:.4g}..{bounds[1]:.4g} m^3")
+    if not run.encloses and unmeasured > tol.LEAK_UNMEASURED_SHARE:
+        # Holes wider than any closing radius: the flood fill ran inside and the surface is a shell around
+        # nothing (a box whose back no camera saw). What the points would enclose if closed is unknown, up
+        # to about their convex hull.
+        from scipy.spatial import ConvexHull, QhullError
+
+        try:
+            hull = float(ConvexHull(run.points).volume)
+        except (QhullError, ValueError):
+            hull = bounds[1]
+        if hull > bounds[1]:
+            bounds = (bounds[0], hull)
+            warnings.append(f"the cloud is open ({100 * unmeasured:.0f} % of the surface not measured, in holes "
+                            f"wider than the flood fill closes): the volume may be anything up to the points' "
+                            f"convex hull, {bounds[0]:.4g}..{bounds[1]:.4g} m^3")
     if run.thin > tol.VOLUME_DOUBT_FRACTION * props.volume:
         warnings.append(f"parts thinner than the point spacing ({1000 * h:.2g} mm cells hold both faces of a "
                         f"wall in {surface.opposed_cells} places): the volume is only known to "
@@ -236,6 +252,7 @@ class _AutoPass:
         points, normals: (m, 3) the points used and their outward normals. h: fine cell, metres.
         surface: the contoured surface. props: its mass properties (box frame). closing: the coarse
         shell's radius, cells. hole, thin: m^3 of volume the cloud leaves open (see ``volume_bounds_m3``).
+        encloses: the coarse flood fill found an inside (``grid.Occupancy.encloses``).
     """
 
     points: np.ndarray
@@ -246,6 +263,7 @@ class _AutoPass:
     closing: int
     hole: float
     thin: float
+    encloses: bool = True
 
     @property
     def points_used(self) -> int:
@@ -329,7 +347,7 @@ def _auto_pass(cloud: PointCloud, box: OrientedBox, local: np.ndarray, spacing: 
     thin = surface.opposed_cells * h**3
     lap("mass_properties", t0)
     return _AutoPass(points=points, normals=normals, h=h, surface=surface, props=props, closing=occ.closing,
-                     hole=hole, thin=thin)
+                     hole=hole, thin=thin, encloses=occ.encloses)
 
 
 def _area(surface) -> float:  # type: ignore[no-untyped-def]

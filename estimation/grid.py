@@ -7,7 +7,7 @@ closed, so everything reachable from the grid border without crossing it is outs
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy import ndimage
@@ -74,11 +74,14 @@ class Occupancy:
         shell: bool grid, nodes within ``closing`` cells of a point (the band where the surface lies).
         outside: bool grid, nodes connected to the border without crossing the shell.
         closing: the dilation radius, in cells, that closed the shell.
+        encloses: the shell encloses the object's inside (``ENCLOSED_SHARE``); False for a solid thinner
+            than the shell, and for a cloud whose holes no closing radius closed (the flood leaked in).
     """
 
     shell: np.ndarray
     outside: np.ndarray
     closing: int
+    encloses: bool = True
 
     @property
     def inside(self) -> np.ndarray:
@@ -111,7 +114,7 @@ def occupancy(points: np.ndarray, grid: Grid) -> Occupancy:
     # Nothing closed for good: a thin-walled object (or a very open one). Crumbs enclosed by a wide
     # shell are not the object's inside; keep the thinnest shell and let the band decide.
     enclosing = [r for r in results if r.inside.sum() > ENCLOSED_SHARE * surface_nodes]
-    return enclosing[-1] if enclosing else results[0]
+    return enclosing[-1] if enclosing else replace(results[0], encloses=False)
 
 
 def _outside(shell: np.ndarray) -> np.ndarray:
