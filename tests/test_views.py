@@ -166,29 +166,37 @@ def test_a_rigid_motion_of_views_and_plane_keeps_the_volume(views):
         assert run(rot, rng.uniform(-2, 2, 3)) == pytest.approx(base, rel=0.005)
 
 
-def test_a_tight_crop_around_a_flat_object_still_finds_the_table():
-    """Cropped close around a book, its top outweighs the ring of table around it: the largest plane is the
-    book's top, refused (the rest of the book and the table lie below it), and the next one is the table.
-    (Before, the views fell back to the plane through their lowest point and the estimate lost 65 %.)"""
+def _box_on_table(size, at, *, floor=False):  # type: ignore[no-untyped-def]
+    """Each camera's whole frame (points, world frame; its centre) of a box of ``size`` (m) standing at ``at``
+    (x, y) on the table, ray cast at sigma 1 mm; the floor too when ``floor``."""
     import mujoco
 
-    from estimation.views import View, estimate_views
     from scenes.cameras import SIGMA_1MM, render
 
-    size = (0.24, 0.17, 0.03)
     spec = mujoco.MjSpec()
+    if floor:
+        spec.worldbody.add_geom(type=mujoco.mjtGeom.mjGEOM_PLANE, size=[3, 3, 0.1])
     spec.worldbody.add_geom(type=mujoco.mjtGeom.mjGEOM_BOX, size=[0.4, 0.3, 0.02], pos=[0, 0, TOP - 0.02])
-    spec.worldbody.add_geom(type=mujoco.mjtGeom.mjGEOM_BOX, size=[s / 2 for s in size], pos=[0, 0, TOP + size[2] / 2])
+    spec.worldbody.add_geom(type=mujoco.mjtGeom.mjGEOM_BOX, size=[s / 2 for s in size],
+                            pos=[at[0], at[1], TOP + size[2] / 2])
     model = spec.compile()
     data = mujoco.MjData(model)
     mujoco.mj_forward(model, data)
     rng = np.random.default_rng(0)
+    return [(render(model, data, cam, noise=SIGMA_1MM, rng=rng).points()[0], np.asarray(cam.position, float))
+            for cam in _cameras()]
+
+
+def test_a_tight_crop_around_a_flat_object_still_finds_the_table():
+    """Cropped close around a book, its top outweighs the ring of table around it: the largest plane is the
+    book's top, refused (the rest of the book and the table lie below it), and the next one is the table.
+    (Before, the views fell back to the plane through their lowest point and the estimate lost 65 %.)"""
+    from estimation.views import View, estimate_views
+
+    size = (0.24, 0.17, 0.03)
     reach = float(np.linalg.norm(size)) / 2 + 0.01  # half the diagonal and a centimetre
-    views = []
-    for cam in _cameras():
-        points, _ = render(model, data, cam, noise=SIGMA_1MM, rng=rng).points()
-        near = np.linalg.norm(points[:, :2], axis=1) < reach
-        views.append(View(points[near], np.asarray(cam.position, float)))
+    views = [View(points[np.linalg.norm(points[:, :2], axis=1) < reach], origin)
+             for points, origin in _box_on_table(size, (0.0, 0.0))]
     result = estimate_views(views, 1000.0, support="auto")
     assert result.plane is not None
     assert result.plane.normal == pytest.approx([0, 0, 1], abs=0.01)
@@ -201,24 +209,10 @@ def test_whole_frames_with_the_floor_in_view_take_the_table_not_the_floor():
     """Whole camera frames of a box on a table see the floor around the table: the floor is a plane with
     everything above it, and what stands on it is the table with the box on top. The table, almost all of
     that and carrying the box, becomes the support. (Before, the "object" was the table: +1000 % and more.)"""
-    import mujoco
-
     from estimation.views import View, estimate_views
-    from scenes.cameras import SIGMA_1MM, render
 
     size = (0.08, 0.06, 0.05)
-    spec = mujoco.MjSpec()
-    spec.worldbody.add_geom(type=mujoco.mjtGeom.mjGEOM_PLANE, size=[3, 3, 0.1])
-    spec.worldbody.add_geom(type=mujoco.mjtGeom.mjGEOM_BOX, size=[0.4, 0.3, 0.02], pos=[0, 0, TOP - 0.02])
-    spec.worldbody.add_geom(type=mujoco.mjtGeom.mjGEOM_BOX, size=[s / 2 for s in size], pos=[0.05, 0, TOP + size[2] / 2])
-    model = spec.compile()
-    data = mujoco.MjData(model)
-    mujoco.mj_forward(model, data)
-    rng = np.random.default_rng(0)
-    views = []
-    for cam in _cameras():
-        points, _ = render(model, data, cam, noise=SIGMA_1MM, rng=rng).points()
-        views.append(View(points, np.asarray(cam.position, float)))
+    views = [View(points, origin) for points, origin in _box_on_table(size, (0.05, 0.0), floor=True)]
     assert min(float(v.points[:, 2].min()) for v in views) < 0.1  # the floor is in view
     result = estimate_views(views, 1000.0, support="auto")
     assert result.plane is not None and -result.plane.offset == pytest.approx(TOP, abs=2e-3)
