@@ -288,10 +288,12 @@ def estimate_views(views: list[View], density: float, *, support: Plane | str | 
     threshold = max(PLANE_NOISE_SIGMAS * noise, PLANE_SPACINGS * spacing)
     warnings: list[str] = []
     plane: Plane | None
+    found = False  # the plane was found in the data (not given, not the fallback through the lowest point)
     if isinstance(support, str):
         if support != "auto":
             raise CloudError(f"support plane: expected 'auto' or A B C D, got {support!r}")
         plane = find_support_plane(points, origins, threshold=threshold, rng=np.random.default_rng(seed))
+        found = plane is not None
         if plane is None:
             plane = plane_below(points)
             warnings.append(f"no support plane in the data; assumed the horizontal plane through the lowest "
@@ -309,7 +311,7 @@ def estimate_views(views: list[View], density: float, *, support: Plane | str | 
             raise CloudError(f"support plane: {100 * below:.0f} % of the points lie more than {1000 * cut:.2g} mm "
                              f"below it (its normal must point up into the object's side)")
         obj, others = _largest_above(points, h, cut)
-        if isinstance(support, str) and not warnings:  # a plane found in the data, not the fallback
+        if found:
             # Whole frames of a tabletop hold the floor too, a plane with everything above it: the "object"
             # above the floor is then the table with the object standing on it. Its own support is the table.
             for _ in range(STANDING_ROUNDS):
