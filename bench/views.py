@@ -1,7 +1,7 @@
 """`twin estimate VIEW [VIEW ...] --support-plane auto` on ray-cast scans of one object at a time.
 
-    .venv/bin/python bench/views.py          # 3 cameras; output in bench/results/views.txt
-    .venv/bin/python bench/views.py --cameras 2
+    .venv/bin/python bench/views.py              # 3 cameras; output in bench/results/views.txt
+    .venv/bin/python bench/views.py --cameras 2  # output in bench/results/views_2cams.txt
 
 Each object of the 20-object clutter is put alone on the table (its pose in the scene file), scanned
 once by the camera ring of ``scenes.sensing.CameraSensor`` at the issue's sigma 1 mm (1280 x 720,
@@ -90,8 +90,8 @@ def main() -> int:
                   f"{time.perf_counter() - t0:.0f} s"]
     text = "\n".join(lines)
     print(text)
-    if args.cameras == 3:
-        RESULTS.write_text(text + "\n")
+    out = RESULTS if args.cameras == 3 else RESULTS.with_name(f"views_{args.cameras}cams.txt")
+    out.write_text(text + "\n")
     return 0
 
 
