@@ -583,7 +583,10 @@ def _pcd_colors(packed: np.ndarray, dtype: np.dtype) -> np.ndarray:
     if dtype.kind == "f":
         bits = np.asarray(packed, dtype=np.float32).view(np.uint32)
     else:
-        bits = np.asarray(packed).astype(np.uint32)
+        # An ASCII file's integer field arrives as float64: a value no uint32 holds (NaN, negative, too large)
+        # is no colour, and casting it is undefined.
+        values = np.asarray(packed, dtype=np.float64)
+        bits = np.where(np.isfinite(values) & (values >= 0) & (values < 2.0**32), values, 0).astype(np.uint32)
     rgb = np.stack([(bits >> shift) & 0xFF for shift in (16, 8, 0)], axis=1)
     return rgb / 255.0
 

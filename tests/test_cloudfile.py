@@ -460,3 +460,21 @@ def test_random_bytes_raise_only_cloud_errors(tmp_path, data):
             assert "\n" not in str(exc)
         else:
             assert cloud.points.shape[1] == 3 and np.isfinite(cloud.points).all()
+
+
+def test_an_ascii_pcd_colour_no_uint32_holds_is_black_without_a_warning(tmp_path):
+    """An ASCII PCD's unsigned rgb field may hold anything text can say (nan, -1, 1e20): casting that to
+    uint32 is undefined (numpy warns). Such a colour reads as black; the points are unaffected."""
+    import warnings
+
+    from estimation import load_cloud
+
+    path = tmp_path / "odd.pcd"
+    path.write_text("VERSION 0.7\nFIELDS x y z rgb\nSIZE 4 4 4 4\nTYPE F F F U\nCOUNT 1 1 1 1\nWIDTH 4\nHEIGHT 1\n"
+                    "POINTS 4\nDATA ascii\n0 0 0 nan\n1 0 0 -1\n0 1 0 1e20\n0 0 1 16744449\n")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        cloud = load_cloud(path)
+    assert cloud.points.shape == (4, 3)
+    assert cloud.colors[:3].tolist() == [[0.0, 0.0, 0.0]] * 3
+    assert cloud.colors[3] == pytest.approx(np.array([0xFF, 0x80, 0x01]) / 255.0)
