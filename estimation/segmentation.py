@@ -67,6 +67,11 @@ class Plane:
         """Signed distance (n,) of ``points`` (n, 3) metres from the plane, positive on the sensors' side."""
         return points @ self.normal + self.offset
 
+    def clearance(self, threshold: float) -> float:
+        """Metres above the plane that clear its points' noise: ``PLANE_SIGMAS`` rms, and at least
+        ``threshold`` (the RANSAC distance), where the plane's own noise tail no longer reaches."""
+        return max(PLANE_SIGMAS * self.rms, threshold)
+
     def as_abcd(self) -> tuple[float, float, float, float]:
         """(A, B, C, D) with ``A x + B y + C z + D = 0``, the CLI's convention."""
         return (*(float(v) for v in self.normal), float(self.offset))
@@ -201,7 +206,7 @@ def segment(points: np.ndarray, *, toward: np.ndarray, rng: np.random.Generator,
     pts = as_points(points, "points")
     plane = fit_plane(pts, threshold=plane_threshold, toward=toward, rng=rng)
     height = plane.height(pts)
-    cut = max(PLANE_SIGMAS * plane.rms, plane_threshold)
+    cut = plane.clearance(plane_threshold)
     above = height > cut
     spacing = median_spacing(pts[above]) if above.sum() > 2 else plane_threshold / CLUSTER_SPACINGS
     if cell is None:

@@ -29,7 +29,6 @@ from estimation.fusion import fuse_views, fused_cloud, oriented_normals
 from estimation.segmentation import (
     CLUSTER_SPACINGS,
     MIN_CLUSTER_POINTS,
-    PLANE_SIGMAS,
     Plane,
     cluster,
     fit_plane,
@@ -162,7 +161,7 @@ def find_support_plane(points: np.ndarray, origins: np.ndarray, *, threshold: fl
         inliers = int((np.abs(h) < threshold).sum())
         if inliers < MIN_PLANE_SHARE * len(points):
             return None  # the next ones are smaller still
-        if _supports(h, max(PLANE_SIGMAS * plane.rms, threshold), inliers):
+        if _supports(h, plane.clearance(threshold), inliers):
             return plane
         rest = rest[np.abs(h[rest]) >= threshold]
     return None
@@ -231,7 +230,7 @@ def _standing_support(points: np.ndarray, plane: Plane, *, threshold: float, tow
     inliers = np.abs(h) < threshold
     if inliers.sum() < STANDING_PLANE_SHARE * len(points):
         return None
-    margin = max(PLANE_SIGMAS * candidate.rms, threshold)
+    margin = candidate.clearance(threshold)
     # Below it, only what lies beyond its edge (the table's sides, the floor) may be more than its noise tail.
     within = _within_extent(points, candidate, inliers, EXTENT_MARGIN_THRESHOLDS * threshold)
     standing = within & (h > 2 * margin)
@@ -305,7 +304,7 @@ def estimate_views(views: list[View], density: float, *, support: Plane | str | 
         h = plane.height(points)
         # At least the RANSAC threshold, not only 3 rms: the plane's noise tail next to the object would join it
         # (bracket scan: +8 % at 3 rms, +4 % at the threshold; the skirt of close_bottom restores the band cut).
-        cut = max(PLANE_SIGMAS * plane.rms, threshold)
+        cut = plane.clearance(threshold)
         below = float((h < -cut).mean())
         if below > MAX_BELOW_GIVEN:
             raise CloudError(f"support plane: {100 * below:.0f} % of the points lie more than {1000 * cut:.2g} mm "
@@ -321,7 +320,7 @@ def estimate_views(views: list[View], density: float, *, support: Plane | str | 
                     break
                 plane = higher
                 h = plane.height(points)
-                cut = max(PLANE_SIGMAS * plane.rms, threshold)
+                cut = plane.clearance(threshold)
                 obj, others = _largest_above(points, h, cut)
                 warnings.append(f"what stood on the first plane found was itself mostly a plane with something "
                                 f"standing on it (a table on the floor?): took that plane (z = {-plane.offset:.4g} "
