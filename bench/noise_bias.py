@@ -11,7 +11,8 @@ sphere and a 60 mm cube, each in a random pose, estimated with 'auto' (no normal
 - "noise lift": the volume the noise itself adds on a sphere, 3 sigma^2 / R^2 (points moved along the
   surface by sigma sit sigma^2 / R outside it on average), for reference;
 - on the cube, the reconstructed surface's mean distance outside the true faces, near the edges and away
-  from them, and the excess cross-section along the edges (the excess volume near them per metre of edge).
+  from them, and the excess cross-section along the edges (the excess volume near them per metre of edge);
+- a 40 mm tetrahedron at sigma 0.5 and 1 mm, three draws: where creases are much of the shape.
 
 Then small objects as the camera feed sees them (``SMALL``): spheres of 5-15 mm radius and a 7 mm-radius
 rod, points about 1.2 mm apart (a 1280 x 720 camera at 1.5 m), sigma 0.5 and 1 mm, median over
@@ -41,6 +42,10 @@ from scenes.sampling import sample_surface  # noqa: E402
 POINTS = 100_000
 SIGMAS = (0.00025, 0.0005)
 RESULTS = ROOT / "bench" / "results" / "noise_bias.txt"
+
+#: The tetrahedron's sigmas (metres) and draws.
+CREASE_SIGMAS = (0.0005, 0.001)
+CREASE_SEEDS = 3
 
 #: Small objects at a camera's spacing (metres) and sigmas (metres); the median of SMALL_SEEDS draws.
 SMALL_SPACING = 0.0012
@@ -104,6 +109,19 @@ def cube_rows() -> list[str]:
     return rows
 
 
+def crease_rows() -> list[str]:
+    """A 40 mm regular tetrahedron (dihedral angle 70.5 degrees, a sixth of its volume within 2 mm of an
+    edge): what the creases' bias does where they are most of the shape, over ``CREASE_SEEDS`` draws."""
+    corners = np.array([[1, 1, 1], [1, -1, -1], [-1, 1, -1], [-1, -1, 1]]) * 0.04 / np.sqrt(8)  # edge 40 mm
+    mesh, _, _ = _posed(trimesh.Trimesh(corners).convex_hull, 3)
+    rows = []
+    for sigma in CREASE_SIGMAS:
+        errors = [estimate(sample_surface(mesh, POINTS, seed=[5, seed], noise_sigma=sigma, with_normals=False),
+                           1000.0).volume / mesh.volume - 1 for seed in range(CREASE_SEEDS)]
+        rows.append(f"tetrahedron 40 mm  sigma {sigma * 1e3:.2f} mm | " + "  ".join(f"{100 * e:+7.3f} %" for e in errors))
+    return rows
+
+
 def small_rows() -> list[str]:
     shapes = [(f"sphere r {r * 1e3:.0f} mm", trimesh.creation.icosphere(subdivisions=5, radius=r), r)
               for r in (0.005, 0.007, 0.010, 0.015)]
@@ -122,7 +140,7 @@ def small_rows() -> list[str]:
 
 def main() -> None:
     lines = [f"bench/noise_bias.py: {POINTS:,} points, isotropic Gaussian noise, 'auto' without normals", ""]
-    for row in sphere_rows() + cube_rows():
+    for row in sphere_rows() + cube_rows() + crease_rows():
         print(row, file=sys.stderr, flush=True)
         lines.append(row)
     lines += ["", f"small objects, points {SMALL_SPACING * 1e3:.1f} mm apart, median of {SMALL_SEEDS} draws"]
