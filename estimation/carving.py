@@ -304,7 +304,9 @@ def carved_surface(carving: Carving) -> tuple[np.ndarray, np.ndarray]:
     up = carving.axes[2]
     base = (index[:, 2] == 0) & (normal @ up < -0.5)
     centre[base] -= np.outer((centre[base] - carving.origin) @ up, up)
-    helper = np.where(np.abs(normal[:, :1]) < 0.9, np.array([[1.0, 0.0, 0.0]]), np.array([[0.0, 1.0, 0.0]]))
+    # Tangents from the grid's own axes, not the world's: the samples then move with the object.
+    e1, e2 = carving.axes[0], carving.axes[1]
+    helper = np.where(np.abs(normal @ e1)[:, None] < 0.9, e1, e2)
     t1 = np.cross(normal, helper)
     t1 /= np.linalg.norm(t1, axis=1, keepdims=True)
     t2 = np.cross(normal, t1)

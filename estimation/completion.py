@@ -423,7 +423,8 @@ def _complete(points: np.ndarray, normals: np.ndarray, origins: np.ndarray, plan
         # under 1.1 mm noise, walls "thinner than the spacing" everywhere, -64 %).
         from estimation.downsample import voxel_subsample
 
-        kept = voxel_subsample(surface, cell)
+        # In the carving grid's frame: voxels on the world's axes keep another subset per rotation.
+        kept = voxel_subsample((surface - carving.origin) @ carving.axes.T, cell)
         surface, surface_n = surface[kept], surface_n[kept]
     return Completion(np.concatenate([mirrored[0], turned[0], surface]),
                       np.concatenate([mirrored[1], turned[1], surface_n]), 0.0, mirrored=len(mirrored[0]),

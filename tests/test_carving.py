@@ -150,8 +150,12 @@ def test_two_depth_views_of_an_l_bracket_carve_its_concave_corner_away():
     assert result.volume_bounds_m3[0] <= BRACKET <= result.volume_bounds_m3[1]
 
 
-def test_a_rigid_motion_of_depth_views_keeps_the_carved_volume():
-    """Points, sensor origins and camera poses moved together: the same volume within 0.5 %."""
+@pytest.mark.parametrize("angles", [(23, -41, 67), (10, 20, 30)])
+def test_a_rigid_motion_of_depth_views_keeps_the_carved_volume(angles):
+    """Points, sensor origins and camera poses moved together: the same completion, point for point, and
+    the same volume within 0.1 % (the issue asks 0.5 %). The carved surface's samples and their thinning
+    once sat on the world's axes: 1,312 completed points here, 1,502 and 1,606 after these motions, and
+    the volume moved 0.3 %."""
     from dataclasses import replace
 
     from scipy.spatial.transform import Rotation
@@ -160,13 +164,15 @@ def test_a_rigid_motion_of_depth_views_keeps_the_carved_volume():
     from scenes.cameras import KINECT_V1
 
     views = _bracket_views(KINECT_V1)
-    base = estimate_views(views, 1000.0, support="auto").estimate.volume
-    rot = Rotation.from_euler("xyz", [23, -41, 67], degrees=True).as_matrix()
+    base = estimate_views(views, 1000.0, support="auto")
+    rot = Rotation.from_euler("xyz", angles, degrees=True).as_matrix()
     shift = np.array([0.4, -1.1, 0.3])
     moved = [replace(v, points=v.points @ rot.T + shift, origin=rot @ v.origin + shift,
                      depth=replace(v.depth, rotation=rot @ v.depth.rotation, position=rot @ v.depth.position + shift))
              for v in views]
-    assert estimate_views(moved, 1000.0, support="auto").estimate.volume == pytest.approx(base, rel=0.005)
+    after = estimate_views(moved, 1000.0, support="auto")
+    assert after.completed_points == base.completed_points
+    assert after.estimate.volume == pytest.approx(base.estimate.volume, rel=0.001)
 
 
 def _one_object(geom: str, size: list[float], height: float, yaw: float = 0.0):  # type: ignore[no-untyped-def]
