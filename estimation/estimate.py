@@ -280,6 +280,7 @@ def _auto_pass(cloud: PointCloud, box: OrientedBox, local: np.ndarray, spacing: 
     from estimation.dualcontour import contour
     from estimation.grid import grid_around, occupancy
     from estimation.implicit import band_field
+    from estimation.neighbours import nearest
     from estimation.normals import THIN_WALL_NEIGHBOURS, fit_normals, orient_outward, orient_to_viewpoint
     from estimation.spacing import point_spacing
     from estimation.sparsegrid import narrow_band
@@ -323,7 +324,7 @@ def _auto_pass(cloud: PointCloud, box: OrientedBox, local: np.ndarray, spacing: 
         # One neighbour search serves the fit and both orientation tests (the thin-wall one looks
         # at THIN_WALL_NEIGHBOURS).
         tree = cKDTree(points)
-        neighbours = tree.query(points, k=min(max(k, THIN_WALL_NEIGHBOURS), len(points)), workers=-1)[1]
+        neighbours = nearest(tree, points, min(max(k, THIN_WALL_NEIGHBOURS), len(points)))[1]
         normals, tilt = fit_normals(points, k, neighbours=neighbours)
         if viewpoint is not None:
             normals = orient_to_viewpoint(points, normals, box.to_local(np.asarray(viewpoint, dtype=np.float64)[None])[0])

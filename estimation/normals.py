@@ -13,6 +13,7 @@ from scipy.spatial import cKDTree
 
 from estimation import tolerances as tol
 from estimation.grid import Grid, Occupancy
+from estimation.neighbours import nearest
 
 #: How far (cells) beyond the shell's closing radius we look for the outside on either side of a point.
 PROBE_CELLS = 1.0
@@ -77,7 +78,7 @@ def fit_normals(points: np.ndarray, k: int = tol.NORMAL_NEIGHBOURS, *,
     """
     k = min(k, len(points))
     if neighbours is None:
-        neighbours = cKDTree(points).query(points, k=k, workers=-1)[1]
+        neighbours = nearest(cKDTree(points), points, k)[1]
     neighbours = neighbours[:, :k]
     normals = np.empty_like(points)
     tilt = np.empty(len(points))
@@ -117,7 +118,7 @@ def orient_outward(
         # Take the side that agrees with the confident neighbours' (already flipped) normals.
         oriented = normals * sign[:, None]
         k = min(tol.NORMAL_NEIGHBOURS, len(points))
-        nbr = (tree.query(points[unsure], k=k, workers=-1)[1] if neighbours is None
+        nbr = (nearest(tree, points[unsure], k)[1] if neighbours is None
                else neighbours[unsure, :k])
         weight = (~unsure[nbr]).astype(float)
         votes = np.einsum("nk,nkj,nj->n", weight, oriented[nbr], normals[unsure])
@@ -140,7 +141,7 @@ def thin_wall_side(points: np.ndarray, normals: np.ndarray, tree: cKDTree,
     outward normal points away from it. A t-test on the offsets keeps noise from deciding.
     """
     k = min(k, len(points))
-    nbr = tree.query(points, k=k, workers=-1)[1] if neighbours is None else neighbours[:, :k]
+    nbr = nearest(tree, points, k)[1] if neighbours is None else neighbours[:, :k]
     offsets = np.einsum("nkj,nj->nk", points[nbr] - points[:, None, :], normals)
     # Offsets from the point's own sheet, as its nearest neighbours place it: measured from the
     # point itself, its own noise would read as a second sheet.

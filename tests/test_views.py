@@ -149,6 +149,8 @@ def test_depth_images_read_like_the_clouds(capsys, tmp_path, frames, pcds):
 
 
 def test_a_rigid_motion_of_views_and_plane_keeps_the_volume(views):
+    """Within 0.2 % (the issue asks 0.5 %). The Kinect's quantised depth puts points on a lattice, where
+    equal distances once let a rigid motion swap a normal's 16th neighbour: 0.45 % then."""
     from scipy.spatial.transform import Rotation
 
     from estimation.views import View, estimate_views, plane_from_abcd
@@ -163,7 +165,7 @@ def test_a_rigid_motion_of_views_and_plane_keeps_the_volume(views):
     rng = np.random.default_rng(7)
     for _ in range(3):
         rot = Rotation.random(random_state=rng).as_matrix()
-        assert run(rot, rng.uniform(-2, 2, 3)) == pytest.approx(base, rel=0.005)
+        assert run(rot, rng.uniform(-2, 2, 3)) == pytest.approx(base, rel=0.002)
 
 
 def _box_on_table(size, at, *, floor=False):  # type: ignore[no-untyped-def]
