@@ -29,6 +29,8 @@ import numpy as np
 from rich.console import Console
 from rich.table import Table
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # this checkout's packages, not an installed copy
+
 ROOT = Path(__file__).resolve().parent.parent
 RIGS = (1, 2, 3)
 

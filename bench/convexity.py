@@ -20,6 +20,8 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # this checkout's packages, not an installed copy
+
 from estimation import estimate
 from estimation.inertia import signed_volumes
 from scenes.sampling import sample_surface

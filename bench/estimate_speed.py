@@ -22,6 +22,8 @@ from pathlib import Path
 
 import numpy as np
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # this checkout's packages, not an installed copy
+
 N = 1_000_000
 REPEATS = 3
 SHAPES = ("smooth-blob-19", "crease-prism-07", "concave-mug-11", "thin-tube-02")

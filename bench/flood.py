@@ -24,6 +24,8 @@ import numpy as np
 from rich.console import Console
 from rich.table import Table
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # this checkout's packages, not an installed copy
+
 from scenes.remote import Remote
 from scenes.scenefile import load_scene
 from sync.keys import Keys

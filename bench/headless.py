@@ -12,6 +12,7 @@ column; 1.0 means as fast as the live 1 kHz loops). The same session run twice m
 from __future__ import annotations
 
 import argparse
+import sys
 import time
 from importlib import resources
 from pathlib import Path
@@ -19,6 +20,8 @@ from pathlib import Path
 import numpy as np
 from rich.console import Console
 from rich.table import Table
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # this checkout's packages, not an installed copy
 
 from scenes.headless import Headless
 from scenes.scenefile import load_scene

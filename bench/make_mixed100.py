@@ -16,9 +16,12 @@ from __future__ import annotations
 
 import argparse
 import math
+import sys
 from pathlib import Path
 
 import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # this checkout's packages, not an installed copy
 
 from estimation.cloudfile import save_cloud
 from scenes.paper_objects import NAMES, paper_object

@@ -17,6 +17,7 @@ from __future__ import annotations
 import argparse
 import csv
 import statistics
+import sys
 import time
 import zlib
 from collections import defaultdict
@@ -25,6 +26,8 @@ from pathlib import Path
 from rich.console import Console
 from rich.progress import Progress
 from rich.table import Table
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # this checkout's packages, not an installed copy
 
 from estimation import estimate
 from scenes.paper_objects import EXPECTED_VOLUME_M3, NAMES, ROTATIONS_DEG, paper_object

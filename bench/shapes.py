@@ -23,6 +23,8 @@ from pathlib import Path
 
 import numpy as np
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # this checkout's packages, not an installed copy
+
 from estimation import estimate
 from estimation.inertia import mass_properties
 from scenes.sampling import sample_surface
