@@ -28,9 +28,9 @@ import time
 from dataclasses import dataclass, replace
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # this checkout's packages, not an installed copy
-
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))  # this checkout's packages, not an installed copy
+
 SCENE = ROOT / "scenes" / "data" / "mixed100.toml"
 RESULTS = Path(__file__).parent / "results" / "build.txt"
 

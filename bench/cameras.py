@@ -29,9 +29,9 @@ import numpy as np
 from rich.console import Console
 from rich.table import Table
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # this checkout's packages, not an installed copy
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))  # this checkout's packages, not an installed copy
 
-ROOT = Path(__file__).resolve().parent.parent
 RIGS = (1, 2, 3)
 
 #: (scene, sensor label) -> (noise model name in scenes.cameras, camera options).
