@@ -86,3 +86,29 @@ def test_a_turn_about_an_objects_axis_of_symmetry_is_not_counted_off_it(tmp_path
     box = trimesh.creation.box(extents=(0.12, 0.08, 0.06))
     crate = object_at_estimate("crate", from_mesh(box.vertices, box.faces, 500.0), 0.5, cache_dir=tmp_path)
     assert symmetry_of(crate).basis.shape[1] == 0
+
+
+def test_a_wrong_centre_of_mass_tips_the_twin_and_compare_says_so(tmp_path):
+    """Dropping both from the reference's rest must still catch what the tolerance is for: a tall box whose
+    centre of mass is put 3 cm off its 4 cm base's centre falls over; the true one stands."""
+    from dataclasses import replace
+
+    import numpy as np
+    import trimesh
+
+    from estimation import from_mesh
+    from twin.objects import object_at_estimate
+
+    box = trimesh.creation.box(extents=(0.04, 0.04, 0.2))
+    true = from_mesh(box.vertices, box.faces, 700.0)
+    wrong = replace(true, mass=replace(true.mass, center_of_mass=true.mass.center_of_mass + np.array([0.03, 0.0, 0.0])))
+    top = SCENE.table.height if SCENE.table else 0.0
+
+    def standing(est, name):  # type: ignore[no-untyped-def]
+        obj = object_at_estimate(name, est, 0.5, cache_dir=tmp_path)
+        return replace(obj, position=np.array([0.0, 0.0, top + 0.1]) + est.mass.center_of_mass)
+
+    reference = standing(true, "ref")
+    same, tipped = compare(SCENE, standing(true, "same"), reference), compare(SCENE, standing(wrong, "w"), reference)
+    assert same.rest_distance < POSITION_FRACTION * same.size and same.rest_angle < ANGLE_DEG
+    assert tipped.rest_angle > 45.0
