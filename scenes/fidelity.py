@@ -56,7 +56,7 @@ def rest_pose(scene: SceneSpec, obj: TwinObject, *, seconds: float = SETTLE_SECO
         return twin.pose(obj.id)
 
 
-def held_at(obj: TwinObject, pose: tuple[np.ndarray, np.ndarray], lowest: float,
+def _held_at(obj: TwinObject, pose: tuple[np.ndarray, np.ndarray], lowest: float,
             height: float = DROP_HEIGHT) -> TwinObject:
     """``obj`` turned to ``pose``'s orientation, its centre of mass over ``pose``'s position and its own
     lowest vertex ``height`` m above the world height ``lowest`` (m): two objects of slightly different
@@ -82,8 +82,8 @@ def compare(scene: SceneSpec, twin_obj: TwinObject, reference: TwinObject) -> Fi
     est, ref = twin_obj.estimate.mass, reference.estimate.mass
     settled = rest_pose(scene, replace(reference, position=reference.position + np.array([0.0, 0.0, DROP_HEIGHT])))
     lowest = settled[0][2] - _depth_below_com(reference, settled[1])
-    p_est, q_est = rest_pose(scene, held_at(twin_obj, settled, lowest))
-    p_ref, q_ref = rest_pose(scene, held_at(reference, settled, lowest))
+    p_est, q_est = rest_pose(scene, _held_at(twin_obj, settled, lowest))
+    p_ref, q_ref = rest_pose(scene, _held_at(reference, settled, lowest))
     turn = np.eye(4)
     turn[:3, :3] = rotation(q_ref).T @ rotation(q_est)  # from the reference's rest to the twin's, body frame
     off = symmetry_of(reference).without(turn)
