@@ -102,9 +102,12 @@ def occupancy(points: np.ndarray, grid: Grid) -> Occupancy:
     idx = grid.index_of(points)
     occupied[idx[:, 0], idx[:, 1], idx[:, 2]] = True
     surface_nodes = int(occupied.sum())
+    # Dilating by a ball is thresholding the distance to the nearest occupied node: one distance
+    # transform serves every radius (dilating by each ball in turn took 0.5 s of a 1M-point mug).
+    distance2 = np.rint(ndimage.distance_transform_edt(~occupied) ** 2)
     results = []
     for radius in CLOSING_RADII:
-        shell = ndimage.binary_dilation(occupied, structure=_ball(radius))
+        shell = distance2 <= _ball_radius2(radius)
         results.append(Occupancy(shell, _outside(shell), radius))
         if len(results) >= 2:
             before, after = results[-2], results[-1]
@@ -130,8 +133,7 @@ def _outside(shell: np.ndarray) -> np.ndarray:
     return np.isin(labels, border)
 
 
-def _ball(radius: int) -> np.ndarray:
-    r = np.arange(-radius, radius + 1)
-    x, y, z = np.meshgrid(r, r, r, indexing="ij")
+def _ball_radius2(radius: int) -> int:
+    """Squared node distance (cells^2) within which a closing ball of ``radius`` cells reaches."""
     # A radius-1 ball is the full 3x3x3 cube: diagonal neighbours close diagonal gaps in the shell.
-    return (x**2 + y**2 + z**2) <= max(radius**2, 3)
+    return max(radius**2, 3)
