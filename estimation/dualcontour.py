@@ -279,24 +279,36 @@ def _place_vertices(points: np.ndarray, normals: np.ndarray, band: Band, cell_ke
         # The vertex stays at the mean crossing m along the surface (the centroid drifts from the crease
         # of a face that ends in the cell), so the height is carried from c to m: the surface falls away
         # from its tangent plane by mu^T S mu / 2 over a tangential step mu, S the shape operator, fitted
-        # from how the normals turn across the cell (n_i - nbar ~ S t_i, least squares).
-        tangent_proj = np.eye(3) - nbar[:, :, None] * nbar[:, None, :]
-        cov_nt = np.stack([np.stack([acc_flat(wf * nf[:, i] * q[:, j]) for j in range(3)], axis=1)
-                           for i in range(3)], axis=1) - normal_sum[flat][:, :, None] * c[:, None, :]
-        cov_tt = np.stack([np.stack([acc_flat(wf * q[:, i] * q[:, j]) for j in range(3)], axis=1)
-                           for i in range(3)], axis=1) - wsum[:, None, None] * c[:, :, None] * c[:, None, :]
-        cov_nt = tangent_proj @ cov_nt @ tangent_proj
-        cov_tt = tangent_proj @ cov_tt @ tangent_proj
-        shape = cov_nt @ np.linalg.pinv(cov_tt, rcond=QEF_RELATIVE_EIGENVALUE, hermitian=True)
+        # from how the normals turn across the cell (n_i - nbar ~ S t_i, least squares). All of it lives
+        # in the tangent plane, so it is worked in a 2-D basis (u, v) of it: 2 x 2 moments, and a closed-form
+        # pseudo-inverse instead of a batched 3 x 3 one (a third of the reconstruction on a mug).
+        u, v = _tangent_basis(nbar)
+        row = _rows_of(cf, flat)
+        uf, vf = u[row], v[row]
+        qu, qv = np.einsum("ij,ij->i", q, uf), np.einsum("ij,ij->i", q, vf)
+        nu, nv = np.einsum("ij,ij->i", nf, uf), np.einsum("ij,ij->i", nf, vf)
+        cu, cv = np.einsum("ij,ij->i", c, u), np.einsum("ij,ij->i", c, v)
+        su, sv = np.einsum("ij,ij->i", normal_sum[flat], u), np.einsum("ij,ij->i", normal_sum[flat], v)
+        # cov_nt[i, j] = sum w n_i q_j - (sum w n_i) c_j and cov_tt likewise, both in (u, v).
+        cov_nt = np.stack([np.stack([acc_flat(wf * nu * qu) - su * cu, acc_flat(wf * nu * qv) - su * cv], axis=1),
+                           np.stack([acc_flat(wf * nv * qu) - sv * cu, acc_flat(wf * nv * qv) - sv * cv], axis=1)],
+                          axis=1)
+        tuu = acc_flat(wf * qu * qu) - wsum * cu * cu
+        tuv = acc_flat(wf * qu * qv) - wsum * cu * cv
+        tvv = acc_flat(wf * qv * qv) - wsum * cv * cv
+        # A cell whose points lie on one spot (one point; rounding leaves ~1e-24 m^2) pins no curvature:
+        # spreads under a millionth of a cell are zero, not inverted.
+        shape = cov_nt @ _pinv_2x2(tuu, tuv, tvv, QEF_RELATIVE_EIGENVALUE, wsum * (1e-6 * h) ** 2)
         cell_centre = band.position(_unravel(cell_keys[flat], dims)) + h / 2
-        mu = np.einsum("nij,nj->ni", tangent_proj, mean[flat] - cell_centre - c)
+        step = mean[flat] - cell_centre - c
+        mu = np.stack([np.einsum("ij,ij->i", step, u), np.einsum("ij,ij->i", step, v)], axis=1)
         fall = 0.5 * np.einsum("ni,nij,nj->n", mu, shape, mu)
         # Noise along the surface lifts the points off a curved one: a point moved by t along the
         # tangent plane sits k t^2 / 2 above the surface, so isotropic noise of sigma puts the points'
         # mean sigma^2 H outside (H = (k1 + k2) / 2, the trace of the shape operator over 2). The
         # spread about the planes (``noise``) is taken as the spread along them too.
-        lift = noise**2 * 0.5 * np.einsum("nii->n", shape)
-        offset_m = height - fall - lift - np.einsum("ij,ij->i", nbar, mean[flat] - cell_centre - c)
+        lift = noise**2 * 0.5 * (shape[:, 0, 0] + shape[:, 1, 1])
+        offset_m = height - fall - lift - np.einsum("ij,ij->i", nbar, step)
         moved = mean[flat] + nbar * offset_m[:, None]
         vertex[flat] = plane_only[flat] = moved
         normal_out[flat] = nbar
@@ -323,6 +335,42 @@ def _place_vertices(points: np.ndarray, normals: np.ndarray, band: Band, cell_ke
     out = np.where(inside_full[:, None], vertex, np.where(inside_plane[:, None], plane_only, mean))
     out[weight == 0] = mean[weight == 0]
     return out, weight > 0, normal_out, flat & (weight > 0)
+
+
+def _rows_of(cells: np.ndarray, selected: np.ndarray) -> np.ndarray:
+    """Each of ``cells`` (rows of the full cell list, all ``selected``) as a row of the selected ones."""
+    return (np.cumsum(selected) - 1)[cells]
+
+
+def _tangent_basis(normal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Two unit vectors (c, 3) each, orthogonal to each other and to the unit ``normal`` (c, 3)."""
+    helper = np.where(np.abs(normal[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
+    u = np.cross(normal, helper)
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    return u, np.cross(normal, u)
+
+
+def _pinv_2x2(a: np.ndarray, b: np.ndarray, c: np.ndarray, rcond: float, floor: np.ndarray | float = 0.0
+              ) -> np.ndarray:
+    """Pseudo-inverses (k, 2, 2) of the symmetric positive semi-definite [[a, b], [b, c]] (each (k,)):
+    eigenvalues at or below ``rcond`` times the largest, or ``floor``, are dropped (as
+    ``np.linalg.pinv(..., hermitian=True)`` does with the first)."""
+    half_trace = 0.5 * (a + c)
+    radius = np.hypot(0.5 * (a - c), b)
+    big, small = half_trace + radius, half_trace - radius
+    cutoff = np.maximum(rcond * np.maximum(np.abs(big), np.abs(small)), floor)
+    matrix = np.stack([np.stack([a, b], axis=1), np.stack([b, c], axis=1)], axis=1)
+    eye = np.eye(2)
+    both = (big > cutoff) & (small > cutoff)
+    one = (big > cutoff) & ~both
+    out = np.zeros_like(matrix)
+    det = np.where(both, a * c - b * b, 1.0)
+    adjugate = np.stack([np.stack([c, -b], axis=1), np.stack([-b, a], axis=1)], axis=1)
+    out[both] = adjugate[both] / det[both, None, None]
+    # One eigenvalue kept: (M - small I) / (big - small) projects onto its eigenvector.
+    projector = (matrix[one] - small[one, None, None] * eye) / (big[one] - small[one])[:, None, None]
+    out[one] = projector / big[one, None, None]
+    return out
 
 
 def _unravel(keys: np.ndarray, dims: np.ndarray) -> np.ndarray:

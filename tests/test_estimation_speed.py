@@ -10,11 +10,13 @@ import sys
 
 import numpy as np
 import pytest
+from scipy import ndimage
 
 from estimation import estimate
 from estimation import tolerances as tol
 from estimation.downsample import voxel_subsample
-from estimation.grid import grid_around, occupancy
+from estimation.dualcontour import QEF_RELATIVE_EIGENVALUE, _pinv_2x2
+from estimation.grid import CLOSING_RADII, _ball_radius2, grid_around, occupancy
 from estimation.implicit import NEIGHBOURS_27, _locate_27
 from estimation.normals import estimate_normals
 from estimation.obb import column_bounds, oriented_box_local
@@ -39,6 +41,40 @@ def test_locate_27_matches_band_locate(ratio, shapes):
     slow = band.locate((base[:, None, :] + NEIGHBOURS_27[None]).reshape(-1, 3))
     assert (slow >= 0).any()
     np.testing.assert_array_equal(_locate_27(band, base), np.where(slow < 0, band.size, slow))
+
+
+@pytest.mark.parametrize("name", ["thin-cup-00", "concave-mug-11", "crease-star-08"])
+def test_every_closing_shell_is_the_ball_dilation_of_the_occupied_nodes(name, shapes):
+    # occupancy thresholds one distance transform; each shell must be what dilating by the ball gives.
+    points = sample_surface(shapes[name].mesh, 4000, seed=2).points
+    grid = grid_around(points, 0.004)
+    occupied = np.zeros(grid.shape, dtype=bool)
+    idx = grid.index_of(points)
+    occupied[idx[:, 0], idx[:, 1], idx[:, 2]] = True
+    distance2 = np.rint(ndimage.distance_transform_edt(~occupied) ** 2)
+    for radius in CLOSING_RADII:
+        r = np.arange(-radius, radius + 1)
+        x, y, z = np.meshgrid(r, r, r, indexing="ij")
+        ball = (x**2 + y**2 + z**2) <= max(radius**2, 3)
+        np.testing.assert_array_equal(distance2 <= _ball_radius2(radius),
+                                      ndimage.binary_dilation(occupied, structure=ball))
+    result = occupancy(points, grid)
+    np.testing.assert_array_equal(result.shell, distance2 <= _ball_radius2(result.closing))
+
+
+def test_closed_form_2x2_pseudo_inverse_matches_numpy():
+    rng = np.random.default_rng(4)
+    rank2 = rng.normal(size=(300, 2, 2))
+    rank1 = rng.normal(size=(300, 2, 1))
+    near1 = rank1 @ rank1.transpose(0, 2, 1) + 1e-3 * np.eye(2)  # a small second eigenvalue: dropped
+    matrices = np.concatenate([rank2 @ rank2.transpose(0, 2, 1), rank1 @ rank1.transpose(0, 2, 1), near1,
+                               np.zeros((5, 2, 2))])
+    got = _pinv_2x2(matrices[:, 0, 0], matrices[:, 0, 1], matrices[:, 1, 1], QEF_RELATIVE_EIGENVALUE)
+    want = np.linalg.pinv(matrices, rcond=QEF_RELATIVE_EIGENVALUE, hermitian=True)
+    scale = np.abs(want).max(axis=(1, 2), keepdims=True) + 1e-300
+    assert np.abs((got - want) / scale).max() < 1e-8
+    # Spreads at or below the floor are dropped whatever their ratio.
+    assert not _pinv_2x2(np.array([1e-24]), np.array([0.0]), np.array([1e-24]), 0.05, 1e-20).any()
 
 
 def test_voxel_subsample_keeps_one_measured_point_per_voxel():
