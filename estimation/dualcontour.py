@@ -59,6 +59,9 @@ VERTEX_SLACK_CELLS = 0.5
 #: (``_turns_with_position``).
 CURVED_MARGIN = 0.05
 
+#: ...and whose fitted curvature turns the normal by less than this (radians) across a cell.
+CURVED_MAX_TURN = 1.0
+
 #: A point's foot is where its normal line crosses its cell's mean plane; lines steeper than this
 #: cosine to the mean normal (at a crease, where the point's face ends) are taken at this cosine.
 FOOT_COSINE = 0.5
@@ -269,7 +272,7 @@ def _place_vertices(points: np.ndarray, normals: np.ndarray, band: Band, cell_ke
     # tightly for its cell they turn with position instead, and the quadric's minimiser (where the
     # tangent planes meet) lies outside a convex patch (a 7 mm tube at sigma 1 mm: half its cells taken
     # for creases, their vertices 0.25 mm out, +1.9 %).
-    one[~one] = _turns_with_position(rest[~one], cell, p - centre, n, w, normal_sum, noise)
+    one[~one] = _turns_with_position(rest[~one], cell, p - centre, n, w, normal_sum, noise, h)
     flat[rest[one]] = True
     sharp, lam, vec, keep = rest[~one], lam[~one], vec[~one], keep[~one]
     vertex = mean.copy()
@@ -389,7 +392,7 @@ def _gather(points: np.ndarray, normals: np.ndarray, band: Band, cell_keys: np.n
 
 
 def _turns_with_position(cells: np.ndarray, cell: np.ndarray, q: np.ndarray, n: np.ndarray, w: np.ndarray,
-                         normal_sum: np.ndarray, noise: float) -> np.ndarray:
+                         normal_sum: np.ndarray, noise: float, h: float) -> np.ndarray:
     """(len(cells),) bool: in each of ``cells`` the normals turn linearly with position (a curved patch)
     rather than jump from one face to another (a crease).
 
@@ -398,12 +401,14 @@ def _turns_with_position(cells: np.ndarray, cell: np.ndarray, q: np.ndarray, n: 
     spread but what noise in the positions hides: a share noise^2 / (the positions' spread per axis) of
     it, as errors in a regressor attenuate its fit. At a crease a line cannot follow the jump: at sigma
     1 mm a tetrahedron's crease cells left 0.6 to 1 of the spread unexplained, a 7 mm tube's cells 0.17 to
-    0.45 with 0.2 to 0.5 expected from the noise. ``CURVED_MARGIN`` is the slack on top.
+    0.45 with 0.2 to 0.5 expected from the noise. ``CURVED_MARGIN`` is the slack on top, and the
+    turn must be gentle enough for one cell (``CURVED_MAX_TURN``).
 
     Args:
         cells: rows of the cells to test. cell, q, n, w: each gathered point's cell row, position from
             its cell's centre (metres), unit normal and weight. normal_sum: (c, 3) each cell's weighted
-            normal sum. noise: the points' standard deviation about the surface, metres.
+            normal sum. noise: the points' standard deviation about the surface, metres. h: cell size,
+            metres.
     """
     if not len(cells):
         return np.zeros(0, dtype=bool)
@@ -428,11 +433,14 @@ def _turns_with_position(cells: np.ndarray, cell: np.ndarray, q: np.ndarray, n: 
                                    np.stack([cov(nv, qu), cov(nv, qv)], axis=1)], axis=1)
     tuu, tuv, tvv = cov(qu, qu), cov(qu, qv), cov(qv, qv)
     spread = cov(nu, nu) + cov(nv, nv)
-    explained = np.einsum("nij,njk,nik->n", normal_by_position, _pinv_2x2(tuu, tuv, tvv, 1e-9),
-                          normal_by_position)
+    shape = normal_by_position @ _pinv_2x2(tuu, tuv, tvv, 1e-9)  # the fitted shape operator, 1/m
+    explained = np.einsum("nij,nij->n", shape, normal_by_position)  # trace(N T^+ N^T)
     unexplained = 1.0 - explained / np.maximum(spread, np.finfo(float).tiny)
     hidden_by_noise = np.minimum(noise**2 / np.maximum((tuu + tvv) / (2 * weight), np.finfo(float).tiny), 1.0)
-    return unexplained < hidden_by_noise + CURVED_MARGIN
+    # A turn of more than about a radian per cell is no patch one vertex can follow: the rim of a wall
+    # a cell thick (two creases in one cell) turns its normals half a circle, nearly linearly.
+    gentle = np.sqrt((shape**2).sum(axis=(1, 2))) * h < CURVED_MAX_TURN
+    return gentle & (unexplained < hidden_by_noise + CURVED_MARGIN)
 
 
 def _rows_of(cells: np.ndarray, selected: np.ndarray) -> np.ndarray:
