@@ -45,3 +45,35 @@ def test_a_torus_with_a_tube_of_seven_sigmas_is_not_contoured_as_creases():
               for c in (sample_surface(mesh, count, seed=[seed], noise_sigma=0.001, with_normals=True)
                         for seed in range(5))]
     assert abs(np.median(errors)) < 0.008, np.round(100 * np.array(errors), 2)
+
+
+def _cell(positions: np.ndarray, normals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    return positions, normals / np.linalg.norm(normals, axis=1, keepdims=True)
+
+
+def test_curved_cells_are_told_from_creases_and_from_a_wall_rim():
+    # Three cells of side 2 mm, points across x in [-1.5, 1.5] mm and y in [-1, 1] mm, exact and noiseless.
+    from estimation.dualcontour import _turns_with_position
+
+    h = 0.002
+    x, y = (g.ravel() for g in np.meshgrid(np.linspace(-0.0015, 0.0015, 31), np.linspace(-0.001, 0.001, 11)))
+    zero = np.zeros_like(x)
+    radius = 0.007  # a 7 mm cylinder: turns 0.3 rad across the cell
+    curved = _cell(np.stack([x, y, np.sqrt(radius**2 - x**2) - radius], axis=1), np.stack([x, zero, np.sqrt(radius**2 - x**2)], axis=1))
+    tilt = np.radians(30.0)  # a 60-degree crease along y
+    side = np.where(x < 0, -1.0, 1.0)
+    crease = _cell(np.stack([x, y, -np.abs(x) * np.tan(tilt)], axis=1),
+                   np.stack([side * np.sin(tilt), zero, np.full_like(x, np.cos(tilt))], axis=1))
+    rim_radius = 0.0008  # a 1.6 mm wall's rim: half a circle within the cell
+    angle = x / 0.0015 * (np.pi / 2)
+    rim = _cell(np.stack([rim_radius * np.sin(angle), y, rim_radius * (np.cos(angle) - 1)], axis=1),
+                np.stack([np.sin(angle), zero, np.cos(angle)], axis=1))
+    cells = [curved, crease, rim]
+    turn = Rotation.random(random_state=7).as_matrix()  # the answer must not depend on the frame
+    q = np.concatenate([c[0] for c in cells]) @ turn.T
+    n = np.concatenate([c[1] for c in cells]) @ turn.T
+    cell = np.repeat(np.arange(3), len(x))
+    w = np.ones(len(q))
+    normal_sum = np.stack([np.bincount(cell, weights=n[:, i]) for i in range(3)], axis=1)
+    verdict = _turns_with_position(np.arange(3), cell, q, n, w, normal_sum, 0.0, h)
+    assert verdict.tolist() == [True, False, False]
