@@ -303,22 +303,11 @@ def _place_vertices(points: np.ndarray, normals: np.ndarray, band: Band, cell_ke
         # in the tangent plane, so it is worked in a 2-D basis (u, v) of it: 2 x 2 moments, and a closed-form
         # pseudo-inverse instead of a batched 3 x 3 one (a third of the reconstruction on a mug).
         u, v = _tangent_basis(nbar)
-        row = _rows_of(cf, flat)
-        uf, vf = u[row], v[row]
-        qu, qv = np.einsum("ij,ij->i", q, uf), np.einsum("ij,ij->i", q, vf)
-        nu, nv = np.einsum("ij,ij->i", nf, uf), np.einsum("ij,ij->i", nf, vf)
-        cu, cv = np.einsum("ij,ij->i", c, u), np.einsum("ij,ij->i", c, v)
-        su, sv = np.einsum("ij,ij->i", normal_sum[flat], u), np.einsum("ij,ij->i", normal_sum[flat], v)
-        # cov_nt[i, j] = sum w n_i q_j - (sum w n_i) c_j and cov_tt likewise, both in (u, v).
-        cov_nt = np.stack([np.stack([acc_flat(wf * nu * qu) - su * cu, acc_flat(wf * nu * qv) - su * cv], axis=1),
-                           np.stack([acc_flat(wf * nv * qu) - sv * cu, acc_flat(wf * nv * qv) - sv * cv], axis=1)],
-                          axis=1)
-        tuu = acc_flat(wf * qu * qu) - wsum * cu * cu
-        tuv = acc_flat(wf * qu * qv) - wsum * cu * cv
-        tvv = acc_flat(wf * qv * qv) - wsum * cv * cv
+        m = _TangentMoments.of(_rows_of(cf, flat), q, nf, wf, u, v)
         # A cell whose points lie on one spot (one point; rounding leaves ~1e-24 m^2) pins no curvature:
         # spreads under a millionth of a cell are zero, not inverted.
-        shape = cov_nt @ _pinv_2x2(tuu, tuv, tvv, QEF_RELATIVE_EIGENVALUE, wsum * (1e-6 * h) ** 2)
+        shape = m.normal_by_position @ _pinv_2x2(m.tuu, m.tuv, m.tvv, QEF_RELATIVE_EIGENVALUE,
+                                                 wsum * (1e-6 * h) ** 2)
         cell_centre = band.position(_unravel(cell_keys[flat], dims)) + h / 2
         step = mean[flat] - cell_centre - c
         mu = np.stack([np.einsum("ij,ij->i", step, u), np.einsum("ij,ij->i", step, v)], axis=1)
@@ -415,32 +404,62 @@ def _turns_with_position(cells: np.ndarray, cell: np.ndarray, q: np.ndarray, n: 
     selected = np.zeros(len(normal_sum), dtype=bool)
     selected[cells] = True
     mine = selected[cell]
-    row = _rows_of(cell[mine], selected)
     u, v = _tangent_basis(normal_sum[cells] / np.linalg.norm(normal_sum[cells], axis=1, keepdims=True))
-    qm, nm, wm = q[mine], n[mine], w[mine]
-    qu, qv = np.einsum("ij,ij->i", qm, u[row]), np.einsum("ij,ij->i", qm, v[row])
-    nu, nv = np.einsum("ij,ij->i", nm, u[row]), np.einsum("ij,ij->i", nm, v[row])
-
-    def acc(values: np.ndarray) -> np.ndarray:
-        return np.bincount(row, weights=values, minlength=len(cells))
-
-    weight = np.maximum(acc(wm), np.finfo(float).tiny)
-
-    def cov(a: np.ndarray, b: np.ndarray) -> np.ndarray:  # weighted sum of products about the means
-        return acc(wm * a * b) - acc(wm * a) * acc(wm * b) / weight
-
-    normal_by_position = np.stack([np.stack([cov(nu, qu), cov(nu, qv)], axis=1),
-                                   np.stack([cov(nv, qu), cov(nv, qv)], axis=1)], axis=1)
-    tuu, tuv, tvv = cov(qu, qu), cov(qu, qv), cov(qv, qv)
-    spread = cov(nu, nu) + cov(nv, nv)
-    shape = normal_by_position @ _pinv_2x2(tuu, tuv, tvv, 1e-9)  # the fitted shape operator, 1/m
-    explained = np.einsum("nij,nij->n", shape, normal_by_position)  # trace(N T^+ N^T)
-    unexplained = 1.0 - explained / np.maximum(spread, np.finfo(float).tiny)
-    hidden_by_noise = np.minimum(noise**2 / np.maximum((tuu + tvv) / (2 * weight), np.finfo(float).tiny), 1.0)
+    m = _TangentMoments.of(_rows_of(cell[mine], selected), q[mine], n[mine], w[mine], u, v)
+    shape = m.normal_by_position @ _pinv_2x2(m.tuu, m.tuv, m.tvv, 1e-9)  # the fitted shape operator, 1/m
+    explained = np.einsum("nij,nij->n", shape, m.normal_by_position)  # trace(N T^+ N^T)
+    unexplained = 1.0 - explained / np.maximum(m.normal_spread, np.finfo(float).tiny)
+    weight = np.maximum(m.weight, np.finfo(float).tiny)
+    hidden_by_noise = np.minimum(noise**2 / np.maximum((m.tuu + m.tvv) / (2 * weight), np.finfo(float).tiny), 1.0)
     # A turn of more than about a radian per cell is no patch one vertex can follow: the rim of a wall
     # a cell thick (two creases in one cell) turns its normals half a circle, nearly linearly.
     gentle = np.sqrt((shape**2).sum(axis=(1, 2))) * h < CURVED_MAX_TURN
     return gentle & (unexplained < hidden_by_noise + CURVED_MARGIN)
+
+
+@dataclass(frozen=True)
+class _TangentMoments:
+    """Weighted second moments of the points' normals and positions about their means, per cell, in each
+    cell's tangent basis (u, v): what a linear fit of the normals' turn with position needs.
+
+    Attributes:
+        weight: (k,) sum of weights. normal_by_position: (k, 2, 2) [i, j] = sum w (n_i - mean)(q_j - mean).
+        tuu, tuv, tvv: (k,) the positions' moments, m^2 (weighted sums). normal_spread: (k,) the
+        tangential normals' summed variance (weighted sum).
+    """
+
+    weight: np.ndarray
+    normal_by_position: np.ndarray
+    tuu: np.ndarray
+    tuv: np.ndarray
+    tvv: np.ndarray
+    normal_spread: np.ndarray
+
+    @classmethod
+    def of(cls, row: np.ndarray, q: np.ndarray, n: np.ndarray, w: np.ndarray, u: np.ndarray,
+           v: np.ndarray) -> _TangentMoments:
+        """``row``: each point's cell (0..k-1); ``q`` (m, 3) positions from the cell centre, metres; ``n``
+        (m, 3) unit normals; ``w`` (m,) weights; ``u``, ``v`` (k, 3) each cell's tangent basis."""
+        k = len(u)
+        ur, vr = u[row], v[row]
+        qu, qv = np.einsum("ij,ij->i", q, ur), np.einsum("ij,ij->i", q, vr)
+        nu, nv = np.einsum("ij,ij->i", n, ur), np.einsum("ij,ij->i", n, vr)
+
+        def acc(values: np.ndarray) -> np.ndarray:
+            return np.bincount(row, weights=values, minlength=k)
+
+        weight = acc(w)
+        safe = np.maximum(weight, np.finfo(float).tiny)
+        sums = [(x, acc(w * x)) for x in (qu, qv, nu, nv)]  # each value with its weighted sum per cell
+        (qu, squ), (qv, sqv), (nu, snu), (nv, snv) = sums
+
+        def cov(a: np.ndarray, sa: np.ndarray, b: np.ndarray, sb: np.ndarray) -> np.ndarray:
+            return acc(w * a * b) - sa * sb / safe  # weighted sum of products about the means
+
+        normal_by_position = np.stack([np.stack([cov(nu, snu, qu, squ), cov(nu, snu, qv, sqv)], axis=1),
+                                       np.stack([cov(nv, snv, qu, squ), cov(nv, snv, qv, sqv)], axis=1)], axis=1)
+        return cls(weight, normal_by_position, cov(qu, squ, qu, squ), cov(qu, squ, qv, sqv), cov(qv, sqv, qv, sqv),
+                   cov(nu, snu, nu, snu) + cov(nv, snv, nv, snv))
 
 
 def _rows_of(cells: np.ndarray, selected: np.ndarray) -> np.ndarray:
