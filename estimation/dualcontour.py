@@ -405,7 +405,8 @@ def _turns_with_position(cells: np.ndarray, cell: np.ndarray, q: np.ndarray, n: 
     selected[cells] = True
     mine = selected[cell]
     u, v = _tangent_basis(normal_sum[cells] / np.linalg.norm(normal_sum[cells], axis=1, keepdims=True))
-    m = _TangentMoments.of(_rows_of(cell[mine], selected), q[mine], n[mine], w[mine], u, v)
+    m = _TangentMoments.of(_rows_of(cell[mine], selected), q[mine], n[mine], w[mine], u, v, with_spread=True)
+    assert m.normal_spread is not None
     shape = m.normal_by_position @ _pinv_2x2(m.tuu, m.tuv, m.tvv, 1e-9)  # the fitted shape operator, 1/m
     explained = np.einsum("nij,nij->n", shape, m.normal_by_position)  # trace(N T^+ N^T)
     unexplained = 1.0 - explained / np.maximum(m.normal_spread, np.finfo(float).tiny)
@@ -425,7 +426,7 @@ class _TangentMoments:
     Attributes:
         weight: (k,) sum of weights. normal_by_position: (k, 2, 2) [i, j] = sum w (n_i - mean)(q_j - mean).
         tuu, tuv, tvv: (k,) the positions' moments, m^2 (weighted sums). normal_spread: (k,) the
-        tangential normals' summed variance (weighted sum).
+        tangential normals' summed variance (weighted sum), when asked for.
     """
 
     weight: np.ndarray
@@ -433,13 +434,14 @@ class _TangentMoments:
     tuu: np.ndarray
     tuv: np.ndarray
     tvv: np.ndarray
-    normal_spread: np.ndarray
+    normal_spread: np.ndarray | None
 
     @classmethod
     def of(cls, row: np.ndarray, q: np.ndarray, n: np.ndarray, w: np.ndarray, u: np.ndarray,
-           v: np.ndarray) -> _TangentMoments:
+           v: np.ndarray, *, with_spread: bool = False) -> _TangentMoments:
         """``row``: each point's cell (0..k-1); ``q`` (m, 3) positions from the cell centre, metres; ``n``
-        (m, 3) unit normals; ``w`` (m,) weights; ``u``, ``v`` (k, 3) each cell's tangent basis."""
+        (m, 3) unit normals; ``w`` (m,) weights; ``u``, ``v`` (k, 3) each cell's tangent basis;
+        ``with_spread``: also ``normal_spread`` (None otherwise: the vertex fit has no use for it)."""
         k = len(u)
         ur, vr = u[row], v[row]
         qu, qv = np.einsum("ij,ij->i", q, ur), np.einsum("ij,ij->i", q, vr)
@@ -450,16 +452,16 @@ class _TangentMoments:
 
         weight = acc(w)
         safe = np.maximum(weight, np.finfo(float).tiny)
-        sums = [(x, acc(w * x)) for x in (qu, qv, nu, nv)]  # each value with its weighted sum per cell
-        (qu, squ), (qv, sqv), (nu, snu), (nv, snv) = sums
+        squ, sqv, snu, snv = (acc(w * x) for x in (qu, qv, nu, nv))  # weighted sums per cell
 
         def cov(a: np.ndarray, sa: np.ndarray, b: np.ndarray, sb: np.ndarray) -> np.ndarray:
             return acc(w * a * b) - sa * sb / safe  # weighted sum of products about the means
 
         normal_by_position = np.stack([np.stack([cov(nu, snu, qu, squ), cov(nu, snu, qv, sqv)], axis=1),
                                        np.stack([cov(nv, snv, qu, squ), cov(nv, snv, qv, sqv)], axis=1)], axis=1)
+        spread = cov(nu, snu, nu, snu) + cov(nv, snv, nv, snv) if with_spread else None
         return cls(weight, normal_by_position, cov(qu, squ, qu, squ), cov(qu, squ, qv, sqv), cov(qv, sqv, qv, sqv),
-                   cov(nu, snu, nu, snu) + cov(nv, snv, nv, snv))
+                   spread)
 
 
 def _rows_of(cells: np.ndarray, selected: np.ndarray) -> np.ndarray:
