@@ -57,9 +57,23 @@ MAX_CELLS_PER_EXTENT = 128
 #: spacings (dropouts, the sparse far side of a view) ...
 FOOTPRINT_CLOSING_SPACINGS = 2.0
 
-#: ... and grown by this many (silhouette pixels are dropped as likely flying pixels, so every view's
-#: outline is about one spacing inside the object's).
+#: ... and grown by this many where a point's camera is not known (completed points, a cloud without depth
+#: images): silhouette pixels are dropped as likely flying pixels, so every view's outline is about one
+#: spacing inside the object's.
 FOOTPRINT_GROW_SPACINGS = 1.0
+
+#: Where it is known, each observed point reaches this many of its camera's pixel pitches further, on its own
+#: surface (:func:`silhouette_reach`): a view's outline lies one pixel beyond its last kept pixel (the edge
+#: pixel, dropped by ``fusion.edge_mask``, was on the object), plus up to one more (the ray of the next
+#: pixel missed the object, by up to a pixel: half on average).
+SILHOUETTE_PIXELS = 1.5
+
+#: A surface seen at more than ~75 degrees from its normal reaches at most 1 / this many pixel pitches per
+#: pitch (depth sensors return little beyond that incidence, and a noisy normal there is no guide).
+GRAZING_COSINE = 0.25
+
+#: Samples of the points' reach (:func:`silhouette_reach`) rasterised at a time (memory: 24 bytes each).
+REACH_SAMPLES = 1_000_000
 
 #: Carved-surface points per boundary voxel face, per axis (2: four points a voxel, about the observed
 #: points' density, so the reconstruction sees no hole between carved and observed surface).
@@ -206,14 +220,21 @@ def _pixels(pts: np.ndarray, view: DepthView) -> tuple[np.ndarray, np.ndarray, n
 
 
 def carve(points: np.ndarray, views: Sequence[DepthView], plane: Plane, *, others: np.ndarray | None = None,
-          cell: float | None = None) -> Carving:
+          cell: float | None = None, origins: np.ndarray | None = None, normals: np.ndarray | None = None) -> Carving:
     """The solid around one object's observed ``points`` that no view saw through.
+
+    It stands on the object's footprint: the points' shadow on the plane, gaps closed, and grown by how far
+    the object may reach past each point unseen (:func:`silhouette_reach`; ``FOOTPRINT_GROW_SPACINGS``
+    where that is not known). Only the growth away from the cameras matters: whatever the cameras saw
+    through is carved anyway.
 
     Args:
         points: (n, 3) metres, world frame: the object's observed points (above the plane).
         views: the depth images that saw the scene (every camera, not only those that saw the object), as
             :func:`carving_views` returns them.
         plane: the support plane, normal up into the objects' side; the solid stands on it.
+        origins, normals: (n, 3) each point's sensor origin (metres) and unit outward normal, world frame;
+            NaN rows (or None) where not known (a completed point).
         others: (m, 3) observed points of other objects: a voxel nearer to one of them than to ``points``
             is theirs (unseen space between two objects is split between them; distances on the grid).
         cell: voxel size, metres; None: the longest extent over ``CELLS_PER_EXTENT``.
@@ -240,7 +261,10 @@ def carve(points: np.ndarray, views: Sequence[DepthView], plane: Plane, *, other
     spacing = point_spacing(pts)
     closing = max(1, int(np.ceil(FOOTPRINT_CLOSING_SPACINGS * spacing / cell)))
     grow = max(1, int(np.ceil(FOOTPRINT_GROW_SPACINGS * spacing / cell)))
-    pad = closing + grow + 1
+    reach = silhouette_reach(pts, origins, normals, views, up) if origins is not None and normals is not None else None
+    known = np.zeros(len(pts), bool) if reach is None else np.isfinite(reach).all(axis=(1, 2))
+    longest = float(np.linalg.norm(reach[known], axis=2).sum(axis=1).max()) if known.any() else 0.0  # type: ignore[index]
+    pad = closing + max(grow, int(np.ceil(longest / cell))) + 1
     lo = np.floor(local[:, :2].min(axis=0) / cell).astype(np.int64) - pad
     hi = np.floor(local[:, :2].max(axis=0) / cell).astype(np.int64) + pad + 1
     top = int(np.ceil(local[:, 2].max() / cell)) + 1
@@ -248,11 +272,15 @@ def carve(points: np.ndarray, views: Sequence[DepthView], plane: Plane, *, other
     origin = centre - plane.offset * up + (lo[0] * cell) * e1 + (lo[1] * cell) * axes[1]
     carving = Carving(np.zeros(shape, dtype=bool), origin, axes, float(cell))
     seen = np.clip(carving.index_of(pts), 0, np.array(shape) - 1)
-    # The footprint: the shadow of the observed points, gaps closed, grown a little.
+    # The footprint: the shadow of the observed points, each grown by what its camera may have missed past
+    # it, gaps closed; points whose camera is not known grown by a spacing after the closing.
     shadow = np.zeros(shape[:2], dtype=bool)
-    shadow[seen[:, 0], seen[:, 1]] = True
-    shadow = ndimage.binary_closing(shadow, iterations=closing)
-    shadow = ndimage.binary_dilation(shadow, iterations=grow)
+    if known.any():
+        cells = _reach_cells(carving, pts[known], reach[known])  # type: ignore[index]
+        shadow[cells[:, 0], cells[:, 1]] = True
+    rest = np.zeros(shape[:2], dtype=bool)
+    rest[seen[~known, 0], seen[~known, 1]] = True
+    shadow = ndimage.binary_closing(shadow | rest, iterations=closing) | ndimage.binary_dilation(rest, iterations=grow)
     fi, fj = np.nonzero(shadow)
     k = np.arange(shape[2])
     index = np.stack([np.repeat(fi, shape[2]), np.repeat(fj, shape[2]), np.tile(k, len(fi))], axis=1)
@@ -275,6 +303,77 @@ def carve(points: np.ndarray, views: Sequence[DepthView], plane: Plane, *, other
     ids = np.unique(labels[seen[:, 0], seen[:, 1], seen[:, 2]])
     solid &= np.isin(labels, ids[ids > 0])
     return carving
+
+
+def silhouette_reach(points: np.ndarray, origins: np.ndarray, normals: np.ndarray, views: Sequence[DepthView],
+                     up: np.ndarray) -> np.ndarray:
+    """(n, 2, 3) metres, world frame: how far the object may reach past each point unseen, as two vectors:
+    along its surface away from its camera (the ray's direction in the tangent plane) and across the ray
+    (tangent too, either way), each ``SILHOUETTE_PIXELS`` of that camera's pixel pitch long on the surface.
+
+    A pixel spans range / fx across the ray, and that over the cosine of the incidence along it: a box's
+    top seen from 30 degrees above the level reaches 2 pitches past its last row, away from the camera;
+    its front face reaches 1.15 pitches down, not back. Along the ray, no further than a level surface
+    would (past a ball's limb) nor than 1 / ``GRAZING_COSINE`` pitches. NaN rows where a point has no
+    origin or normal, or its origin is none of the ``views``' camera centres (to 1 mm).
+
+    Args:
+        points, origins, normals: (n, 3) float64, world frame: points and their sensor origins (metres),
+            unit outward normals.
+        views: the cameras (their centres and focal lengths).
+        up: (3,) unit, the support plane's normal (what "level" means).
+    """
+    pts = np.asarray(points, dtype=np.float64)
+    out = np.full((len(pts), 2, 3), np.nan)
+    if not len(views) or not len(pts):
+        return out
+    centres = np.array([np.asarray(v.position, dtype=np.float64) for v in views])
+    focal = np.array([min(v.intrinsics.fx, v.intrinsics.fy) for v in views])
+    org = np.asarray(origins, dtype=np.float64)
+    ok = np.isfinite(org).all(axis=1) & np.isfinite(normals).all(axis=1)
+    gap = np.linalg.norm(np.where(ok[:, None], org, 0.0)[:, None, :] - centres[None], axis=2)
+    which = np.argmin(gap, axis=1)
+    ok &= gap[np.arange(len(pts)), which] <= 1e-3
+    ray = pts[ok] - org[ok]
+    rng = np.linalg.norm(ray, axis=1)
+    ray /= np.maximum(rng, 1e-12)[:, None]
+    n = np.asarray(normals, dtype=np.float64)[ok]
+    pitch = SILHOUETTE_PIXELS * rng / focal[which[ok]]
+    cosine = np.abs(np.einsum("ij,ij->i", ray, n))
+    along = ray - np.einsum("ij,ij->i", ray, n)[:, None] * n
+    across = np.cross(n, ray)
+    # Head on, the ray has no direction in the tangent plane: a pitch each way in any two tangent directions.
+    tiny = np.linalg.norm(along, axis=1) < 1e-6
+    helper = np.where((np.abs(n[:, :1]) < 0.9), np.array([1.0, 0, 0]), np.array([0, 1.0, 0]))
+    along[tiny] = np.cross(n[tiny], helper[tiny])
+    across[tiny] = np.cross(n[tiny], along[tiny])
+    along /= np.linalg.norm(along, axis=1, keepdims=True)
+    across /= np.linalg.norm(across, axis=1, keepdims=True)
+    # No further than on a level surface seen along the same ray: past a ball's or a lying can's limb the
+    # incidence nears 90 degrees, but the surface curves away from the next ray instead of running on.
+    level = np.abs(ray @ up)
+    out[ok, 0] = along * (pitch / np.maximum(np.maximum(cosine, level), GRAZING_COSINE))[:, None]
+    out[ok, 1] = across * pitch[:, None]
+    return out
+
+
+def _reach_cells(carving: Carving, points: np.ndarray, reach: np.ndarray) -> np.ndarray:
+    """(m, 2) grid columns (indices in the plane) of each point's parallelogram, point + [0, 1] reach[0]
+    +- reach[1] ((n, 3) points and (n, 2, 3) reach, metres), sampled no more than a cell apart.
+
+    Away from the camera only: towards it, a point's neighbour was seen (or was hidden by something nearer,
+    as the far rim of a ring's hole is behind the hole; grown that way, the hole would close)."""
+    steps = [max(1, int(np.ceil(float(np.linalg.norm(reach[:, k], axis=1).max()) / carving.cell))) for k in range(2)]
+    a = np.linspace(0.0, 1.0, steps[0] + 1)
+    b = np.linspace(-1.0, 1.0, 2 * steps[1] + 1)
+    ab = np.stack(np.meshgrid(a, b, indexing="ij"), axis=-1).reshape(-1, 2)
+    chunk = max(1, REACH_SAMPLES // len(ab))  # bounded memory however fine the grid is against the pixels
+    cells = []
+    for start in range(0, len(points), chunk):
+        p, r = points[start:start + chunk], reach[start:start + chunk]
+        grown = p[:, None, :] + ab[None, :, :1] * r[:, None, 0] + ab[None, :, 1:] * r[:, None, 1]
+        cells.append(np.unique(carving.index_of(grown.reshape(-1, 3))[:, :2], axis=0))
+    return np.concatenate(cells)
 
 
 def carved_surface(carving: Carving) -> tuple[np.ndarray, np.ndarray]:

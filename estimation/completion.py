@@ -407,7 +407,9 @@ def _complete(points: np.ndarray, normals: np.ndarray, origins: np.ndarray, plan
 
     extent = float(np.ptp(points, axis=0).max())
     voxel = min(extent / CELLS_PER_EXTENT, max(0.5 * cut, extent / MAX_CELLS_PER_EXTENT))
-    carving = carve(np.concatenate([points, turned[0]]), views, plane, others=others, cell=voxel)
+    unknown = np.full_like(turned[0], np.nan)
+    carving = carve(np.concatenate([points, turned[0]]), views, plane, others=others, cell=voxel,
+                    origins=np.concatenate([origins, unknown]), normals=np.concatenate([normals, unknown]))
     surface, surface_n = carved_surface(carving)
     have = np.concatenate(have_p)
     have_normals = np.concatenate(have_n)

@@ -334,11 +334,11 @@ def test_touching_objects_first_seen_in_one_scan_are_both_observed():
 
 
 def test_an_object_moved_out_from_behind_another_is_seen_better_and_its_cloud_refreshed():
-    # One camera; a stands behind b and is mostly hidden. Moved clear of b it shows more of itself: once at
-    # rest the sensor offers the better view (refreshed), in the frame it tracks, and goes on tracking.
+    # One camera; a stands 2 cm behind b and is mostly hidden. Moved clear of b it shows more of itself: once
+    # at rest the sensor offers the better view (refreshed), in the frame it tracks, and goes on tracking.
     from scenes.cameras import SIGMA_1MM
 
-    model, data = _model({"a": (0.0, 0.0), "b": (0.0, -0.09)})
+    model, data = _model({"a": (0.0, 0.0), "b": (0.0, -0.08)})
     sensor, truth = CameraSensor(CameraFeed(_rig(1), WORKSPACE, seed=8, noise=SIGMA_1MM)), _Truth(model, data)
     first = sensor.observe(truth, "a", 0, shot=1)  # type: ignore[arg-type]
     sensor.observe(truth, "b", 0, shot=1)  # type: ignore[arg-type]

@@ -9,7 +9,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from estimation.carving import carve, carved_surface, carving_views, free_space
+from estimation.carving import (
+    SILHOUETTE_PIXELS,
+    carve,
+    carved_surface,
+    carving_views,
+    free_space,
+    silhouette_reach,
+)
 from estimation.completion import mirror_image
 from estimation.segmentation import Plane
 from scenes.cameras import EXACT, CameraFeed
@@ -38,6 +45,31 @@ def test_free_space_is_empty_space_and_never_the_object():
     assert not free[inside].any()  # nothing inside the box is carved (exact depth)
     # Around the box at 3 cameras, most of the empty space is seen through.
     assert free[~inside].mean() > 0.8
+
+
+def test_a_point_reaches_past_itself_what_its_camera_pixel_spans_on_its_own_surface():
+    # A camera 1 m away, 30 degrees above the level: on a level top a pixel spans pitch / sin(30 deg) along
+    # the view, away from the camera; on an upright face facing it, pitch / cos(30 deg) down it, not back;
+    # past a ball's limb (incidence 90 degrees) no further than on the level surface along the same ray.
+    from estimation.carving import DepthView
+    from estimation.fusion import Intrinsics
+
+    elevation = np.radians(30.0)
+    camera = np.array([-np.cos(elevation), 0.0, np.sin(elevation)])
+    view = DepthView(np.zeros((2, 2)), 0.0, Intrinsics(500.0, 500.0, 1.0, 1.0, 2, 2), np.eye(3), camera)
+    pitch = SILHOUETTE_PIXELS * 1.0 / 500.0
+    at = np.zeros((3, 3))
+    level, upright = np.array([0.0, 0.0, 1.0]), np.array([-1.0, 0.0, 0.0])
+    limb = np.cross(camera, [0.0, 1.0, 0.0])
+    limb /= np.linalg.norm(limb)  # perpendicular to the ray, in the vertical plane of the view
+    reach = silhouette_reach(at, np.tile(camera, (3, 1)), np.stack([level, upright, limb]), [view], level)
+    away = np.array([1.0, 0.0, 0.0])
+    np.testing.assert_allclose(reach[0, 0], away * pitch / np.sin(elevation), rtol=1e-9)
+    np.testing.assert_allclose(np.abs(reach[0, 1]), [0.0, pitch, 0.0], atol=1e-12)
+    np.testing.assert_allclose(reach[1, 0], [0.0, 0.0, -pitch / np.cos(elevation)], atol=1e-12)
+    assert np.linalg.norm(reach[2, 0]) == pytest.approx(pitch / np.sin(elevation))
+    # An origin that is no camera's: not known.
+    assert np.isnan(silhouette_reach(at[:1], camera[None] + 0.01, level[None], [view], level)).all()
 
 
 @pytest.mark.parametrize("count", [2, 3])
@@ -201,7 +233,9 @@ ONE_CAMERA_SHAPES = {  # name: (geom, size, height, yaw, volume)
 @pytest.mark.parametrize("shape", list(ONE_CAMERA_SHAPES))
 def test_one_camera_sees_the_back_of_a_half_turn_symmetric_object(shape, monkeypatch):
     """One camera (sigma 1 mm, 320 x 240 at ~0.6 m): the front turned half a turn about the axis found
-    from the silhouette and the seen-through space closes the back. Without it a ball loses its back."""
+    from the silhouette and the seen-through space closes the back. Without it a ball loses its back; a box
+    or a can standing upright is closed by the carved solid alone (its footprint is its top's shadow grown
+    by what the camera's silhouette pixels may have missed: carving.silhouette_reach)."""
     import estimation.completion as completion
     from estimation import estimate, make_cloud
     from scenes.cameras import SIGMA_1MM, ring
@@ -223,7 +257,7 @@ def test_one_camera_sees_the_back_of_a_half_turn_symmetric_object(shape, monkeyp
     if shape == "ball":
         assert error() < -0.2
     else:
-        assert abs(turned) <= abs(error()) + 0.005
+        assert abs(error()) < 0.05
 
 
 def test_no_half_turn_from_views_around_the_object_or_noise_near_its_size():
