@@ -233,9 +233,7 @@ ONE_CAMERA_SHAPES = {  # name: (geom, size, height, yaw, volume)
 @pytest.mark.parametrize("shape", list(ONE_CAMERA_SHAPES))
 def test_one_camera_sees_the_back_of_a_half_turn_symmetric_object(shape, monkeypatch):
     """One camera (sigma 1 mm, 320 x 240 at ~0.6 m): the front turned half a turn about the axis found
-    from the silhouette and the seen-through space closes the back. Without it a ball loses its back; a box
-    or a can standing upright is closed by the carved solid alone (its footprint is its top's shadow grown
-    by what the camera's silhouette pixels may have missed: carving.silhouette_reach)."""
+    from the silhouette and the seen-through space closes the back. Without it a ball loses its back."""
     import estimation.completion as completion
     from estimation import estimate, make_cloud
     from scenes.cameras import SIGMA_1MM, ring
@@ -257,7 +255,7 @@ def test_one_camera_sees_the_back_of_a_half_turn_symmetric_object(shape, monkeyp
     if shape == "ball":
         assert error() < -0.2
     else:
-        assert abs(error()) < 0.05
+        assert abs(turned) <= abs(error()) + 0.005
 
 
 def test_no_half_turn_from_views_around_the_object_or_noise_near_its_size():
