@@ -38,6 +38,7 @@ import numpy as np
 
 from estimation.contracts import as_points
 from estimation.inertia import triangle_areas
+from estimation.neighbours import nearest
 from estimation.segmentation import Plane
 
 if TYPE_CHECKING:
@@ -248,7 +249,7 @@ def mirror_image(points: np.ndarray, normals: np.ndarray, plane: Plane, *, noise
     h = plane.height(pts)
     tree = cKDTree(pts)
     k = min(TOP_NEIGHBOURS, len(pts))
-    centroids = plane.height(pts[tree.query(pts, k, workers=-1)[1].reshape(len(pts), k)].mean(axis=1))
+    centroids = plane.height(pts[nearest(tree, pts, k)[1]].mean(axis=1))
     top = float(np.percentile(centroids, TOP_PERCENTILE)) - TOP_NOISE_SIGMAS * noise / np.sqrt(k)
     middle = 0.5 * max(top, 0.0)
     lower = h < middle  # whatever the plane's removal left of it

@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from estimation.neighbours import nearest
+
 #: Points sampled for the statistics: medians over 5000 are stable to about 1 %.
 SAMPLE = 5000
 
@@ -88,7 +90,7 @@ def surface_noise(points: np.ndarray, tree=None) -> float:  # type: ignore[no-un
     # shows there is the patch widened to measure it properly.
     tree = _sample_tree(points)
     k = min(NOISE_FIRST_NEIGHBOURS, len(points))
-    dist, nbr = tree.query(sample, k=k, workers=-1)
+    dist, nbr = nearest(tree, sample, k)
     local = points[nbr] - points[nbr].mean(axis=1, keepdims=True)
     smallest = np.maximum(np.linalg.eigvalsh(np.einsum("nki,nkj->nij", local, local))[:, 0], 0.0)
     sigma = float(np.sqrt(np.median(smallest) / max(k - 3, 1)))
@@ -98,7 +100,7 @@ def surface_noise(points: np.ndarray, tree=None) -> float:  # type: ignore[no-un
     reference, k = points, min(NOISE_NEIGHBOURS, len(points))
     for _ in range(NOISE_ITERATIONS):
         tree = _sample_tree(reference)
-        dist, nbr = tree.query(sample, k=k, workers=-1)
+        dist, nbr = nearest(tree, sample, k)
         local = reference[nbr] - reference[nbr].mean(axis=1, keepdims=True)
         smallest = np.maximum(np.linalg.eigvalsh(np.einsum("nki,nkj->nij", local, local))[:, 0], 0.0)
         sigma = float(np.sqrt(np.median(smallest) / max(k - 3, 1)))
