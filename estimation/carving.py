@@ -278,8 +278,7 @@ def carve(points: np.ndarray, views: Sequence[DepthView], plane: Plane, *, other
     # it, gaps closed; the shadow of points whose camera is not known, gaps closed, grown by a spacing.
     shadow = np.zeros(shape[:2], dtype=bool)
     if known.any():
-        cells = _reach_cells(carving, pts[known], reach[known])  # type: ignore[index]
-        shadow[cells[:, 0], cells[:, 1]] = True
+        _mark_reach(shadow, carving, pts[known], reach[known])  # type: ignore[index]
     rest = np.zeros(shape[:2], dtype=bool)
     rest[seen[~known, 0], seen[~known, 1]] = True
     shadow = ndimage.binary_closing(shadow | rest, iterations=closing)
@@ -361,23 +360,27 @@ def silhouette_reach(points: np.ndarray, origins: np.ndarray, normals: np.ndarra
     return out
 
 
-def _reach_cells(carving: Carving, points: np.ndarray, reach: np.ndarray) -> np.ndarray:
-    """(m, 2) grid columns (indices in the plane) of each point's parallelogram, point + [0, 1] reach[0]
-    +- reach[1] ((n, 3) points and (n, 2, 3) reach, metres), sampled no more than a cell apart.
+def _mark_reach(shadow: np.ndarray, carving: Carving, points: np.ndarray, reach: np.ndarray) -> None:
+    """Mark in ``shadow`` (the grid's columns, (nu, nv) bool) each point's parallelogram on the plane, point +
+    [0, 1] reach[0] +- reach[1] ((n, 3) points and (n, 2, 3) reach, metres), sampled no more than a cell apart.
 
     Away from the camera only: towards it, a point's neighbour was seen (or was hidden by something nearer,
     as the far rim of a ring's hole is behind the hole; grown that way, the hole would close)."""
-    steps = [max(1, int(np.ceil(float(np.linalg.norm(reach[:, k], axis=1).max()) / carving.cell))) for k in range(2)]
+    # In the plane, in cells: only the shadow is marked.
+    flat = carving.axes[:2].T / carving.cell
+    xy = (points - carving.origin) @ flat
+    r = reach @ flat
+    steps = [max(1, int(np.ceil(float(np.linalg.norm(r[:, k], axis=1).max())))) for k in range(2)]
     a = np.linspace(0.0, 1.0, steps[0] + 1)
     b = np.linspace(-1.0, 1.0, 2 * steps[1] + 1)
     ab = np.stack(np.meshgrid(a, b, indexing="ij"), axis=-1).reshape(-1, 2)
     chunk = max(1, REACH_SAMPLES // len(ab))  # bounded memory however fine the grid is against the pixels
-    cells = []
     for start in range(0, len(points), chunk):
-        p, r = points[start:start + chunk], reach[start:start + chunk]
-        grown = p[:, None, :] + ab[None, :, :1] * r[:, None, 0] + ab[None, :, 1:] * r[:, None, 1]
-        cells.append(np.unique(carving.index_of(grown.reshape(-1, 3))[:, :2], axis=0))
-    return np.concatenate(cells)
+        p, q = xy[start:start + chunk], r[start:start + chunk]
+        cells = np.floor(p[:, None, :] + ab[None, :, :1] * q[:, None, 0] + ab[None, :, 1:] * q[:, None, 1])
+        cells = cells.reshape(-1, 2).astype(np.int64)
+        inside = ((cells >= 0) & (cells < np.array(shadow.shape))).all(axis=1)
+        shadow[cells[inside, 0], cells[inside, 1]] = True
 
 
 def carved_surface(carving: Carving) -> tuple[np.ndarray, np.ndarray]:
