@@ -57,9 +57,9 @@ MAX_CELLS_PER_EXTENT = 128
 #: spacings (dropouts, the sparse far side of a view) ...
 FOOTPRINT_CLOSING_SPACINGS = 2.0
 
-#: ... and grown by this many where a point's camera is not known (completed points, a cloud without depth
-#: images): silhouette pixels are dropped as likely flying pixels, so every view's outline is about one
-#: spacing inside the object's.
+#: ... and grown by this many where a point's camera is not known (completed points: the half-turned image):
+#: silhouette pixels are dropped as likely flying pixels, so every view's outline is about one spacing
+#: inside the object's.
 FOOTPRINT_GROW_SPACINGS = 1.0
 
 #: Where it is known, each observed point reaches this many of its camera's pixel pitches further, on its own
@@ -345,7 +345,7 @@ def silhouette_reach(points: np.ndarray, origins: np.ndarray, normals: np.ndarra
     cosine = np.abs(np.einsum("ij,ij->i", ray, n))
     along = ray - np.einsum("ij,ij->i", ray, n)[:, None] * n
     across = np.cross(n, ray)
-    # Head on, the ray has no direction in the tangent plane: a pitch each way in any two tangent directions.
+    # Head on, the ray has no direction in the tangent plane: a pitch in any two tangent directions.
     tiny = np.linalg.norm(along, axis=1) < 1e-6
     helper = np.where((np.abs(n[:, :1]) < 0.9), np.array([1.0, 0, 0]), np.array([0, 1.0, 0]))
     along[tiny] = np.cross(n[tiny], helper[tiny])
