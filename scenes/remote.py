@@ -25,7 +25,7 @@ from scenes.sources import prepare_objects, reference_estimate, source_mesh
 from sync.clock import REAL_CLOCK, Clock
 from sync.keys import Keys
 from sync.link import Link
-from sync.messages import VERSION, Gone, Heartbeat, OperatorCommand, Pose, SceneInfo, cloud_message
+from sync.messages import MAX_INT64, VERSION, Gone, Heartbeat, OperatorCommand, Pose, SceneInfo, cloud_message
 from sync.recording import Recorder
 from sync.transport import Transport
 from twin.debuglog import OFF, DebugLog
@@ -374,7 +374,9 @@ class Remote:
         if self._command is None:
             return 0
         stamp, arrived = self._command
-        return max(0, stamp + self.clock.stamp_ns() - arrived)
+        # A command stamped near the int64 limit (forged, or a broken clock) must not push every later pose
+        # past it, where the twin refuses them all: clamped, the twin finds no such moment and compares now.
+        return min(MAX_INT64, max(0, stamp + self.clock.stamp_ns() - arrived))
 
     def _scene_info(self) -> SceneInfo:
         t, ee = self.scene.table, self.scene.end_effector

@@ -6,8 +6,8 @@ ordered also carry the sender's ``epoch`` (fixed for one run of the sender, larg
 ``seq`` counting up within the epoch, so a restarted remote is told from a stale one.
 
 :func:`decode` rejects what no honest sender could mean, before anything is allocated for it: an unknown
-type or version, garbage, non-finite numbers, a quaternion that is not unit length, an id outside the
-key-expression alphabet, a cloud whose header and payload sizes disagree or that claims more than
+type or version, garbage, non-finite numbers, a stamp or sequence number an int64 cannot hold, a quaternion
+that is not unit length, an id outside the key-expression alphabet, a cloud whose header and payload sizes disagree or that claims more than
 :data:`MAX_CLOUD_POINTS`. Each rejection is a :class:`MessageError` with a short ``reason``; receivers
 drop such a message, count it per reason and log it.
 
@@ -37,6 +37,14 @@ QUAT_NORM_TOLERANCE = 1e-3
 
 #: Largest coordinate, metres, any message may carry: a scene is metres across, 1 km is no scene.
 MAX_COORDINATE = 1e3
+
+#: Largest stamp, epoch or sequence number a message may carry, and the smallest is 0: what an int64 holds.
+#: msgpack carries integers up to 2**64 - 1, but the twin keeps stamps in numpy int64 arrays
+#: (:mod:`twin.history`): a pose answering to 2**64 - 1 raised OverflowError out of the twin's loop.
+MAX_INT64 = 2**63 - 1
+
+#: The integer fields that are times (ns) or sequence numbers, in any message that has them.
+_ORDINALS = ("stamp_ns", "epoch", "seq", "answers_ns")
 
 #: Default cloud quantisation step, metres: a tenth of a millimetre, well under a sensor's noise.
 CLOUD_QUANTUM = 1e-4
@@ -355,12 +363,8 @@ def _check(msg: Message) -> None:
     name = msg.object_id if hasattr(msg, "object_id") else getattr(msg, "name", None)
     if name is not None and not valid_id(name):
         raise MessageError("bad-id", f"id {name[:80]!r} is not a key chunk ([A-Za-z0-9_-], 1-64)")
-    for field in ("epoch", "seq"):
-        if getattr(msg, field, 0) < 0:
-            raise MessageError("bad-seq", f"{type(msg).__name__}: negative {field}")
+    _ordinals(msg)
     if isinstance(msg, Pose):
-        if msg.answers_ns < 0:
-            raise MessageError("bad-seq", f"pose {msg.object_id!r}: negative answers_ns")
         _finite(msg, msg.position, msg.linvel, msg.angvel, (msg.sim_time, msg.position_sigma, msg.angle_sigma))
         _coordinates(msg, msg.position)
         _unit(msg, msg.quat)
@@ -411,6 +415,17 @@ def _check_cloud(msg: Cloud) -> None:
     _framed_size(msg, msg.data, 3 * (msg.bits // 8) * msg.count, "points")
     if msg.normals:
         _framed_size(msg, msg.normals, 3 * msg.count, "normals")
+
+
+def _ordinals(msg: Message) -> None:
+    """Stamps and sequence numbers: a negative epoch, seq or answers_ns is a bad sequence number; any of
+    them (or a stamp) outside 0 .. :data:`MAX_INT64` is out of range."""
+    for field in _ORDINALS:
+        value = getattr(msg, field, 0)
+        if value < 0 and field != "stamp_ns":
+            raise MessageError("bad-seq", f"{type(msg).__name__}: negative {field}")
+        if not 0 <= value <= MAX_INT64:
+            raise MessageError("out-of-range", f"{type(msg).__name__}: {field} {value} outside 0 .. 2**63 - 1")
 
 
 def _finite(msg: Message, *groups) -> None:  # type: ignore[no-untyped-def]

@@ -14,7 +14,7 @@ from scenes.scenefile import load_scene
 from scenes.sensing import SurfaceSensor, Track
 from sync.keys import Keys
 from sync.link import Link
-from sync.messages import VERSION, Pose
+from sync.messages import VERSION, OperatorCommand, Pose
 from twin.runtime import LocalSettings
 from twin.trajectory import push_trajectory
 
@@ -86,6 +86,21 @@ def test_a_forged_sequence_number_silences_an_object_only_until_a_heartbeat_and_
         assert np.linalg.norm(session.local.twin.pose("crate")[0] - target) > 0.05  # the forgery hides the move
         # A heartbeat (every 0.2 s) pulls the forged mark back; the next keyframe (1 s) brings the real pose.
         session.run(remote.keyframe_s + remote.heartbeat_s)
+        assert np.linalg.norm(session.local.twin.pose("crate")[0] - target) < 0.005
+
+
+def test_a_command_stamped_at_the_int64_limit_does_not_push_the_remotes_poses_out_of_range(cache):
+    with Headless(load_scene(SMALL), cache_dir=cache) as session:
+        session.run(0.2)
+        remote, keys = session.remote, Keys("small")
+        ee = tuple(remote.twin.data.mocap_pos[0].tolist())
+        # The remote answers to command stamps on the twin's clock: this one plus any time would pass 2**63 - 1.
+        Link(session.bus.transport()).put(keys.operator, OperatorCommand(v=VERSION, stamp_ns=2**63 - 1, epoch=1,
+                                                                         seq=1, position=ee))
+        session.run(0.05)
+        target = _move_crate(remote, 0.1)
+        session.run(0.3)
+        assert not session.local.link.counters.dropped_by_reason  # its poses still decode
         assert np.linalg.norm(session.local.twin.pose("crate")[0] - target) < 0.005
 
 

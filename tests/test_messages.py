@@ -15,9 +15,12 @@ from sync.link import Link
 from sync.messages import (
     MAX_CLOUD_POINTS,
     VERSION,
+    Gone,
     Heartbeat,
     MessageError,
     OperatorCommand,
+    OperatorForce,
+    OperatorTarget,
     Pose,
     SceneInfo,
     as_received,
@@ -120,6 +123,12 @@ def test_a_pose_whose_seen_flag_is_not_a_bool_is_rejected():
     ({"position_sigma": -0.001}, "out-of-range"),
     ({"angle_sigma": float("nan")}, "non-finite"),
     ({"position_sigma": 1e9}, "out-of-range"),
+    ({"answers_ns": 2**64 - 1}, "out-of-range"),  # msgpack carries it; the twin's int64 history cannot
+    ({"answers_ns": 2**63}, "out-of-range"),
+    ({"stamp_ns": 2**64 - 1}, "out-of-range"),
+    ({"stamp_ns": -1}, "out-of-range"),
+    ({"seq": 2**63}, "out-of-range"),
+    ({"epoch": 2**64 - 1}, "out-of-range"),
 ])
 def test_decode_rejects_poses_no_sender_could_mean(fields, reason):
     with pytest.raises(MessageError) as err:
@@ -137,6 +146,23 @@ def test_decode_rejects_other_impossible_messages():
         with pytest.raises(MessageError) as err:
             decode(encode(msg))
         assert err.value.reason == reason
+
+
+def test_every_stamp_and_sequence_number_must_fit_an_int64():
+    largest = 2**63 - 1
+    assert decode(encode(_pose(stamp_ns=largest, epoch=largest, seq=largest, answers_ns=largest))).seq == largest
+    messages = [_pose(), _cloud(), Heartbeat(v=VERSION, stamp_ns=0, epoch=0, seq=1, sim_time=0.0, objects=1),
+                Gone(v=VERSION, stamp_ns=0, object_id="o", epoch=0, seq=1),
+                OperatorCommand(v=VERSION, stamp_ns=0, epoch=0, seq=1, position=(0.0, 0.0, 0.5)),
+                OperatorTarget(v=VERSION, stamp_ns=0, device="d", epoch=0, seq=1, position=(0.0, 0.0, 0.5)),
+                OperatorForce(v=VERSION, stamp_ns=0, epoch=0, seq=1, sim_time=0.0, force=(0.0,) * 3,
+                              position=(0.0,) * 3)]
+    for msg in messages:
+        decode(encode(msg))
+        for field in ("stamp_ns", "epoch", "seq"):
+            with pytest.raises(MessageError) as err:
+                decode(encode(replace(msg, **{field: 2**64 - 1})))
+            assert err.value.reason == "out-of-range", (type(msg).__name__, field)
 
 
 @pytest.mark.parametrize("data", [b"", b"\x00\xff garbage", b"\x93\x01"])
