@@ -33,7 +33,7 @@ class LinkCounters:
     bytes_sent: int = 0
     messages_received: int = 0
     bytes_received: int = 0
-    dropped_malformed: int = 0
+    dropped_malformed: int = 0  # every message dropped: decode's reasons, and the receiver's (see Link.dropped)
     dropped_by_reason: Counter = field(default_factory=Counter)
     last_received: float | None = None  # clock.now() of the last good message
 
@@ -83,10 +83,7 @@ class Link:
             if named is not None and object_of(key) not in (None, named):
                 raise MessageError("wrong-key", f"a message about {named!r} on another object's key")
         except MessageError as exc:
-            with self._lock:
-                self.counters.dropped_malformed += 1
-                self.counters.dropped_by_reason[exc.reason] += 1
-            self.dropped_log.warning(exc.reason, "dropped malformed message on %s: %s", key, exc)
+            self.dropped(exc.reason, "dropped malformed message on %s: %s", key, exc)
             return False
         with self._lock:
             self.counters.messages_received += 1
@@ -97,6 +94,16 @@ class Link:
         except Exception:  # the handler's bug must not become the transport's crash
             log.exception("handling a message on %s failed", key)
         return True
+
+    def dropped(self, reason: str, msg: str, *args: object, exc_info: bool = False) -> None:
+        """Count a received message dropped for ``reason`` and log ``msg % args``, rate-limited per reason.
+
+        For the receiver's own checks after decoding too (e.g. the twin's ``"handler-error"``), so every drop
+        is in one counter."""
+        with self._lock:
+            self.counters.dropped_malformed += 1
+            self.counters.dropped_by_reason[reason] += 1
+        self.dropped_log.warning(reason, msg, *args, exc_info=exc_info)
 
     def close(self) -> None:
         self.transport.close()

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 from dataclasses import replace
 from pathlib import Path
 
@@ -102,6 +103,30 @@ def test_a_command_stamped_at_the_int64_limit_does_not_push_the_remotes_poses_ou
         session.run(0.3)
         assert not session.local.link.counters.dropped_by_reason  # its poses still decode
         assert np.linalg.norm(session.local.twin.pose("crate")[0] - target) < 0.005
+
+
+def test_a_message_whose_handling_fails_is_dropped_counted_and_logged_and_the_twin_runs_on(cache, caplog):
+    with Headless(load_scene(SMALL), cache_dir=cache) as session:
+        session.run(0.2)
+        remote, local = session.remote, session.local
+        pos, quat = remote.twin.pose("crate")
+        # Queued as the transport's thread would, past decode (which now refuses it): a value no check caught.
+        # Its answers_ns overflows the twin's int64 history when the pose is measured.
+        bad = Pose(v=VERSION, stamp_ns=0, object_id="crate", epoch=remote.epoch, seq=10**7, sim_time=0.0,
+                   position=tuple(pos.tolist()), quat=tuple(quat.tolist()), linvel=(0.0,) * 3, angvel=(0.0,) * 3,
+                   answers_ns=2**64 - 1)
+        t0 = local.twin.time
+        with caplog.at_level(logging.WARNING, logger="sync.link"):
+            local._enqueue(Keys("small").object("crate", "pose"), bad)
+            session.run(0.05)
+        assert dict(local.link.counters.dropped_by_reason) == {"handler-error": 1}
+        assert local.twin.time == pytest.approx(t0 + 0.05)
+        (record,) = [r for r in caplog.records if "handling it failed" in r.getMessage()]
+        assert record.exc_info is not None and record.exc_info[0] is OverflowError  # with its traceback
+        # The forged seq holds the crate's poses back until a heartbeat; the keyframe after brings them.
+        target = _move_crate(remote, 0.1)
+        session.run(remote.keyframe_s + remote.heartbeat_s)
+        assert np.linalg.norm(local.twin.pose("crate")[0] - target) < 0.005
 
 
 def test_without_workers_the_twin_estimates_in_its_own_thread(cache):

@@ -13,6 +13,10 @@ Ordering: each ordered message carries the remote's ``(epoch, seq)``. Newer beat
 restarted remote (larger epoch) is followed at once. A heartbeat states the remote's counter now, so
 a mark past it (a forged or corrupted sequence number) is pulled back to it at the next heartbeat: it
 cannot silence the real remote for longer than a heartbeat period.
+
+Bad input: the link drops what decoding refuses (:mod:`sync.link`); a message that passes and still makes its
+handling fail is dropped too, counted in the same counter as ``"handler-error"`` and logged with its traceback
+(rate-limited), and the loop goes on.
 """
 
 from __future__ import annotations
@@ -325,7 +329,7 @@ class Local:
                 item = self.inbox.get(timeout=left)
             except queue.Empty:
                 return
-            self._handle(*item)
+            self._handle_safely(*item)
             self._flush_corrections()
             left = deadline - self.clock.now()
 
@@ -379,7 +383,7 @@ class Local:
                 item = self.inbox.get_nowait()
             except queue.Empty:
                 break
-            self._handle(*item)
+            self._handle_safely(*item)
         if correct:
             self._flush_corrections()
 
@@ -506,6 +510,19 @@ class Local:
         self.dropped_log.warning("out-of-scene", "dropped a %s of %r at %s: outside the scene", type(msg).__name__,
                                  msg.object_id, p.tolist())
         return False
+
+    def _handle_safely(self, received: float, key: str, msg) -> None:  # type: ignore[no-untyped-def]
+        """:meth:`_handle`, with an exception dropping the message (counted as ``"handler-error"``, logged with
+        its traceback, rate-limited) instead of ending the loop: decoding checks every value it knows of, and
+        one message it let through must not stop the twin. The physics step is not in here."""
+        try:
+            self._handle(received, key, msg)
+        except Exception as exc:
+            self._handler_error(msg, key, exc)
+
+    def _handler_error(self, msg, key: str, exc: Exception) -> None:  # type: ignore[no-untyped-def]
+        self.link.dropped("handler-error", "dropped a %s on %s: handling it failed (%s: %s)", type(msg).__name__,
+                          key, type(exc).__name__, exc, exc_info=True)
 
     def _handle(self, received: float, key: str, msg) -> None:  # type: ignore[no-untyped-def]
         if key == self.keys.operator_target:
@@ -641,10 +658,24 @@ class Local:
 
     def _flush_corrections(self) -> None:
         """Measure the corrections the poses handled since the last flush call for (each object once, from its
-        newest pose: see :meth:`_handle`); :meth:`_apply_corrections` then applies them step by step."""
-        if self._to_correct:
-            ids, self._to_correct = self._to_correct, []
-            self._measure([i for i in dict.fromkeys(ids) if i in self._targets])
+        newest pose: see :meth:`_handle`); :meth:`_apply_corrections` then applies them step by step.
+
+        A pose whose measurement fails is dropped and counted (``"handler-error"``), as in
+        :meth:`_handle_safely`; the others of its batch are measured one by one, so it costs them nothing."""
+        if not self._to_correct:
+            return
+        ids, self._to_correct = self._to_correct, []
+        ids = [i for i in dict.fromkeys(ids) if i in self._targets]
+        try:
+            self._measure(ids)
+        except Exception:
+            for object_id in ids:
+                try:
+                    self._measure([object_id])
+                except Exception as exc:
+                    self._handler_error(self._targets[object_id], self.keys.object(object_id, "pose"), exc)
+        for object_id in ids:
+            del self._targets[object_id]
 
     def _measure(self, ids: list[str]) -> None:
         """Turn each object's newest pose from C into the correction C' still needs: C's pose and velocity
@@ -655,7 +686,7 @@ class Local:
             return
         s = self.settings
         body, _, dof = self._indices(ids)
-        msgs = [self._targets.pop(i) for i in ids]
+        msgs = [self._targets[i] for i in ids]  # the caller forgets them once measured
         want = np.array([self._on_body(i, m, self._offsets[i], row=True) for i, m in zip(ids, msgs, strict=True)])
         n = len(ids)
         past, since, aligned = np.empty((n, STATE)), np.zeros((n, CORRECTION)), np.zeros(n, dtype=bool)
