@@ -15,8 +15,8 @@ from scenes.scenefile import load_scene
 from scenes.sensing import SurfaceSensor, Track
 from sync.keys import Keys
 from sync.link import Link
-from sync.messages import VERSION, OperatorCommand, Pose
-from twin.runtime import LocalSettings
+from sync.messages import VERSION, Cloud, OperatorCommand, Pose, cloud_message
+from twin.runtime import MAX_ORPHAN_POSES, LocalSettings
 from twin.trajectory import push_trajectory
 
 SMALL = Path(__file__).parent / "data" / "small.toml"
@@ -127,6 +127,44 @@ def test_a_message_whose_handling_fails_is_dropped_counted_and_logged_and_the_tw
         target = _move_crate(remote, 0.1)
         session.run(remote.keyframe_s + remote.heartbeat_s)
         assert np.linalg.norm(local.twin.pose("crate")[0] - target) < 0.005
+
+
+def _box_cloud(object_id: str, centre: np.ndarray, *, epoch: int, seq: int) -> Cloud:
+    """A 6 cm cube's surface cloud around ``centre`` (m, world frame), frame at the centre."""
+    rng = np.random.default_rng(5)
+    points = rng.uniform(-1.0, 1.0, (3000, 3))
+    points[np.arange(3000), rng.integers(0, 3, 3000)] = rng.choice([-1.0, 1.0], 3000)  # onto a face
+    return cloud_message(object_id, centre + 0.03 * points, stamp_ns=0, epoch=epoch, seq=seq, material="wood_pine",
+                         density=None, frame_position=centre, frame_quat=np.array([1.0, 0.0, 0.0, 0.0]))
+
+
+def test_poses_of_ids_without_a_cloud_are_bounded_and_one_just_before_its_cloud_is_used(cache):
+    with Headless(load_scene(SMALL), cache_dir=cache) as session:
+        session.run(0.1)
+        local, keys, epoch = session.local, Keys("small"), session.remote.epoch
+        forger = Link(session.bus.transport())
+        flood = 3 * MAX_ORPHAN_POSES
+        for k in range(flood):
+            forger.put(keys.object(f"ghost{k}", "pose"), Pose(
+                v=VERSION, stamp_ns=0, object_id=f"ghost{k}", epoch=epoch, seq=1, sim_time=0.0,
+                position=(0.0, 0.0, 0.6), quat=(1.0, 0.0, 0.0, 0.0), linvel=(0.0,) * 3, angvel=(0.0,) * 3,
+                seen=k % 2 == 0))
+            if k % 500 == 0:
+                session.tick()
+        session.tick()
+        assert local.report.evicted["pose"] == flood - MAX_ORPHAN_POSES
+        for held in (local._latest, local._pose_mark, local._unseen):
+            assert len(held) <= MAX_ORPHAN_POSES + 2, held  # the ghosts kept, and the crate and can
+        # A cube whose pose (10 cm from where its cloud was taken, and newer) comes just before its cloud.
+        taken, moved = np.array([-0.25, -0.2, 0.53]), (-0.25, -0.1, 0.53)
+        forger.put(keys.object("cube", "pose"), Pose(
+            v=VERSION, stamp_ns=0, object_id="cube", epoch=epoch, seq=2, sim_time=0.0, position=moved,
+            quat=(1.0, 0.0, 0.0, 0.0), linvel=(0.0,) * 3, angvel=(0.0,) * 3))
+        session.tick()
+        forger.put(keys.object("cube", "cloud"), _box_cloud("cube", taken, epoch=epoch, seq=1))
+        session.run(0.1)
+        assert "cube" in local.objects
+        assert np.linalg.norm(local.twin.pose("cube")[0] - moved) < 0.005
 
 
 def test_without_workers_the_twin_estimates_in_its_own_thread(cache):

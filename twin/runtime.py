@@ -182,9 +182,16 @@ class LocalReport:
     # reason -> device targets dropped after decoding: "out-of-workspace", "out-of-order", "wrong-type"
     operator_dropped: Counter = field(default_factory=Counter)
     forces_sent: int = 0  # OperatorForce messages published
+    # kind -> entries forgotten to bound memory: "pose" (ids with a pose and no cloud, past MAX_ORPHAN_POSES)
+    evicted: Counter = field(default_factory=Counter)
     # id -> |twin - remote| position, metres, every DIVERGENCE_EVERY seconds of twin time while both are known
     divergence: dict[str, list[float]] = field(default_factory=dict)
 
+
+#: Ids the twin keeps a pose of while it has no cloud of them (no body, none being estimated): a pose may come
+#: just before its object's cloud and is used when the object arrives, but poses for ids that never get a cloud
+#: (forged, or a remote's mistake) must not grow memory without limit. Past this many, the oldest is forgotten.
+MAX_ORPHAN_POSES = 1024
 
 #: How often (twin time, seconds) the report samples each object's divergence from the remote.
 DIVERGENCE_EVERY = 0.01
@@ -264,6 +271,7 @@ class Local:
         self._latest: dict[str, Pose] = {}
         self._unseen: set[str] = set()  # objects the remote's sensor has lost (Pose.seen False)
         self._pose_mark: dict[str, tuple[int, int]] = {}  # id -> (epoch, seq) of the newest pose taken
+        self._orphans: dict[str, None] = {}  # ids with a pose and no cloud, oldest first (MAX_ORPHAN_POSES)
         self._targets: dict[str, Pose] = {}  # id -> its newest pose from C, until measured (_measure)
         self._errors: dict[str, tuple[np.ndarray, bool]] = {}  # id -> (correction left (12,), snap it)
         self._history = History(round(settings.align_window / self.twin.model.opt.timestep))
@@ -533,6 +541,8 @@ class Local:
             if not self._in_scene(msg, msg.position) or not self._newer(self._pose_mark, msg):
                 return
             self._latest[msg.object_id] = msg
+            if msg.object_id not in self._clouds:
+                self._orphan(msg.object_id)
             if not msg.seen:
                 self._on_unseen(msg.object_id)
                 return
@@ -550,6 +560,7 @@ class Local:
         elif isinstance(msg, Cloud):
             if not self._in_scene(msg, msg.frame_position) or not self._newer(self._clouds, msg):
                 return
+            self._orphans.pop(msg.object_id, None)  # its pose, if one came first, is kept for it
             self._jobs[msg.object_id] = (self._submit(msg), msg, received)
             self.rlog.event(self.twin.time, f"{msg.object_id}: cloud received (seq {msg.seq}); estimating")
         elif isinstance(msg, Gone):
@@ -566,6 +577,7 @@ class Local:
             self._latest.pop(msg.object_id, None)
             self._mapped.pop(msg.object_id, None)
             self._pose_mark.pop(msg.object_id, None)
+            self._orphans.pop(msg.object_id, None)
             self._unseen.discard(msg.object_id)
             self.hold.forget(msg.object_id)
             if self.twin.has(msg.object_id):
@@ -573,6 +585,19 @@ class Local:
             for side in ("twin", "remote"):
                 self.rlog.removed(side, msg.object_id, self.twin.time)
             self.rlog.event(self.twin.time, f"{msg.object_id}: removed by the remote")
+
+    def _orphan(self, object_id: str) -> None:
+        """Note a pose of an object the twin has no cloud of, newest last; past :data:`MAX_ORPHAN_POSES` such ids,
+        forget all the twin holds of the oldest (its pose, mark and unseen flag) and count it."""
+        self._orphans.pop(object_id, None)
+        self._orphans[object_id] = None
+        if len(self._orphans) > MAX_ORPHAN_POSES:
+            oldest = next(iter(self._orphans))
+            del self._orphans[oldest]
+            for held in (self._latest, self._pose_mark, self._mapped):
+                held.pop(oldest, None)
+            self._unseen.discard(oldest)
+            self.report.evicted["pose"] += 1
 
     def _collect(self) -> None:
         for object_id, (future, msg, received) in list(self._jobs.items()):
