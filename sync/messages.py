@@ -176,8 +176,10 @@ class OperatorTarget(_Msg, tag="target"):
         encode(OperatorTarget(v=VERSION, stamp_ns=time.time_ns(), device="haptic0", epoch=t0, seq=n,
                               position=(0.1, 0.0, 0.55)))
 
-    The twin takes the newest ``(epoch, seq)`` of each device and drops older ones; a target that is not
-    finite, beyond :data:`MAX_COORDINATE`, or outside the scene's workspace is dropped and counted.
+    The twin takes the newest ``(epoch, seq)`` of each device and drops older ones, until the device has had
+    no target taken for :data:`sync.ordering.MARK_EXPIRY` seconds (then the next one is taken whatever its
+    number); a target that is not finite, beyond :data:`MAX_COORDINATE`, or outside the scene's workspace is
+    dropped and counted.
     """
 
     device: str

@@ -15,8 +15,9 @@ from scenes.scenefile import load_scene
 from scenes.sensing import SurfaceSensor, Track
 from sync.keys import Keys
 from sync.link import Link
-from sync.messages import VERSION, Cloud, OperatorCommand, Pose, cloud_message
-from twin.runtime import MAX_ORPHAN_POSES, LocalSettings
+from sync.messages import VERSION, Cloud, OperatorCommand, OperatorTarget, Pose, cloud_message
+from sync.ordering import MARK_EXPIRY, MAX_SENDERS
+from twin.runtime import MAX_ORPHAN_POSES, LocalSettings, OperatorSettings
 from twin.trajectory import push_trajectory
 
 SMALL = Path(__file__).parent / "data" / "small.toml"
@@ -165,6 +166,40 @@ def test_poses_of_ids_without_a_cloud_are_bounded_and_one_just_before_its_cloud_
         session.run(0.1)
         assert "cube" in local.objects
         assert np.linalg.norm(local.twin.pose("cube")[0] - moved) < 0.005
+
+
+def test_a_forged_device_mark_freezes_the_device_no_longer_than_the_mark_expiry(cache):
+    with Headless(load_scene(SMALL), cache_dir=cache, operator=OperatorSettings(listen=True)) as session:
+        local, driver, keys = session.local, Link(session.bus.transport()), Keys("small")
+
+        def target(position: np.ndarray, epoch: int, seq: int, device: str = "haptic0") -> None:
+            driver.put(keys.operator_target, OperatorTarget(v=VERSION, stamp_ns=0, device=device, epoch=epoch,
+                                                            seq=seq, position=tuple(position.tolist())))
+
+        start = local.twin.data.mocap_pos[0].copy()
+        forged, goal = start + np.array([0.05, 0.0, 0.0]), start + np.array([0.1, 0.0, 0.0])
+        target(start, 5, 1)
+        session.tick()
+        target(forged, 2**63 - 1, 2**63 - 1)
+        session.tick()
+        t0, seq = session.clock.now(), 0
+        # The driver restarts with a smaller epoch than the forgery and streams at the loop rate.
+        while session.clock.now() < t0 + MARK_EXPIRY - 2 * session.dt:
+            seq += 1
+            target(goal, 6, seq)
+            session.tick()
+            assert np.allclose(local.device_target, forged)
+        for _ in range(5):
+            seq += 1
+            target(goal, 6, seq)
+            session.tick()
+        assert np.allclose(local.device_target, goal) and np.allclose(local.twin.data.mocap_pos[0], goal)
+        assert local.report.operator_dropped["out-of-order"] >= seq - 5
+        # Forged device ids: at most MAX_SENDERS marks are kept.
+        for k in range(MAX_SENDERS + 10):
+            target(goal, 1, 1, device=f"fake{k}")
+        session.tick()
+        assert len(local._device_marks) == MAX_SENDERS and local.report.evicted["device"] == 11
 
 
 def test_without_workers_the_twin_estimates_in_its_own_thread(cache):

@@ -12,7 +12,9 @@ leaves alone is held at the remote's pose (:mod:`twin.hold`).
 Ordering: each ordered message carries the remote's ``(epoch, seq)``. Newer beats older per object; a
 restarted remote (larger epoch) is followed at once. A heartbeat states the remote's counter now, so
 a mark past it (a forged or corrupted sequence number) is pulled back to it at the next heartbeat: it
-cannot silence the real remote for longer than a heartbeat period.
+cannot silence the real remote for longer than a heartbeat period. A device driver's targets have no
+heartbeat: each device's mark expires :data:`sync.ordering.MARK_EXPIRY` seconds after the last target taken
+from it, so a forged one cannot freeze the device for longer (:mod:`sync.ordering`).
 
 Bad input: the link drops what decoding refuses (:mod:`sync.link`); a message that passes and still makes its
 handling fail is dropped too, counted in the same counter as ``"handler-error"`` and logged with its traceback
@@ -53,6 +55,7 @@ from sync.messages import (
     unpack_normals,
     unpack_points,
 )
+from sync.ordering import Marks
 from sync.ratelimit import RateLimitedLog
 from sync.recording import Recorder
 from sync.transport import Transport
@@ -120,7 +123,9 @@ class OperatorSettings:
     Attributes:
         listen: follow :class:`sync.messages.OperatorTarget` messages on ``operator/target`` (a device
             driver) whenever :meth:`Local.iterate` is given no trajectory; newest ``(epoch, seq)`` per
-            device wins, the latest of any device is applied.
+            device wins, a device's mark lasting :data:`sync.ordering.MARK_EXPIRY` seconds after its last
+            target taken (so no forged sequence number freezes a device for longer); the latest of any
+            device is applied.
         force_rate: :class:`sync.messages.OperatorForce` messages per second of twin time on
             ``operator/force``; 0 publishes none. At or above the loop rate: one per step.
         reach: how far beyond the table's edges (and above its top) a target may be, metres; without a
@@ -182,7 +187,8 @@ class LocalReport:
     # reason -> device targets dropped after decoding: "out-of-workspace", "out-of-order", "wrong-type"
     operator_dropped: Counter = field(default_factory=Counter)
     forces_sent: int = 0  # OperatorForce messages published
-    # kind -> entries forgotten to bound memory: "pose" (ids with a pose and no cloud, past MAX_ORPHAN_POSES)
+    # kind -> entries forgotten to bound memory: "pose" (ids with a pose and no cloud, past MAX_ORPHAN_POSES),
+    # "device" (device marks, past sync.ordering.MAX_SENDERS)
     evicted: Counter = field(default_factory=Counter)
     # id -> |twin - remote| position, metres, every DIVERGENCE_EVERY seconds of twin time while both are known
     divergence: dict[str, list[float]] = field(default_factory=dict)
@@ -294,7 +300,7 @@ class Local:
         self._seq = 0
         self._epoch = clock.stamp_ns()  # of the operator commands this twin sends
         self.device_target: np.ndarray | None = None  # the latest device target taken (OperatorSettings.listen)
-        self._device_marks: dict[str, tuple[int, int]] = {}
+        self._device_marks = Marks()  # newest (epoch, seq) per device, expiring (sync.ordering)
         self._force_every = None if operator.force_rate <= 0 else 1.0 / operator.force_rate
         self._next_force = 0.0
         self._force_seq = 0
@@ -483,14 +489,14 @@ class Local:
                 v=VERSION, stamp_ns=self.clock.stamp_ns(), epoch=self._epoch, seq=self._force_seq, sim_time=t,
                 force=_float3(force), position=_float3(self.twin.data.mocap_pos[0])))
 
-    def _on_device_target(self, msg) -> None:  # type: ignore[no-untyped-def]
-        """Take a device driver's target if it is one, newer than the last of its device, in the workspace."""
+    def _on_device_target(self, msg, received: float) -> None:  # type: ignore[no-untyped-def]
+        """Take a device driver's target if it is one, newer than the last of its device (or that device's mark
+        has expired: :mod:`sync.ordering`), in the workspace. ``received``: when it arrived, clock seconds."""
         dropped = self.report.operator_dropped
         if not isinstance(msg, OperatorTarget):
             dropped["wrong-type"] += 1  # e.g. a pose published on the operator key
             return
-        mark = self._device_marks.get(msg.device)
-        if mark is not None and (msg.epoch, msg.seq) <= mark:
+        if not self._device_marks.newer(msg.device, msg.epoch, msg.seq, received):
             dropped["out-of-order"] += 1
             return
         position = np.asarray(msg.position, dtype=float)
@@ -500,7 +506,8 @@ class Local:
             self.dropped_log.warning("out-of-workspace", "dropped an operator target outside the workspace: %s",
                                      position.tolist())
             return
-        self._device_marks[msg.device] = (msg.epoch, msg.seq)
+        if self._device_marks.take(msg.device, msg.epoch, msg.seq, received):
+            self.report.evicted["device"] += 1
         self.device_target = position
         self.report.operator_targets += 1
 
@@ -534,7 +541,7 @@ class Local:
 
     def _handle(self, received: float, key: str, msg) -> None:  # type: ignore[no-untyped-def]
         if key == self.keys.operator_target:
-            self._on_device_target(msg)
+            self._on_device_target(msg, received)
         elif isinstance(msg, Heartbeat):
             self._on_heartbeat(msg)
         elif isinstance(msg, Pose):
