@@ -24,6 +24,8 @@ import math
 import msgspec
 import numpy as np
 
+from estimation.errors import MaterialError
+from estimation.materials import MAX_DENSITY, MIN_DENSITY, material
 from sync.keys import valid_id
 
 VERSION = 2
@@ -37,6 +39,15 @@ QUAT_NORM_TOLERANCE = 1e-3
 
 #: Largest coordinate, metres, any message may carry: a scene is metres across, 1 km is no scene.
 MAX_COORDINATE = 1e3
+
+#: Fastest an object may move in a pose, m/s and rad/s: far beyond anything on a table (a thrown ball is
+#: 40 m/s); past it the twin would write a forged velocity into MuJoCo's state.
+MAX_SPEED, MAX_ANGULAR_SPEED = 100.0, 1000.0
+
+#: A scene's sizes, metres: table sides, table height and end-effector radius lie in [MIN_SIZE, MAX_SCENE_SIZE]
+#: (a radius up to MAX_EE_RADIUS; 0 means none). Below a millimetre MuJoCo refuses the body (mass and inertia
+#: under mjMINVAL); a table is metres across, 100 m is a hall; the end effector is a fingertip or a tool.
+MIN_SIZE, MAX_SCENE_SIZE, MAX_EE_RADIUS = 1e-3, 100.0, 1.0
 
 #: Largest stamp, epoch or sequence number a message may carry, and the smallest is 0: what an int64 holds.
 #: msgpack carries integers up to 2**64 - 1, but the twin keeps stamps in numpy int64 arrays
@@ -372,6 +383,9 @@ def _check(msg: Message) -> None:
         _unit(msg, msg.quat)
         if msg.position_sigma < 0 or msg.angle_sigma < 0 or msg.position_sigma > MAX_COORDINATE:
             raise MessageError("out-of-range", f"pose {msg.object_id!r}: sigma outside [0, {MAX_COORDINATE:g}]")
+        if math.hypot(*msg.linvel) > MAX_SPEED or math.hypot(*msg.angvel) > MAX_ANGULAR_SPEED:
+            raise MessageError("out-of-range", f"pose {msg.object_id!r}: faster than {MAX_SPEED:g} m/s or "
+                                               f"{MAX_ANGULAR_SPEED:g} rad/s")
     elif isinstance(msg, Cloud):
         _check_cloud(msg)
     elif isinstance(msg, OperatorCommand | OperatorTarget):
@@ -391,6 +405,7 @@ def _check(msg: Message) -> None:
         _coordinates(msg, msg.ee_position, msg.table_size or (), (msg.table_height,))
         if (msg.table_size is not None and min(msg.table_size) <= 0) or msg.ee_radius < 0:
             raise MessageError("bad-size", "scene: non-positive table size or negative end-effector radius")
+        _check_scene_sizes(msg)
         low, high = msg.workspace_min, msg.workspace_max
         if (low is None) != (high is None):
             raise MessageError("bad-size", "scene: a workspace needs both corners")
@@ -399,6 +414,22 @@ def _check(msg: Message) -> None:
             _coordinates(msg, low, high)
             if not all(a < b for a, b in zip(low, high, strict=True)):
                 raise MessageError("bad-size", "scene: workspace min is not below max on every axis")
+
+
+def _check_scene_sizes(msg: SceneInfo) -> None:
+    """Table and end effector within :data:`MIN_SIZE` .. :data:`MAX_SCENE_SIZE` (:data:`MAX_EE_RADIUS`), and
+    the table's material one the twin knows (it sets the table's friction)."""
+    if msg.table_size is not None:
+        if not all(MIN_SIZE <= x <= MAX_SCENE_SIZE for x in (*msg.table_size, msg.table_height)):
+            raise MessageError("out-of-range", f"scene: table size or height outside {MIN_SIZE:g} .. "
+                                               f"{MAX_SCENE_SIZE:g} m")
+        try:
+            material(msg.table_material)
+        except MaterialError as exc:
+            raise MessageError("bad-material", f"scene: table material: {exc}") from exc
+    if msg.ee_radius != 0 and not MIN_SIZE <= msg.ee_radius <= MAX_EE_RADIUS:
+        raise MessageError("out-of-range", f"scene: end-effector radius {msg.ee_radius:g} m outside {MIN_SIZE:g} .. "
+                                           f"{MAX_EE_RADIUS:g}")
 
 
 def _check_cloud(msg: Cloud) -> None:
@@ -413,6 +444,9 @@ def _check_cloud(msg: Cloud) -> None:
     _unit(msg, msg.frame_quat)
     if (msg.density is not None and not (math.isfinite(msg.density) and msg.density > 0)):
         raise MessageError("non-finite", f"cloud {msg.object_id!r}: density {msg.density}")
+    if msg.density is not None and not MIN_DENSITY <= msg.density <= MAX_DENSITY:
+        raise MessageError("out-of-range", f"cloud {msg.object_id!r}: density {msg.density:g} kg/m^3 outside "
+                                           f"{MIN_DENSITY:g} .. {MAX_DENSITY:g}")
     # The frame headers state the decompressed sizes: checked against the point count without inflating.
     _framed_size(msg, msg.data, 3 * (msg.bits // 8) * msg.count, "points")
     if msg.normals:

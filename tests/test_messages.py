@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import logging
+
 import numpy as np
 import pytest
 import zstandard
@@ -9,6 +11,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from msgspec.structs import replace
 
+from sync.clock import SimClock
 from sync.inprocess import InProcessBus
 from sync.keys import Keys, intersects
 from sync.link import Link
@@ -30,6 +33,7 @@ from sync.messages import (
     unpack_normals,
     unpack_points,
 )
+from twin.runtime import Local, LocalSettings, SyncError
 
 IDENTITY = np.array([1.0, 0, 0, 0])
 
@@ -97,6 +101,8 @@ def test_normals_that_do_not_match_the_points_are_rejected():
 
 def test_a_good_pose_passes_unchanged():
     assert decode(encode(_pose())) == _pose()
+    fast = _pose(linvel=(0.0, 99.0, 0.0), angvel=(999.0, 0.0, 0.0))  # within MAX_SPEED, MAX_ANGULAR_SPEED
+    assert decode(encode(fast)) == fast
     assert decode(encode(_pose(seen=False))).seen is False
 
 
@@ -129,6 +135,10 @@ def test_a_pose_whose_seen_flag_is_not_a_bool_is_rejected():
     ({"stamp_ns": -1}, "out-of-range"),
     ({"seq": 2**63}, "out-of-range"),
     ({"epoch": 2**64 - 1}, "out-of-range"),
+    ({"linvel": (1e300, 0.0, 0.0)}, "out-of-range"),  # would reach MuJoCo's qvel
+    ({"linvel": (60.0, 60.0, 60.0)}, "out-of-range"),  # 104 m/s
+    ({"angvel": (0.0, 1e300, 0.0)}, "out-of-range"),
+    ({"angvel": (0.0, 0.0, -1001.0)}, "out-of-range"),
 ])
 def test_decode_rejects_poses_no_sender_could_mean(fields, reason):
     with pytest.raises(MessageError) as err:
@@ -165,6 +175,48 @@ def test_every_stamp_and_sequence_number_must_fit_an_int64():
             assert err.value.reason == "out-of-range", (type(msg).__name__, field)
 
 
+def _scene(**fields) -> SceneInfo:  # type: ignore[no-untyped-def]
+    good = SceneInfo(v=VERSION, stamp_ns=0, name="s", table_size=(1.0, 0.6, 0.04), table_height=0.5,
+                     table_material="wood_pine", ee_radius=0.02, ee_position=(-0.3, 0.0, 0.56))
+    return replace(good, **fields)
+
+
+@pytest.mark.parametrize(("fields", "reason"), [
+    ({"table_size": (1e-300, 1e-300, 1e-300)}, "out-of-range"),
+    ({"table_size": (1000.0, 1000.0, 1000.0)}, "out-of-range"),  # under 1 km, but no table
+    ({"table_height": 1e-9}, "out-of-range"),
+    ({"ee_radius": 999.0}, "out-of-range"),
+    ({"ee_radius": 1e-300}, "out-of-range"),  # MuJoCo refused the sphere: a ValueError out of Local()
+    ({"table_material": "adamantium"}, "bad-material"),  # a MaterialError out of Local()
+    ({"ee_radius": float("inf")}, "non-finite"),
+])
+def test_decode_rejects_scenes_no_twin_could_build(fields, reason):
+    with pytest.raises(MessageError) as err:
+        decode(encode(_scene(**fields)))
+    assert err.value.reason == reason
+
+
+def test_scenes_without_a_table_or_end_effector_still_decode():
+    bare = _scene(table_size=None, table_height=0.0, table_material="", ee_radius=0.0)
+    assert decode(encode(bare)) == bare
+    assert decode(encode(_scene(table_material="PLA"))).table_material == "PLA"  # aliases too
+
+
+@pytest.mark.parametrize(("fields", "said"), [
+    ({"table_material": "adamantium"}, "table material: unknown material 'adamantium'"),
+    ({"ee_radius": 1e-300}, "end-effector radius 1e-300 m outside"),
+    ({"name": "other"}, "it describes scene 'other', not 's'"),  # on the key asked for, another scene
+])
+def test_the_twin_refuses_a_scene_reply_it_cannot_use_and_says_so(fields, said, caplog):
+    clock, bus = SimClock(), InProcessBus()
+    info = _scene(**fields)
+    bus.transport("remote").queryable("twin/s/**", lambda _selector: [(Keys("s").info, encode(info))])
+    with caplog.at_level(logging.WARNING, logger="sync.link"), \
+            pytest.raises(SyncError, match=r"^no remote scene answered on twin/s/scene within 0\.5 s$"):
+        Local(bus.transport("twin"), clock=clock, scene="s", settings=LocalSettings(workers=0), wait=0.5)
+    assert caplog.records and all(said in r.getMessage() for r in caplog.records)
+
+
 @pytest.mark.parametrize("data", [b"", b"\x00\xff garbage", b"\x93\x01"])
 def test_decode_rejects_garbage(data):
     with pytest.raises(MessageError):
@@ -194,6 +246,10 @@ def test_a_small_cloud_claiming_a_huge_size_is_refused_without_allocating():
     ({"frame_position": (float("nan"), 0.0, 0.0)}, "non-finite"),
     ({"origin": (0.0, float("inf"), 0.0)}, "non-finite"),
     ({"density": -3.0}, "non-finite"),
+    ({"density": 1e300}, "out-of-range"),  # a 4.8e296 kg crate
+    ({"density": 1e-300}, "out-of-range"),
+    ({"density": 0.09}, "out-of-range"),
+    ({"density": 1.01e5}, "out-of-range"),
     ({"bits": 12}, "bad-header"),
     ({"quantum": float("nan")}, "bad-header"),
 ])

@@ -900,10 +900,19 @@ class Local:
     def _find_scene(self, scene: str | None, wait: float) -> SceneInfo:
         selector = Keys(scene).info if scene else any_scene_info()
         found: list[SceneInfo] = []
+
+        def answer(key: str, msg) -> None:  # type: ignore[no-untyped-def]
+            if not isinstance(msg, SceneInfo):
+                return
+            if scene and msg.name != scene:  # not the scene asked for, whatever key it came on: refused
+                self.link.dropped("wrong-key", "dropped a reply on %s: it describes scene %r, not %r", key,
+                                  msg.name, scene)
+                return
+            found.append(msg)
+
         deadline = self.clock.now() + wait
         while not found and self.clock.now() < deadline:
-            self.link.query(selector, lambda _k, m: found.append(m) if isinstance(m, SceneInfo) else None,
-                            timeout=min(1.0, wait))
+            self.link.query(selector, answer, timeout=min(1.0, wait))
             if not found:
                 self.clock.sleep(0.1)
         if not found:
