@@ -28,7 +28,9 @@ from dataclasses import dataclass
 from functools import cache
 
 PREFIX = "twin"
-_CHUNK = re.compile(r"^[A-Za-z0-9_-]{1,64}$")
+#: Longest id (scene, object, device), characters; other names on the wire (materials) are held to it too.
+MAX_ID_LENGTH = 64
+_CHUNK = re.compile(rf"^[A-Za-z0-9_-]{{1,{MAX_ID_LENGTH}}}$")
 
 
 def valid_id(name: str) -> bool:

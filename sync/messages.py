@@ -7,9 +7,10 @@ ordered also carry the sender's ``epoch`` (fixed for one run of the sender, larg
 
 :func:`decode` rejects what no honest sender could mean, before anything is allocated for it: an unknown
 type or version, garbage, non-finite numbers, a stamp or sequence number an int64 cannot hold, a quaternion
-that is not unit length, an id outside the key-expression alphabet, a cloud whose header and payload sizes disagree or that claims more than
-:data:`MAX_CLOUD_POINTS`. Each rejection is a :class:`MessageError` with a short ``reason``; receivers
-drop such a message, count it per reason and log it.
+that is not unit length, an id outside the key-expression alphabet, a material the twin does not know (or a
+name longer than an id), sizes, densities and speeds outside physical ranges, a cloud whose header and
+payload sizes disagree or that claims more than :data:`MAX_CLOUD_POINTS`. Each rejection is a
+:class:`MessageError` with a short ``reason``; receivers drop such a message, count it per reason and log it.
 
 Clouds are quantised on a grid of ``quantum`` metres relative to their minimum corner (16 bits per axis
 while the extent fits, else 32), sorted so neighbouring points have similar bytes, split into byte planes
@@ -26,7 +27,7 @@ import numpy as np
 
 from estimation.errors import MaterialError
 from estimation.materials import MAX_DENSITY, MIN_DENSITY, material
-from sync.keys import valid_id
+from sync.keys import MAX_ID_LENGTH, valid_id
 
 VERSION = 2
 
@@ -423,13 +424,22 @@ def _check_scene_sizes(msg: SceneInfo) -> None:
         if not all(MIN_SIZE <= x <= MAX_SCENE_SIZE for x in (*msg.table_size, msg.table_height)):
             raise MessageError("out-of-range", f"scene: table size or height outside {MIN_SIZE:g} .. "
                                                f"{MAX_SCENE_SIZE:g} m")
-        try:
-            material(msg.table_material)
-        except MaterialError as exc:
-            raise MessageError("bad-material", f"scene: table material: {exc}") from exc
+        _material(msg, msg.table_material)
     if msg.ee_radius != 0 and not MIN_SIZE <= msg.ee_radius <= MAX_EE_RADIUS:
         raise MessageError("out-of-range", f"scene: end-effector radius {msg.ee_radius:g} m outside {MIN_SIZE:g} .. "
                                            f"{MAX_EE_RADIUS:g}")
+
+
+def _material(msg: SceneInfo | Cloud, name: str) -> None:
+    """A material name the twin knows, at most :data:`sync.keys.MAX_ID_LENGTH` characters (a long one is refused
+    before it is looked up, matched against the table for hints, or logged)."""
+    what = "scene: table material" if isinstance(msg, SceneInfo) else f"cloud {msg.object_id!r}: material"
+    if len(name) > MAX_ID_LENGTH:
+        raise MessageError("bad-material", f"{what} of {len(name):,} characters, more than {MAX_ID_LENGTH}")
+    try:
+        material(name)
+    except MaterialError as exc:
+        raise MessageError("bad-material", f"{what}: {exc}") from exc
 
 
 def _check_cloud(msg: Cloud) -> None:
@@ -442,6 +452,8 @@ def _check_cloud(msg: Cloud) -> None:
     _finite(msg, msg.origin, msg.frame_position)
     _coordinates(msg, msg.origin, msg.frame_position)
     _unit(msg, msg.frame_quat)
+    if msg.material is not None:
+        _material(msg, msg.material)
     if (msg.density is not None and not (math.isfinite(msg.density) and msg.density > 0)):
         raise MessageError("non-finite", f"cloud {msg.object_id!r}: density {msg.density}")
     if msg.density is not None and not MIN_DENSITY <= msg.density <= MAX_DENSITY:

@@ -40,8 +40,9 @@ IDENTITY = np.array([1.0, 0, 0, 0])
 
 def _cloud(n: int = 100, **kw):  # type: ignore[no-untyped-def]
     points = np.random.default_rng(1).random((n, 3))
-    return cloud_message("o", points, stamp_ns=0, epoch=7, seq=1, material=None, density=1.0,
-                         frame_position=np.zeros(3), frame_quat=IDENTITY, **kw)
+    kw = {"material": None, "density": 1.0, **kw}
+    return cloud_message("o", points, stamp_ns=0, epoch=7, seq=1, frame_position=np.zeros(3), frame_quat=IDENTITY,
+                         **kw)
 
 
 def _pose(**fields) -> Pose:  # type: ignore[no-untyped-def]
@@ -173,6 +174,23 @@ def test_every_stamp_and_sequence_number_must_fit_an_int64():
             with pytest.raises(MessageError) as err:
                 decode(encode(replace(msg, **{field: 2**64 - 1})))
             assert err.value.reason == "out-of-range", (type(msg).__name__, field)
+
+
+@pytest.mark.parametrize("msg", [_cloud(material="x" * 1_000_000, density=None),
+                                 SceneInfo(v=VERSION, stamp_ns=0, name="s", table_size=(1.0, 0.6, 0.04),
+                                           table_height=0.5, table_material="zz" * 1000, ee_radius=0.02,
+                                           ee_position=(0.0, 0.0, 0.6))])
+def test_a_name_longer_than_an_id_is_refused_and_never_logged_whole(msg):
+    with pytest.raises(MessageError) as err:
+        decode(encode(msg))
+    assert err.value.reason == "bad-material" and len(str(err.value)) < 120
+
+
+def test_a_cloud_of_a_material_the_twin_does_not_know_is_refused():
+    assert decode(encode(_cloud(material="wood_pine", density=None))).material == "wood_pine"
+    with pytest.raises(MessageError, match="unknown material 'adamantium'") as err:
+        decode(encode(_cloud(material="adamantium", density=None)))
+    assert err.value.reason == "bad-material"
 
 
 def _scene(**fields) -> SceneInfo:  # type: ignore[no-untyped-def]
