@@ -223,7 +223,7 @@ def test_scenes_without_a_table_or_end_effector_still_decode():
 @pytest.mark.parametrize(("fields", "said"), [
     ({"table_material": "adamantium"}, "table material: unknown material 'adamantium'"),
     ({"ee_radius": 1e-300}, "end-effector radius 1e-300 m outside"),
-    ({"name": "other"}, "it describes scene 'other', not 's'"),  # on the key asked for, another scene
+    ({"name": "other"}, "scene 'other' described on scene 's''s key"),  # on the key asked for, another scene
 ])
 def test_the_twin_refuses_a_scene_reply_it_cannot_use_and_says_so(fields, said, caplog):
     clock, bus = SimClock(), InProcessBus()
@@ -300,6 +300,41 @@ def test_the_link_drops_a_message_filed_under_another_objects_key_and_counts_why
     assert [m.object_id for m in got] == ["crate"]
     assert rx.counters.dropped_malformed == 2
     assert dict(rx.counters.dropped_by_reason) == {"wrong-key": 1, "bad-quaternion": 1}
+
+
+def _every_message() -> dict[str, tuple[str, object]]:
+    """One good message of each type, by the key (of scene "s", object "crate") it travels on."""
+    keys = Keys("s")
+    return {keys.info: _scene(), keys.object("crate", "cloud"): replace(_cloud(), object_id="crate"),
+            keys.object("crate", "pose"): _pose(), keys.object("crate", "gone"): Gone(
+                v=VERSION, stamp_ns=0, object_id="crate", epoch=0, seq=1),
+            keys.heartbeat: Heartbeat(v=VERSION, stamp_ns=0, epoch=0, seq=1, sim_time=0.0, objects=1),
+            keys.operator: OperatorCommand(v=VERSION, stamp_ns=0, epoch=0, seq=1, position=(0.0, 0.0, 0.5)),
+            keys.operator_target: OperatorTarget(v=VERSION, stamp_ns=0, device="d", epoch=0, seq=1,
+                                                 position=(0.0, 0.0, 0.5)),
+            keys.operator_force: OperatorForce(v=VERSION, stamp_ns=0, epoch=0, seq=1, sim_time=0.0,
+                                               force=(0.0,) * 3, position=(0.0,) * 3)}
+
+
+def test_the_link_takes_each_message_only_on_its_own_key_and_counts_the_rest_as_wrong_key():
+    bus = InProcessBus()
+    rx, tx = Link(bus.transport()), bus.transport()
+    got: list[tuple[str, object]] = []
+    rx.subscribe("twin/**", lambda k, m: got.append((k, m)))
+    messages = _every_message()
+    for key, msg in messages.items():
+        tx.put(key, encode(msg))
+    assert got == list(messages.items())
+    wrong = [(other, msg) for key, msg in messages.items() for other in messages if other != key]
+    wrong += [("twin/s/objects/x/y/pose", _pose()),  # deeper than an object key: was applied to the crate
+              ("twin/s/objects/crate/pose/x", _pose()), ("twin/s/objects/crate", _pose()),
+              ("twin/s/remote/heartbeat/x", messages[Keys("s").heartbeat]), ("twin/s/other", _scene()),
+              ("twin/other/scene", _scene()),  # scene "s" described on scene "other"'s key
+              (Keys("s").object("can", "pose"), _pose())]
+    for key, msg in wrong:
+        tx.put(key, encode(msg))
+    assert len(got) == len(messages)
+    assert dict(rx.counters.dropped_by_reason) == {"wrong-key": len(wrong)}
 
 
 @pytest.mark.parametrize(("a", "b", "expected"), [

@@ -184,7 +184,8 @@ class LocalReport:
     holds: int = 0  # times an object strayed from the remote's pose on its own and was pinned to it
     snaps: int = 0  # corrections too large to blend in: the object was moved at once
     operator_targets: int = 0  # device targets taken (OperatorSettings.listen)
-    # reason -> device targets dropped after decoding: "out-of-workspace", "out-of-order", "wrong-type"
+    # reason -> device targets dropped after decoding: "out-of-workspace", "out-of-order" (another message on
+    # the target key is the link's "wrong-key")
     operator_dropped: Counter = field(default_factory=Counter)
     forces_sent: int = 0  # OperatorForce messages published
     # kind -> entries forgotten to bound memory: "pose" (ids with a pose and no cloud, past MAX_ORPHAN_POSES),
@@ -489,13 +490,10 @@ class Local:
                 v=VERSION, stamp_ns=self.clock.stamp_ns(), epoch=self._epoch, seq=self._force_seq, sim_time=t,
                 force=_float3(force), position=_float3(self.twin.data.mocap_pos[0])))
 
-    def _on_device_target(self, msg, received: float) -> None:  # type: ignore[no-untyped-def]
-        """Take a device driver's target if it is one, newer than the last of its device (or that device's mark
-        has expired: :mod:`sync.ordering`), in the workspace. ``received``: when it arrived, clock seconds."""
+    def _on_device_target(self, msg: OperatorTarget, received: float) -> None:
+        """Take a device driver's target if it is newer than the last of its device (or that device's mark has
+        expired: :mod:`sync.ordering`) and in the workspace. ``received``: when it arrived, clock seconds."""
         dropped = self.report.operator_dropped
-        if not isinstance(msg, OperatorTarget):
-            dropped["wrong-type"] += 1  # e.g. a pose published on the operator key
-            return
         if not self._device_marks.newer(msg.device, msg.epoch, msg.seq, received):
             dropped["out-of-order"] += 1
             return
@@ -540,7 +538,7 @@ class Local:
                           key, type(exc).__name__, exc, exc_info=True)
 
     def _handle(self, received: float, key: str, msg) -> None:  # type: ignore[no-untyped-def]
-        if key == self.keys.operator_target:
+        if isinstance(msg, OperatorTarget):  # the link passes one on its key only (sync.keys.carried_by)
             self._on_device_target(msg, received)
         elif isinstance(msg, Heartbeat):
             self._on_heartbeat(msg)
@@ -900,19 +898,12 @@ class Local:
     def _find_scene(self, scene: str | None, wait: float) -> SceneInfo:
         selector = Keys(scene).info if scene else any_scene_info()
         found: list[SceneInfo] = []
-
-        def answer(key: str, msg) -> None:  # type: ignore[no-untyped-def]
-            if not isinstance(msg, SceneInfo):
-                return
-            if scene and msg.name != scene:  # not the scene asked for, whatever key it came on: refused
-                self.link.dropped("wrong-key", "dropped a reply on %s: it describes scene %r, not %r", key,
-                                  msg.name, scene)
-                return
-            found.append(msg)
-
         deadline = self.clock.now() + wait
         while not found and self.clock.now() < deadline:
-            self.link.query(selector, answer, timeout=min(1.0, wait))
+            # The link takes a SceneInfo only on its own scene's key (sync.keys.carried_by), and replies only
+            # come on keys the selector matches: a reply describing another scene is dropped as wrong-key.
+            self.link.query(selector, lambda _k, m: found.append(m) if isinstance(m, SceneInfo) else None,
+                            timeout=min(1.0, wait))
             if not found:
                 self.clock.sleep(0.1)
         if not found:
