@@ -202,6 +202,26 @@ def test_a_forged_device_mark_freezes_the_device_no_longer_than_the_mark_expiry(
         assert len(local._device_marks) == MAX_SENDERS and local.report.evicted["device"] == 11
 
 
+def test_the_remote_takes_operator_commands_newest_first_and_inside_the_workspace(cache):
+    with Headless(load_scene(SMALL), cache_dir=cache) as session:
+        remote, operator = session.remote, Link(session.bus.transport())
+
+        def command(position: tuple[float, float, float], epoch: int, seq: int) -> np.ndarray:
+            operator.put(Keys("small").operator, OperatorCommand(v=VERSION, stamp_ns=0, epoch=epoch, seq=seq,
+                                                                 position=position))
+            session.run(0.01)
+            return remote.twin.data.mocap_pos[0].copy()
+
+        above = (0.0, 0.0, 0.7)
+        assert np.allclose(command(above, 5, 100), above)
+        # An older command (a reordered or replayed one) is dropped: it moved the end effector to (900, -900, 900).
+        assert np.allclose(command((0.1, 0.0, 0.7), 1, 1), above)
+        assert np.allclose(command((900.0, -900.0, 900.0), 5, 101), above)  # newer, but 900 m away
+        assert remote.operator_dropped == {"out-of-order": 1, "out-of-workspace": 1}
+        session.run(MARK_EXPIRY)  # no command taken for that long: the next is taken whatever its number
+        assert np.allclose(command((0.1, 0.0, 0.7), 1, 1), (0.1, 0.0, 0.7))
+
+
 def test_without_workers_the_twin_estimates_in_its_own_thread(cache):
     with Headless(load_scene(SMALL), cache_dir=cache, settings=LocalSettings(workers=3)) as session:
         assert session.local._pool is None and not session.local.twin.background  # forced headless

@@ -116,6 +116,12 @@ class LocalSettings:
 DEFAULT_LOCAL = LocalSettings()
 
 
+#: How far beyond the table's edges (and above its top) the operator may send the end effector, metres
+#: (without a table: around its start): the twin's default for device targets, and the remote's bound for the
+#: operator commands it takes (:class:`scenes.remote.Remote`).
+OPERATOR_REACH = 2.0
+
+
 @dataclass(frozen=True)
 class OperatorSettings:
     """The operator's device on the wire: targets in, force out (keys in :mod:`sync.keys`).
@@ -134,7 +140,7 @@ class OperatorSettings:
 
     listen: bool = False
     force_rate: float = 0.0
-    reach: float = 2.0
+    reach: float = OPERATOR_REACH
 
 
 NO_OPERATOR_IO = OperatorSettings()
@@ -263,7 +269,7 @@ class Local:
         self.keys = Keys(info.name)
         self.twin = Twin(_empty_spec(info), background=settings.workers > 0)
         self._floor = info.table_height if info.table_size is not None else 0.0
-        self.workspace = _workspace(info, operator.reach)
+        self.workspace = reach_box(info, operator.reach)
         self.scene_box = _scene_box(info)
         self._box: tuple[object, list[float], list[float]] = (None, [], [])  # scene_box as floats, see _in_scene
         if info.table_size is not None:
@@ -919,7 +925,7 @@ class Local:
 SCENE_REACH = 10.0
 
 
-def _workspace(info: SceneInfo, reach: float) -> tuple[np.ndarray, np.ndarray]:
+def reach_box(info: SceneInfo, reach: float) -> tuple[np.ndarray, np.ndarray]:
     """(low, high) corners of the box targets or object poses must lie in, metres, world frame: ``reach`` beyond
     the table's edges and above its top, down to the floor; without a table, ``reach`` around the end
     effector's start."""
@@ -935,7 +941,7 @@ def _scene_box(info: SceneInfo) -> tuple[np.ndarray, np.ndarray]:
     declared workspace when the remote announces one, else :data:`SCENE_REACH` around the table."""
     if info.workspace_min is not None and info.workspace_max is not None:
         return np.asarray(info.workspace_min, dtype=float), np.asarray(info.workspace_max, dtype=float)
-    return _workspace(info, SCENE_REACH)
+    return reach_box(info, SCENE_REACH)
 
 
 def _float3(v: np.ndarray) -> tuple[float, float, float]:
