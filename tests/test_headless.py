@@ -1,8 +1,10 @@
-"""Remote and twin in one process, on the in-process bus and a simulated clock: no sockets, no threads."""
+"""Remote and twin in one process, on the in-process bus and a simulated clock: no sockets, no threads (one test
+runs an estimation worker process, as live twins do)."""
 
 from __future__ import annotations
 
 import logging
+import time
 from dataclasses import replace
 from pathlib import Path
 
@@ -13,11 +15,22 @@ from scenes.headless import Headless
 from scenes.remote import Remote
 from scenes.scenefile import load_scene
 from scenes.sensing import SurfaceSensor, Track
+from sync.clock import SimClock
+from sync.inprocess import InProcessBus
 from sync.keys import Keys
 from sync.link import Link
-from sync.messages import VERSION, Cloud, OperatorCommand, OperatorTarget, Pose, cloud_message
+from sync.messages import (
+    VERSION,
+    Cloud,
+    OperatorCommand,
+    OperatorTarget,
+    Pose,
+    SceneInfo,
+    cloud_message,
+    encode,
+)
 from sync.ordering import MARK_EXPIRY, MAX_SENDERS
-from twin.runtime import MAX_ORPHAN_POSES, LocalSettings, OperatorSettings
+from twin.runtime import MAX_ORPHAN_POSES, Local, LocalSettings, OperatorSettings
 from twin.trajectory import push_trajectory
 
 SMALL = Path(__file__).parent / "data" / "small.toml"
@@ -220,6 +233,31 @@ def test_the_remote_takes_operator_commands_newest_first_and_inside_the_workspac
         assert remote.operator_dropped == {"out-of-order": 1, "out-of-workspace": 1}
         session.run(MARK_EXPIRY)  # no command taken for that long: the next is taken whatever its number
         assert np.allclose(command((0.1, 0.0, 0.7), 1, 1), (0.1, 0.0, 0.7))
+
+
+def test_a_cloud_superseded_before_its_estimation_started_is_cancelled(cache):
+    # A worker process this time (Headless has none): a bare remote on the in-process bus that answers the scene.
+    bus, clock, keys = InProcessBus(), SimClock(), Keys("s")
+    info = SceneInfo(v=VERSION, stamp_ns=0, name="s", table_size=(1.0, 0.6, 0.04), table_height=0.5,
+                     table_material="wood_pine", ee_radius=0.02, ee_position=(-0.3, 0.0, 0.56))
+    bus.transport("remote").queryable("twin/s/**", lambda _selector: [(keys.info, encode(info))])
+    local = Local(bus.transport("twin"), clock=clock, scene="s", settings=LocalSettings(workers=1, cache_dir=cache))
+    try:
+        sender, centre = Link(bus.transport("sensor")), np.array([0.0, 0.0, 0.53])
+        for seq in range(1, 11):  # ten views of one cube before the twin's loop runs: only the last matters
+            sender.put(keys.object("cube", "cloud"), _box_cloud("cube", centre, epoch=1, seq=seq))
+        local.iterate()
+        # At most workers + 1 jobs are handed to the pool at once (started: not cancellable), and the last stays.
+        assert local.report.clouds_superseded >= 10 - 2 - 1
+        deadline = time.monotonic() + 120.0  # a failsafe for a hung worker, not a measurement
+        while local.objects != ["cube"]:
+            assert time.monotonic() < deadline, "the cube was never estimated"
+            local.iterate()
+            clock.advance(local.twin.model.opt.timestep)
+            time.sleep(0.005)
+        assert local.report.objects_synced == 1 and local._clouds["cube"] == (1, 10)
+    finally:
+        local.close()
 
 
 def test_without_workers_the_twin_estimates_in_its_own_thread(cache):

@@ -183,6 +183,7 @@ class LocalReport:
     recoveries: int = 0
     estimation_errors: int = 0
     worker_retries: int = 0  # clouds estimated again because their worker process died
+    clouds_superseded: int = 0  # estimations cancelled before they started: a newer cloud of the object came
     failed_edits: int = 0  # objects whose model did not compile: the twin went on without them
     out_of_order: int = 0  # messages older than what the twin already had from the remote
     out_of_scene: int = 0  # poses and clouds placed outside the scene's box (its workspace, or SCENE_REACH around the table)
@@ -572,6 +573,9 @@ class Local:
             if not self._in_scene(msg, msg.frame_position) or not self._newer(self._clouds, msg):
                 return
             self._orphans.pop(msg.object_id, None)  # its pose, if one came first, is kept for it
+            superseded = self._jobs.get(msg.object_id)
+            if superseded is not None and superseded[0].cancel():  # its result would be thrown away unused
+                self.report.clouds_superseded += 1
             self._jobs[msg.object_id] = (self._submit(msg), msg, received)
             self.rlog.event(self.twin.time, f"{msg.object_id}: cloud received (seq {msg.seq}); estimating")
         elif isinstance(msg, Gone):
