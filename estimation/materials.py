@@ -107,6 +107,11 @@ def material(name: str) -> Material:
 #: Density used when neither a material nor a density is given: water, so mass (kg) = volume (litres).
 DEFAULT_DENSITY = 1000.0
 
+#: The densities, kg/m^3, a message from the network may state (:mod:`sync.messages`): from below the
+#: lightest aerogels (~1) to above the densest element (osmium, 22,590); every material in the table lies
+#: well inside. Past them an estimate's mass is no object's (1e300 gave a 4.8e296 kg crate).
+MIN_DENSITY, MAX_DENSITY = 0.1, 1e5
+
 
 def resolve_density(material_name: str | None, density: float | None) -> tuple[float, Material | None]:
     """(density kg/m^3, the material or None) from a material name, an explicit density, or neither.

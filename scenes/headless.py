@@ -26,7 +26,7 @@ from sync.clock import SimClock
 from sync.inprocess import InProcessBus
 from sync.netem import LinkModel, Network
 from sync.recording import Recorder, RecordingTransport
-from twin.runtime import DEFAULT_LOCAL, Local, LocalSettings
+from twin.runtime import DEFAULT_LOCAL, NO_OPERATOR_IO, Local, LocalSettings, OperatorSettings
 from twin.trajectory import Trajectory
 
 
@@ -35,7 +35,8 @@ class Headless:
 
     The twin joins after the remote has settled and published its scene, estimates every cloud in this
     thread (``workers`` is forced to 0: worker processes would make arrival times depend on the machine),
-    and compiles each object before the next tick. ``remote_options`` go to :class:`scenes.remote.Remote`.
+    and compiles each object before the next tick. ``operator`` is the twin's device input and force output
+    (:class:`twin.runtime.OperatorSettings`); ``remote_options`` go to :class:`scenes.remote.Remote`.
 
     ``network`` puts an emulated link between the sides (``downlink``: remote -> twin, ``uplink``: twin ->
     remote); their counters are ``self.uplink.stats`` and ``self.downlink.stats`` (None: no link that way).
@@ -50,7 +51,7 @@ class Headless:
     def __init__(self, scene: SceneSpec, *, settings: LocalSettings = DEFAULT_LOCAL,
                  sensor: Sensor | None = None, cache_dir: Path | None = None, network: Network | None = None,
                  record: str | Path | None = None, record_metadata: dict[str, object] | None = None,
-                 **remote_options: object) -> None:
+                 operator: OperatorSettings = NO_OPERATOR_IO, **remote_options: object) -> None:
         self.clock = SimClock()
         self.recorder = None if record is None else Recorder(record, clock=self.clock, metadata={
             **scene_metadata(scene), "side": "both", "command": "headless",
@@ -70,7 +71,7 @@ class Headless:
         self.remote = Remote(scene, remote_side, clock=self.clock, sensor=sensor, cache_dir=cache_dir,
                              recorder=self.recorder, **remote_options)  # type: ignore[arg-type]
         self.dt = float(self.remote.twin.model.opt.timestep)
-        self.local = Local(twin_side, clock=self.clock, scene=scene.name, recorder=self.recorder,
+        self.local = Local(twin_side, clock=self.clock, scene=scene.name, recorder=self.recorder, operator=operator,
                            settings=replace(settings, workers=0, cache_dir=cache_dir or settings.cache_dir))
         if self.local.twin.model.opt.timestep != self.dt:
             raise ValueError("remote and twin step at different rates")  # pragma: no cover

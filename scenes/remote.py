@@ -12,6 +12,7 @@ from __future__ import annotations
 import logging
 import queue
 import threading
+from collections import Counter
 from collections.abc import Callable
 from concurrent.futures import Future
 from dataclasses import dataclass, replace
@@ -25,7 +26,9 @@ from scenes.sources import prepare_objects, reference_estimate, source_mesh
 from sync.clock import REAL_CLOCK, Clock
 from sync.keys import Keys
 from sync.link import Link
-from sync.messages import VERSION, Gone, Heartbeat, OperatorCommand, Pose, SceneInfo, cloud_message
+from sync.messages import MAX_INT64, VERSION, Gone, Heartbeat, OperatorCommand, Pose, SceneInfo, cloud_message
+from sync.ordering import Marks
+from sync.ratelimit import RateLimitedLog
 from sync.recording import Recorder
 from sync.transport import Transport
 from twin.debuglog import OFF, DebugLog
@@ -33,6 +36,7 @@ from twin.loop import LoopStats, run_loop
 from twin.model import add_object, remove_object
 from twin.objects import TwinObject
 from twin.poses import rotation
+from twin.runtime import OPERATOR_REACH, reach_box
 from twin.sim import Twin
 
 log = logging.getLogger(__name__)
@@ -67,7 +71,13 @@ class Remote:
     it is queued and done by the loop between two steps, never during one.
 
     ``epoch`` numbers this run of the remote on the wire (default: the clock's stamp at start, so a
-    restarted remote has a larger one). On a simulated clock, objects added later compile in the loop's
+    restarted remote has a larger one).
+
+    Operator commands are taken by the rule the twin applies to device targets: newest ``(epoch, seq)`` wins,
+    a mark lasting :data:`sync.ordering.MARK_EXPIRY` seconds after the last command taken (so with two twins
+    commanding, the later started one wins while it streams), and only inside the twin's operator workspace
+    (:func:`twin.runtime.reach_box` with :data:`twin.runtime.OPERATOR_REACH`). The rest are counted in
+    ``operator_dropped`` by reason (``"out-of-order"``, ``"out-of-workspace"``). On a simulated clock, objects added later compile in the loop's
     thread (deterministic); on a real one, in the background.
     """
 
@@ -94,6 +104,9 @@ class Remote:
         self._replies: dict[str, bytes] = {}  # key -> last encoded message, for late joiners
         self._operator: np.ndarray | None = None
         self._command: tuple[int, int] | None = None  # (its stamp on the twin's clock, when it arrived here)
+        self._commands = Marks()  # the newest (epoch, seq) of the operator's commands taken (sync.ordering)
+        self.operator_dropped: Counter = Counter()  # reason -> operator commands dropped after decoding
+        self._dropped_log = RateLimitedLog(log, clock)
         self._seq = 0
         self._published: dict[str, tuple[np.ndarray, np.ndarray]] = {}
         self._rows: _Published | None = None  # _published as arrays, for the deadband check over all objects
@@ -116,6 +129,7 @@ class Remote:
         if scene.table is not None:
             rlog.table(scene.table.size, scene.table.height)
         self._info = self.link.put(self.keys.info, self._scene_info()) if publish else None
+        self._workspace = reach_box(self._scene_info(), OPERATOR_REACH)
         self.link.queryable(self.keys.info, lambda _k: [(self.keys.info, self._info or b"")])
         self.link.queryable(self.keys.state, lambda _k: list(self._replies_snapshot()))
         self.link.subscribe(self.keys.operator, self._on_operator)
@@ -365,8 +379,22 @@ class Remote:
         return sorted(items, key=lambda kv: not kv[0].endswith("/cloud"))
 
     def _on_operator(self, _key: str, msg) -> None:  # type: ignore[no-untyped-def]
-        if isinstance(msg, OperatorCommand):
-            self._operator = np.asarray(msg.position)
+        """Take the operator's command if it is newer and in the workspace (see the class docstring)."""
+        if not isinstance(msg, OperatorCommand):
+            return
+        now, position = self.clock.now(), np.asarray(msg.position, dtype=float)
+        low, high = self._workspace
+        with self._lock:  # the transport's threads
+            if not self._commands.newer("operator", msg.epoch, msg.seq, now):
+                self.operator_dropped["out-of-order"] += 1
+                return
+            if not (np.all(position >= low) and np.all(position <= high)):
+                self.operator_dropped["out-of-workspace"] += 1
+                self._dropped_log.warning("out-of-workspace", "dropped an operator command outside the workspace: %s",
+                                          position.tolist())
+                return
+            self._commands.take("operator", msg.epoch, msg.seq, now)
+            self._operator = position
             self._command = (msg.stamp_ns, self.clock.stamp_ns())
 
     def _answers_ns(self) -> int:
@@ -374,7 +402,9 @@ class Remote:
         if self._command is None:
             return 0
         stamp, arrived = self._command
-        return max(0, stamp + self.clock.stamp_ns() - arrived)
+        # A command stamped near the int64 limit (forged, or a broken clock) must not push every later pose
+        # past it, where the twin refuses them all: clamped, the twin finds no such moment and compares now.
+        return min(MAX_INT64, max(0, stamp + self.clock.stamp_ns() - arrived))
 
     def _scene_info(self) -> SceneInfo:
         t, ee = self.scene.table, self.scene.end_effector

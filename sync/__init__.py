@@ -2,7 +2,8 @@
 
 ``keys`` owns the key expressions, ``messages`` the wire format and its checks, ``link`` the counted,
 checked send and receive over a ``transport`` (``zenoh_transport`` for live runs, ``inprocess`` for
-headless ones), and ``clock`` the time every loop reads. Nothing here knows MuJoCo or the scene.
+headless ones), ``ordering`` newest-wins per sender for senders without heartbeats, and ``clock`` the time
+every loop reads. Nothing here knows MuJoCo or the scene.
 
 The public names below load on first use (PEP 562): ``import sync`` imports neither Zenoh nor msgspec.
 """

@@ -28,7 +28,9 @@ from dataclasses import dataclass
 from functools import cache
 
 PREFIX = "twin"
-_CHUNK = re.compile(r"^[A-Za-z0-9_-]{1,64}$")
+#: Longest id (scene, object, device), characters; other names on the wire (materials) are held to it too.
+MAX_ID_LENGTH = 64
+_CHUNK = re.compile(rf"^[A-Za-z0-9_-]{{1,{MAX_ID_LENGTH}}}$")
 
 
 def valid_id(name: str) -> bool:
@@ -94,6 +96,25 @@ class Keys:
         if len(parts) == 5 and parts[:3] == [PREFIX, self.scene, "objects"] and parts[4] in OBJECT_KINDS:
             return parts[3], parts[4]
         return None
+
+
+#: The message each non-object key carries, by its chunks after ``twin/<scene>/``: the message's tag in
+#: :mod:`sync.messages` (object keys ``objects/<id>/<kind>`` carry the message tagged ``<kind>``).
+_CARRIES = {("scene",): "scene", ("remote", "heartbeat"): "heartbeat", ("operator", "command"): "operator",
+            ("operator", "target"): "target", ("operator", "force"): "force"}
+
+
+def carried_by(key: str) -> tuple[str, str, str | None] | None:
+    """(scene, the tag of the one message type ``key`` carries, the object id in it or None) for a key of the
+    layout above, exactly; None for any other key (deeper, shallower, unknown chunks, a bad id)."""
+    parts = key.split("/")
+    if len(parts) < 3 or parts[0] != PREFIX or not valid_id(parts[1]):
+        return None
+    rest = tuple(parts[2:])
+    if len(rest) == 3 and rest[0] == "objects" and rest[2] in OBJECT_KINDS and valid_id(rest[1]):
+        return parts[1], rest[2], rest[1]
+    tag = _CARRIES.get(rest)
+    return None if tag is None else (parts[1], tag, None)
 
 
 def any_scene_info() -> str:

@@ -1,9 +1,10 @@
 """One side's end of the wire: publish encoded messages (counting bytes), receive checked ones.
 
 Receiving is where bad input from the network stops: anything :func:`~sync.messages.decode` rejects, and
-an object message filed under another object's key, is dropped, counted per reason and logged, rate-limited
-per reason (:class:`~sync.ratelimit.RateLimitedLog`), never passed on and never raised into the transport's
-threads.
+any message on a key that is not its own (:func:`sync.keys.carried_by`: another type's key, another object's
+or scene's, a key deeper or shallower than the layout's), is dropped, counted per reason and logged,
+rate-limited per reason (:class:`~sync.ratelimit.RateLimitedLog`), never passed on and never raised into the
+transport's threads.
 """
 
 from __future__ import annotations
@@ -15,12 +16,15 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from sync.clock import REAL_CLOCK, Clock
-from sync.keys import object_of
-from sync.messages import Message, MessageError, decode, encode
+from sync.keys import carried_by
+from sync.messages import Message, MessageError, SceneInfo, decode, encode
 from sync.ratelimit import RateLimitedLog
 from sync.transport import Transport
 
 log = logging.getLogger(__name__)
+
+#: Characters of a key a log line shows.
+_KEY_LOGGED = 200
 
 Handler = Callable[[str, Message], None]
 
@@ -33,7 +37,7 @@ class LinkCounters:
     bytes_sent: int = 0
     messages_received: int = 0
     bytes_received: int = 0
-    dropped_malformed: int = 0
+    dropped_malformed: int = 0  # every message dropped: decode's reasons, and the receiver's (see Link.dropped)
     dropped_by_reason: Counter = field(default_factory=Counter)
     last_received: float | None = None  # clock.now() of the last good message
 
@@ -79,14 +83,10 @@ class Link:
         """Decode, check and hand over one payload; bad ones are dropped and counted. True if handled."""
         try:
             msg = decode(data)
-            named = getattr(msg, "object_id", None)
-            if named is not None and object_of(key) not in (None, named):
-                raise MessageError("wrong-key", f"a message about {named!r} on another object's key")
+            _check_key(key, msg)
         except MessageError as exc:
-            with self._lock:
-                self.counters.dropped_malformed += 1
-                self.counters.dropped_by_reason[exc.reason] += 1
-            self.dropped_log.warning(exc.reason, "dropped malformed message on %s: %s", key, exc)
+            # A subscription to ``.../**`` passes keys of any length: only so much of one is logged.
+            self.dropped(exc.reason, "dropped malformed message on %s: %s", key[:_KEY_LOGGED], exc)
             return False
         with self._lock:
             self.counters.messages_received += 1
@@ -98,6 +98,16 @@ class Link:
             log.exception("handling a message on %s failed", key)
         return True
 
+    def dropped(self, reason: str, msg: str, *args: object, exc_info: bool = False) -> None:
+        """Count a received message dropped for ``reason`` and log ``msg % args``, rate-limited per reason.
+
+        For the receiver's own checks after decoding too (e.g. the twin's ``"handler-error"``), so every drop
+        is in one counter."""
+        with self._lock:
+            self.counters.dropped_malformed += 1
+            self.counters.dropped_by_reason[reason] += 1
+        self.dropped_log.warning(reason, msg, *args, exc_info=exc_info)
+
     def close(self) -> None:
         self.transport.close()
 
@@ -105,3 +115,19 @@ class Link:
         with self._lock:
             self.counters.messages_sent += 1
             self.counters.bytes_sent += len(data)
+
+
+def _check_key(key: str, msg: Message) -> None:
+    """Raise ``wrong-key`` unless ``key`` is exactly the key ``msg``'s type travels on, naming its object (or, for
+    a :class:`~sync.messages.SceneInfo`, its scene)."""
+    carried = carried_by(key)
+    tag = type(msg).__struct_config__.tag
+    if carried is None or carried[1] != tag:
+        raise MessageError("wrong-key", f"a {type(msg).__name__} on a key that carries "
+                                        f"{'no message' if carried is None else repr(carried[1])}")
+    scene, _, object_id = carried
+    named = getattr(msg, "object_id", None)
+    if named is not None and named != object_id:
+        raise MessageError("wrong-key", f"a message about {named!r} on another object's key")
+    if isinstance(msg, SceneInfo) and msg.name != scene:
+        raise MessageError("wrong-key", f"scene {msg.name!r} described on scene {scene!r}'s key")

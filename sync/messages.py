@@ -6,10 +6,11 @@ ordered also carry the sender's ``epoch`` (fixed for one run of the sender, larg
 ``seq`` counting up within the epoch, so a restarted remote is told from a stale one.
 
 :func:`decode` rejects what no honest sender could mean, before anything is allocated for it: an unknown
-type or version, garbage, non-finite numbers, a quaternion that is not unit length, an id outside the
-key-expression alphabet, a cloud whose header and payload sizes disagree or that claims more than
-:data:`MAX_CLOUD_POINTS`. Each rejection is a :class:`MessageError` with a short ``reason``; receivers
-drop such a message, count it per reason and log it.
+type or version, garbage, non-finite numbers, a stamp or sequence number an int64 cannot hold, a quaternion
+that is not unit length, an id outside the key-expression alphabet, a material the twin does not know (or a
+name longer than an id), sizes, densities and speeds outside physical ranges, a cloud whose header and
+payload sizes disagree or that claims more than :data:`MAX_CLOUD_POINTS`. Each rejection is a
+:class:`MessageError` with a short ``reason``; receivers drop such a message, count it per reason and log it.
 
 Clouds are quantised on a grid of ``quantum`` metres relative to their minimum corner (16 bits per axis
 while the extent fits, else 32), sorted so neighbouring points have similar bytes, split into byte planes
@@ -24,7 +25,9 @@ import math
 import msgspec
 import numpy as np
 
-from sync.keys import valid_id
+from estimation.errors import MaterialError
+from estimation.materials import MAX_DENSITY, MIN_DENSITY, material
+from sync.keys import MAX_ID_LENGTH, valid_id
 
 VERSION = 2
 
@@ -37,6 +40,23 @@ QUAT_NORM_TOLERANCE = 1e-3
 
 #: Largest coordinate, metres, any message may carry: a scene is metres across, 1 km is no scene.
 MAX_COORDINATE = 1e3
+
+#: Fastest an object may move in a pose, m/s and rad/s: far beyond anything on a table (a thrown ball is
+#: 40 m/s); past it the twin would write a forged velocity into MuJoCo's state.
+MAX_SPEED, MAX_ANGULAR_SPEED = 100.0, 1000.0
+
+#: A scene's sizes, metres: table sides, table height and end-effector radius lie in [MIN_SIZE, MAX_SCENE_SIZE]
+#: (a radius up to MAX_EE_RADIUS; 0 means none). Below a millimetre MuJoCo refuses the body (mass and inertia
+#: under mjMINVAL); a table is metres across, 100 m is a hall; the end effector is a fingertip or a tool.
+MIN_SIZE, MAX_SCENE_SIZE, MAX_EE_RADIUS = 1e-3, 100.0, 1.0
+
+#: Largest stamp, epoch or sequence number a message may carry, and the smallest is 0: what an int64 holds.
+#: msgpack carries integers up to 2**64 - 1, but the twin keeps stamps in numpy int64 arrays
+#: (:mod:`twin.history`): a pose answering to 2**64 - 1 raised OverflowError out of the twin's loop.
+MAX_INT64 = 2**63 - 1
+
+#: The integer fields that are times (ns) or sequence numbers, in any message that has them.
+_ORDINALS = ("stamp_ns", "epoch", "seq", "answers_ns")
 
 #: Default cloud quantisation step, metres: a tenth of a millimetre, well under a sensor's noise.
 CLOUD_QUANTUM = 1e-4
@@ -168,8 +188,10 @@ class OperatorTarget(_Msg, tag="target"):
         encode(OperatorTarget(v=VERSION, stamp_ns=time.time_ns(), device="haptic0", epoch=t0, seq=n,
                               position=(0.1, 0.0, 0.55)))
 
-    The twin takes the newest ``(epoch, seq)`` of each device and drops older ones; a target that is not
-    finite, beyond :data:`MAX_COORDINATE`, or outside the scene's workspace is dropped and counted.
+    The twin takes the newest ``(epoch, seq)`` of each device and drops older ones, until the device has had
+    no target taken for :data:`sync.ordering.MARK_EXPIRY` seconds (then the next one is taken whatever its
+    number); a target that is not finite, beyond :data:`MAX_COORDINATE`, or outside the scene's workspace is
+    dropped and counted.
     """
 
     device: str
@@ -355,17 +377,16 @@ def _check(msg: Message) -> None:
     name = msg.object_id if hasattr(msg, "object_id") else getattr(msg, "name", None)
     if name is not None and not valid_id(name):
         raise MessageError("bad-id", f"id {name[:80]!r} is not a key chunk ([A-Za-z0-9_-], 1-64)")
-    for field in ("epoch", "seq"):
-        if getattr(msg, field, 0) < 0:
-            raise MessageError("bad-seq", f"{type(msg).__name__}: negative {field}")
+    _ordinals(msg)
     if isinstance(msg, Pose):
-        if msg.answers_ns < 0:
-            raise MessageError("bad-seq", f"pose {msg.object_id!r}: negative answers_ns")
         _finite(msg, msg.position, msg.linvel, msg.angvel, (msg.sim_time, msg.position_sigma, msg.angle_sigma))
         _coordinates(msg, msg.position)
         _unit(msg, msg.quat)
         if msg.position_sigma < 0 or msg.angle_sigma < 0 or msg.position_sigma > MAX_COORDINATE:
             raise MessageError("out-of-range", f"pose {msg.object_id!r}: sigma outside [0, {MAX_COORDINATE:g}]")
+        if math.hypot(*msg.linvel) > MAX_SPEED or math.hypot(*msg.angvel) > MAX_ANGULAR_SPEED:
+            raise MessageError("out-of-range", f"pose {msg.object_id!r}: faster than {MAX_SPEED:g} m/s or "
+                                               f"{MAX_ANGULAR_SPEED:g} rad/s")
     elif isinstance(msg, Cloud):
         _check_cloud(msg)
     elif isinstance(msg, OperatorCommand | OperatorTarget):
@@ -385,6 +406,7 @@ def _check(msg: Message) -> None:
         _coordinates(msg, msg.ee_position, msg.table_size or (), (msg.table_height,))
         if (msg.table_size is not None and min(msg.table_size) <= 0) or msg.ee_radius < 0:
             raise MessageError("bad-size", "scene: non-positive table size or negative end-effector radius")
+        _check_scene_sizes(msg)
         low, high = msg.workspace_min, msg.workspace_max
         if (low is None) != (high is None):
             raise MessageError("bad-size", "scene: a workspace needs both corners")
@@ -393,6 +415,31 @@ def _check(msg: Message) -> None:
             _coordinates(msg, low, high)
             if not all(a < b for a, b in zip(low, high, strict=True)):
                 raise MessageError("bad-size", "scene: workspace min is not below max on every axis")
+
+
+def _check_scene_sizes(msg: SceneInfo) -> None:
+    """Table and end effector within :data:`MIN_SIZE` .. :data:`MAX_SCENE_SIZE` (:data:`MAX_EE_RADIUS`), and
+    the table's material one the twin knows (it sets the table's friction)."""
+    if msg.table_size is not None:
+        if not all(MIN_SIZE <= x <= MAX_SCENE_SIZE for x in (*msg.table_size, msg.table_height)):
+            raise MessageError("out-of-range", f"scene: table size or height outside {MIN_SIZE:g} .. "
+                                               f"{MAX_SCENE_SIZE:g} m")
+        _material(msg, msg.table_material)
+    if msg.ee_radius != 0 and not MIN_SIZE <= msg.ee_radius <= MAX_EE_RADIUS:
+        raise MessageError("out-of-range", f"scene: end-effector radius {msg.ee_radius:g} m outside {MIN_SIZE:g} .. "
+                                           f"{MAX_EE_RADIUS:g}")
+
+
+def _material(msg: SceneInfo | Cloud, name: str) -> None:
+    """A material name the twin knows, at most :data:`sync.keys.MAX_ID_LENGTH` characters (a long one is refused
+    before it is looked up, matched against the table for hints, or logged)."""
+    what = "scene: table material" if isinstance(msg, SceneInfo) else f"cloud {msg.object_id!r}: material"
+    if len(name) > MAX_ID_LENGTH:
+        raise MessageError("bad-material", f"{what} of {len(name):,} characters, more than {MAX_ID_LENGTH}")
+    try:
+        material(name)
+    except MaterialError as exc:
+        raise MessageError("bad-material", f"{what}: {exc}") from exc
 
 
 def _check_cloud(msg: Cloud) -> None:
@@ -405,12 +452,28 @@ def _check_cloud(msg: Cloud) -> None:
     _finite(msg, msg.origin, msg.frame_position)
     _coordinates(msg, msg.origin, msg.frame_position)
     _unit(msg, msg.frame_quat)
+    if msg.material is not None:
+        _material(msg, msg.material)
     if (msg.density is not None and not (math.isfinite(msg.density) and msg.density > 0)):
         raise MessageError("non-finite", f"cloud {msg.object_id!r}: density {msg.density}")
+    if msg.density is not None and not MIN_DENSITY <= msg.density <= MAX_DENSITY:
+        raise MessageError("out-of-range", f"cloud {msg.object_id!r}: density {msg.density:g} kg/m^3 outside "
+                                           f"{MIN_DENSITY:g} .. {MAX_DENSITY:g}")
     # The frame headers state the decompressed sizes: checked against the point count without inflating.
     _framed_size(msg, msg.data, 3 * (msg.bits // 8) * msg.count, "points")
     if msg.normals:
         _framed_size(msg, msg.normals, 3 * msg.count, "normals")
+
+
+def _ordinals(msg: Message) -> None:
+    """Stamps and sequence numbers: a negative epoch, seq or answers_ns is a bad sequence number; any of
+    them (or a stamp) outside 0 .. :data:`MAX_INT64` is out of range."""
+    for field in _ORDINALS:
+        value = getattr(msg, field, 0)
+        if value < 0 and field != "stamp_ns":
+            raise MessageError("bad-seq", f"{type(msg).__name__}: negative {field}")
+        if not 0 <= value <= MAX_INT64:
+            raise MessageError("out-of-range", f"{type(msg).__name__}: {field} {value} outside 0 .. 2**63 - 1")
 
 
 def _finite(msg: Message, *groups) -> None:  # type: ignore[no-untyped-def]

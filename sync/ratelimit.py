@@ -36,8 +36,9 @@ class RateLimitedLog:
         self._budgets: dict[str, _Budget] = {}
         self._lock = threading.Lock()
 
-    def warning(self, reason: str, msg: str, *args: object) -> bool:
-        """Log ``msg % args`` for ``reason`` at WARNING if its budget allows, else at DEBUG.
+    def warning(self, reason: str, msg: str, *args: object, exc_info: bool = False) -> bool:
+        """Log ``msg % args`` for ``reason`` at WARNING if its budget allows, else at DEBUG; with ``exc_info``,
+        the exception being handled goes with it (its traceback), at whichever level.
 
         Returns:
             Whether it went out at WARNING.
@@ -54,9 +55,9 @@ class RateLimitedLog:
             else:
                 b.held += 1
         if not loud:
-            self.logger.debug(msg, *args)
+            self.logger.debug(msg, *args, exc_info=exc_info)
         elif held:
-            self.logger.warning(msg + " (%d more like it held back; see DEBUG)", *args, held)
+            self.logger.warning(msg + " (%d more like it held back; see DEBUG)", *args, held, exc_info=exc_info)
         else:
-            self.logger.warning(msg, *args)
+            self.logger.warning(msg, *args, exc_info=exc_info)
         return loud

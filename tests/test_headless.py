@@ -1,7 +1,10 @@
-"""Remote and twin in one process, on the in-process bus and a simulated clock: no sockets, no threads."""
+"""Remote and twin in one process, on the in-process bus and a simulated clock: no sockets, no threads (one test
+runs an estimation worker process, as live twins do)."""
 
 from __future__ import annotations
 
+import logging
+import time
 from dataclasses import replace
 from pathlib import Path
 
@@ -12,10 +15,22 @@ from scenes.headless import Headless
 from scenes.remote import Remote
 from scenes.scenefile import load_scene
 from scenes.sensing import SurfaceSensor, Track
+from sync.clock import SimClock
+from sync.inprocess import InProcessBus
 from sync.keys import Keys
 from sync.link import Link
-from sync.messages import VERSION, Pose
-from twin.runtime import LocalSettings
+from sync.messages import (
+    VERSION,
+    Cloud,
+    OperatorCommand,
+    OperatorTarget,
+    Pose,
+    SceneInfo,
+    cloud_message,
+    encode,
+)
+from sync.ordering import MARK_EXPIRY, MAX_SENDERS
+from twin.runtime import MAX_ORPHAN_POSES, Local, LocalSettings, OperatorSettings
 from twin.trajectory import push_trajectory
 
 SMALL = Path(__file__).parent / "data" / "small.toml"
@@ -87,6 +102,162 @@ def test_a_forged_sequence_number_silences_an_object_only_until_a_heartbeat_and_
         # A heartbeat (every 0.2 s) pulls the forged mark back; the next keyframe (1 s) brings the real pose.
         session.run(remote.keyframe_s + remote.heartbeat_s)
         assert np.linalg.norm(session.local.twin.pose("crate")[0] - target) < 0.005
+
+
+def test_a_command_stamped_at_the_int64_limit_does_not_push_the_remotes_poses_out_of_range(cache):
+    with Headless(load_scene(SMALL), cache_dir=cache) as session:
+        session.run(0.2)
+        remote, keys = session.remote, Keys("small")
+        ee = tuple(remote.twin.data.mocap_pos[0].tolist())
+        # The remote answers to command stamps on the twin's clock: this one plus any time would pass 2**63 - 1.
+        Link(session.bus.transport()).put(keys.operator, OperatorCommand(v=VERSION, stamp_ns=2**63 - 1, epoch=1,
+                                                                         seq=1, position=ee))
+        session.run(0.05)
+        target = _move_crate(remote, 0.1)
+        session.run(0.3)
+        assert not session.local.link.counters.dropped_by_reason  # its poses still decode
+        assert np.linalg.norm(session.local.twin.pose("crate")[0] - target) < 0.005
+
+
+def test_a_message_whose_handling_fails_is_dropped_counted_and_logged_and_the_twin_runs_on(cache, caplog):
+    with Headless(load_scene(SMALL), cache_dir=cache) as session:
+        session.run(0.2)
+        remote, local = session.remote, session.local
+        pos, quat = remote.twin.pose("crate")
+        # Queued as the transport's thread would, past decode (which now refuses it): a value no check caught.
+        # Its answers_ns overflows the twin's int64 history when the pose is measured.
+        bad = Pose(v=VERSION, stamp_ns=0, object_id="crate", epoch=remote.epoch, seq=10**7, sim_time=0.0,
+                   position=tuple(pos.tolist()), quat=tuple(quat.tolist()), linvel=(0.0,) * 3, angvel=(0.0,) * 3,
+                   answers_ns=2**64 - 1)
+        t0 = local.twin.time
+        with caplog.at_level(logging.WARNING, logger="sync.link"):
+            local._enqueue(Keys("small").object("crate", "pose"), bad)
+            session.run(0.05)
+        assert dict(local.link.counters.dropped_by_reason) == {"handler-error": 1}
+        assert local.twin.time == pytest.approx(t0 + 0.05)
+        (record,) = [r for r in caplog.records if "handling it failed" in r.getMessage()]
+        assert record.exc_info is not None and record.exc_info[0] is OverflowError  # with its traceback
+        # The forged seq holds the crate's poses back until a heartbeat; the keyframe after brings them.
+        target = _move_crate(remote, 0.1)
+        session.run(remote.keyframe_s + remote.heartbeat_s)
+        assert np.linalg.norm(local.twin.pose("crate")[0] - target) < 0.005
+
+
+def _box_cloud(object_id: str, centre: np.ndarray, *, epoch: int, seq: int) -> Cloud:
+    """A 6 cm cube's surface cloud around ``centre`` (m, world frame), frame at the centre."""
+    rng = np.random.default_rng(5)
+    points = rng.uniform(-1.0, 1.0, (3000, 3))
+    points[np.arange(3000), rng.integers(0, 3, 3000)] = rng.choice([-1.0, 1.0], 3000)  # onto a face
+    return cloud_message(object_id, centre + 0.03 * points, stamp_ns=0, epoch=epoch, seq=seq, material="wood_pine",
+                         density=None, frame_position=centre, frame_quat=np.array([1.0, 0.0, 0.0, 0.0]))
+
+
+def test_poses_of_ids_without_a_cloud_are_bounded_and_one_just_before_its_cloud_is_used(cache):
+    with Headless(load_scene(SMALL), cache_dir=cache) as session:
+        session.run(0.1)
+        local, keys, epoch = session.local, Keys("small"), session.remote.epoch
+        forger = Link(session.bus.transport())
+        flood = 3 * MAX_ORPHAN_POSES
+        for k in range(flood):
+            forger.put(keys.object(f"ghost{k}", "pose"), Pose(
+                v=VERSION, stamp_ns=0, object_id=f"ghost{k}", epoch=epoch, seq=1, sim_time=0.0,
+                position=(0.0, 0.0, 0.6), quat=(1.0, 0.0, 0.0, 0.0), linvel=(0.0,) * 3, angvel=(0.0,) * 3,
+                seen=k % 2 == 0))
+            if k % 500 == 0:
+                session.tick()
+        session.tick()
+        assert local.report.evicted["pose"] == flood - MAX_ORPHAN_POSES
+        for held in (local._latest, local._pose_mark, local._unseen):
+            assert len(held) <= MAX_ORPHAN_POSES + 2, held  # the ghosts kept, and the crate and can
+        # A cube whose pose (10 cm from where its cloud was taken, and newer) comes just before its cloud.
+        taken, moved = np.array([-0.25, -0.2, 0.53]), (-0.25, -0.1, 0.53)
+        forger.put(keys.object("cube", "pose"), Pose(
+            v=VERSION, stamp_ns=0, object_id="cube", epoch=epoch, seq=2, sim_time=0.0, position=moved,
+            quat=(1.0, 0.0, 0.0, 0.0), linvel=(0.0,) * 3, angvel=(0.0,) * 3))
+        session.tick()
+        forger.put(keys.object("cube", "cloud"), _box_cloud("cube", taken, epoch=epoch, seq=1))
+        session.run(0.1)
+        assert "cube" in local.objects
+        assert np.linalg.norm(local.twin.pose("cube")[0] - moved) < 0.005
+
+
+def test_a_forged_device_mark_freezes_the_device_no_longer_than_the_mark_expiry(cache):
+    with Headless(load_scene(SMALL), cache_dir=cache, operator=OperatorSettings(listen=True)) as session:
+        local, driver, keys = session.local, Link(session.bus.transport()), Keys("small")
+
+        def target(position: np.ndarray, epoch: int, seq: int, device: str = "haptic0") -> None:
+            driver.put(keys.operator_target, OperatorTarget(v=VERSION, stamp_ns=0, device=device, epoch=epoch,
+                                                            seq=seq, position=tuple(position.tolist())))
+
+        start = local.twin.data.mocap_pos[0].copy()
+        forged, goal = start + np.array([0.05, 0.0, 0.0]), start + np.array([0.1, 0.0, 0.0])
+        target(start, 5, 1)
+        session.tick()
+        target(forged, 2**63 - 1, 2**63 - 1)
+        session.tick()
+        t0, seq = session.clock.now(), 0
+        # The driver restarts with a smaller epoch than the forgery and streams at the loop rate.
+        while session.clock.now() < t0 + MARK_EXPIRY - 2 * session.dt:
+            seq += 1
+            target(goal, 6, seq)
+            session.tick()
+            assert np.allclose(local.device_target, forged)
+        for _ in range(5):
+            seq += 1
+            target(goal, 6, seq)
+            session.tick()
+        assert np.allclose(local.device_target, goal) and np.allclose(local.twin.data.mocap_pos[0], goal)
+        assert local.report.operator_dropped["out-of-order"] >= seq - 5
+        # Forged device ids: at most MAX_SENDERS marks are kept.
+        for k in range(MAX_SENDERS + 10):
+            target(goal, 1, 1, device=f"fake{k}")
+        session.tick()
+        assert len(local._device_marks) == MAX_SENDERS and local.report.evicted["device"] == 11
+
+
+def test_the_remote_takes_operator_commands_newest_first_and_inside_the_workspace(cache):
+    with Headless(load_scene(SMALL), cache_dir=cache) as session:
+        remote, operator = session.remote, Link(session.bus.transport())
+
+        def command(position: tuple[float, float, float], epoch: int, seq: int) -> np.ndarray:
+            operator.put(Keys("small").operator, OperatorCommand(v=VERSION, stamp_ns=0, epoch=epoch, seq=seq,
+                                                                 position=position))
+            session.run(0.01)
+            return remote.twin.data.mocap_pos[0].copy()
+
+        above = (0.0, 0.0, 0.7)
+        assert np.allclose(command(above, 5, 100), above)
+        # An older command (a reordered or replayed one) is dropped: it moved the end effector to (900, -900, 900).
+        assert np.allclose(command((0.1, 0.0, 0.7), 1, 1), above)
+        assert np.allclose(command((900.0, -900.0, 900.0), 5, 101), above)  # newer, but 900 m away
+        assert remote.operator_dropped == {"out-of-order": 1, "out-of-workspace": 1}
+        session.run(MARK_EXPIRY)  # no command taken for that long: the next is taken whatever its number
+        assert np.allclose(command((0.1, 0.0, 0.7), 1, 1), (0.1, 0.0, 0.7))
+
+
+def test_a_cloud_superseded_before_its_estimation_started_is_cancelled(cache):
+    # A worker process this time (Headless has none): a bare remote on the in-process bus that answers the scene.
+    bus, clock, keys = InProcessBus(), SimClock(), Keys("s")
+    info = SceneInfo(v=VERSION, stamp_ns=0, name="s", table_size=(1.0, 0.6, 0.04), table_height=0.5,
+                     table_material="wood_pine", ee_radius=0.02, ee_position=(-0.3, 0.0, 0.56))
+    bus.transport("remote").queryable("twin/s/**", lambda _selector: [(keys.info, encode(info))])
+    local = Local(bus.transport("twin"), clock=clock, scene="s", settings=LocalSettings(workers=1, cache_dir=cache))
+    try:
+        sender, centre = Link(bus.transport("sensor")), np.array([0.0, 0.0, 0.53])
+        for seq in range(1, 11):  # ten views of one cube before the twin's loop runs: only the last matters
+            sender.put(keys.object("cube", "cloud"), _box_cloud("cube", centre, epoch=1, seq=seq))
+        local.iterate()
+        # At most workers + 1 jobs are handed to the pool at once (started: not cancellable), and the last stays.
+        assert local.report.clouds_superseded >= 10 - 2 - 1
+        deadline = time.monotonic() + 120.0  # a failsafe for a hung worker, not a measurement
+        while local.objects != ["cube"]:
+            assert time.monotonic() < deadline, "the cube was never estimated"
+            local.iterate()
+            clock.advance(local.twin.model.opt.timestep)
+            time.sleep(0.005)
+        assert local.report.objects_synced == 1 and local._clouds["cube"] == (1, 10)
+    finally:
+        local.close()
 
 
 def test_without_workers_the_twin_estimates_in_its_own_thread(cache):

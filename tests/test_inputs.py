@@ -9,7 +9,7 @@ import pytest
 import trimesh
 
 from estimation import CloudError, CloudFileError, MaterialError, estimate, load_cloud, make_cloud, save_cloud
-from estimation.materials import material, materials
+from estimation.materials import MAX_DENSITY, MIN_DENSITY, material, materials
 from estimation.units import UnitsError, unit_scale
 from scenes.sampling import sample_surface
 
@@ -96,6 +96,7 @@ def test_material_table_has_sources():
     assert len(table) >= 20
     for m in table.values():
         assert m.density > 0 and m.friction > 0 and len(m.source) > 10
+        assert MIN_DENSITY * 100 < m.density < MAX_DENSITY / 5, m.name  # well inside what the wire takes
     assert material("Wood-Oak").name == "wood_oak"
 
 

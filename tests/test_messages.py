@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import logging
+
 import numpy as np
 import pytest
 import zstandard
@@ -9,15 +11,19 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from msgspec.structs import replace
 
+from sync.clock import SimClock
 from sync.inprocess import InProcessBus
 from sync.keys import Keys, intersects
 from sync.link import Link
 from sync.messages import (
     MAX_CLOUD_POINTS,
     VERSION,
+    Gone,
     Heartbeat,
     MessageError,
     OperatorCommand,
+    OperatorForce,
+    OperatorTarget,
     Pose,
     SceneInfo,
     as_received,
@@ -27,14 +33,16 @@ from sync.messages import (
     unpack_normals,
     unpack_points,
 )
+from twin.runtime import Local, LocalSettings, SyncError
 
 IDENTITY = np.array([1.0, 0, 0, 0])
 
 
 def _cloud(n: int = 100, **kw):  # type: ignore[no-untyped-def]
     points = np.random.default_rng(1).random((n, 3))
-    return cloud_message("o", points, stamp_ns=0, epoch=7, seq=1, material=None, density=1.0,
-                         frame_position=np.zeros(3), frame_quat=IDENTITY, **kw)
+    kw = {"material": None, "density": 1.0, **kw}
+    return cloud_message("o", points, stamp_ns=0, epoch=7, seq=1, frame_position=np.zeros(3), frame_quat=IDENTITY,
+                         **kw)
 
 
 def _pose(**fields) -> Pose:  # type: ignore[no-untyped-def]
@@ -94,6 +102,8 @@ def test_normals_that_do_not_match_the_points_are_rejected():
 
 def test_a_good_pose_passes_unchanged():
     assert decode(encode(_pose())) == _pose()
+    fast = _pose(linvel=(0.0, 99.0, 0.0), angvel=(999.0, 0.0, 0.0))  # within MAX_SPEED, MAX_ANGULAR_SPEED
+    assert decode(encode(fast)) == fast
     assert decode(encode(_pose(seen=False))).seen is False
 
 
@@ -120,6 +130,16 @@ def test_a_pose_whose_seen_flag_is_not_a_bool_is_rejected():
     ({"position_sigma": -0.001}, "out-of-range"),
     ({"angle_sigma": float("nan")}, "non-finite"),
     ({"position_sigma": 1e9}, "out-of-range"),
+    ({"answers_ns": 2**64 - 1}, "out-of-range"),  # msgpack carries it; the twin's int64 history cannot
+    ({"answers_ns": 2**63}, "out-of-range"),
+    ({"stamp_ns": 2**64 - 1}, "out-of-range"),
+    ({"stamp_ns": -1}, "out-of-range"),
+    ({"seq": 2**63}, "out-of-range"),
+    ({"epoch": 2**64 - 1}, "out-of-range"),
+    ({"linvel": (1e300, 0.0, 0.0)}, "out-of-range"),  # would reach MuJoCo's qvel
+    ({"linvel": (60.0, 60.0, 60.0)}, "out-of-range"),  # 104 m/s
+    ({"angvel": (0.0, 1e300, 0.0)}, "out-of-range"),
+    ({"angvel": (0.0, 0.0, -1001.0)}, "out-of-range"),
 ])
 def test_decode_rejects_poses_no_sender_could_mean(fields, reason):
     with pytest.raises(MessageError) as err:
@@ -137,6 +157,82 @@ def test_decode_rejects_other_impossible_messages():
         with pytest.raises(MessageError) as err:
             decode(encode(msg))
         assert err.value.reason == reason
+
+
+def test_every_stamp_and_sequence_number_must_fit_an_int64():
+    largest = 2**63 - 1
+    assert decode(encode(_pose(stamp_ns=largest, epoch=largest, seq=largest, answers_ns=largest))).seq == largest
+    messages = [_pose(), _cloud(), Heartbeat(v=VERSION, stamp_ns=0, epoch=0, seq=1, sim_time=0.0, objects=1),
+                Gone(v=VERSION, stamp_ns=0, object_id="o", epoch=0, seq=1),
+                OperatorCommand(v=VERSION, stamp_ns=0, epoch=0, seq=1, position=(0.0, 0.0, 0.5)),
+                OperatorTarget(v=VERSION, stamp_ns=0, device="d", epoch=0, seq=1, position=(0.0, 0.0, 0.5)),
+                OperatorForce(v=VERSION, stamp_ns=0, epoch=0, seq=1, sim_time=0.0, force=(0.0,) * 3,
+                              position=(0.0,) * 3)]
+    for msg in messages:
+        decode(encode(msg))
+        for field in ("stamp_ns", "epoch", "seq"):
+            with pytest.raises(MessageError) as err:
+                decode(encode(replace(msg, **{field: 2**64 - 1})))
+            assert err.value.reason == "out-of-range", (type(msg).__name__, field)
+
+
+@pytest.mark.parametrize("msg", [_cloud(material="x" * 1_000_000, density=None),
+                                 SceneInfo(v=VERSION, stamp_ns=0, name="s", table_size=(1.0, 0.6, 0.04),
+                                           table_height=0.5, table_material="zz" * 1000, ee_radius=0.02,
+                                           ee_position=(0.0, 0.0, 0.6))])
+def test_a_name_longer_than_an_id_is_refused_and_never_logged_whole(msg):
+    with pytest.raises(MessageError) as err:
+        decode(encode(msg))
+    assert err.value.reason == "bad-material" and len(str(err.value)) < 120
+
+
+def test_a_cloud_of_a_material_the_twin_does_not_know_is_refused():
+    assert decode(encode(_cloud(material="wood_pine", density=None))).material == "wood_pine"
+    with pytest.raises(MessageError, match="unknown material 'adamantium'") as err:
+        decode(encode(_cloud(material="adamantium", density=None)))
+    assert err.value.reason == "bad-material"
+
+
+def _scene(**fields) -> SceneInfo:  # type: ignore[no-untyped-def]
+    good = SceneInfo(v=VERSION, stamp_ns=0, name="s", table_size=(1.0, 0.6, 0.04), table_height=0.5,
+                     table_material="wood_pine", ee_radius=0.02, ee_position=(-0.3, 0.0, 0.56))
+    return replace(good, **fields)
+
+
+@pytest.mark.parametrize(("fields", "reason"), [
+    ({"table_size": (1e-300, 1e-300, 1e-300)}, "out-of-range"),
+    ({"table_size": (1000.0, 1000.0, 1000.0)}, "out-of-range"),  # under 1 km, but no table
+    ({"table_height": 1e-9}, "out-of-range"),
+    ({"ee_radius": 999.0}, "out-of-range"),
+    ({"ee_radius": 1e-300}, "out-of-range"),  # MuJoCo refused the sphere: a ValueError out of Local()
+    ({"table_material": "adamantium"}, "bad-material"),  # a MaterialError out of Local()
+    ({"ee_radius": float("inf")}, "non-finite"),
+])
+def test_decode_rejects_scenes_no_twin_could_build(fields, reason):
+    with pytest.raises(MessageError) as err:
+        decode(encode(_scene(**fields)))
+    assert err.value.reason == reason
+
+
+def test_scenes_without_a_table_or_end_effector_still_decode():
+    bare = _scene(table_size=None, table_height=0.0, table_material="", ee_radius=0.0)
+    assert decode(encode(bare)) == bare
+    assert decode(encode(_scene(table_material="PLA"))).table_material == "PLA"  # aliases too
+
+
+@pytest.mark.parametrize(("fields", "said"), [
+    ({"table_material": "adamantium"}, "table material: unknown material 'adamantium'"),
+    ({"ee_radius": 1e-300}, "end-effector radius 1e-300 m outside"),
+    ({"name": "other"}, "scene 'other' described on scene 's''s key"),  # on the key asked for, another scene
+])
+def test_the_twin_refuses_a_scene_reply_it_cannot_use_and_says_so(fields, said, caplog):
+    clock, bus = SimClock(), InProcessBus()
+    info = _scene(**fields)
+    bus.transport("remote").queryable("twin/s/**", lambda _selector: [(Keys("s").info, encode(info))])
+    with caplog.at_level(logging.WARNING, logger="sync.link"), \
+            pytest.raises(SyncError, match=r"^no remote scene answered on twin/s/scene within 0\.5 s$"):
+        Local(bus.transport("twin"), clock=clock, scene="s", settings=LocalSettings(workers=0), wait=0.5)
+    assert caplog.records and all(said in r.getMessage() for r in caplog.records)
 
 
 @pytest.mark.parametrize("data", [b"", b"\x00\xff garbage", b"\x93\x01"])
@@ -168,6 +264,10 @@ def test_a_small_cloud_claiming_a_huge_size_is_refused_without_allocating():
     ({"frame_position": (float("nan"), 0.0, 0.0)}, "non-finite"),
     ({"origin": (0.0, float("inf"), 0.0)}, "non-finite"),
     ({"density": -3.0}, "non-finite"),
+    ({"density": 1e300}, "out-of-range"),  # a 4.8e296 kg crate
+    ({"density": 1e-300}, "out-of-range"),
+    ({"density": 0.09}, "out-of-range"),
+    ({"density": 1.01e5}, "out-of-range"),
     ({"bits": 12}, "bad-header"),
     ({"quantum": float("nan")}, "bad-header"),
 ])
@@ -200,6 +300,41 @@ def test_the_link_drops_a_message_filed_under_another_objects_key_and_counts_why
     assert [m.object_id for m in got] == ["crate"]
     assert rx.counters.dropped_malformed == 2
     assert dict(rx.counters.dropped_by_reason) == {"wrong-key": 1, "bad-quaternion": 1}
+
+
+def _every_message() -> dict[str, tuple[str, object]]:
+    """One good message of each type, by the key (of scene "s", object "crate") it travels on."""
+    keys = Keys("s")
+    return {keys.info: _scene(), keys.object("crate", "cloud"): replace(_cloud(), object_id="crate"),
+            keys.object("crate", "pose"): _pose(), keys.object("crate", "gone"): Gone(
+                v=VERSION, stamp_ns=0, object_id="crate", epoch=0, seq=1),
+            keys.heartbeat: Heartbeat(v=VERSION, stamp_ns=0, epoch=0, seq=1, sim_time=0.0, objects=1),
+            keys.operator: OperatorCommand(v=VERSION, stamp_ns=0, epoch=0, seq=1, position=(0.0, 0.0, 0.5)),
+            keys.operator_target: OperatorTarget(v=VERSION, stamp_ns=0, device="d", epoch=0, seq=1,
+                                                 position=(0.0, 0.0, 0.5)),
+            keys.operator_force: OperatorForce(v=VERSION, stamp_ns=0, epoch=0, seq=1, sim_time=0.0,
+                                               force=(0.0,) * 3, position=(0.0,) * 3)}
+
+
+def test_the_link_takes_each_message_only_on_its_own_key_and_counts_the_rest_as_wrong_key():
+    bus = InProcessBus()
+    rx, tx = Link(bus.transport()), bus.transport()
+    got: list[tuple[str, object]] = []
+    rx.subscribe("twin/**", lambda k, m: got.append((k, m)))
+    messages = _every_message()
+    for key, msg in messages.items():
+        tx.put(key, encode(msg))
+    assert got == list(messages.items())
+    wrong = [(other, msg) for key, msg in messages.items() for other in messages if other != key]
+    wrong += [("twin/s/objects/x/y/pose", _pose()),  # deeper than an object key: was applied to the crate
+              ("twin/s/objects/crate/pose/x", _pose()), ("twin/s/objects/crate", _pose()),
+              ("twin/s/remote/heartbeat/x", messages[Keys("s").heartbeat]), ("twin/s/other", _scene()),
+              ("twin/other/scene", _scene()),  # scene "s" described on scene "other"'s key
+              (Keys("s").object("can", "pose"), _pose())]
+    for key, msg in wrong:
+        tx.put(key, encode(msg))
+    assert len(got) == len(messages)
+    assert dict(rx.counters.dropped_by_reason) == {"wrong-key": len(wrong)}
 
 
 @pytest.mark.parametrize(("a", "b", "expected"), [

@@ -142,8 +142,9 @@ def test_bad_targets_are_dropped_and_counted(twin):
     driver.target([0.1, 0.1, 3000.0], seq=104)  # beyond 1 km: refused at decoding
     counters = local.link.counters
     _run_until(local, lambda: counters.dropped_malformed + sum(local.report.operator_dropped.values()) >= 7)
-    assert counters.dropped_by_reason == {"undecodable": 1, "non-finite": 1, "bad-id": 1, "out-of-range": 1}
-    assert local.report.operator_dropped == {"wrong-type": 1, "out-of-workspace": 1, "out-of-order": 1}
+    assert counters.dropped_by_reason == {"undecodable": 1, "non-finite": 1, "bad-id": 1, "out-of-range": 1,
+                                          "wrong-key": 1}  # the pose: not what the target key carries
+    assert local.report.operator_dropped == {"out-of-workspace": 1, "out-of-order": 1}
     local.run(0.1)
     assert np.allclose(local.device_target, good) and np.allclose(local.twin.data.mocap_pos[0], good)
 

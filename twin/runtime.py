@@ -12,7 +12,13 @@ leaves alone is held at the remote's pose (:mod:`twin.hold`).
 Ordering: each ordered message carries the remote's ``(epoch, seq)``. Newer beats older per object; a
 restarted remote (larger epoch) is followed at once. A heartbeat states the remote's counter now, so
 a mark past it (a forged or corrupted sequence number) is pulled back to it at the next heartbeat: it
-cannot silence the real remote for longer than a heartbeat period.
+cannot silence the real remote for longer than a heartbeat period. A device driver's targets have no
+heartbeat: each device's mark expires :data:`sync.ordering.MARK_EXPIRY` seconds after the last target taken
+from it, so a forged one cannot freeze the device for longer (:mod:`sync.ordering`).
+
+Bad input: the link drops what decoding refuses (:mod:`sync.link`); a message that passes and still makes its
+handling fail is dropped too, counted in the same counter as ``"handler-error"`` and logged with its traceback
+(rate-limited), and the loop goes on.
 """
 
 from __future__ import annotations
@@ -49,6 +55,7 @@ from sync.messages import (
     unpack_normals,
     unpack_points,
 )
+from sync.ordering import Marks
 from sync.ratelimit import RateLimitedLog
 from sync.recording import Recorder
 from sync.transport import Transport
@@ -109,6 +116,12 @@ class LocalSettings:
 DEFAULT_LOCAL = LocalSettings()
 
 
+#: How far beyond the table's edges (and above its top) the operator may send the end effector, metres
+#: (without a table: around its start): the twin's default for device targets, and the remote's bound for the
+#: operator commands it takes (:class:`scenes.remote.Remote`).
+OPERATOR_REACH = 2.0
+
+
 @dataclass(frozen=True)
 class OperatorSettings:
     """The operator's device on the wire: targets in, force out (keys in :mod:`sync.keys`).
@@ -116,7 +129,9 @@ class OperatorSettings:
     Attributes:
         listen: follow :class:`sync.messages.OperatorTarget` messages on ``operator/target`` (a device
             driver) whenever :meth:`Local.iterate` is given no trajectory; newest ``(epoch, seq)`` per
-            device wins, the latest of any device is applied.
+            device wins, a device's mark lasting :data:`sync.ordering.MARK_EXPIRY` seconds after its last
+            target taken (so no forged sequence number freezes a device for longer); the latest of any
+            device is applied.
         force_rate: :class:`sync.messages.OperatorForce` messages per second of twin time on
             ``operator/force``; 0 publishes none. At or above the loop rate: one per step.
         reach: how far beyond the table's edges (and above its top) a target may be, metres; without a
@@ -125,7 +140,7 @@ class OperatorSettings:
 
     listen: bool = False
     force_rate: float = 0.0
-    reach: float = 2.0
+    reach: float = OPERATOR_REACH
 
 
 NO_OPERATOR_IO = OperatorSettings()
@@ -168,6 +183,7 @@ class LocalReport:
     recoveries: int = 0
     estimation_errors: int = 0
     worker_retries: int = 0  # clouds estimated again because their worker process died
+    clouds_superseded: int = 0  # estimations cancelled before they started: a newer cloud of the object came
     failed_edits: int = 0  # objects whose model did not compile: the twin went on without them
     out_of_order: int = 0  # messages older than what the twin already had from the remote
     out_of_scene: int = 0  # poses and clouds placed outside the scene's box (its workspace, or SCENE_REACH around the table)
@@ -175,12 +191,21 @@ class LocalReport:
     holds: int = 0  # times an object strayed from the remote's pose on its own and was pinned to it
     snaps: int = 0  # corrections too large to blend in: the object was moved at once
     operator_targets: int = 0  # device targets taken (OperatorSettings.listen)
-    # reason -> device targets dropped after decoding: "out-of-workspace", "out-of-order", "wrong-type"
+    # reason -> device targets dropped after decoding: "out-of-workspace", "out-of-order" (another message on
+    # the target key is the link's "wrong-key")
     operator_dropped: Counter = field(default_factory=Counter)
     forces_sent: int = 0  # OperatorForce messages published
+    # kind -> entries forgotten to bound memory: "pose" (ids with a pose and no cloud, past MAX_ORPHAN_POSES),
+    # "device" (device marks, past sync.ordering.MAX_SENDERS)
+    evicted: Counter = field(default_factory=Counter)
     # id -> |twin - remote| position, metres, every DIVERGENCE_EVERY seconds of twin time while both are known
     divergence: dict[str, list[float]] = field(default_factory=dict)
 
+
+#: Ids the twin keeps a pose of while it has no cloud of them (no body, none being estimated): a pose may come
+#: just before its object's cloud and is used when the object arrives, but poses for ids that never get a cloud
+#: (forged, or a remote's mistake) must not grow memory without limit. Past this many, the oldest is forgotten.
+MAX_ORPHAN_POSES = 1024
 
 #: How often (twin time, seconds) the report samples each object's divergence from the remote.
 DIVERGENCE_EVERY = 0.01
@@ -245,7 +270,7 @@ class Local:
         self.keys = Keys(info.name)
         self.twin = Twin(_empty_spec(info), background=settings.workers > 0)
         self._floor = info.table_height if info.table_size is not None else 0.0
-        self.workspace = _workspace(info, operator.reach)
+        self.workspace = reach_box(info, operator.reach)
         self.scene_box = _scene_box(info)
         self._box: tuple[object, list[float], list[float]] = (None, [], [])  # scene_box as floats, see _in_scene
         if info.table_size is not None:
@@ -260,6 +285,7 @@ class Local:
         self._latest: dict[str, Pose] = {}
         self._unseen: set[str] = set()  # objects the remote's sensor has lost (Pose.seen False)
         self._pose_mark: dict[str, tuple[int, int]] = {}  # id -> (epoch, seq) of the newest pose taken
+        self._orphans: dict[str, None] = {}  # ids with a pose and no cloud, oldest first (MAX_ORPHAN_POSES)
         self._targets: dict[str, Pose] = {}  # id -> its newest pose from C, until measured (_measure)
         self._errors: dict[str, tuple[np.ndarray, bool]] = {}  # id -> (correction left (12,), snap it)
         self._history = History(round(settings.align_window / self.twin.model.opt.timestep))
@@ -282,7 +308,7 @@ class Local:
         self._seq = 0
         self._epoch = clock.stamp_ns()  # of the operator commands this twin sends
         self.device_target: np.ndarray | None = None  # the latest device target taken (OperatorSettings.listen)
-        self._device_marks: dict[str, tuple[int, int]] = {}
+        self._device_marks = Marks()  # newest (epoch, seq) per device, expiring (sync.ordering)
         self._force_every = None if operator.force_rate <= 0 else 1.0 / operator.force_rate
         self._next_force = 0.0
         self._force_seq = 0
@@ -325,7 +351,7 @@ class Local:
                 item = self.inbox.get(timeout=left)
             except queue.Empty:
                 return
-            self._handle(*item)
+            self._handle_safely(*item)
             self._flush_corrections()
             left = deadline - self.clock.now()
 
@@ -379,7 +405,7 @@ class Local:
                 item = self.inbox.get_nowait()
             except queue.Empty:
                 break
-            self._handle(*item)
+            self._handle_safely(*item)
         if correct:
             self._flush_corrections()
 
@@ -471,14 +497,11 @@ class Local:
                 v=VERSION, stamp_ns=self.clock.stamp_ns(), epoch=self._epoch, seq=self._force_seq, sim_time=t,
                 force=_float3(force), position=_float3(self.twin.data.mocap_pos[0])))
 
-    def _on_device_target(self, msg) -> None:  # type: ignore[no-untyped-def]
-        """Take a device driver's target if it is one, newer than the last of its device, in the workspace."""
+    def _on_device_target(self, msg: OperatorTarget, received: float) -> None:
+        """Take a device driver's target if it is newer than the last of its device (or that device's mark has
+        expired: :mod:`sync.ordering`) and in the workspace. ``received``: when it arrived, clock seconds."""
         dropped = self.report.operator_dropped
-        if not isinstance(msg, OperatorTarget):
-            dropped["wrong-type"] += 1  # e.g. a pose published on the operator key
-            return
-        mark = self._device_marks.get(msg.device)
-        if mark is not None and (msg.epoch, msg.seq) <= mark:
+        if not self._device_marks.newer(msg.device, msg.epoch, msg.seq, received):
             dropped["out-of-order"] += 1
             return
         position = np.asarray(msg.position, dtype=float)
@@ -488,7 +511,8 @@ class Local:
             self.dropped_log.warning("out-of-workspace", "dropped an operator target outside the workspace: %s",
                                      position.tolist())
             return
-        self._device_marks[msg.device] = (msg.epoch, msg.seq)
+        if self._device_marks.take(msg.device, msg.epoch, msg.seq, received):
+            self.report.evicted["device"] += 1
         self.device_target = position
         self.report.operator_targets += 1
 
@@ -507,15 +531,30 @@ class Local:
                                  msg.object_id, p.tolist())
         return False
 
+    def _handle_safely(self, received: float, key: str, msg) -> None:  # type: ignore[no-untyped-def]
+        """:meth:`_handle`, with an exception dropping the message (counted as ``"handler-error"``, logged with
+        its traceback, rate-limited) instead of ending the loop: decoding checks every value it knows of, and
+        one message it let through must not stop the twin. The physics step is not in here."""
+        try:
+            self._handle(received, key, msg)
+        except Exception as exc:
+            self._handler_error(msg, key, exc)
+
+    def _handler_error(self, msg, key: str, exc: Exception) -> None:  # type: ignore[no-untyped-def]
+        self.link.dropped("handler-error", "dropped a %s on %s: handling it failed (%s: %s)", type(msg).__name__,
+                          key, type(exc).__name__, exc, exc_info=True)
+
     def _handle(self, received: float, key: str, msg) -> None:  # type: ignore[no-untyped-def]
-        if key == self.keys.operator_target:
-            self._on_device_target(msg)
+        if isinstance(msg, OperatorTarget):  # the link passes one on its key only (sync.keys.carried_by)
+            self._on_device_target(msg, received)
         elif isinstance(msg, Heartbeat):
             self._on_heartbeat(msg)
         elif isinstance(msg, Pose):
             if not self._in_scene(msg, msg.position) or not self._newer(self._pose_mark, msg):
                 return
             self._latest[msg.object_id] = msg
+            if msg.object_id not in self._clouds:
+                self._orphan(msg.object_id)
             if not msg.seen:
                 self._on_unseen(msg.object_id)
                 return
@@ -533,6 +572,10 @@ class Local:
         elif isinstance(msg, Cloud):
             if not self._in_scene(msg, msg.frame_position) or not self._newer(self._clouds, msg):
                 return
+            self._orphans.pop(msg.object_id, None)  # its pose, if one came first, is kept for it
+            superseded = self._jobs.get(msg.object_id)
+            if superseded is not None and superseded[0].cancel():  # its result would be thrown away unused
+                self.report.clouds_superseded += 1
             self._jobs[msg.object_id] = (self._submit(msg), msg, received)
             self.rlog.event(self.twin.time, f"{msg.object_id}: cloud received (seq {msg.seq}); estimating")
         elif isinstance(msg, Gone):
@@ -549,6 +592,7 @@ class Local:
             self._latest.pop(msg.object_id, None)
             self._mapped.pop(msg.object_id, None)
             self._pose_mark.pop(msg.object_id, None)
+            self._orphans.pop(msg.object_id, None)
             self._unseen.discard(msg.object_id)
             self.hold.forget(msg.object_id)
             if self.twin.has(msg.object_id):
@@ -556,6 +600,19 @@ class Local:
             for side in ("twin", "remote"):
                 self.rlog.removed(side, msg.object_id, self.twin.time)
             self.rlog.event(self.twin.time, f"{msg.object_id}: removed by the remote")
+
+    def _orphan(self, object_id: str) -> None:
+        """Note a pose of an object the twin has no cloud of, newest last; past :data:`MAX_ORPHAN_POSES` such ids,
+        forget all the twin holds of the oldest (its pose, mark and unseen flag) and count it."""
+        self._orphans.pop(object_id, None)
+        self._orphans[object_id] = None
+        if len(self._orphans) > MAX_ORPHAN_POSES:
+            oldest = next(iter(self._orphans))
+            del self._orphans[oldest]
+            for held in (self._latest, self._pose_mark, self._mapped):
+                held.pop(oldest, None)
+            self._unseen.discard(oldest)
+            self.report.evicted["pose"] += 1
 
     def _collect(self) -> None:
         for object_id, (future, msg, received) in list(self._jobs.items()):
@@ -641,10 +698,24 @@ class Local:
 
     def _flush_corrections(self) -> None:
         """Measure the corrections the poses handled since the last flush call for (each object once, from its
-        newest pose: see :meth:`_handle`); :meth:`_apply_corrections` then applies them step by step."""
-        if self._to_correct:
-            ids, self._to_correct = self._to_correct, []
-            self._measure([i for i in dict.fromkeys(ids) if i in self._targets])
+        newest pose: see :meth:`_handle`); :meth:`_apply_corrections` then applies them step by step.
+
+        A pose whose measurement fails is dropped and counted (``"handler-error"``), as in
+        :meth:`_handle_safely`; the others of its batch are measured one by one, so it costs them nothing."""
+        if not self._to_correct:
+            return
+        ids, self._to_correct = self._to_correct, []
+        ids = [i for i in dict.fromkeys(ids) if i in self._targets]
+        try:
+            self._measure(ids)
+        except Exception:
+            for object_id in ids:
+                try:
+                    self._measure([object_id])
+                except Exception as exc:
+                    self._handler_error(self._targets[object_id], self.keys.object(object_id, "pose"), exc)
+        for object_id in ids:
+            del self._targets[object_id]
 
     def _measure(self, ids: list[str]) -> None:
         """Turn each object's newest pose from C into the correction C' still needs: C's pose and velocity
@@ -655,7 +726,7 @@ class Local:
             return
         s = self.settings
         body, _, dof = self._indices(ids)
-        msgs = [self._targets.pop(i) for i in ids]
+        msgs = [self._targets[i] for i in ids]  # the caller forgets them once measured
         want = np.array([self._on_body(i, m, self._offsets[i], row=True) for i, m in zip(ids, msgs, strict=True)])
         n = len(ids)
         past, since, aligned = np.empty((n, STATE)), np.zeros((n, CORRECTION)), np.zeros(n, dtype=bool)
@@ -839,6 +910,8 @@ class Local:
         found: list[SceneInfo] = []
         deadline = self.clock.now() + wait
         while not found and self.clock.now() < deadline:
+            # The link takes a SceneInfo only on its own scene's key (sync.keys.carried_by), and replies only
+            # come on keys the selector matches: a reply describing another scene is dropped as wrong-key.
             self.link.query(selector, lambda _k, m: found.append(m) if isinstance(m, SceneInfo) else None,
                             timeout=min(1.0, wait))
             if not found:
@@ -856,7 +929,7 @@ class Local:
 SCENE_REACH = 10.0
 
 
-def _workspace(info: SceneInfo, reach: float) -> tuple[np.ndarray, np.ndarray]:
+def reach_box(info: SceneInfo, reach: float) -> tuple[np.ndarray, np.ndarray]:
     """(low, high) corners of the box targets or object poses must lie in, metres, world frame: ``reach`` beyond
     the table's edges and above its top, down to the floor; without a table, ``reach`` around the end
     effector's start."""
@@ -872,7 +945,7 @@ def _scene_box(info: SceneInfo) -> tuple[np.ndarray, np.ndarray]:
     declared workspace when the remote announces one, else :data:`SCENE_REACH` around the table."""
     if info.workspace_min is not None and info.workspace_max is not None:
         return np.asarray(info.workspace_min, dtype=float), np.asarray(info.workspace_max, dtype=float)
-    return _workspace(info, SCENE_REACH)
+    return reach_box(info, SCENE_REACH)
 
 
 def _float3(v: np.ndarray) -> tuple[float, float, float]:
