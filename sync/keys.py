@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass
-from functools import cache
+from functools import lru_cache
 
 PREFIX = "twin"
 #: Longest id (scene, object, device), characters; other names on the wire (materials) are held to it too.
@@ -147,7 +147,12 @@ def intersects(a: str, b: str) -> bool:
     return _intersects(tuple(a.split("/")), tuple(b.split("/")))
 
 
-@cache
+#: Key pairs whose match is remembered: the in-process bus matches every message's key against every
+#: subscription, and forged unique keys must not grow the memo without limit (100k of them held ~350 MB).
+_MATCH_MEMO = 65_536
+
+
+@lru_cache(maxsize=_MATCH_MEMO)
 def _intersects(a: tuple[str, ...], b: tuple[str, ...]) -> bool:
     if not a or not b:
         rest = a or b

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from sync.clock import REAL_CLOCK, Clock
+from twin.samples import Samples
 
 
 @dataclass(frozen=True)
@@ -41,7 +42,7 @@ class Pacer:
         self.start = clock.now()
         self.iterations = 0
         self.missed = 0
-        self.work: list[float] = []
+        self.work = Samples()  # seconds each iteration's work took (a uniform subsample past a million)
         self._t0 = self.start
 
     def begin(self) -> None:

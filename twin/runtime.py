@@ -67,6 +67,7 @@ from twin.loop import LoopStats, run_loop
 from twin.model import EndEffectorSpec, TableSpec, add_object, new_spec, remove_object
 from twin.objects import DEFAULT_FRICTION, TwinObject, lowest_point, object_at_estimate
 from twin.poses import from_rotvec, quat_conj, quat_mul, quat_product, rotation, to_rotvec
+from twin.samples import Samples
 from twin.sim import Twin
 from twin.trajectory import Trajectory
 from twin.workers import background_worker
@@ -174,7 +175,7 @@ class LocalReport:
 
     objects_synced: int = 0
     pose_updates: int = 0
-    pose_latency: list[float] = field(default_factory=list)
+    pose_latency: list[float] = field(default_factory=Samples)  # a uniform subsample past a million (twin.samples)
     add_latency: list[float] = field(default_factory=list)  # cloud received -> touchable in the twin
     # id -> (seconds from the cloud's publish stamp, seconds from its arrival) to touchable, latest cloud
     touchable_after: dict[str, tuple[float, float]] = field(default_factory=dict)
@@ -199,6 +200,7 @@ class LocalReport:
     # "device" (device marks, past sync.ordering.MAX_SENDERS)
     evicted: Counter = field(default_factory=Counter)
     # id -> |twin - remote| position, metres, every DIVERGENCE_EVERY seconds of twin time while both are known
+    # (each a twin.samples.Samples: a uniform subsample past a million)
     divergence: dict[str, list[float]] = field(default_factory=dict)
 
 
@@ -870,7 +872,7 @@ class Local:
             remote = self.remote_pose(object_id)
             if remote is not None and self.twin.has(object_id):
                 gap = float(np.linalg.norm(self.twin.pose(object_id)[0] - remote[0]))
-                self.report.divergence.setdefault(object_id, []).append(gap)
+                self.report.divergence.setdefault(object_id, Samples()).append(gap)
 
     def _hold_at(self, object_id: str) -> None:
         """Tell the hold where the remote last had the object (mapped onto the twin's body)."""
