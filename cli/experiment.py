@@ -14,6 +14,7 @@ import logging
 import math
 from pathlib import Path
 
+from cli.outputs import check_output_folder, claim_output_folder
 from estimation.errors import TwinError
 
 log = logging.getLogger(__name__)
@@ -23,6 +24,9 @@ FORCE_JND_PCT = 7.0
 
 #: The file that marks a folder as this command's own: only such a folder (or an empty one) is written into.
 MARKER = ".twin-experiment"
+
+#: The files this command writes into --out (none may be an input).
+WRITES = ("results.csv", "report.md", "force_vs_delay.png", "force_vs_mass.png", "divergence.png", "bytes_per_s.png")
 
 HELP = """Run a latency sweep headless: per condition one session on the simulated clock gives both direct
 teleoperation (the operator feels C's force after the round trip) and the twin (the operator feels C' at once).
@@ -105,10 +109,7 @@ def parse(args: argparse.Namespace):  # type: ignore[no-untyped-def]
     sweep = Sweep(tasks=tasks, delays=tuple(d / 1e3 for d in delays), jitter=args.jitter / 1e3,
                   loss=args.loss / 100, mass_scales=masses, seeds=args.seeds, speed=args.speed)
     sweep.conditions()  # every condition checked before any work
-    out: Path = args.out
-    if out.exists() and (not out.is_dir() or (any(out.iterdir()) and not (out / MARKER).is_file())):
-        raise TwinError(f"--out {out}: exists and is not empty (and not a folder this command wrote); "
-                        "choose a new folder")
+    check_output_folder(args.out, marker=MARKER, writes=WRITES, inputs=(args.scene,))
     return sweep
 
 
@@ -156,8 +157,7 @@ def run(args: argparse.Namespace) -> int:
     sweep = parse(args)
     scene, recorded = source(args)
     out: Path = args.out
-    out.mkdir(parents=True, exist_ok=True)
-    (out / MARKER).write_text("written by twin experiment\n")
+    claim_output_folder(out, marker=MARKER, command="twin experiment")
     engine = nullcontext(None) if args.dask is None else dask_executor(args.dask, args.workers)
     with engine as executor, Progress(TextColumn("sessions"), BarColumn(), MofNCompleteColumn(),
                                       TimeElapsedColumn(), transient=False) as bar:

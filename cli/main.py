@@ -16,6 +16,7 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
+from cli.outputs import check_not_input, check_record_file
 from estimation.errors import TwinError
 
 log = logging.getLogger("twin")
@@ -86,11 +87,24 @@ def check_args(args: argparse.Namespace) -> None:
             raise TwinError(f"--viewpoint must be three finite numbers, got {viewpoint}")
     if getattr(args, "points", None) is not None and args.points < 100:
         raise TwinError(f"--points must be at least 100, got {args.points}")
+    inputs = _input_files(args)
     if getattr(args, "record", None) is not None:
         _check_writable_file(Path(args.record), "--record")
+        check_record_file(Path(args.record), inputs)
     rerun = getattr(args, "rerun", None)
     if rerun and rerun[0] == "save" and len(rerun) == 2:
         _check_writable_file(Path(rerun[1]), "--rerun save")
+        check_not_input(Path(rerun[1]), inputs, "--rerun save")
+
+
+#: Options naming files a command reads (``local --scene`` is a name, not a file: only paths count).
+_INPUT_OPTIONS = ("scene", "script", "replay_operator", "recording", "zenoh_config")
+
+
+def _input_files(args: argparse.Namespace) -> list[Path]:
+    """The files the command reads, for refusing an output that is one of them."""
+    found = [v for a in _INPUT_OPTIONS if isinstance(v := getattr(args, a, None), Path)]
+    return found + list(getattr(args, "views", None) or ())
 
 
 def _check_writable_file(path: Path, flag: str) -> None:
@@ -664,9 +678,11 @@ def _record_option(p: argparse.ArgumentParser) -> None:
 
 
 def _cmd_replay(args: argparse.Namespace) -> int:
-    from cli.record import check_replay_inputs, network_from_options, print_summary, replay
+    from cli.record import check_replay_inputs, check_replay_out, network_from_options, print_summary, replay
 
     check_replay_inputs(args.recording)
+    if args.out is not None:
+        check_replay_out(args.out, args.recording, args.script, args.scene)
     if args.seed is not None and args.seed < 0:
         raise TwinError(f"--seed must be >= 0, got {args.seed}")
     network = network_from_options(delay_ms=args.delay_ms, jitter_ms=args.jitter_ms, loss_pct=args.loss_pct,
@@ -731,10 +747,12 @@ def _run_remote(args: argparse.Namespace, scene, rlog) -> None:  # type: ignore[
 
     session = _session(args)
     recorder = open_recorder(args.record, clock=REAL_CLOCK, command="remote", side="remote", scene_path=args.scene)
+    started = False
     try:
         remote = Remote(scene, recording_transport(ZenohTransport(session), recorder, "remote"),
                         deadband=Deadband(args.deadband_mm * 1e-3, args.deadband_deg), sensor=remote_sensor(args.sensor, scene),
                         points=args.points, progress=True, rlog=rlog, recorder=recorder)
+        started = True
         print(f"remote scene {scene.name!r}: {len(scene.objects)} objects published; running (Ctrl-C stops)",
               file=sys.stderr)  # status, not the result
         stats = remote.run(args.duration)
@@ -745,8 +763,17 @@ def _run_remote(args: argparse.Namespace, scene, rlog) -> None:  # type: ignore[
         remote.close()
     finally:
         session.close()
-        if recorder is not None:
-            recorder.close()
+        _finish_recording(recorder, started)
+
+
+def _finish_recording(recorder, started: bool, **end: object) -> None:  # type: ignore[no-untyped-def]
+    """Put the recording in place if the session started; else drop it, leaving any earlier file untouched."""
+    if recorder is None:
+        return
+    if started:
+        recorder.close(**end)
+    else:
+        recorder.discard()
 
 
 def _arrivals(local, every: int = 50):  # type: ignore[no-untyped-def]
@@ -804,6 +831,7 @@ def _run_local(args: argparse.Namespace, rlog) -> None:  # type: ignore[no-untyp
             raise TwinError(f"{args.replay_operator}: the recording has no operator targets")
     session = _session(args)
     recorder = open_recorder(args.record, clock=REAL_CLOCK, command="local", side="twin", scene_name=args.scene or "")
+    started = False
     try:
         try:
             local = Local(recording_transport(ZenohTransport(session), recorder, "twin"), scene=args.scene,
@@ -812,6 +840,7 @@ def _run_local(args: argparse.Namespace, rlog) -> None:  # type: ignore[no-untyp
                           rlog=rlog, recorder=recorder)
         except (SyncError, ValueError) as exc:
             raise TwinError(str(exc)) from exc
+        started = True
         stats = local.run(args.duration, trajectory=trajectory, until=None if args.json else _arrivals(local))
         r, c = local.report, local.link.counters
         record = {"objects_synced": r.objects_synced, "pose_updates": r.pose_updates,
@@ -829,12 +858,10 @@ def _run_local(args: argparse.Namespace, rlog) -> None:  # type: ignore[no-untyp
                 print(f"  {o['id']}: {o['estimated_mass_kg']:.3f} kg, touchable {o['add_latency_s'] or 0:.2f} s "
                       f"after its cloud arrived, {(o['twin_minus_remote_m'] or 0) * 1e3:.1f} mm from the remote")
         local.close()
-        if recorder is not None:
-            recorder.close(twin_time_s=local.twin.time)
+        _finish_recording(recorder, started, twin_time_s=local.twin.time)
     finally:
         session.close()
-        if recorder is not None:
-            recorder.close()
+        _finish_recording(recorder, started)
 
 
 def _local_objects(local) -> list[dict]:  # type: ignore[no-untyped-def]

@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from cli.outputs import check_output_folder, claim_output_folder
 from estimation.errors import TwinError
 from sync.clock import Clock
 from sync.netem import Conditions, GilbertElliott, Network
@@ -26,6 +27,12 @@ from sync.transport import Transport
 from twin.trajectory import Trajectory
 
 log = logging.getLogger(__name__)
+
+#: The file that marks a folder as ``twin replay``'s own: only such a folder (or an empty one) is written into.
+REPLAY_MARKER = ".twin-replay"
+
+#: What ``twin replay --out`` writes there.
+REPLAY_WRITES = ("replay.mcap", "summary.json")
 
 #: When two step times are the same time: step times are float sums (a microsecond is far below a step).
 _SAME_TIME = 1e-6
@@ -161,7 +168,8 @@ def replay(path: str | Path, *, script: Path | None = None, scene: Path | None =
     truth = recording.truth()
     record = None
     if out is not None:
-        out.mkdir(parents=True, exist_ok=True)
+        check_replay_out(out, recording.path, script, scene)
+        claim_output_folder(out, marker=REPLAY_MARKER, command="twin replay")
         record = out / "replay.mcap"
     wall0 = time.perf_counter()
     with Headless(spec, network=network, cache_dir=cache_dir, record=record,
@@ -281,3 +289,13 @@ def check_replay_inputs(path: Path) -> None:
     """Refuse a missing file before any work (the full read happens in :func:`replay`)."""
     if not path.is_file():
         raise TwinError(f"{path}: no such recording")
+
+
+def check_replay_out(out: Path, recording: Path, script: Path | None = None, scene: Path | None = None) -> None:
+    """Refuse an ``--out`` folder replay must not write into: a user's own (not empty and without
+    :data:`REPLAY_MARKER`), or one whose ``replay.mcap`` or ``summary.json`` is an input.
+
+    Raises:
+        TwinError: naming the folder and why.
+    """
+    check_output_folder(out, marker=REPLAY_MARKER, writes=REPLAY_WRITES, inputs=(recording, script, scene))

@@ -41,8 +41,10 @@ from __future__ import annotations
 import json
 import logging
 import math
+import os
 import queue
 import struct
+import tempfile
 import threading
 import zlib
 from collections import Counter
@@ -118,8 +120,13 @@ class RecordingError(TwinError, ValueError):
 class Recorder:
     """Writes one session to an MCAP file. Thread-safe: any thread may log; one thread writes.
 
+    The file is written as a hidden sibling (``.<name>.<random>.partial``, an MCAP file too, so a killed
+    process leaves its torn recording there) and renamed onto ``path`` by :meth:`close`: an existing file at
+    ``path`` is replaced only when the session has run; :meth:`discard` drops the sibling instead (a command
+    that failed before it started).
+
     Args:
-        path: the ``.mcap`` file (created or replaced).
+        path: the ``.mcap`` file (created or replaced when the recording is closed).
         clock: the session's clock (its ``stamp_ns`` times every record; ``realtime`` names the clock kind).
         metadata: more ``tactile_twin.session`` entries (``scene_name``, ``scene_toml``, ``seeds``, ...);
             values are strings, or JSON-encoded when they are not.
@@ -139,7 +146,9 @@ class Recorder:
             raise RecordingError(f"truth rate must be a positive number of samples per second, got {truth_rate}")
         self.truth_every = 1.0 / truth_rate
         try:
-            self._file = open(self.path, "wb")  # closed by close()
+            fd, partial = tempfile.mkstemp(dir=self.path.parent, prefix=f".{self.path.name}.", suffix=".partial")
+            self._partial = Path(partial)
+            self._file = os.fdopen(fd, "wb")  # closed by close()
         except OSError as exc:
             raise RecordingError(f"{self.path}: cannot write a recording ({exc.strerror or exc})") from None
         self._writer = Writer(self._file, chunk_size=CHUNK_BYTES)
@@ -201,7 +210,8 @@ class Recorder:
              "translation": _xyz(p), "rotation": _foxglove_quat(q)} for i, (p, q) in poses.items()]})
 
     def close(self, **end: object) -> None:
-        """Drain the queue and finish the file (idempotent); ``end`` goes into ``tactile_twin.end``."""
+        """Drain the queue, finish the file and rename it onto ``path`` (idempotent); ``end`` goes into
+        ``tactile_twin.end``."""
         if self._closed:
             return
         self._closed = True
@@ -212,6 +222,17 @@ class Recorder:
                                                        **{k: str(v) for k, v in end.items()}})
         self._writer.finish()
         self._file.close()
+        os.replace(self._partial, self.path)
+
+    def discard(self) -> None:
+        """Stop recording and delete what was written; ``path`` is left as it was (idempotent)."""
+        if self._closed:
+            return
+        self._closed = True
+        self._queue.put(None)
+        self._thread.join()
+        self._file.close()
+        self._partial.unlink(missing_ok=True)
 
     # internals
 

@@ -205,3 +205,43 @@ def test_an_experiment_asks_for_what_its_input_can_give(recorded, tmp_path, caps
     assert main(["experiment", str(remote_only), "--out", str(tmp_path / "b")]) == 2
     assert "the recording has no operator targets" in capsys.readouterr().err
     assert not (tmp_path / "a").exists() and not (tmp_path / "b").exists()
+
+
+def test_replay_out_never_overwrites_an_input_or_a_users_folder(recorded, cache, tmp_path, capsys):
+    path, _, _ = recorded
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    (mine / "summary.json").write_text("my own notes\n")
+    assert main(["replay", str(path), "--out", str(mine), "--duration", "0.1", "--cache-dir", str(cache)]) == 2
+    err = capsys.readouterr().err
+    assert "not a folder this command wrote" in err and err.count("\n") == 1, err
+    assert [p.name for p in mine.iterdir()] == ["summary.json"] and (mine / "summary.json").read_text() == "my own notes\n"
+    out = tmp_path / "out"
+    assert main(["replay", str(path), "--out", str(out), "--duration", "0.1", "--cache-dir", str(cache)]) == 0
+    capsys.readouterr()
+    first = (out / "replay.mcap").read_bytes()
+    # The folder is replay's own now, but its replay.mcap is this replay's input: refused, not truncated.
+    assert main(["replay", str(out / "replay.mcap"), "--out", str(out), "--duration", "0.1"]) == 2
+    assert "is the input" in capsys.readouterr().err
+    assert (out / "replay.mcap").read_bytes() == first
+
+
+def test_record_refuses_an_input_or_a_users_file_and_a_failed_start_leaves_the_file(recorded, tmp_path, capsys):
+    path, _, _ = recorded
+    before = path.read_bytes()
+    args = ["local", "--replay-operator", str(path), "--record", str(path), "--duration", "1"]
+    assert main(args) == 2
+    assert "is the input" in capsys.readouterr().err and path.read_bytes() == before
+    notes = tmp_path / "notes.mcap"
+    notes.write_text("precious\n")
+    assert main(["local", "--record", str(notes), "--duration", "1"]) == 2
+    assert "not an MCAP recording" in capsys.readouterr().err and notes.read_text() == "precious\n"
+    # A recorder whose session never started leaves an earlier recording as it was, and nothing beside it.
+    kept = tmp_path / "kept.mcap"
+    kept.write_bytes(before)
+    Recorder(kept, clock=SimClock()).discard()
+    assert kept.read_bytes() == before and sorted(tmp_path.iterdir()) == sorted([notes, kept])
+    with Recorder(kept, clock=SimClock()) as r:  # one that ran replaces it, when it is closed
+        r.target(0.0, np.zeros(3))
+        assert kept.read_bytes() == before
+    assert read_recording(kept).counts[TARGET_TOPIC] == 1
