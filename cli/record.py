@@ -103,7 +103,7 @@ def recorded_network(recording: Recording) -> Network | None:
                 c = {**c, "burst": GilbertElliott(**c["burst"])}
             sides[side] = None if c is None else Conditions(**c)
         return Network(**sides, seed=int(doc.get("seed", 0)))
-    except (ValueError, TypeError, AttributeError) as exc:
+    except (ValueError, TypeError, AttributeError, OverflowError) as exc:
         raise RecordingError(f"{recording.path}: unreadable network metadata ({exc})") from None
 
 
@@ -202,9 +202,9 @@ def replay(path: str | Path, *, script: Path | None = None, scene: Path | None =
 
 def _recorded_duration(recording: Recording) -> float:
     """Twin seconds the recorded session ran: from its end record, else its last target, else its truth."""
-    end = recording.end or {}
-    if "twin_time_s" in end:
-        return float(end["twin_time_s"])
+    end = recording.end_time()
+    if end is not None:
+        return end
     times, _ = recording.targets()
     if len(times):
         return float(times[-1]) + 1e-3
