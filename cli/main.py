@@ -258,7 +258,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--loss", dest="loss_pct", type=float, help="independent packet loss each way, percent")
     p.add_argument("--seed", type=int, help="seed of the emulated network (default: the recording's, else 0)")
     p.add_argument("--duration", dest="replay_duration", type=float,
-                   help="twin seconds to run (default: as long as the recording)")
+                   help="twin seconds to run (default: as long as the recording; at most 3600)")
     p.add_argument("--out", type=Path, help="folder for summary.json and replay.mcap")
     p.add_argument("--cache-dir", type=Path, help="CoACD cache (default $TWIN_CACHE_DIR or ~/.cache/tactile-twin)")
     p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
@@ -555,21 +555,22 @@ def _load_twin(args: argparse.Namespace):  # type: ignore[no-untyped-def]
 
 
 def _trajectory(args: argparse.Namespace, twin):  # type: ignore[no-untyped-def]
+    """The default operator of ``twin run``: a push from where the end effector starts."""
     import numpy as np
 
-    from twin.trajectory import load_trajectory, push_trajectory
+    from twin.trajectory import push_trajectory
 
-    if args.script is None:
-        start = twin.data.mocap_pos[0].copy() if twin.model.nmocap else np.zeros(3)
-        return push_trajectory(start, start + np.array([1.0, 0.0, -0.15]), max(args.duration, 1e-3))
-    return load_trajectory(args.script)
+    start = twin.data.mocap_pos[0].copy() if twin.model.nmocap else np.zeros(3)
+    return push_trajectory(start, start + np.array([1.0, 0.0, -0.15]), max(args.duration, 1e-3))
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
     from twin.sim import run_paced
+    from twin.trajectory import load_trajectory
 
     if args.duration <= 0 or args.rate <= 0:
         raise TwinError("--duration and --rate must be positive")
+    script = None if args.script is None else load_trajectory(args.script)  # before the build: a bad script costs nothing
     with _open_rerun(args, "twin") as rlog:
         twin, built = _load_twin(args)
         with twin:
@@ -577,7 +578,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
                 _log_built(rlog, built)
             else:
                 rlog.model_geometry(twin)
-            trajectory = _trajectory(args, twin) if twin.model.nmocap else None
+            trajectory = (script or _trajectory(args, twin)) if twin.model.nmocap else None
             start = {i: twin.pose(i) for i in twin.object_ids()}
             if args.viewer:
                 stats = _run_with_viewer(twin, args, trajectory)

@@ -22,7 +22,14 @@ from cli.outputs import check_output_folder, claim_output_folder
 from estimation.errors import TwinError
 from sync.clock import Clock
 from sync.netem import Conditions, GilbertElliott, Network
-from sync.recording import Recorder, Recording, RecordingError, RecordingTransport, read_recording
+from sync.recording import (
+    MAX_REPLAY_SECONDS,
+    Recorder,
+    Recording,
+    RecordingError,
+    RecordingTransport,
+    read_recording,
+)
 from sync.transport import Transport
 from twin.trajectory import Trajectory
 
@@ -163,6 +170,8 @@ def replay(path: str | Path, *, script: Path | None = None, scene: Path | None =
     if network is not None and seed is not None:
         network = replace(network, seed=seed)
     duration = _recorded_duration(recording) if duration is None else duration
+    if duration > MAX_REPLAY_SECONDS:
+        raise RecordingError(f"--duration {duration:g} s is more than a replay runs (at most {MAX_REPLAY_SECONDS:g} s)")
     if not duration > 0:
         raise RecordingError(f"{recording.path}: nothing to replay (the recorded session lasted {duration:g} s)")
     truth = recording.truth()
