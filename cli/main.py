@@ -56,7 +56,7 @@ _NUMBERS: dict[str, tuple[str, float, bool, float]] = {
     "deadband_mm": ("--deadband-mm", 0.0, True, math.inf),
     "deadband_deg": ("--deadband-deg", 0.0, True, math.inf),
     "rerun_rate": ("--rerun-rate", 0.0, False, math.inf),
-    "threshold": ("--threshold", 0.0, False, math.inf),
+    "threshold": ("--threshold", 0.0, False, 1.0),  # CoACD's range (it aborts the process past 1)
     "density": ("--density", 0.0, False, math.inf),
     "force_rate": ("--force-rate", 0.0, True, MAX_RATE_HZ),
     "delay_ms": ("--delay", 0.0, True, math.inf),
@@ -85,8 +85,13 @@ def check_args(args: argparse.Namespace) -> None:
     for viewpoint in getattr(args, "viewpoint", None) or ():  # once per view
         if not all(math.isfinite(x) for x in viewpoint):
             raise TwinError(f"--viewpoint must be three finite numbers, got {viewpoint}")
-    if getattr(args, "points", None) is not None and args.points < 100:
-        raise TwinError(f"--points must be at least 100, got {args.points}")
+    if getattr(args, "points", None) is not None:
+        from scenes.scenefile import MAX_POINTS, MIN_POINTS  # a scene file's own bounds on an object's cloud
+
+        if not MIN_POINTS <= args.points <= MAX_POINTS:
+            raise TwinError(f"--points must be from {MIN_POINTS} to {MAX_POINTS}, got {args.points}")
+    if getattr(args, "max_hulls", None) is not None and args.max_hulls != -1 and args.max_hulls < 1:
+        raise TwinError(f"--max-hulls must be -1 (no cap) or >= 1, got {args.max_hulls}")
     inputs = _input_files(args)
     if getattr(args, "record", None) is not None:
         _check_writable_file(Path(args.record), "--record")
@@ -461,16 +466,16 @@ def _coacd_options(p: argparse.ArgumentParser) -> None:
     from twin.decompose import CoacdSettings
 
     d = CoacdSettings()
-    p.add_argument("--threshold", type=float, default=d.threshold, help=f"CoACD concavity (default {d.threshold})")
-    p.add_argument("--max-hulls", type=int, default=d.max_convex_hull, help=f"CoACD max hulls (default {d.max_convex_hull})")
+    p.add_argument("--threshold", type=float, default=d.threshold,
+                   help=f"CoACD concavity, in (0, 1] (default {d.threshold})")
+    p.add_argument("--max-hulls", type=int, default=d.max_convex_hull,
+                   help=f"CoACD max hulls, >= 1 or -1 for no cap (default {d.max_convex_hull})")
     p.add_argument("--cache-dir", type=Path, help="CoACD cache (default $TWIN_CACHE_DIR or ~/.cache/tactile-twin)")
 
 
 def _coacd_settings(args: argparse.Namespace):  # type: ignore[no-untyped-def]
     from twin.decompose import CoacdSettings
 
-    if args.threshold <= 0 or args.max_hulls == 0:
-        raise TwinError("--threshold must be > 0 and --max-hulls non-zero")
     return CoacdSettings(threshold=args.threshold, max_convex_hull=args.max_hulls)
 
 
