@@ -26,22 +26,49 @@ EXIT_BAD_INPUT = 2
 
 def main(argv: list[str] | None = None) -> int:
     """Run the CLI; returns the process exit code (0 ok, 2 bad input)."""
+    import warnings
+
     parser = _parser()
     args = parser.parse_args(argv)
-    logging.basicConfig(
-        level=logging.DEBUG if args.verbose else logging.WARNING,
-        format="%(levelname)s %(name)s: %(message)s",
-        stream=sys.stderr,
-    )
+    stream = logging.StreamHandler(sys.stderr)
+    formatter = logging.Formatter if args.verbose else _OneLineFormatter  # -v keeps tracebacks whole
+    stream.setFormatter(formatter("%(levelname)s %(name)s: %(message)s"))
+    logging.basicConfig(level=logging.DEBUG if args.verbose else logging.WARNING, handlers=[stream])
     handler: Callable[[argparse.Namespace], int] = args.handler
-    try:
-        check_args(args)  # before any work: a bad number should not cost a build
-        return handler(args)
-    except TwinError as exc:
-        print(f"twin {args.command}: error: {exc}", file=sys.stderr)
-        return EXIT_BAD_INPUT
-    except KeyboardInterrupt:
-        return 130
+    # Warnings (numpy's overflow RuntimeWarnings, say) are held: a failed command's stderr is its one error
+    # line; a command that succeeds shows them afterwards, one line each.
+    with warnings.catch_warnings(record=True) as held:
+        warnings.simplefilter("default")
+        try:
+            check_args(args)  # before any work: a bad number should not cost a build
+            code = handler(args)
+        except TwinError as exc:
+            print(f"twin {args.command}: error: {one_line(str(exc))}", file=sys.stderr)
+            return EXIT_BAD_INPUT
+        except KeyboardInterrupt:
+            return 130
+    for w in held[:MAX_HELD_WARNINGS]:
+        log.warning("%s: %s", w.category.__name__, one_line(str(w.message)))
+    if len(held) > MAX_HELD_WARNINGS:
+        log.warning("%d more warnings", len(held) - MAX_HELD_WARNINGS)
+    return code
+
+
+#: Warnings shown after a command that succeeded; the rest are counted.
+MAX_HELD_WARNINGS = 20
+
+
+def one_line(text: str) -> str:
+    """``text`` on one line: its non-empty lines joined with '; ' (MuJoCo's compile errors add
+    "\nElement name ...")."""
+    return "; ".join(line.strip() for line in text.splitlines() if line.strip())
+
+
+class _OneLineFormatter(logging.Formatter):
+    """Log records on one line each: a multi-line message (or traceback) is joined with '; '."""
+
+    def format(self, record: logging.LogRecord) -> str:
+        return one_line(super().format(record))
 
 
 #: The loop's ceiling: one step of the smallest scene takes ~10 us, so faster asks only queue work (1e9 Hz grew

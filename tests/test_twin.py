@@ -289,6 +289,19 @@ def test_cli_refuses_bad_numbers_and_paths_with_one_line(argv, message, capsys):
     assert re.search(message, err), err
 
 
+def test_cli_errors_and_warnings_of_a_failed_command_are_one_line(tmp_path, capsys):
+    import cli.main as cli_main
+
+    built = tmp_path / "built"
+    built.mkdir()
+    (built / "scene.xml").write_text('<mujoco><include file="missing.xml"/></mujoco>')  # MuJoCo: several lines
+    assert main(["run", str(built), "--duration", "0.1"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "MuJoCo cannot load it" in err, err
+
+    assert cli_main.one_line("a bad input\n  Element name 'x'\n\n") == "a bad input; Element name 'x'"
+
+
 def test_cli_rerun_save_to_an_unwritable_place_fails_before_any_work(small_scene, tmp_path, capsys):
     out = tmp_path / "built"
     folder = tmp_path / "a-folder.rrd"
