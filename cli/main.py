@@ -746,8 +746,11 @@ def _network_options(p: argparse.ArgumentParser, *, listen_default: str | None =
 
 
 def _session(args: argparse.Namespace):  # type: ignore[no-untyped-def]
-    from sync.zenoh_transport import exposed_without_tls, make_config, open_session
+    from sync.zenoh_transport import check_endpoint, exposed_without_tls, make_config, open_session
 
+    for flag in ("listen", "connect"):  # first: a malformed endpoint is not an exposed one
+        for endpoint in getattr(args, flag) or ():
+            check_endpoint(endpoint, f"--{flag}")
     exposed = exposed_without_tls(args.listen or [])
     if exposed and not args.insecure:
         raise TwinError(f"--listen {exposed[0]} is reachable from other machines in plain text; listen on a "
