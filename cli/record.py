@@ -92,8 +92,13 @@ def recorded_scene(recording: Recording):  # type: ignore[no-untyped-def]
         doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise RecordingError(f"{recording.path}: the recorded scene is not valid TOML ({exc})") from None
+    except RecursionError:  # tomllib recurses once per nesting level
+        raise RecordingError(f"{recording.path}: the recorded scene is nested too deeply to be a scene") from None
     base = Path(recording.metadata.get("scene_dir") or recording.path.parent)
-    return parse_scene(doc, base=base)
+    try:
+        return parse_scene(doc, base=base)
+    except (OverflowError, RecursionError) as exc:  # e.g. an integer too large for a float
+        raise RecordingError(f"{recording.path}: the recorded scene is not a valid scene ({exc})") from None
 
 
 def recorded_network(recording: Recording) -> Network | None:

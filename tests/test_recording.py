@@ -290,6 +290,9 @@ def _rewrite(src: Path, dst: Path, *, topic: str | None = None, data: bytes = b"
     ({"end": {"twin_time_s": "1e12"}}, "twin_time_s 1e+12 is outside"),
     ({"end": {"twin_time_s": "abc"}}, "twin_time_s 'abc' is not a number"),
     ({"session": {"network": json.dumps({"uplink": {"delay": 0.01}, "downlink": None, "seed": -5})}}, "seed must be"),
+    ({"session": {"scene_toml": 'name="x"\nq=' + "[" * 5000 + "]" * 5000 + "\n"}}, "nested too deeply"),
+    ({"session": {"scene_toml": 'name="x"\n[[objects]]\nid="a"\nprimitive={type="box",size=[0.05,0.05,0.05]}\n'
+                                'position=[1' + "0" * 400 + ',0]\n'}}, "not a valid scene"),
     ({"session": {"network": json.dumps({"uplink": {"rate_bps": 1e-300}, "downlink": None, "seed": 0})}}, "rate_bps"),
 ])
 def test_malformed_records_are_one_line_errors_naming_the_record_and_field(recorded, tmp_path, capsys, change, words):
