@@ -52,10 +52,12 @@ def _remote_main(scene_path: str, endpoint: str, zenoh_config: str | None, ready
     session = open_session(make_config(listen=[endpoint], config_file=zenoh_config))
     recorder = open_recorder(None if record is None else Path(record), clock=REAL_CLOCK, command="demo",
                              side="remote", scene_path=Path(scene_path))
+    started = False
     try:
         scene = load_scene(scene_path)
         remote = Remote(scene, recording_transport(ZenohTransport(session), recorder, "remote"),
                         recorder=recorder, sensor=remote_sensor(sensor, scene))
+        started = True
         ready.set()
         stats = remote.run(24 * 3600.0, stop=stop)
         c = remote.link.counters
@@ -67,7 +69,7 @@ def _remote_main(scene_path: str, endpoint: str, zenoh_config: str | None, ready
     finally:
         session.close()
         if recorder is not None:
-            recorder.close()
+            recorder.close() if started else recorder.discard()
 
 
 def run_demo(*, duration: float = 5.0, scene_path: Path | None = None, zenoh_config: str | None = None,
@@ -141,8 +143,10 @@ def run_demo(*, duration: float = 5.0, scene_path: Path | None = None, zenoh_con
         if local is not None:
             local.close()
         session.close()
-        if recorder is not None:
-            recorder.close(twin_time_s=None if local is None else local.twin.time)
+        if recorder is not None and local is None:
+            recorder.discard()  # the twin never started: leave any earlier file at --record as it was
+        elif recorder is not None:
+            recorder.close(twin_time_s=local.twin.time)
     remote_stats = results.get(timeout=60)
     remote.join(timeout=10)
     if remote.is_alive():

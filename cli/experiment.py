@@ -14,6 +14,7 @@ import logging
 import math
 from pathlib import Path
 
+from cli.outputs import check_output_folder, claim_output_folder
 from estimation.errors import TwinError
 
 log = logging.getLogger(__name__)
@@ -23,6 +24,9 @@ FORCE_JND_PCT = 7.0
 
 #: The file that marks a folder as this command's own: only such a folder (or an empty one) is written into.
 MARKER = ".twin-experiment"
+
+#: The files this command writes into --out (none may be an input).
+WRITES = ("results.csv", "report.md", "force_vs_delay.png", "force_vs_mass.png", "divergence.png", "bytes_per_s.png")
 
 HELP = """Run a latency sweep headless: per condition one session on the simulated clock gives both direct
 teleoperation (the operator feels C's force after the round trip) and the twin (the operator feels C' at once).
@@ -42,12 +46,14 @@ def add_parser(sub) -> None:  # type: ignore[no-untyped-def]
     p.add_argument("--jitter", type=float, default=0.0,
                    help="jitter in ms (standard deviation, normal; needs jitter <= delay/3 at every delay)")
     p.add_argument("--loss", type=float, default=0.0, help="independent packet loss, percent, each direction")
-    p.add_argument("--mass-scale", default="1", help="twin mass / true mass, comma-separated (default 1)")
+    p.add_argument("--mass-scale", default="1",
+                   help="twin mass / true mass, comma-separated, each from 0.01 to 100 (default 1)")
     p.add_argument("--seeds", type=int, default=1, help="network seeds per condition (default 1)")
     p.add_argument("--tasks", default=None,
                    help="tasks, comma-separated: push, press, recorded (default: push,press for a scene, "
                         "recorded for a recording)")
-    p.add_argument("--speed", type=float, default=1.0, help="task speed factor (2: twice as fast; default 1)")
+    p.add_argument("--speed", type=float, default=1.0,
+                   help="task speed factor, from 0.05 to 20 (2: twice as fast; default 1)")
     p.add_argument("--workers", type=int, default=2, help="worker processes (default 2; 0: this process)")
     p.add_argument("--dask", metavar="ADDRESS",
                    help="run the sessions on a Dask cluster instead: a scheduler address (tcp://HOST:8786) or "
@@ -76,21 +82,24 @@ def parse(args: argparse.Namespace):  # type: ignore[no-untyped-def]
         TwinError: a bad list, a negative or non-finite number, loss over 100 %, jitter the distribution cannot
             take at some delay, an unknown task, or an --out folder with files this command did not write.
     """
-    from scenes.experiment import Sweep
+    from scenes.experiment import MASS_SCALE_RANGE, SPEED_RANGE, Sweep
 
     delays = _floats(args.delays, "--delays")
     if min(delays) < 0:
         raise TwinError(f"--delays: a delay cannot be negative, got {min(delays):g} ms")
-    for flag, value in (("--jitter", args.jitter), ("--loss", args.loss), ("--speed", args.speed)):
+    for flag, value in (("--jitter", args.jitter), ("--loss", args.loss)):
         if not math.isfinite(value) or value < 0:
             raise TwinError(f"{flag} must be a finite number >= 0, got {value:g}")
     if args.loss > 100:
         raise TwinError(f"--loss is a percentage: at most 100, got {args.loss:g}")
-    if args.speed == 0:
-        raise TwinError("--speed must be > 0")
+    low, high = SPEED_RANGE
+    if not (math.isfinite(args.speed) and low <= args.speed <= high):
+        raise TwinError(f"--speed must be from {low:g} to {high:g}, got {args.speed:g}")
     masses = _floats(args.mass_scale, "--mass-scale")
-    if min(masses) <= 0:
-        raise TwinError(f"--mass-scale: a mass scale must be > 0, got {min(masses):g}")
+    low, high = MASS_SCALE_RANGE
+    if not all(low <= m <= high for m in masses):
+        bad = next(m for m in masses if not low <= m <= high)
+        raise TwinError(f"--mass-scale: a mass scale must be from {low:g} to {high:g}, got {bad:g}")
     if args.seeds < 1:
         raise TwinError(f"--seeds must be at least 1, got {args.seeds}")
     if args.workers < 0:
@@ -105,10 +114,7 @@ def parse(args: argparse.Namespace):  # type: ignore[no-untyped-def]
     sweep = Sweep(tasks=tasks, delays=tuple(d / 1e3 for d in delays), jitter=args.jitter / 1e3,
                   loss=args.loss / 100, mass_scales=masses, seeds=args.seeds, speed=args.speed)
     sweep.conditions()  # every condition checked before any work
-    out: Path = args.out
-    if out.exists() and (not out.is_dir() or (any(out.iterdir()) and not (out / MARKER).is_file())):
-        raise TwinError(f"--out {out}: exists and is not empty (and not a folder this command wrote); "
-                        "choose a new folder")
+    check_output_folder(args.out, marker=MARKER, writes=WRITES, inputs=(args.scene,))
     return sweep
 
 
@@ -156,8 +162,7 @@ def run(args: argparse.Namespace) -> int:
     sweep = parse(args)
     scene, recorded = source(args)
     out: Path = args.out
-    out.mkdir(parents=True, exist_ok=True)
-    (out / MARKER).write_text("written by twin experiment\n")
+    claim_output_folder(out, marker=MARKER, command="twin experiment")
     engine = nullcontext(None) if args.dask is None else dask_executor(args.dask, args.workers)
     with engine as executor, Progress(TextColumn("sessions"), BarColumn(), MofNCompleteColumn(),
                                       TimeElapsedColumn(), transient=False) as bar:

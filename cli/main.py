@@ -16,6 +16,7 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
+from cli.outputs import check_not_input, check_record_file
 from estimation.errors import TwinError
 
 log = logging.getLogger("twin")
@@ -25,22 +26,49 @@ EXIT_BAD_INPUT = 2
 
 def main(argv: list[str] | None = None) -> int:
     """Run the CLI; returns the process exit code (0 ok, 2 bad input)."""
+    import warnings
+
     parser = _parser()
     args = parser.parse_args(argv)
-    logging.basicConfig(
-        level=logging.DEBUG if args.verbose else logging.WARNING,
-        format="%(levelname)s %(name)s: %(message)s",
-        stream=sys.stderr,
-    )
+    stream = logging.StreamHandler(sys.stderr)
+    formatter = logging.Formatter if args.verbose else _OneLineFormatter  # -v keeps tracebacks whole
+    stream.setFormatter(formatter("%(levelname)s %(name)s: %(message)s"))
+    logging.basicConfig(level=logging.DEBUG if args.verbose else logging.WARNING, handlers=[stream])
     handler: Callable[[argparse.Namespace], int] = args.handler
-    try:
-        check_args(args)  # before any work: a bad number should not cost a build
-        return handler(args)
-    except TwinError as exc:
-        print(f"twin {args.command}: error: {exc}", file=sys.stderr)
-        return EXIT_BAD_INPUT
-    except KeyboardInterrupt:
-        return 130
+    # Warnings (numpy's overflow RuntimeWarnings, say) are held: a failed command's stderr is its one error
+    # line; a command that succeeds shows them afterwards, one line each.
+    with warnings.catch_warnings(record=True) as held:
+        warnings.simplefilter("default")
+        try:
+            check_args(args)  # before any work: a bad number should not cost a build
+            code = handler(args)
+        except TwinError as exc:
+            print(f"twin {args.command}: error: {one_line(str(exc))}", file=sys.stderr)
+            return EXIT_BAD_INPUT
+        except KeyboardInterrupt:
+            return 130
+    for w in held[:MAX_HELD_WARNINGS]:
+        log.warning("%s: %s", w.category.__name__, one_line(str(w.message)))
+    if len(held) > MAX_HELD_WARNINGS:
+        log.warning("%d more warnings", len(held) - MAX_HELD_WARNINGS)
+    return code
+
+
+#: Warnings shown after a command that succeeded; the rest are counted.
+MAX_HELD_WARNINGS = 20
+
+
+def one_line(text: str) -> str:
+    """``text`` on one line: its non-empty lines joined with '; ' (MuJoCo's compile errors add
+    "\nElement name ...")."""
+    return "; ".join(line.strip() for line in text.splitlines() if line.strip())
+
+
+class _OneLineFormatter(logging.Formatter):
+    """Log records on one line each: a multi-line message (or traceback) is joined with '; '."""
+
+    def format(self, record: logging.LogRecord) -> str:
+        return one_line(super().format(record))
 
 
 #: The loop's ceiling: one step of the smallest scene takes ~10 us, so faster asks only queue work (1e9 Hz grew
@@ -55,7 +83,7 @@ _NUMBERS: dict[str, tuple[str, float, bool, float]] = {
     "deadband_mm": ("--deadband-mm", 0.0, True, math.inf),
     "deadband_deg": ("--deadband-deg", 0.0, True, math.inf),
     "rerun_rate": ("--rerun-rate", 0.0, False, math.inf),
-    "threshold": ("--threshold", 0.0, False, math.inf),
+    "threshold": ("--threshold", 0.0, False, 1.0),  # CoACD's range (it aborts the process past 1)
     "density": ("--density", 0.0, False, math.inf),
     "force_rate": ("--force-rate", 0.0, True, MAX_RATE_HZ),
     "delay_ms": ("--delay", 0.0, True, math.inf),
@@ -84,13 +112,31 @@ def check_args(args: argparse.Namespace) -> None:
     for viewpoint in getattr(args, "viewpoint", None) or ():  # once per view
         if not all(math.isfinite(x) for x in viewpoint):
             raise TwinError(f"--viewpoint must be three finite numbers, got {viewpoint}")
-    if getattr(args, "points", None) is not None and args.points < 100:
-        raise TwinError(f"--points must be at least 100, got {args.points}")
+    if getattr(args, "points", None) is not None:
+        from scenes.scenefile import MAX_POINTS, MIN_POINTS  # a scene file's own bounds on an object's cloud
+
+        if not MIN_POINTS <= args.points <= MAX_POINTS:
+            raise TwinError(f"--points must be from {MIN_POINTS} to {MAX_POINTS}, got {args.points}")
+    if getattr(args, "max_hulls", None) is not None and args.max_hulls != -1 and args.max_hulls < 1:
+        raise TwinError(f"--max-hulls must be -1 (no cap) or >= 1, got {args.max_hulls}")
+    inputs = _input_files(args)
     if getattr(args, "record", None) is not None:
         _check_writable_file(Path(args.record), "--record")
+        check_record_file(Path(args.record), inputs)
     rerun = getattr(args, "rerun", None)
     if rerun and rerun[0] == "save" and len(rerun) == 2:
         _check_writable_file(Path(rerun[1]), "--rerun save")
+        check_not_input(Path(rerun[1]), inputs, "--rerun save")
+
+
+#: Options naming files a command reads (``local --scene`` is a name, not a file: only paths count).
+_INPUT_OPTIONS = ("scene", "script", "replay_operator", "recording", "zenoh_config")
+
+
+def _input_files(args: argparse.Namespace) -> list[Path]:
+    """The files the command reads, for refusing an output that is one of them."""
+    found = [v for a in _INPUT_OPTIONS if isinstance(v := getattr(args, a, None), Path)]
+    return found + list(getattr(args, "views", None) or ())
 
 
 def _check_writable_file(path: Path, flag: str) -> None:
@@ -244,7 +290,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--loss", dest="loss_pct", type=float, help="independent packet loss each way, percent")
     p.add_argument("--seed", type=int, help="seed of the emulated network (default: the recording's, else 0)")
     p.add_argument("--duration", dest="replay_duration", type=float,
-                   help="twin seconds to run (default: as long as the recording)")
+                   help="twin seconds to run (default: as long as the recording; at most 3600)")
     p.add_argument("--out", type=Path, help="folder for summary.json and replay.mcap")
     p.add_argument("--cache-dir", type=Path, help="CoACD cache (default $TWIN_CACHE_DIR or ~/.cache/tactile-twin)")
     p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
@@ -447,16 +493,16 @@ def _coacd_options(p: argparse.ArgumentParser) -> None:
     from twin.decompose import CoacdSettings
 
     d = CoacdSettings()
-    p.add_argument("--threshold", type=float, default=d.threshold, help=f"CoACD concavity (default {d.threshold})")
-    p.add_argument("--max-hulls", type=int, default=d.max_convex_hull, help=f"CoACD max hulls (default {d.max_convex_hull})")
+    p.add_argument("--threshold", type=float, default=d.threshold,
+                   help=f"CoACD concavity, in (0, 1] (default {d.threshold})")
+    p.add_argument("--max-hulls", type=int, default=d.max_convex_hull,
+                   help=f"CoACD max hulls, >= 1 or -1 for no cap (default {d.max_convex_hull})")
     p.add_argument("--cache-dir", type=Path, help="CoACD cache (default $TWIN_CACHE_DIR or ~/.cache/tactile-twin)")
 
 
 def _coacd_settings(args: argparse.Namespace):  # type: ignore[no-untyped-def]
     from twin.decompose import CoacdSettings
 
-    if args.threshold <= 0 or args.max_hulls == 0:
-        raise TwinError("--threshold must be > 0 and --max-hulls non-zero")
     return CoacdSettings(threshold=args.threshold, max_convex_hull=args.max_hulls)
 
 
@@ -541,21 +587,22 @@ def _load_twin(args: argparse.Namespace):  # type: ignore[no-untyped-def]
 
 
 def _trajectory(args: argparse.Namespace, twin):  # type: ignore[no-untyped-def]
+    """The default operator of ``twin run``: a push from where the end effector starts."""
     import numpy as np
 
-    from twin.trajectory import load_trajectory, push_trajectory
+    from twin.trajectory import push_trajectory
 
-    if args.script is None:
-        start = twin.data.mocap_pos[0].copy() if twin.model.nmocap else np.zeros(3)
-        return push_trajectory(start, start + np.array([1.0, 0.0, -0.15]), max(args.duration, 1e-3))
-    return load_trajectory(args.script)
+    start = twin.data.mocap_pos[0].copy() if twin.model.nmocap else np.zeros(3)
+    return push_trajectory(start, start + np.array([1.0, 0.0, -0.15]), max(args.duration, 1e-3))
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
     from twin.sim import run_paced
+    from twin.trajectory import load_trajectory
 
     if args.duration <= 0 or args.rate <= 0:
         raise TwinError("--duration and --rate must be positive")
+    script = None if args.script is None else load_trajectory(args.script)  # before the build: a bad script costs nothing
     with _open_rerun(args, "twin") as rlog:
         twin, built = _load_twin(args)
         with twin:
@@ -563,7 +610,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
                 _log_built(rlog, built)
             else:
                 rlog.model_geometry(twin)
-            trajectory = _trajectory(args, twin) if twin.model.nmocap else None
+            trajectory = (script or _trajectory(args, twin)) if twin.model.nmocap else None
             start = {i: twin.pose(i) for i in twin.object_ids()}
             if args.viewer:
                 stats = _run_with_viewer(twin, args, trajectory)
@@ -664,9 +711,11 @@ def _record_option(p: argparse.ArgumentParser) -> None:
 
 
 def _cmd_replay(args: argparse.Namespace) -> int:
-    from cli.record import check_replay_inputs, network_from_options, print_summary, replay
+    from cli.record import check_replay_inputs, check_replay_out, network_from_options, print_summary, replay
 
     check_replay_inputs(args.recording)
+    if args.out is not None:
+        check_replay_out(args.out, args.recording, args.script, args.scene)
     if args.seed is not None and args.seed < 0:
         raise TwinError(f"--seed must be >= 0, got {args.seed}")
     network = network_from_options(delay_ms=args.delay_ms, jitter_ms=args.jitter_ms, loss_pct=args.loss_pct,
@@ -697,8 +746,11 @@ def _network_options(p: argparse.ArgumentParser, *, listen_default: str | None =
 
 
 def _session(args: argparse.Namespace):  # type: ignore[no-untyped-def]
-    from sync.zenoh_transport import exposed_without_tls, make_config, open_session
+    from sync.zenoh_transport import check_endpoint, exposed_without_tls, make_config, open_session
 
+    for flag in ("listen", "connect"):  # first: a malformed endpoint is not an exposed one
+        for endpoint in getattr(args, flag) or ():
+            check_endpoint(endpoint, f"--{flag}")
     exposed = exposed_without_tls(args.listen or [])
     if exposed and not args.insecure:
         raise TwinError(f"--listen {exposed[0]} is reachable from other machines in plain text; listen on a "
@@ -731,10 +783,12 @@ def _run_remote(args: argparse.Namespace, scene, rlog) -> None:  # type: ignore[
 
     session = _session(args)
     recorder = open_recorder(args.record, clock=REAL_CLOCK, command="remote", side="remote", scene_path=args.scene)
+    started = False
     try:
         remote = Remote(scene, recording_transport(ZenohTransport(session), recorder, "remote"),
                         deadband=Deadband(args.deadband_mm * 1e-3, args.deadband_deg), sensor=remote_sensor(args.sensor, scene),
                         points=args.points, progress=True, rlog=rlog, recorder=recorder)
+        started = True
         print(f"remote scene {scene.name!r}: {len(scene.objects)} objects published; running (Ctrl-C stops)",
               file=sys.stderr)  # status, not the result
         stats = remote.run(args.duration)
@@ -745,8 +799,17 @@ def _run_remote(args: argparse.Namespace, scene, rlog) -> None:  # type: ignore[
         remote.close()
     finally:
         session.close()
-        if recorder is not None:
-            recorder.close()
+        _finish_recording(recorder, started)
+
+
+def _finish_recording(recorder, started: bool, **end: object) -> None:  # type: ignore[no-untyped-def]
+    """Put the recording in place if the session started; else drop it, leaving any earlier file untouched."""
+    if recorder is None:
+        return
+    if started:
+        recorder.close(**end)
+    else:
+        recorder.discard()
 
 
 def _arrivals(local, every: int = 50):  # type: ignore[no-untyped-def]
@@ -804,6 +867,7 @@ def _run_local(args: argparse.Namespace, rlog) -> None:  # type: ignore[no-untyp
             raise TwinError(f"{args.replay_operator}: the recording has no operator targets")
     session = _session(args)
     recorder = open_recorder(args.record, clock=REAL_CLOCK, command="local", side="twin", scene_name=args.scene or "")
+    started = False
     try:
         try:
             local = Local(recording_transport(ZenohTransport(session), recorder, "twin"), scene=args.scene,
@@ -812,6 +876,7 @@ def _run_local(args: argparse.Namespace, rlog) -> None:  # type: ignore[no-untyp
                           rlog=rlog, recorder=recorder)
         except (SyncError, ValueError) as exc:
             raise TwinError(str(exc)) from exc
+        started = True
         stats = local.run(args.duration, trajectory=trajectory, until=None if args.json else _arrivals(local))
         r, c = local.report, local.link.counters
         record = {"objects_synced": r.objects_synced, "pose_updates": r.pose_updates,
@@ -829,12 +894,10 @@ def _run_local(args: argparse.Namespace, rlog) -> None:  # type: ignore[no-untyp
                 print(f"  {o['id']}: {o['estimated_mass_kg']:.3f} kg, touchable {o['add_latency_s'] or 0:.2f} s "
                       f"after its cloud arrived, {(o['twin_minus_remote_m'] or 0) * 1e3:.1f} mm from the remote")
         local.close()
-        if recorder is not None:
-            recorder.close(twin_time_s=local.twin.time)
+        _finish_recording(recorder, started, twin_time_s=local.twin.time)
     finally:
         session.close()
-        if recorder is not None:
-            recorder.close()
+        _finish_recording(recorder, started)
 
 
 def _local_objects(local) -> list[dict]:  # type: ignore[no-untyped-def]

@@ -18,14 +18,28 @@ from pathlib import Path
 
 import numpy as np
 
+from cli.outputs import check_output_folder, claim_output_folder
 from estimation.errors import TwinError
 from sync.clock import Clock
 from sync.netem import Conditions, GilbertElliott, Network
-from sync.recording import Recorder, Recording, RecordingError, RecordingTransport, read_recording
+from sync.recording import (
+    MAX_REPLAY_SECONDS,
+    Recorder,
+    Recording,
+    RecordingError,
+    RecordingTransport,
+    read_recording,
+)
 from sync.transport import Transport
 from twin.trajectory import Trajectory
 
 log = logging.getLogger(__name__)
+
+#: The file that marks a folder as ``twin replay``'s own: only such a folder (or an empty one) is written into.
+REPLAY_MARKER = ".twin-replay"
+
+#: What ``twin replay --out`` writes there.
+REPLAY_WRITES = ("replay.mcap", "summary.json")
 
 #: When two step times are the same time: step times are float sums (a microsecond is far below a step).
 _SAME_TIME = 1e-6
@@ -78,8 +92,13 @@ def recorded_scene(recording: Recording):  # type: ignore[no-untyped-def]
         doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise RecordingError(f"{recording.path}: the recorded scene is not valid TOML ({exc})") from None
+    except RecursionError:  # tomllib recurses once per nesting level
+        raise RecordingError(f"{recording.path}: the recorded scene is nested too deeply to be a scene") from None
     base = Path(recording.metadata.get("scene_dir") or recording.path.parent)
-    return parse_scene(doc, base=base)
+    try:
+        return parse_scene(doc, base=base)
+    except (OverflowError, RecursionError) as exc:  # e.g. an integer too large for a float
+        raise RecordingError(f"{recording.path}: the recorded scene is not a valid scene ({exc})") from None
 
 
 def recorded_network(recording: Recording) -> Network | None:
@@ -96,7 +115,7 @@ def recorded_network(recording: Recording) -> Network | None:
                 c = {**c, "burst": GilbertElliott(**c["burst"])}
             sides[side] = None if c is None else Conditions(**c)
         return Network(**sides, seed=int(doc.get("seed", 0)))
-    except (ValueError, TypeError, AttributeError) as exc:
+    except (ValueError, TypeError, AttributeError, OverflowError) as exc:
         raise RecordingError(f"{recording.path}: unreadable network metadata ({exc})") from None
 
 
@@ -156,12 +175,15 @@ def replay(path: str | Path, *, script: Path | None = None, scene: Path | None =
     if network is not None and seed is not None:
         network = replace(network, seed=seed)
     duration = _recorded_duration(recording) if duration is None else duration
+    if duration > MAX_REPLAY_SECONDS:
+        raise RecordingError(f"--duration {duration:g} s is more than a replay runs (at most {MAX_REPLAY_SECONDS:g} s)")
     if not duration > 0:
         raise RecordingError(f"{recording.path}: nothing to replay (the recorded session lasted {duration:g} s)")
     truth = recording.truth()
     record = None
     if out is not None:
-        out.mkdir(parents=True, exist_ok=True)
+        check_replay_out(out, recording.path, script, scene)
+        claim_output_folder(out, marker=REPLAY_MARKER, command="twin replay")
         record = out / "replay.mcap"
     wall0 = time.perf_counter()
     with Headless(spec, network=network, cache_dir=cache_dir, record=record,
@@ -194,9 +216,9 @@ def replay(path: str | Path, *, script: Path | None = None, scene: Path | None =
 
 def _recorded_duration(recording: Recording) -> float:
     """Twin seconds the recorded session ran: from its end record, else its last target, else its truth."""
-    end = recording.end or {}
-    if "twin_time_s" in end:
-        return float(end["twin_time_s"])
+    end = recording.end_time()
+    if end is not None:
+        return end
     times, _ = recording.targets()
     if len(times):
         return float(times[-1]) + 1e-3
@@ -281,3 +303,13 @@ def check_replay_inputs(path: Path) -> None:
     """Refuse a missing file before any work (the full read happens in :func:`replay`)."""
     if not path.is_file():
         raise TwinError(f"{path}: no such recording")
+
+
+def check_replay_out(out: Path, recording: Path, script: Path | None = None, scene: Path | None = None) -> None:
+    """Refuse an ``--out`` folder replay must not write into: a user's own (not empty and without
+    :data:`REPLAY_MARKER`), or one whose ``replay.mcap`` or ``summary.json`` is an input.
+
+    Raises:
+        TwinError: naming the folder and why.
+    """
+    check_output_folder(out, marker=REPLAY_MARKER, writes=REPLAY_WRITES, inputs=(recording, script, scene))

@@ -206,18 +206,30 @@ class Row:
 assert tuple(f.name for f in fields(Row)) == COLUMNS
 
 
+#: Twin mass / true mass a condition may ask for: a twin a hundred times off is no twin, and far below it
+#: MuJoCo refuses the bodies (1e-300 made every step fail while the sweep went on).
+MASS_SCALE_RANGE = (0.01, 100.0)
+
+#: Task speed factors a condition may ask for: a task runs 1/speed times its length, so 0.05 makes a
+#: seconds-long push a minute or two of simulation, while 1e-6 asked for 62 GiB of trace; past 20 the
+#: end effector moves tens of metres per second.
+SPEED_RANGE = (0.05, 20.0)
+
+
 def check_condition(c: Condition) -> None:
     """Refuse a condition before any work.
 
     Raises:
-        ExperimentError: an unknown task, a mass scale or speed that is not a finite positive number, or
-            network conditions :class:`sync.netem.Conditions` refuses (the message names the delay).
+        ExperimentError: an unknown task, a mass scale outside :data:`MASS_SCALE_RANGE` or a speed outside
+            :data:`SPEED_RANGE`, or network conditions :class:`sync.netem.Conditions` refuses (the message
+            names the delay).
     """
     if c.task not in (*TASKS, RECORDED):
         raise ExperimentError(f"unknown task {c.task!r} (known: {', '.join(TASKS)})")
-    for name, value in (("mass scale", c.mass_scale), ("speed", c.speed)):
-        if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
-            raise ExperimentError(f"{name} must be a finite number > 0, got {value!r}")
+    for name, value, (low, high) in (("mass scale", c.mass_scale, MASS_SCALE_RANGE),
+                                     ("speed", c.speed, SPEED_RANGE)):
+        if not (isinstance(value, int | float) and math.isfinite(value) and low <= value <= high):
+            raise ExperimentError(f"{name} must be a number from {low:g} to {high:g}, got {value!r}")
     try:
         c.conditions()
     except TwinError as exc:
@@ -367,6 +379,9 @@ def run_session(scene: SceneSpec, condition: Condition, *, cache_dir: Path | Non
         remote, local = session.remote, session.local
         dt = session.dt
         session.run(SETUP_S)
+        if local.twin.failed_edits:  # an object MuJoCo refused is missing from C': the run would measure nothing
+            raise ExperimentError(f"mass scale {condition.mass_scale:g}: {local.twin.failed_edits} object(s) could "
+                                  "not be added to the twin (MuJoCo refused the model; see the log)")
         if condition.task == RECORDED:
             if recorded is None:
                 raise ExperimentError(f"the {RECORDED!r} task needs a recording")

@@ -32,6 +32,7 @@ goes through, in order:
 from __future__ import annotations
 
 import math
+import numbers
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -43,6 +44,17 @@ DISTRIBUTIONS = ("normal", "exponential")
 
 #: A truncated normal keeps its configured mean and spread only if zero is this many sigmas below the mean.
 NORMAL_SIGMAS = 3.0
+
+#: Relative slack on the jitter limit: the limit is a float quotient (0.3 / 3 is 0.09999999999999999), and
+#: jitter given as exactly delay / 3 must pass; a part in a billion is far below any timing that matters.
+JITTER_LIMIT_SLACK = 1e-9
+
+#: The slowest bandwidth cap, bit/s: below it one message's transmission time overflows the clock's
+#: nanoseconds (1e-300 bit/s did); 1 bit/s is already no usable link.
+MIN_RATE_BPS = 1.0
+
+#: Network seeds: what numpy's SeedSequence takes, non-negative, kept to 64 bits.
+MAX_SEED = 2**64 - 1
 
 
 class ConditionsError(TwinError, ValueError):
@@ -105,7 +117,7 @@ class Conditions:
         reorder: let packets overtake each other (default: FIFO, never).
         loss: probability that a packet is lost, independently of the others, in [0, 1].
         burst: bursty loss instead (give ``loss`` or ``burst``, not both).
-        rate_bps: bandwidth cap, bit/s, > 0 (None: unlimited, no queueing).
+        rate_bps: bandwidth cap, bit/s, >= :data:`MIN_RATE_BPS` (None: unlimited, no queueing).
         queue_bytes: tail-drop limit of the queue in front of the cap, bytes, >= 1 (None: unlimited).
 
     Raises:
@@ -128,14 +140,14 @@ class Conditions:
         if self.distribution not in DISTRIBUTIONS:
             raise ConditionsError(f"distribution must be one of {', '.join(DISTRIBUTIONS)}, got {self.distribution!r}")
         limit = delay / NORMAL_SIGMAS if self.distribution == "normal" else delay
-        if jitter > limit:
+        if jitter > limit * (1 + JITTER_LIMIT_SLACK):
             raise ConditionsError(f"jitter {jitter:g} s is more than {self.distribution} jitter allows with a "
                                   f"{delay:g} s delay (at most {limit:g} s)")
         _number("loss", self.loss, high=1.0)
         if self.burst is not None and self.loss > 0:
             raise ConditionsError("loss and burst both given: choose independent or bursty loss")
         if self.rate_bps is not None:
-            _number("rate_bps", self.rate_bps, open_low=True)
+            _number("rate_bps", self.rate_bps, low=MIN_RATE_BPS)
         if self.queue_bytes is not None:
             if self.rate_bps is None:
                 raise ConditionsError("queue_bytes needs rate_bps: without a cap nothing queues")
@@ -158,6 +170,10 @@ class Network:
     uplink: Conditions | None = None
     downlink: Conditions | None = None
     seed: int = 0
+
+    def __post_init__(self) -> None:
+        if isinstance(self.seed, bool) or not isinstance(self.seed, numbers.Integral) or not 0 <= self.seed <= MAX_SEED:
+            raise ConditionsError(f"seed must be an integer in [0, {MAX_SEED}], got {self.seed!r}")
 
     def models(self) -> tuple[LinkModel | None, LinkModel | None]:
         """(uplink, downlink) models, each with its own generator spawned from ``seed``."""

@@ -41,8 +41,10 @@ from __future__ import annotations
 import json
 import logging
 import math
+import os
 import queue
 import struct
+import tempfile
 import threading
 import zlib
 from collections import Counter
@@ -54,7 +56,7 @@ import numpy as np
 
 from estimation.errors import TwinError
 from sync.clock import Clock
-from sync.messages import peek_stamp
+from sync.messages import MAX_COORDINATE, QUAT_NORM_TOLERANCE, peek_stamp
 from sync.transport import Answer, OnSample, Transport
 
 log = logging.getLogger(__name__)
@@ -76,6 +78,22 @@ CHUNK_BYTES = 64 * 1024
 #: Slack when comparing a sampled side's time with the next sample time: step times are float sums
 #: (0.001 added a thousand times is not 1.0), and a microsecond is far below any physics step.
 _TIME_SLACK = 1e-6
+
+#: The largest record a recording may hold once decompressed (a chunk, a message, metadata), bytes: a
+#: 10 M-point cloud (:data:`sync.messages.MAX_CLOUD_POINTS`) packs to well under it, while a 27 KB file of
+#: zstd-compressed zeros once claimed 200 MB per message. Checked before and while decompressing.
+MAX_RECORD_BYTES = 128 * 2**20
+
+#: The most a recording may hold in all, decompressed, bytes: an hour's live session is a few hundred MB.
+MAX_RECORDING_BYTES = 1 * 2**30
+
+#: The longest replay, twin seconds: the live commands' default session (an hour). A replay also runs no
+#: longer than its recording holds (:meth:`Recording.span_s` plus :data:`RECORDED_TIME_SLACK_S`).
+MAX_REPLAY_SECONDS = 3600.0
+
+#: How far a recorded twin time may run past the recording's own span of log times, seconds: the twin's
+#: clock starts after the recorder's, and a step or a late final record is far below a second.
+RECORDED_TIME_SLACK_S = 1.0
 
 WIRE_SCHEMA = "tactile_twin.wire"
 TARGET_TOPIC = "/operator/target"
@@ -118,8 +136,13 @@ class RecordingError(TwinError, ValueError):
 class Recorder:
     """Writes one session to an MCAP file. Thread-safe: any thread may log; one thread writes.
 
+    The file is written as a hidden sibling (``.<name>.<random>.partial``, an MCAP file too, so a killed
+    process leaves its torn recording there) and renamed onto ``path`` by :meth:`close`: an existing file at
+    ``path`` is replaced only when the session has run; :meth:`discard` drops the sibling instead (a command
+    that failed before it started).
+
     Args:
-        path: the ``.mcap`` file (created or replaced).
+        path: the ``.mcap`` file (created or replaced when the recording is closed).
         clock: the session's clock (its ``stamp_ns`` times every record; ``realtime`` names the clock kind).
         metadata: more ``tactile_twin.session`` entries (``scene_name``, ``scene_toml``, ``seeds``, ...);
             values are strings, or JSON-encoded when they are not.
@@ -139,7 +162,9 @@ class Recorder:
             raise RecordingError(f"truth rate must be a positive number of samples per second, got {truth_rate}")
         self.truth_every = 1.0 / truth_rate
         try:
-            self._file = open(self.path, "wb")  # closed by close()
+            fd, partial = tempfile.mkstemp(dir=self.path.parent, prefix=f".{self.path.name}.", suffix=".partial")
+            self._partial = Path(partial)
+            self._file = os.fdopen(fd, "wb")  # closed by close()
         except OSError as exc:
             raise RecordingError(f"{self.path}: cannot write a recording ({exc.strerror or exc})") from None
         self._writer = Writer(self._file, chunk_size=CHUNK_BYTES)
@@ -201,7 +226,8 @@ class Recorder:
              "translation": _xyz(p), "rotation": _foxglove_quat(q)} for i, (p, q) in poses.items()]})
 
     def close(self, **end: object) -> None:
-        """Drain the queue and finish the file (idempotent); ``end`` goes into ``tactile_twin.end``."""
+        """Drain the queue, finish the file and rename it onto ``path`` (idempotent); ``end`` goes into
+        ``tactile_twin.end``."""
         if self._closed:
             return
         self._closed = True
@@ -212,6 +238,17 @@ class Recorder:
                                                        **{k: str(v) for k, v in end.items()}})
         self._writer.finish()
         self._file.close()
+        os.replace(self._partial, self.path)
+
+    def discard(self) -> None:
+        """Stop recording and delete what was written; ``path`` is left as it was (idempotent)."""
+        if self._closed:
+            return
+        self._closed = True
+        self._queue.put(None)
+        self._thread.join()
+        self._file.close()
+        self._partial.unlink(missing_ok=True)
 
     # internals
 
@@ -347,25 +384,109 @@ class Recording:
                 out.append(WireRecord(side, direction, key, r.log_time, r.publish_time, r.data))
         return out
 
+    @property
+    def span_s(self) -> float:
+        """Seconds between the first and the last record's log time (the recording clock's)."""
+        if not self.records:
+            return 0.0
+        return (max(r.log_time for r in self.records) - min(r.log_time for r in self.records)) * 1e-9
+
+    def latest_time(self) -> float:
+        """The latest twin time the recording can hold, seconds: its span, the slack, at most the maximum."""
+        return min(self.span_s + RECORDED_TIME_SLACK_S, MAX_REPLAY_SECONDS)
+
     def targets(self) -> tuple[np.ndarray, np.ndarray]:
-        """The operator's targets: (times (n,) float64 s of the twin, positions (n, 3) float64 m, world)."""
-        rows = [r.json() for r in self.topic(TARGET_TOPIC)]
-        times = np.array([row["sim_time"] for row in rows], dtype=np.float64)
-        points = np.array([[row["position"][a] for a in "xyz"] for row in rows], dtype=np.float64).reshape(-1, 3)
-        return times, points
+        """The operator's targets: (times (n,) float64 s of the twin, positions (n, 3) float64 m, world).
+
+        Raises:
+            RecordingError: a target that is not a JSON object with a ``sim_time`` from 0 to
+                :meth:`latest_time` (ascending) and a ``position`` {x, y, z} within
+                :data:`sync.messages.MAX_COORDINATE` metres.
+        """
+        latest = self.latest_time()
+        times, points = [], []
+        for r in self.topic(TARGET_TOPIC):
+            row = self._object(r)
+            t = self._number(row, "sim_time", r.topic, 0.0, latest)
+            if times and t < times[-1]:
+                raise RecordingError(f"{self.path}: a {r.topic} record's sim_time {t:g} s goes back (previous "
+                                     f"{times[-1]:g} s)")
+            times.append(t)
+            points.append(self._vector(row, "position", "xyz", r.topic, MAX_COORDINATE))
+        return np.array(times, dtype=np.float64), np.array(points, dtype=np.float64).reshape(-1, 3)
 
     def truth(self) -> dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]]:
-        """Ground truth per object: (times (n,) s, positions (n, 3) m, quaternions (n, 4) w x y z), world."""
+        """Ground truth per object: (times (n,) s, positions (n, 3) m, quaternions (n, 4) w x y z), world.
+
+        Raises:
+            RecordingError: a record that is not a JSON object with a ``sim_time`` from 0 to
+                :meth:`latest_time` and a list of ``transforms``, each with a string ``child_frame_id``, a
+                ``translation`` {x, y, z} within :data:`sync.messages.MAX_COORDINATE` m and a ``rotation``
+                {x, y, z, w}.
+        """
+        latest = self.latest_time()
         rows: dict[str, list[tuple[float, list[float], list[float]]]] = {}
         for r in self.topic(TRUTH_TOPIC):
-            msg = r.json()
-            for tf in msg["transforms"]:
+            msg = self._object(r)
+            t = self._number(msg, "sim_time", r.topic, 0.0, latest)
+            transforms = msg.get("transforms")
+            if not isinstance(transforms, list):
+                raise RecordingError(f"{self.path}: a {r.topic} record's transforms is not a list")
+            for tf in transforms:
+                if not isinstance(tf, dict) or not isinstance(tf.get("child_frame_id"), str):
+                    raise RecordingError(f"{self.path}: a {r.topic} record's child_frame_id is not a string")
                 object_id = tf["child_frame_id"].removeprefix("truth/")
-                q = tf["rotation"]
-                rows.setdefault(object_id, []).append(
-                    (msg["sim_time"], [tf["translation"][a] for a in "xyz"], [q["w"], q["x"], q["y"], q["z"]]))
+                p = self._vector(tf, "translation", "xyz", r.topic, MAX_COORDINATE)
+                x, y, z, w = self._vector(tf, "rotation", "xyzw", r.topic, 1.0 + QUAT_NORM_TOLERANCE)
+                rows.setdefault(object_id, []).append((t, p, [w, x, y, z]))
         return {i: (np.array([t for t, _, _ in v]), np.array([p for _, p, _ in v]), np.array([q for _, _, q in v]))
                 for i, v in rows.items()}
+
+    def end_time(self) -> float | None:
+        """The twin time the end record says the session stopped at (None: no end record, or none given).
+
+        Raises:
+            RecordingError: ``twin_time_s`` is not a number from 0 to :meth:`latest_time`.
+        """
+        raw = (self.end or {}).get("twin_time_s")
+        if raw is None or raw == "None":  # a twin that never started records None
+            return None
+        try:
+            t = float(raw)
+        except ValueError:
+            raise RecordingError(f"{self.path}: the end record's twin_time_s {raw!r} is not a number") from None
+        return self._in_range(t, "the end record's twin_time_s", 0.0, self.latest_time())
+
+    # checks of decoded fields: one line naming the record kind and the field
+
+    def _object(self, r: Record) -> dict:
+        try:
+            doc = json.loads(r.data)
+        except (ValueError, UnicodeDecodeError):
+            raise RecordingError(f"{self.path}: a {r.topic} record is not JSON") from None
+        if not isinstance(doc, dict):
+            raise RecordingError(f"{self.path}: a {r.topic} record is not a JSON object")
+        return doc
+
+    def _number(self, doc: dict, key: str, topic: str, low: float, high: float, *, name: str | None = None) -> float:
+        value, name = doc.get(key), name or key
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise RecordingError(f"{self.path}: a {topic} record's {name} is "
+                                 f"{'missing' if value is None else 'not a number'}")
+        return self._in_range(float(value), f"a {topic} record's {name}", low, high)
+
+    def _in_range(self, value: float, what: str, low: float, high: float) -> float:
+        if not (math.isfinite(value) and low <= value <= high):
+            note = (f" (the recording holds {self.span_s:.3g} s of records; a replay runs at most "
+                    f"{MAX_REPLAY_SECONDS:g} s)" if what.endswith("time") or what.endswith("time_s") else "")
+            raise RecordingError(f"{self.path}: {what} {value:g} is outside [{low:g}, {high:g}]{note}")
+        return value
+
+    def _vector(self, doc: dict, key: str, axes: str, topic: str, bound: float) -> list[float]:
+        v = doc.get(key)
+        if not isinstance(v, dict):
+            raise RecordingError(f"{self.path}: a {topic} record's {key} is not an object {{{', '.join(axes)}}}")
+        return [self._number(v, a, topic, -bound, bound, name=f"{key}.{a}") for a in axes]
 
 
 def read_recording(path: str | Path) -> Recording:
@@ -380,10 +501,12 @@ def read_recording(path: str | Path) -> Recording:
 
     Raises:
         RecordingError: no such file, not an MCAP file, no ``tactile_twin.session`` metadata before the
-            damage, or a schema version this code does not read.
+            damage, a schema version this code does not read, a record past :data:`MAX_RECORD_BYTES` or a
+            file past :data:`MAX_RECORDING_BYTES` decompressed, or a bad end record
+            (:meth:`Recording.end_time`).
     """
-    from mcap.exceptions import McapError
-    from mcap.records import Channel, Message, Metadata
+    from mcap.exceptions import McapError, RecordLengthLimitExceeded
+    from mcap.records import Channel, Chunk, Message, Metadata
     from mcap.stream_reader import StreamReader
 
     path = Path(path)
@@ -395,9 +518,25 @@ def read_recording(path: str | Path) -> Recording:
     records: list[Record] = []
     damage: str | None = None
     with open(path, "rb") as f:
-        reader = StreamReader(f, validate_crcs=True, record_size_limit=1 << 30)
-        try:
+        reader = StreamReader(f, validate_crcs=True, emit_chunks=True, record_size_limit=MAX_RECORD_BYTES)
+        total = 0  # bytes held, decompressed
+
+        def unchunked():  # type: ignore[no-untyped-def]
+            nonlocal total
             for rec in reader.records:
+                if isinstance(rec, Chunk):
+                    data = _inflate(path, rec)
+                    total += len(data)
+                    _check_total(path, total)
+                    yield from _chunk_records(data)
+                else:
+                    if isinstance(rec, Message):
+                        total += len(rec.data)
+                        _check_total(path, total)
+                    yield rec
+
+        try:
+            for rec in unchunked():
                 if isinstance(rec, Metadata):
                     if rec.name == "tactile_twin.session":
                         metadata = dict(rec.metadata)
@@ -413,6 +552,8 @@ def read_recording(path: str | Path) -> Recording:
                     records.append(Record(topic, rec.log_time, rec.publish_time, rec.data))
         except RecordingError:
             raise
+        except RecordLengthLimitExceeded as exc:
+            raise RecordingError(f"{path}: a record is larger than the {MAX_RECORD_BYTES >> 20} MiB limit ({exc})") from None
         except (McapError, ValueError, struct.error, zlib.error, EOFError, MemoryError, UnicodeDecodeError) as exc:
             # ValueError covers the reader's CRC mismatch and zstd's own errors (a ZstdError is one).
             what = type(exc).__name__ + (f": {exc}" if str(exc) else "")
@@ -421,7 +562,79 @@ def read_recording(path: str | Path) -> Recording:
             damage = f"{path}: the recording is damaged after {len(records)} messages ({what}); using those"
     if metadata is None:
         raise RecordingError(f"{path}: no tactile_twin.session metadata: not a tactile-twin recording")
-    return Recording(path, metadata, records, end, damage, Counter(r.topic for r in records))
+    recording = Recording(path, metadata, records, end, damage, Counter(r.topic for r in records))
+    recording.end_time()  # checked here, whatever the caller reads (targets and truth: when they are read)
+    return recording
+
+
+def _check_total(path: Path, total: int) -> None:
+    if total > MAX_RECORDING_BYTES:
+        raise RecordingError(f"{path}: holds more than {MAX_RECORDING_BYTES >> 20} MiB decompressed, the limit")
+
+
+def _inflate(path: Path, chunk) -> bytes:  # type: ignore[no-untyped-def]
+    """A chunk's records, decompressed, never past :data:`MAX_RECORD_BYTES` whatever its header claims.
+
+    Raises:
+        RecordingError: the chunk claims or decompresses to more than the limit.
+        McapError: an unknown compression or a CRC mismatch (damage).
+    """
+    from mcap.exceptions import McapError
+
+    too_big = RecordingError(f"{path}: a chunk decompresses to more than the {MAX_RECORD_BYTES >> 20} MiB "
+                             "limit per record")
+    if chunk.uncompressed_size > MAX_RECORD_BYTES:
+        raise too_big
+    if chunk.compression == "":
+        data = chunk.data
+    elif chunk.compression == "zstd":
+        import io
+
+        import zstandard
+
+        with zstandard.ZstdDecompressor().stream_reader(io.BytesIO(chunk.data)) as stream:
+            parts, size = [], 0
+            while piece := stream.read(1 << 20):
+                size += len(piece)
+                if size > MAX_RECORD_BYTES:
+                    raise too_big
+                parts.append(piece)
+        data = b"".join(parts)
+    elif chunk.compression == "lz4":
+        try:
+            import lz4.frame
+        except ImportError:
+            raise McapError("lz4 compression, and the lz4 package is not installed") from None
+        data = lz4.frame.LZ4FrameDecompressor().decompress(chunk.data, max_length=MAX_RECORD_BYTES + 1)
+        if len(data) > MAX_RECORD_BYTES:
+            raise too_big
+    else:
+        raise McapError(f"unknown chunk compression {chunk.compression!r}")
+    if len(data) != chunk.uncompressed_size:
+        raise McapError(f"a chunk decompressed to {len(data)} bytes, its header says {chunk.uncompressed_size}")
+    if chunk.uncompressed_crc and zlib.crc32(data) != chunk.uncompressed_crc:
+        raise McapError("a chunk's CRC does not match its records")
+    return data
+
+
+def _chunk_records(data: bytes) -> list:  # type: ignore[type-arg]
+    """The schema, channel and message records in a chunk's decompressed ``data`` (others skipped)."""
+    from io import BytesIO
+
+    from mcap.data_stream import ReadDataStream
+    from mcap.opcode import Opcode
+    from mcap.records import Channel, Message
+
+    stream, out = ReadDataStream(BytesIO(data)), []
+    while stream.count < len(data):
+        opcode, length = stream.read1(), stream.read8()
+        if opcode == Opcode.CHANNEL:
+            out.append(Channel.read(stream))
+        elif opcode == Opcode.MESSAGE:
+            out.append(Message.read(stream, length))
+        else:
+            stream.read(length)
+    return out
 
 
 def _check_version(path: Path, metadata: dict[str, str]) -> None:

@@ -51,6 +51,45 @@ def exposed_without_tls(endpoints: list[str]) -> list[str]:
     return exposed
 
 
+#: Zenoh link protocols whose address is HOST:PORT.
+_HOST_PORT_PROTOCOLS = ("tcp", "udp", "tls", "quic", "ws")
+
+#: Every link protocol Zenoh builds may carry (the rest have their own address forms).
+_PROTOCOLS = (*_HOST_PORT_PROTOCOLS, "unixsock-stream", "unixpipe", "serial", "vsock")
+
+
+def check_endpoint(endpoint: str, what: str = "endpoint") -> None:
+    """Refuse an endpoint Zenoh would reject with a Rust error, or a HOST:PORT one without a port.
+
+    Form: ``PROTOCOL/ADDRESS[?METADATA][#CONFIG]``, e.g. ``tcp/192.168.1.5:7447`` or ``tls/[::1]:7447``.
+
+    Raises:
+        SessionError: naming ``what`` and the endpoint, and the expected form.
+    """
+    proto, slash, rest = endpoint.partition("/")
+    address = rest.split("#")[0].split("?")[0]
+    form = "expected PROTOCOL/HOST:PORT, e.g. tcp/127.0.0.1:7447"
+    if not slash or proto not in _PROTOCOLS or not address:
+        raise SessionError(f"{what} {endpoint!r}: not a Zenoh endpoint ({form})")
+    if proto in _HOST_PORT_PROTOCOLS:
+        host, colon, port = address.rpartition(":")
+        if not colon or not host or not port.isdigit() or not 0 <= int(port) <= 65535:
+            raise SessionError(f"{what} {endpoint!r}: no valid port ({form})")
+
+
+def _zenoh_error(exc: Exception) -> str:
+    """Zenoh's (Rust) error text as one short line: the JSON5 position if any, no source locations."""
+    import re
+
+    text = str(exc)
+    where = re.search(r"-->\s*(\d+):(\d+)", text)
+    said = re.search(r"=\s*([^\n]+)", text)
+    if where and said:
+        text = f"{said.group(1)} at line {where.group(1)}, column {where.group(2)}"
+    text = re.sub(r"\s+at /\S+\.rs:\d+\.?", "", text)
+    return "; ".join(line.strip() for line in text.splitlines() if line.strip())
+
+
 def make_config(*, listen: list[str] | None = None, connect: list[str] | None = None,
                 config_file: str | Path | None = None, mode: str = "peer"):  # type: ignore[no-untyped-def]
     """A ``zenoh.Config``: the file's settings (if any), then mode, scouting off, and the endpoints."""
@@ -63,17 +102,23 @@ def make_config(*, listen: list[str] | None = None, connect: list[str] | None = 
         try:
             conf = zenoh.Config.from_file(str(path))
         except Exception as exc:  # zenoh raises its own ZError for JSON5 or schema problems
-            raise SessionError(f"zenoh config {path}: {exc}") from exc
+            raise SessionError(f"zenoh config {path}: {_zenoh_error(exc)}") from exc
     else:
         conf = zenoh.Config()
         conf.insert_json5("mode", json.dumps(mode))
         conf.insert_json5("scouting/multicast/enabled", "false")
         conf.insert_json5("scouting/gossip/enabled", "false")
         conf.insert_json5("listen/endpoints", json.dumps([LOOPBACK_ANY_PORT]))
-    if listen is not None:
-        conf.insert_json5("listen/endpoints", json.dumps(listen))
-    if connect is not None:
-        conf.insert_json5("connect/endpoints", json.dumps(connect))
+    for what, endpoints in (("listen endpoint", listen), ("connect endpoint", connect)):
+        for endpoint in endpoints or ():
+            check_endpoint(endpoint, what)
+    try:
+        if listen is not None:
+            conf.insert_json5("listen/endpoints", json.dumps(listen))
+        if connect is not None:
+            conf.insert_json5("connect/endpoints", json.dumps(connect))
+    except Exception as exc:  # zenoh's ZError: an endpoint it still refuses
+        raise SessionError(f"Zenoh endpoints {listen or []} {connect or []}: {_zenoh_error(exc)}") from exc
     return conf
 
 
@@ -83,7 +128,7 @@ def open_session(conf):  # type: ignore[no-untyped-def]
     try:
         return zenoh.open(conf)
     except Exception as exc:  # e.g. a listen endpoint already in use, or a bad certificate path
-        raise SessionError(f"could not open a Zenoh session: {exc}") from exc
+        raise SessionError(f"could not open a Zenoh session: {_zenoh_error(exc)}") from exc
 
 
 class ZenohTransport:

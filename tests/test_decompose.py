@@ -148,3 +148,21 @@ def test_a_failed_write_is_a_warning_and_leaves_nothing(tmp_path, caplog):
         assert save_entry(target, hulls) is False
     assert "cannot write CoACD cache entry" in caplog.text
     assert not list((tmp_path / "ok").glob("*.tmp")) and target.is_dir()
+
+
+@pytest.mark.parametrize(("change", "match"), [
+    ({"threshold": 1.5}, r"threshold must be in \(0, 1\], got 1.5"),  # CoACD aborts the process past 1
+    ({"threshold": 0.0}, r"threshold must be in \(0, 1\]"),
+    ({"threshold": float("nan")}, r"threshold must be in \(0, 1\]"),
+    ({"max_convex_hull": 0}, r"max hulls must be -1 \(no cap\) or >= 1"),
+    ({"max_ch_vertex": 3}, r"max_ch_vertex must be >= 4"),
+    ({"resolution": 0}, r"resolution must be >= 1"),
+    ({"preprocess_mode": "sometimes"}, r"preprocess_mode must be auto, on or off"),
+])
+def test_coacd_settings_outside_coacds_ranges_are_refused(change, match):
+    from dataclasses import replace
+
+    from twin.decompose import CoacdSettingsError
+
+    with pytest.raises(CoacdSettingsError, match=match):
+        replace(SETTINGS, **change)

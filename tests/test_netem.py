@@ -144,7 +144,10 @@ def test_the_same_seed_gives_the_same_arrivals():
     (lambda: Conditions(delay=0.03, jitter=0.02), r"^jitter 0.02 s is more than normal jitter allows .* 0.01 s\)"),
     (lambda: Conditions(delay=0.05, jitter=0.06, distribution="exponential"), r"more than exponential jitter"),
     (lambda: Conditions(delay=0.05, jitter=0.01, distribution="pareto"), r"^distribution must be one of normal"),
-    (lambda: Conditions(rate_bps=0), r"^rate_bps must be finite and in \(0, inf\]"),
+    (lambda: Conditions(rate_bps=0), r"^rate_bps must be finite and in \[1, inf\]"),
+    (lambda: Conditions(rate_bps=1e-300), r"^rate_bps must be finite and in \[1, inf\]"),
+    (lambda: Network(seed=-5), r"^seed must be an integer in \[0, "),
+    (lambda: Network(seed=1.5), r"^seed must be an integer"),
     (lambda: Conditions(rate_bps=-1e6), r"^rate_bps must be"),
     (lambda: Conditions(rate_bps=math.inf), r"^rate_bps must be"),
     (lambda: Conditions(rate_bps=1e6, queue_bytes=0), r"^queue_bytes must be"),
@@ -160,6 +163,29 @@ def test_impossible_conditions_are_one_line_value_errors(make, match):
         make()
     assert isinstance(err.value, ValueError) and isinstance(err.value, TwinError)
     assert "\n" not in str(err.value)
+
+
+@pytest.mark.parametrize(("delay", "jitter"), [(0.3, 0.1), (0.03, 0.01), (0.15, 0.05)])
+def test_jitter_of_exactly_a_third_of_the_delay_is_allowed(delay, jitter):
+    # 0.3 / 3 is 0.09999999999999999 in floats: the limit has a relative slack.
+    assert Conditions(delay=delay, jitter=jitter).jitter == jitter
+    with pytest.raises(ConditionsError, match="more than normal jitter"):
+        Conditions(delay=delay, jitter=jitter * 1.001)
+
+
+def test_jitter_at_a_third_of_the_delay_on_the_command_lines(tmp_path, capsys):
+    from cli.main import main
+
+    garbage = tmp_path / "garbage.mcap"  # the conditions are checked before the recording is read
+    garbage.write_bytes(b"not a recording")
+    assert main(["replay", str(garbage), "--delay", "300", "--jitter", "100"]) == 2
+    assert "not a readable tactile-twin recording" in capsys.readouterr().err
+    theirs = tmp_path / "theirs"
+    theirs.mkdir()
+    (theirs / "notes.txt").write_text("mine\n")  # the folder is checked after every condition
+    assert main(["experiment", str(Path(__file__).parent / "data" / "small.toml"), "--delays", "300",
+                 "--jitter", "100", "--out", str(theirs)]) == 2
+    assert "not a folder this command wrote" in capsys.readouterr().err
 
 
 def test_the_bus_delivers_over_a_link_when_due_and_at_once_without_one():

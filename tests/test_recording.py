@@ -205,3 +205,124 @@ def test_an_experiment_asks_for_what_its_input_can_give(recorded, tmp_path, caps
     assert main(["experiment", str(remote_only), "--out", str(tmp_path / "b")]) == 2
     assert "the recording has no operator targets" in capsys.readouterr().err
     assert not (tmp_path / "a").exists() and not (tmp_path / "b").exists()
+
+
+def test_replay_out_never_overwrites_an_input_or_a_users_folder(recorded, cache, tmp_path, capsys):
+    path, _, _ = recorded
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    (mine / "summary.json").write_text("my own notes\n")
+    assert main(["replay", str(path), "--out", str(mine), "--duration", "0.1", "--cache-dir", str(cache)]) == 2
+    err = capsys.readouterr().err
+    assert "not a folder this command wrote" in err and err.count("\n") == 1, err
+    assert [p.name for p in mine.iterdir()] == ["summary.json"] and (mine / "summary.json").read_text() == "my own notes\n"
+    out = tmp_path / "out"
+    assert main(["replay", str(path), "--out", str(out), "--duration", "0.1", "--cache-dir", str(cache)]) == 0
+    capsys.readouterr()
+    first = (out / "replay.mcap").read_bytes()
+    # The folder is replay's own now, but its replay.mcap is this replay's input: refused, not truncated.
+    assert main(["replay", str(out / "replay.mcap"), "--out", str(out), "--duration", "0.1"]) == 2
+    assert "is the input" in capsys.readouterr().err
+    assert (out / "replay.mcap").read_bytes() == first
+
+
+def test_record_refuses_an_input_or_a_users_file_and_a_failed_start_leaves_the_file(recorded, tmp_path, capsys):
+    path, _, _ = recorded
+    before = path.read_bytes()
+    args = ["local", "--replay-operator", str(path), "--record", str(path), "--duration", "1"]
+    assert main(args) == 2
+    assert "is the input" in capsys.readouterr().err and path.read_bytes() == before
+    notes = tmp_path / "notes.mcap"
+    notes.write_text("precious\n")
+    assert main(["local", "--record", str(notes), "--duration", "1"]) == 2
+    assert "not an MCAP recording" in capsys.readouterr().err and notes.read_text() == "precious\n"
+    # A recorder whose session never started leaves an earlier recording as it was, and nothing beside it.
+    kept = tmp_path / "kept.mcap"
+    kept.write_bytes(before)
+    Recorder(kept, clock=SimClock()).discard()
+    assert kept.read_bytes() == before and sorted(tmp_path.iterdir()) == sorted([notes, kept])
+    with Recorder(kept, clock=SimClock()) as r:  # one that ran replaces it, when it is closed
+        r.target(0.0, np.zeros(3))
+        assert kept.read_bytes() == before
+    assert read_recording(kept).counts[TARGET_TOPIC] == 1
+
+
+def _rewrite(src: Path, dst: Path, *, topic: str | None = None, data: bytes = b"", end: dict | None = None,
+             session: dict | None = None) -> Path:
+    """A copy of recording ``src`` with the first message on ``topic`` replaced by ``data``, and entries of
+    the end or session metadata replaced: valid MCAP, bad content."""
+    from mcap.records import Channel, Message, Metadata, Schema
+    from mcap.stream_reader import StreamReader
+    from mcap.writer import Writer
+
+    with src.open("rb") as f, dst.open("wb") as g:
+        w = Writer(g)
+        w.start(profile="tactile-twin")
+        schemas, channels, done = {}, {}, False
+        for r in StreamReader(f).records:
+            if isinstance(r, Schema):
+                schemas[r.id] = w.register_schema(r.name, r.encoding, r.data)
+            elif isinstance(r, Channel):
+                channels[r.id] = (w.register_channel(r.topic, r.message_encoding, schemas.get(r.schema_id, 0),
+                                                     dict(r.metadata)), r.topic)
+            elif isinstance(r, Message):
+                cid, name = channels[r.channel_id]
+                replace = name == topic and not done
+                done = done or replace
+                w.add_message(cid, r.log_time, data if replace else r.data, r.publish_time)
+            elif isinstance(r, Metadata):
+                extra = {"tactile_twin.end": end, "tactile_twin.session": session}.get(r.name) or {}
+                w.add_metadata(r.name, {**dict(r.metadata), **extra})
+        w.finish()
+    return dst
+
+
+@pytest.mark.parametrize(("change", "words"), [
+    ({"topic": TARGET_TOPIC, "data": b'{"position": {"x": 0, "y": 0, "z": 0}}'}, "/operator/target record's sim_time is missing"),
+    ({"topic": TARGET_TOPIC, "data": b"[1, 2]"}, "/operator/target record is not a JSON object"),
+    ({"topic": TARGET_TOPIC, "data": b"\xff\xfe garbage"}, "/operator/target record is not JSON"),
+    ({"topic": TARGET_TOPIC, "data": b'{"sim_time": NaN, "position": {"x": 0, "y": 0, "z": 0}}'}, "sim_time nan is outside"),
+    ({"topic": TARGET_TOPIC, "data": b'{"sim_time": 0.1, "position": {"x": 1e300, "y": 0, "z": 0}}'}, "position.x 1e+300 is outside"),
+    ({"topic": TARGET_TOPIC, "data": b'{"sim_time": 1e9, "position": {"x": 0, "y": 0, "z": 0}}'}, "sim_time 1e+09 is outside"),
+    ({"topic": TRUTH_TOPIC, "data": b'{"sim_time": 0, "transforms": [{"child_frame_id": 5}]}'}, "child_frame_id is not a string"),
+    ({"topic": TRUTH_TOPIC, "data": b"{not json"}, "/truth/transforms record is not JSON"),
+    ({"end": {"twin_time_s": "inf"}}, "twin_time_s inf is outside"),
+    ({"end": {"twin_time_s": "1e12"}}, "twin_time_s 1e+12 is outside"),
+    ({"end": {"twin_time_s": "abc"}}, "twin_time_s 'abc' is not a number"),
+    ({"session": {"network": json.dumps({"uplink": {"delay": 0.01}, "downlink": None, "seed": -5})}}, "seed must be"),
+    ({"session": {"scene_toml": 'name="x"\nq=' + "[" * 5000 + "]" * 5000 + "\n"}}, "nested too deeply"),
+    ({"session": {"scene_toml": 'name="x"\n[[objects]]\nid="a"\nprimitive={type="box",size=[0.05,0.05,0.05]}\n'
+                                'position=[1' + "0" * 400 + ',0]\n'}}, "not a valid scene"),
+    ({"session": {"network": json.dumps({"uplink": {"rate_bps": 1e-300}, "downlink": None, "seed": 0})}}, "rate_bps"),
+])
+def test_malformed_records_are_one_line_errors_naming_the_record_and_field(recorded, tmp_path, capsys, change, words):
+    path, _, _ = recorded
+    bad = _rewrite(path, tmp_path / "bad.mcap", **change)
+    commands = [["replay", str(bad), "--duration", "0.1"]]
+    if "topic" in change and change["topic"] == TARGET_TOPIC:
+        commands += [["local", "--replay-operator", str(bad)], ["experiment", str(bad), "--out", str(tmp_path / "x")]]
+    for command in commands:
+        assert main(command) == 2, command
+        err = capsys.readouterr().err
+        assert words in err and err.count("\n") == 1 and "Traceback" not in err, err
+    assert not (tmp_path / "x").exists()
+
+
+def test_a_decompression_bomb_is_refused_naming_the_limit(recorded, tmp_path, capsys):
+    from mcap.writer import CompressionType, Writer
+
+    from sync.recording import MAX_RECORD_BYTES
+
+    session = read_recording(recorded[0]).metadata
+    bomb = tmp_path / "bomb.mcap"
+    with bomb.open("wb") as f:  # one message of zeros just past the limit: ~130 KB on disk
+        w = Writer(f, compression=CompressionType.ZSTD, chunk_size=1 << 20)
+        w.start(profile="tactile-twin")
+        w.add_metadata("tactile_twin.session", session)
+        channel = w.register_channel(FORCE_TOPIC, "json", 0)
+        w.add_message(channel, 0, bytes(MAX_RECORD_BYTES + 1), 0)
+        w.finish()
+    assert bomb.stat().st_size < 1 << 20
+    assert main(["replay", str(bomb)]) == 2
+    err = capsys.readouterr().err
+    assert f"more than the {MAX_RECORD_BYTES >> 20} MiB limit" in err and err.count("\n") == 1, err

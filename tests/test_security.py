@@ -12,6 +12,7 @@ order, so once the allowed one is in, a forgery that was let through would be in
 from __future__ import annotations
 
 import json
+import re
 import shutil
 import subprocess
 import threading
@@ -377,3 +378,28 @@ def test_a_flood_of_garbage_and_stale_poses_is_counted_and_the_twin_runs_on(tmp_
         finally:
             flooder.close()
             session.close()
+
+
+@pytest.mark.parametrize(("argv", "message"), [
+    (["local", "--connect", "garbage"], r"--connect 'garbage': not a Zenoh endpoint \(expected PROTOCOL/HOST:PORT"),
+    (["local", "--connect", "tcp/notanaddress"], r"--connect 'tcp/notanaddress': no valid port"),
+    (["local", "--listen", "tcp/notanaddress"], r"--listen 'tcp/notanaddress': no valid port"),  # not "exposed"
+    (["remote", str(Path(__file__).parent / "data" / "small.toml"), "--listen", "tcp/127.0.0.1:99999"],
+     r"--listen 'tcp/127.0.0.1:99999': no valid port"),
+])
+def test_bad_endpoints_are_one_line_errors_naming_them(argv, message, capsys):
+    from cli.main import main
+
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and re.search(message, err), err
+
+
+def test_a_bad_zenoh_config_is_one_line_with_its_position(tmp_path, capsys):
+    from cli.main import main
+
+    bad = tmp_path / "bad.json5"
+    bad.write_text("{{{ not json\n")
+    assert main(["local", "--zenoh-config", str(bad)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "at line 1, column 2" in err and ".rs:" not in err, err

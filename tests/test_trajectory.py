@@ -58,3 +58,33 @@ def test_an_unreadable_file_is_a_trajectory_error(tmp_path):
         load_trajectory(binary)
     with pytest.raises(TrajectoryError, match="cannot read trajectory"):
         load_trajectory(tmp_path)  # a directory
+
+
+def test_a_fifo_or_a_folder_is_refused_without_blocking(tmp_path, capsys):
+    import os
+    from pathlib import Path
+
+    from cli.main import main
+
+    fifo = tmp_path / "script.csv"
+    os.mkfifo(fifo)  # opening it for reading would wait for a writer for ever
+    with pytest.raises(TrajectoryError, match="not a regular file"):
+        load_trajectory(fifo)
+    small = Path(__file__).parent / "data" / "small.toml"
+    for command in (["run", str(small), "--script", str(fifo)], ["local", "--script", str(fifo)]):
+        assert main(command) == 2  # before any build or session
+        err = capsys.readouterr().err
+        assert "not a regular file" in err and err.count("\n") == 1, err
+
+
+def test_positions_beyond_the_wire_bound_are_refused(tmp_path, capsys):
+    from pathlib import Path
+
+    from cli.main import main
+    from sync.messages import MAX_COORDINATE
+
+    path = _write(tmp_path, "0,0,0,0\n1,1e300,0,0\n")
+    with pytest.raises(TrajectoryError, match=rf":2: a position beyond {MAX_COORDINATE:g} m"):
+        load_trajectory(path)
+    assert main(["run", str(Path(__file__).parent / "data" / "small.toml"), "--script", str(path)]) == 2
+    assert capsys.readouterr().err.count("\n") == 1

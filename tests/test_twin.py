@@ -267,7 +267,11 @@ def test_cli_viewer_without_display(small_scene, monkeypatch, capsys):
         (["demo", "--duration", "nan"], r"--duration must be a finite number, got nan"),
         (["remote", str(SMALL), "--duration", "-1"], r"--duration must be > 0, got -1"),
         (["remote", str(SMALL), "--deadband-mm", "nan"], r"--deadband-mm must be a finite number"),
-        (["remote", str(SMALL), "--points", "0"], r"--points must be at least 100, got 0"),
+        (["remote", str(SMALL), "--points", "0"], r"--points must be from 100 to 10000000, got 0"),
+        (["remote", str(SMALL), "--points", "2000000000"], r"--points must be from 100 to 10000000, got 2000000000"),
+        (["run", str(SMALL), "--threshold", "2"], r"--threshold must be > 0 and <= 1, got 2"),
+        (["build", str(SMALL), "--out", "o", "--threshold", "1.5"], r"--threshold must be > 0 and <= 1, got 1.5"),
+        (["run", str(SMALL), "--max-hulls", "-5"], r"--max-hulls must be -1 \(no cap\) or >= 1, got -5"),
         (["local", "--duration", "0"], r"--duration must be > 0, got 0"),
         (["local", "--stale-after", "inf"], r"--stale-after must be a finite number, got inf"),
         (["estimate", str(SMALL), "--density", "nan"], r"--density must be a finite number, got nan"),
@@ -283,6 +287,19 @@ def test_cli_refuses_bad_numbers_and_paths_with_one_line(argv, message, capsys):
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and err.startswith(f"twin {argv[0]}: error: ")
     assert re.search(message, err), err
+
+
+def test_cli_errors_and_warnings_of_a_failed_command_are_one_line(tmp_path, capsys):
+    import cli.main as cli_main
+
+    built = tmp_path / "built"
+    built.mkdir()
+    (built / "scene.xml").write_text('<mujoco><include file="missing.xml"/></mujoco>')  # MuJoCo: several lines
+    assert main(["run", str(built), "--duration", "0.1"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "MuJoCo cannot load it" in err, err
+
+    assert cli_main.one_line("a bad input\n  Element name 'x'\n\n") == "a bad input; Element name 'x'"
 
 
 def test_cli_rerun_save_to_an_unwritable_place_fails_before_any_work(small_scene, tmp_path, capsys):

@@ -12,6 +12,7 @@ from __future__ import annotations
 import hashlib
 import json
 import logging
+import math
 import os
 from collections.abc import Sequence
 from concurrent.futures import ProcessPoolExecutor
@@ -20,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
+from estimation.errors import TwinError
 from twin.workers import background_worker
 
 log = logging.getLogger(__name__)
@@ -65,6 +67,33 @@ class CoacdSettings:
     #: order of CoACD's own concavity threshold. Sparse noisy scans of convex shapes read up to 0.12: those
     #: above it go to CoACD, as a concave object would (the cloud cannot tell them apart).
     convex_tolerance: float = 0.05
+
+    def __post_init__(self) -> None:
+        """Refuse what CoACD would abort on (``threshold > 1`` kills the process) or cannot mean.
+
+        Raises:
+            CoacdSettingsError: ``threshold`` outside (0, 1] (CoACD's documented range is 0.01 to 1),
+                ``max_convex_hull`` not -1 or >= 1, ``max_ch_vertex`` below 4 (a hull has 4), a
+                resolution or MCTS count below 1, ``preprocess_mode`` not auto/on/off, or
+                ``convex_tolerance`` outside [0, 1].
+        """
+        if not (math.isfinite(self.threshold) and 0 < self.threshold <= 1):
+            raise CoacdSettingsError(f"CoACD threshold must be in (0, 1], got {self.threshold:g}")
+        if self.max_convex_hull != -1 and self.max_convex_hull < 1:
+            raise CoacdSettingsError(f"CoACD max hulls must be -1 (no cap) or >= 1, got {self.max_convex_hull}")
+        if self.max_ch_vertex < 4:
+            raise CoacdSettingsError(f"CoACD max_ch_vertex must be >= 4, got {self.max_ch_vertex}")
+        for name in ("preprocess_resolution", "resolution", "mcts_nodes", "mcts_iterations", "mcts_max_depth"):
+            if getattr(self, name) < 1:
+                raise CoacdSettingsError(f"CoACD {name} must be >= 1, got {getattr(self, name)}")
+        if self.preprocess_mode not in ("auto", "on", "off"):
+            raise CoacdSettingsError(f"CoACD preprocess_mode must be auto, on or off, got {self.preprocess_mode!r}")
+        if not (math.isfinite(self.convex_tolerance) and 0 <= self.convex_tolerance <= 1):
+            raise CoacdSettingsError(f"convex_tolerance must be in [0, 1], got {self.convex_tolerance:g}")
+
+
+class CoacdSettingsError(TwinError, ValueError):
+    """CoACD settings outside the ranges CoACD accepts."""
 
 
 #: The settings used when none are given.

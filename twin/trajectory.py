@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from estimation.errors import TwinError
+from sync.messages import MAX_COORDINATE
 
 Trajectory = Callable[[float], np.ndarray]
 
@@ -70,10 +71,14 @@ def load_trajectory(path: str | Path) -> Trajectory:
         ``trajectory(t) -> (3,) float64``, metres, world frame.
 
     Raises:
-        TrajectoryError: the file cannot be read, a row has other than four columns or a value that is
-            not a finite number, there are no waypoints, or the times do not increase.
+        TrajectoryError: the file is not a regular file or cannot be read, a row has other than four
+            columns or a value that is not a finite number, a position beyond
+            :data:`sync.messages.MAX_COORDINATE` (what the wire carries), there are no waypoints, or the
+            times do not increase.
     """
     path = Path(path)
+    if path.exists() and not path.is_file() and not path.is_dir():  # a FIFO or device: reading blocks forever
+        raise TrajectoryError(f"{path}: not a regular file")
     try:
         text = path.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as exc:
@@ -93,6 +98,8 @@ def load_trajectory(path: str | Path) -> Trajectory:
             raise TrajectoryError(f"{path}:{number}: not a number in {','.join(cells)!r}") from None
         if not all(math.isfinite(v) for v in values):
             raise TrajectoryError(f"{path}:{number}: non-finite value in {','.join(cells)!r}")
+        if any(abs(v) > MAX_COORDINATE for v in values[1:]):
+            raise TrajectoryError(f"{path}:{number}: a position beyond {MAX_COORDINATE:g} m in {','.join(cells)!r}")
         if rows and values[0] <= rows[-1][0]:
             raise TrajectoryError(f"{path}:{number}: t = {values[0]:g} s does not increase "
                                   f"(previous {rows[-1][0]:g} s)")

@@ -1,0 +1,85 @@
+"""Where the commands write, checked before any work: never over an input, never into a user's own folder.
+
+An output folder (``twin experiment --out``, ``twin replay --out``) must be new, empty, or one this
+command wrote before (it holds the command's marker file); an output file (``--record``, ``--rerun save``,
+the files written into an output folder) must not be one of the command's inputs. ``twin build --out``
+follows the same rule with its own check (:func:`scenes.build.check_output`), since it replaces the
+folder whole.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterable
+from pathlib import Path
+
+from estimation.errors import TwinError
+
+#: The first bytes of every MCAP file: an existing file without them is not a recording we may replace.
+MCAP_MAGIC = b"\x89MCAP0\r\n"
+
+
+def same_file(a: Path, b: Path) -> bool:
+    """Whether ``a`` and ``b`` name one file (the same inode, or the same resolved path if either is new)."""
+    try:
+        if a.exists() and b.exists():
+            return os.path.samefile(a, b)
+        return a.resolve() == b.resolve()
+    except OSError:
+        return False
+
+
+def check_not_input(output: Path, inputs: Iterable[Path | None], flag: str) -> None:
+    """Refuse an output file that is one of the inputs.
+
+    Raises:
+        TwinError: naming the flag, the file and the input it would overwrite.
+    """
+    for source in inputs:
+        if source is not None and same_file(Path(output), Path(source)):
+            raise TwinError(f"{flag} {output}: is the input {source}; writing it would destroy it, choose another file")
+
+
+def check_output_folder(out: Path, *, marker: str, flag: str = "--out", writes: Iterable[str] = (),
+                        inputs: Iterable[Path | None] = ()) -> None:
+    """Refuse an output folder this command must not write into: it exists and is not a folder, or holds
+    files and not ``marker`` (so it is not this command's); or one of the files it ``writes`` there is one
+    of the ``inputs``.
+
+    Raises:
+        TwinError: naming the folder and why.
+    """
+    out = Path(out)
+    if out.exists() and (not out.is_dir() or (any(out.iterdir()) and not (out / marker).is_file())):
+        raise TwinError(f"{flag} {out}: exists and is not empty (and not a folder this command wrote); "
+                        "choose a new folder")
+    inputs = tuple(inputs)
+    for name in writes:
+        check_not_input(out / name, inputs, flag)
+
+
+def claim_output_folder(out: Path, *, marker: str, command: str) -> None:
+    """Create ``out`` (checked by :func:`check_output_folder`) and mark it as ``command``'s."""
+    out.mkdir(parents=True, exist_ok=True)
+    (out / marker).write_text(f"written by {command}\n")
+
+
+def check_record_file(path: Path, inputs: Iterable[Path | None], flag: str = "--record") -> None:
+    """Refuse a recording path that is an input, or an existing file that is not an MCAP recording (a user's
+    own file, which the recording would replace).
+
+    Raises:
+        TwinError: naming the flag, the file and why.
+    """
+    check_not_input(path, inputs, flag)
+    if path.is_file():
+        try:
+            with path.open("rb") as f:
+                head = f.read(len(MCAP_MAGIC))
+        except OSError as exc:
+            raise TwinError(f"{flag} {path}: cannot read it ({exc.strerror or exc})") from None
+        if head != MCAP_MAGIC:
+            raise TwinError(f"{flag} {path}: exists and is not an MCAP recording; refusing to replace it")
+    elif path.exists() and not path.is_dir():
+        raise TwinError(f"{flag} {path}: not a regular file")
+
