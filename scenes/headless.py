@@ -58,13 +58,13 @@ class Headless:
             "network": None if network is None else dataclasses.asdict(network),
             "seeds": {"network": None if network is None else network.seed}, **(record_metadata or {})})
         try:
-            self._start(scene, settings, sensor, cache_dir, network, remote_options)
+            self._start(scene, settings, sensor, cache_dir, network, operator, remote_options)
         except BaseException:
             if self.recorder is not None:
                 self.recorder.discard()  # nothing ran: no recording, and an earlier file at ``record`` stays
             raise
 
-    def _start(self, scene, settings, sensor, cache_dir, network, remote_options) -> None:  # type: ignore[no-untyped-def]
+    def _start(self, scene, settings, sensor, cache_dir, network, operator, remote_options) -> None:  # type: ignore[no-untyped-def]
         self.uplink, self.downlink = (None, None) if network is None else network.models()
         links: dict[tuple[str, str], LinkModel] = {}
         if self.uplink is not None:
