@@ -7,8 +7,19 @@ a 1 m crate.
 from __future__ import annotations
 
 #: Fewer points than this cannot fix a closed surface of any interest (a cube needs ~8 per face to
-#: estimate normals with 10 neighbours); the CLI contract says "~100".
+#: estimate normals with 10 neighbours); the CLI contract says "~100". Distinct positions are counted: a
+#: repeated row (a quantised sensor, rounded coordinates, copies of one scan) adds no surface.
 MIN_POINTS = 100
+
+#: Largest coordinate, metres, an estimate accepts. 10 km is beyond any object placed in a workspace
+#: (PLAUSIBLE_EXTENT_M warns from 5 m) and keeps float64 resolution near 1e-12 m; far beyond it squared
+#: distances overflow (a cloud at 1e50 m failed inside the SVD) or the file's units are simply wrong.
+MAX_COORDINATE_M = 1e4
+
+#: Smallest object extent, metres, an estimate accepts: 1 um, a thousandth of the smallest extent
+#: PLAUSIBLE_EXTENT_M lets pass without a warning and below any depth sensor's resolution. Much smaller
+#: clouds (1e-200 m) underflow the volumes (extent cubed) and spacings to zero.
+MIN_EXTENT_M = 1e-6
 
 #: A cloud whose smallest principal extent is below this fraction of its largest is flat (a sheet) or
 #: line-like: it encloses no volume. 1e-3 is a 1 mm thick sheet at 1 m, far below any real object.
