@@ -30,7 +30,8 @@ from pathlib import Path
 import numpy as np
 
 from estimation.cloud import PointCloud, is_single_origin, make_cloud
-from estimation.errors import CloudFileError
+from estimation.contracts import unit_quaternion
+from estimation.errors import CloudError, CloudFileError
 
 log = logging.getLogger(__name__)
 
@@ -552,10 +553,13 @@ def _viewpoint(path: Path, words: list[str] | None) -> np.ndarray | None:
         raise CloudFileError(f"{path}: VIEWPOINT needs 7 finite numbers (tx ty tz qw qx qy qz), got {' '.join(words)[:80]!r}")
     if values == _DEFAULT_VIEWPOINT:
         return None
-    if not any(values[3:]):
-        # The rotation is not used (an origin does not turn), but a zero quaternion is no rotation at all:
-        # the header is damaged, and so may be its translation.
-        raise CloudFileError(f"{path}: VIEWPOINT's quaternion qw qx qy qz is zero, not a rotation")
+    # The rotation is not used (an origin does not turn), but a quaternion that is no rotation (zero, or
+    # of norm 2: 5 5 5 5) says the header is damaged, and so may be its translation. The rule is
+    # --viewpoint-pose's.
+    try:
+        unit_quaternion(values[3:], "VIEWPOINT's quaternion qw qx qy qz")
+    except CloudError as exc:
+        raise CloudFileError(f"{path}: {exc}") from None
     return np.array(values[:3])
 
 

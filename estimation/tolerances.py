@@ -21,6 +21,10 @@ MAX_COORDINATE_M = 1e4
 #: clouds (1e-200 m) underflow the volumes (extent cubed) and spacings to zero.
 MIN_EXTENT_M = 1e-6
 
+#: A quaternion's norm must be within this of 1 (files carry ~7 significant digits; a wrong order or a
+#: missing component is off by far more). Within it, the quaternion is normalised before use.
+QUAT_NORM_TOLERANCE = 1e-3
+
 #: A cloud whose smallest principal extent is below this fraction of its largest is flat (a sheet) or
 #: line-like: it encloses no volume. 1e-3 is a 1 mm thick sheet at 1 m, far below any real object.
 FLATNESS_RATIO = 1e-3

@@ -275,10 +275,15 @@ def test_bad_depth_frames_are_one_line_errors(capsys, tmp_path, name, write, mes
 
 @pytest.mark.parametrize(("extra", "message"), [
     (["--intrinsics", "50", "50", "319.5", "14.5"], r"principal point \(319.5, 14.5\) lies outside the 40x30"),
-    (["--intrinsics", "0", "50", "19.5", "14.5"], r"focal lengths must be > 0"),
+    (["--intrinsics", "0", "50", "19.5", "14.5"], r"focal lengths must be 1 to 1e\+06 pixels"),
+    (["--intrinsics", "1e-300", "1e-300", "19.5", "14.5"], r"focal lengths must be 1 to 1e\+06 pixels"),
+    (["--intrinsics", "1e300", "50", "19.5", "14.5"], r"focal lengths must be 1 to 1e\+06 pixels"),
     (["--intrinsics", "50", "50", "19.5", "14.5", "--depth-scale", "1000"], r"inverse"),
+    (["--intrinsics", "50", "50", "19.5", "14.5", "--depth-scale", "1e-300"], r"depth scale must be .* in \[1e-06, 10\]"),
     (["--intrinsics", "50", "50", "19.5", "14.5", "--viewpoint-pose", "0", "0", "0", "2", "0", "0", "0"],
-     r"norm 1, got 2"),
+     r"norm 1 \(within 0.001\), got 2"),
+    (["--intrinsics", "50", "50", "19.5", "14.5", "--viewpoint-pose", "1e300", "0", "0", "1", "0", "0", "0"],
+     r"pose: the camera is 1e\+300 m from the origin, beyond the 10000 m"),
 ])
 def test_bad_intrinsics_and_poses_are_one_line_errors(capsys, tmp_path, extra, message):
     import re
@@ -295,10 +300,13 @@ def _png(path, array):  # type: ignore[no-untyped-def]
     Image.fromarray(array).save(path)
 
 
-def test_a_pcd_viewpoint_with_a_zero_quaternion_is_refused(capsys, tmp_path):
+@pytest.mark.parametrize(("quat", "norm"), [("0 0 0 0", "0"), ("5 5 5 5", "10")])
+def test_a_pcd_viewpoint_with_a_non_unit_quaternion_is_refused(capsys, tmp_path, quat, norm):
+    # The same rule as --viewpoint-pose (contracts.unit_quaternion): 5 5 5 5 used to pass silently.
     path = tmp_path / "z.pcd"
     path.write_text("VERSION .7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH 1\nHEIGHT 1\n"
-                    "VIEWPOINT 1 2 3 0 0 0 0\nPOINTS 1\nDATA ascii\n1 2 3\n")
+                    f"VIEWPOINT 1 2 3 {quat}\nPOINTS 1\nDATA ascii\n1 2 3\n")
     assert main(["estimate", str(path)]) == 2
     err = capsys.readouterr().err
-    assert "z.pcd: VIEWPOINT's quaternion qw qx qy qz is zero" in err and err.count("\n") == 1
+    assert f"z.pcd: VIEWPOINT's quaternion qw qx qy qz must have norm 1 (within 0.001), got {norm}\n" in err
+    assert err.count("\n") == 1
