@@ -21,6 +21,7 @@ as "no viewpoint" (None), not as a sensor at the origin.
 from __future__ import annotations
 
 import logging
+import stat
 import warnings
 import zipfile
 from collections.abc import Callable
@@ -101,12 +102,7 @@ def load_cloud(path: str | Path, *, scale: float = 1.0, max_points: int = MAX_PO
         CloudError: the file holds no usable points.
     """
     path = Path(path)
-    if path.is_dir():
-        raise CloudFileError(f"{path}: is a directory, not a cloud file")
-    if not path.exists():
-        raise CloudFileError(f"{path}: no such file")
-    if not path.is_file():
-        raise CloudFileError(f"{path}: not a regular file")
+    check_input_file(path)
     suffix = path.suffix.lower()
     if suffix not in SUFFIXES:
         raise CloudFileError(f"{path}: unknown cloud format {suffix!r}; use one of {sorted(SUFFIXES)}")
@@ -129,6 +125,26 @@ def load_cloud(path: str | Path, *, scale: float = 1.0, max_points: int = MAX_PO
     return make_cloud(
         cols.points, cols.normals, cols.colors, scale=scale, sensor_origins=cols.sensor_origins, copy=False
     )
+
+
+def check_input_file(path: Path) -> None:
+    """Raise unless ``path`` is an existing regular file whose metadata can be read.
+
+    Raises:
+        CloudFileError: a directory, missing, not a regular file (a FIFO, a device), or any OS error on
+            the way (a name too long, a permission denied on a folder, a loop of links):
+            ``cannot read PATH: reason``.
+    """
+    try:
+        mode = path.stat().st_mode
+    except FileNotFoundError:
+        raise CloudFileError(f"{path}: no such file") from None
+    except OSError as exc:
+        raise CloudFileError(f"cannot read {path}: {exc.strerror or exc}") from None
+    if stat.S_ISDIR(mode):
+        raise CloudFileError(f"{path}: is a directory, not a cloud file")
+    if not stat.S_ISREG(mode):
+        raise CloudFileError(f"{path}: not a regular file")
 
 
 def save_cloud(cloud: PointCloud, path: str | Path, *, ascii: bool = False) -> None:

@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from estimation import tolerances as tol
+from estimation.cloudfile import check_input_file
 from estimation.contracts import unit_quaternion
 from estimation.errors import CloudError, CloudFileError
 from estimation.fusion import Intrinsics, depth_to_points
@@ -69,8 +70,7 @@ def read_depth(path: str | Path, *, scale: float | None = None) -> np.ndarray:
     if scale is not None and not (np.isfinite(scale) and MIN_DEPTH_SCALE <= scale <= MAX_DEPTH_SCALE):
         raise CloudError(f"depth scale must be metres per unit in [{MIN_DEPTH_SCALE:g}, {MAX_DEPTH_SCALE:g}] (0.001 for millimetres; "
                          f"Open3D's depth_scale is the inverse), got {scale:g}")
-    if not path.is_file():
-        raise CloudFileError(f"{path}: no such file")
+    check_input_file(path)
     suffix = path.suffix.lower()
     if suffix == ".png":
         raw = _read_png(path)

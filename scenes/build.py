@@ -235,9 +235,19 @@ def check_output(out: Path, *, keep: tuple[Path, ...] = ()) -> None:
     (the scene file and its sources).
 
     Raises:
-        BuildError: naming the folder and why.
+        BuildError: naming the folder and why (a symbolic link is refused: replacing it would follow it to
+            the folder it names, or fail half way).
     """
-    out = Path(out).resolve()
+    try:
+        _check_output(Path(out), keep)
+    except OSError as exc:  # a name too long, a permission denied on the way
+        raise BuildError(f"cannot use --out {out}: {exc.strerror or exc}") from None
+
+
+def _check_output(out: Path, keep: tuple[Path, ...]) -> None:
+    if out.is_symlink():
+        raise BuildError(f"{out}: is a symbolic link; give --out a real folder (a build replaces it whole)")
+    out = out.resolve()
     cwd = Path.cwd().resolve()
     if out == cwd or out in cwd.parents:
         raise BuildError(f"{out}: refusing to build into the current folder or one of its parents; "

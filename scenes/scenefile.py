@@ -251,10 +251,14 @@ def load_scene(path: str | Path) -> SceneSpec:
         SceneError: unreadable TOML, unknown keys, missing or duplicate ids, bad values, missing files.
     """
     path = Path(path)
-    if not path.is_file():
-        raise SceneError(f"{path}: no such scene file")
     try:
-        doc = tomllib.loads(path.read_text())
+        if not path.is_file():
+            raise SceneError(f"{path}: no such scene file")
+        text = path.read_text()
+    except OSError as exc:  # a name too long, a permission denied
+        raise SceneError(f"cannot read {path}: {exc.strerror or exc}") from None
+    try:
+        doc = tomllib.loads(text)
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise SceneError(f"{path}: not valid TOML ({exc})") from exc
     return parse_scene(doc, base=path.parent, path=path)
