@@ -640,12 +640,55 @@ def _read_pcd_compressed(
 # --- numpy and text ----------------------------------------------------------------------------------
 
 
+#: numpy dtype kinds a cloud or depth array may hold: signed and unsigned integers and floats. Complex
+#: values would lose their imaginary part (numpy only warns), booleans, strings and records are no coordinates.
+REAL_KINDS = "iuf"
+
+
+def npy_header(path: Path) -> tuple[tuple[int, ...], np.dtype]:
+    """The shape and dtype an .npy file's header declares, checked against the file's size; no data is read.
+
+    Raises:
+        CloudFileError: not an .npy header, or fewer data bytes than the shape claims (a small file whose
+            header claims (90000, 90000) would otherwise be a 60 GiB allocation).
+    """
+    with path.open("rb") as fh:
+        try:
+            version = np.lib.format.read_magic(fh)
+            if version == (1, 0):
+                shape, _, dtype = np.lib.format.read_array_header_1_0(fh)
+            elif version == (2, 0):
+                shape, _, dtype = np.lib.format.read_array_header_2_0(fh)
+            else:  # 3.0 (utf-8 field names) has no public reader
+                shape, _, dtype = np.lib.format._read_array_header(fh, version)
+        except (ValueError, EOFError) as exc:
+            raise CloudFileError(f"{path}: not a readable .npy array ({str(exc).splitlines()[0]})") from None
+        offset = fh.tell()
+    claimed = int(np.prod(shape, dtype=object)) * dtype.itemsize
+    available = path.stat().st_size - offset
+    if claimed > available:
+        raise CloudFileError(f"{path}: truncated: the header claims shape {shape} of {dtype} ({claimed} bytes), but "
+                             f"{available} bytes follow it")
+    return shape, dtype
+
+
+def check_real(path: Path, dtype: np.dtype, what: str) -> None:
+    """Raise unless ``dtype`` holds real numbers (``REAL_KINDS``)."""
+    if dtype.kind not in REAL_KINDS or dtype.fields is not None:
+        raise CloudFileError(f"{path}: {what} must hold real numbers (integer or float), got {dtype}")
+
+
 def _read_numpy(path: Path, max_points: int) -> _Columns:
     if path.suffix.lower() == ".npy":
-        # Memory-mapping reads only the header and fails on a file shorter than its header claims.
+        # Everything is checked on the header before any data is read: a 1-D or 3-D array skipped the
+        # row cap (an 800 MB (100000000,) file reached 1.6 GB before its shape was refused).
+        shape, dtype = npy_header(path)
+        check_real(path, dtype, "a cloud array")
+        if len(shape) != 2 or shape[1] not in (3, 6, 9):
+            raise CloudFileError(f"{path}: expected an (n, 3), (n, 6) or (n, 9) array (xyz, normals, colours), "
+                                 f"got shape {shape}")
+        _check_max(path, shape[0], max_points)
         table = np.load(path, mmap_mode="r", allow_pickle=False)
-        if table.ndim == 2:
-            _check_max(path, len(table), max_points)
         return _Columns(*_split_columns(np.array(table)))
     with zipfile.ZipFile(path) as archive:
         members = {Path(name).stem: name for name in archive.namelist() if name.endswith(".npy")}
@@ -665,6 +708,10 @@ def _check_npz_member(path: Path, archive: zipfile.ZipFile, name: str, max_point
         version = np.lib.format.read_magic(fh)
         reader = np.lib.format.read_array_header_1_0 if version == (1, 0) else np.lib.format.read_array_header_2_0
         shape, _, dtype = reader(fh)
+    key = Path(name).stem
+    check_real(path, dtype, f"array {key!r}")
+    if key == "points" and (len(shape) != 2 or shape[1] != 3):
+        raise CloudFileError(f"{path}: array {key!r} must be (n, 3), got shape {shape}")
     if shape and shape[0] > max_points:
         _check_max(path, shape[0], max_points)
     nbytes = int(np.prod(shape, dtype=object)) * dtype.itemsize

@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from estimation import tolerances as tol
-from estimation.cloudfile import check_input_file
+from estimation.cloudfile import MAX_POINTS, REAL_KINDS, check_input_file, npy_header
 from estimation.contracts import unit_quaternion
 from estimation.errors import CloudError, CloudFileError
 from estimation.fusion import Intrinsics, depth_to_points
@@ -38,6 +38,10 @@ FLOAT_DEPTH_SCALE = 1.0
 #: A depth scale this large (metres per unit) is almost surely Open3D's inverse convention (units per
 #: metre, 1000 for millimetres): 10 m per unit fits no depth sensor.
 MAX_DEPTH_SCALE = 10.0
+
+#: Most pixels a depth image may have: a 4K depth frame is 8.3 M; as many as ``cloudfile.MAX_POINTS``, since
+#: every pixel may become a point (a 16-bit PNG header claiming 20000x20000 would be 400 M).
+MAX_DEPTH_PIXELS = MAX_POINTS
 
 #: Smallest depth scale, metres per unit: a micrometre, finer than any sensor stores depth (RealSense's
 #: finest depth unit is 1e-5 m); far below it every depth collapses under ``tolerances.MIN_EXTENT_M``.
@@ -63,7 +67,8 @@ def read_depth(path: str | Path, *, scale: float | None = None) -> np.ndarray:
         (h, w) float64 metres, NaN where there was no return (zero, negative or non-finite).
 
     Raises:
-        CloudFileError: missing or unreadable file, not single-channel, 8-bit PNG.
+        CloudFileError: missing or unreadable file, not single-channel, 8-bit PNG, not real numbers, more
+            than ``MAX_DEPTH_PIXELS``.
         CloudError: a bad ``scale``, an empty image, or one with no valid depth.
     """
     path = Path(path)
@@ -75,12 +80,16 @@ def read_depth(path: str | Path, *, scale: float | None = None) -> np.ndarray:
     if suffix == ".png":
         raw = _read_png(path)
     elif suffix == ".npy":
+        # Shape, type and size from the header, before any data is read.
+        shape, dtype = npy_header(path)
+        if len(shape) != 2 or dtype.kind not in REAL_KINDS or dtype.fields is not None:
+            raise CloudFileError(f"{path}: a depth image must be a numeric (h, w) array of real numbers, got {dtype} "
+                                 f"{shape}")
+        _check_pixels(path, shape[1], shape[0])
         try:
             raw = np.load(path, allow_pickle=False)
         except (OSError, ValueError) as exc:
             raise CloudFileError(f"{path}: not a readable .npy array ({exc})") from None
-        if raw.ndim != 2 or not (np.issubdtype(raw.dtype, np.floating) or np.issubdtype(raw.dtype, np.integer)):
-            raise CloudFileError(f"{path}: a depth image must be a numeric (h, w) array, got {raw.dtype} {raw.shape}")
     else:
         raise CloudFileError(f"{path}: depth images are read from .png or .npy, not {suffix or 'no suffix'}")
     if raw.size == 0:
@@ -95,14 +104,30 @@ def read_depth(path: str | Path, *, scale: float | None = None) -> np.ndarray:
     return depth
 
 
+def _check_pixels(path: Path, width: int, height: int) -> None:
+    if width * height > MAX_DEPTH_PIXELS:
+        raise CloudFileError(f"{path}: a {width}x{height} depth image is more than the {MAX_DEPTH_PIXELS:,} pixels "
+                             f"one view may hold")
+
+
 def _read_png(path: Path) -> np.ndarray:
+    import warnings
+
     from PIL import Image, UnidentifiedImageError
 
+    # The size, from the PNG header (signature, then the IHDR chunk's big-endian width and height), is held
+    # to our own cap before PIL opens it: PIL warns past 89 M pixels and raises its own error past 179 M.
+    with path.open("rb") as fh:
+        head = fh.read(24)
+    if head[:8] == b"\x89PNG\r\n\x1a\n" and head[12:16] == b"IHDR":
+        _check_pixels(path, int.from_bytes(head[16:20], "big"), int.from_bytes(head[20:24], "big"))
     try:
-        with Image.open(path) as image:
-            mode = image.mode
-            raw = np.asarray(image)
-    except (OSError, UnidentifiedImageError) as exc:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", Image.DecompressionBombWarning)  # under our cap: wanted
+            with Image.open(path) as image:
+                mode = image.mode
+                raw = np.asarray(image)
+    except (OSError, UnidentifiedImageError, Image.DecompressionBombError) as exc:
         raise CloudFileError(f"{path}: not a readable PNG ({exc})") from None
     if mode in ("L", "P", "1") or raw.dtype == np.uint8:
         raise CloudFileError(f"{path}: an 8-bit PNG cannot hold depth; expected a 16-bit single-channel PNG "
