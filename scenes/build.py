@@ -224,7 +224,8 @@ def compile_spec(spec):  # type: ignore[no-untyped-def]
     try:
         return spec.compile()
     except ValueError as exc:
-        raise BuildError(f"MuJoCo could not compile the model: {exc}") from exc
+        # MuJoCo's message spans lines ("Error: ...\nElement name 'a', id 3"); the CLI prints one.
+        raise BuildError(f"MuJoCo could not compile the model: {' '.join(str(exc).split())}") from exc
 
 
 def check_output(out: Path, *, keep: tuple[Path, ...] = ()) -> None:
