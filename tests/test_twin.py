@@ -172,7 +172,7 @@ def test_open_mesh_gives_closed_hulls_inside_its_hull(tmp_path):
         ('name="x"\n[[objects]]\nid="a"\nprimitive={type="box",size=[1,1,1]}\nmaterail="steel"', "did you mean 'material'"),
         ('name="x"\n[[objects]]\nid="a"\nmesh="missing.stl"', "does not exist"),
         ('name="x"\n[[objects]]\nid="a"\nprimitive={type="box",size=[1,1,1]}\ndensity=-3', "must be positive"),
-        ('name="x"\n[[objects]]\nid="a"\nprimitive={type="box",size=[1,0,1]}', "must be positive"),
+        ('name="x"\n[[objects]]\nid="a"\nprimitive={type="box",size=[1,0,1]}', "must be 0.001 to 100 m, got 0.0"),
         ('name="x"\n[[objects]]\nid="a"\nprimitive={type="box",size=[1,1,1]}\nmaterial="unobtainium"', "unknown material"),
         ('name="x"\n[[objects]]\nid="a"\nprimitive={type="box",size=[1,1,1]}\n[[objects]]\nid="a"\npaper="cone"', "duplicate"),
         ('name="x"\n[[objects]]\nid="a"', "exactly one source"),
