@@ -165,8 +165,10 @@ def check_estimable(cloud: PointCloud) -> None:
         raise CloudError(f"too few points: {n} (need at least {tol.MIN_POINTS})")
     far = float(np.abs(cloud.points).max())
     if far > tol.MAX_COORDINATE_M:
+        stray = far_points(cloud.points)
         raise CloudError(f"coordinates reach {far:.3g} m from the origin, beyond the {tol.MAX_COORDINATE_M:g} m "
-                         f"an estimate accepts (wrong --units or scale?)")
+                         f"an estimate accepts" + (f"; that is {stray}: remove them" if stray else
+                                                   " (wrong --units or scale?)"))
     # Singular values of the centred cloud are its spread along the principal axes (a uniform subset of
     # 20,000 tells flat from solid as well as a million points, at a 50th of the cost).
     sample = cloud.points[:: max(1, n // 20000)]
@@ -183,7 +185,33 @@ def check_estimable(cloud: PointCloud) -> None:
     spread = np.linalg.svd(sample - sample.mean(axis=0), compute_uv=False)
     if spread[2] < tol.FLATNESS_RATIO * spread[0]:
         shape = "line-like" if spread[1] < tol.FLATNESS_RATIO * spread[0] else "flat (planar)"
-        raise CloudError(f"degenerate cloud: {shape}, it encloses no volume")
+        far = far_points(cloud.points)
+        raise CloudError(f"degenerate cloud: {shape}, it encloses no volume" + (f"; but that is {far}: remove them"
+                                                                              if far else ""))
+
+
+def far_points(points: np.ndarray) -> str:
+    """Describe the few far points that, not the object, make a cloud look flat, line-like or vast; or "".
+
+    One stray point 1 km from a 10 cm object turns the principal spread into a line (or, less far, a grid
+    of 10^11 cells). Points farther from the median than ``tol.OUTLIER_REACH`` times the distance within
+    which 99 % of the points lie are far; when the rest is solid, errors name them (they are not dropped:
+    which points are the object is the caller's call). For failure paths: it looks at every point.
+
+    Args:
+        points: (n, 3) float64, metres.
+    """
+    # The largest coordinate difference, not the Euclidean norm: its squares overflow past 1e154 m.
+    d = np.abs(points - np.median(points, axis=0)).max(axis=1)
+    reach = float(np.percentile(d, 99))
+    far = d > tol.OUTLIER_REACH * reach
+    rest = points[~far][:: max(1, int((~far).sum()) // 20000)]
+    if not far.any() or len(rest) < 4:
+        return ""
+    spread = np.linalg.svd(rest - rest.mean(axis=0), compute_uv=False)
+    if spread[2] < tol.FLATNESS_RATIO * spread[0]:
+        return ""
+    return f"{int(far.sum())} far point(s), up to {d.max():.3g} m from the rest, which lies within {reach:.3g} m"
 
 
 def distinct_rows(points: np.ndarray) -> np.ndarray:

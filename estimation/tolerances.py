@@ -29,6 +29,15 @@ QUAT_NORM_TOLERANCE = 1e-3
 #: line-like: it encloses no volume. 1e-3 is a 1 mm thick sheet at 1 m, far below any real object.
 FLATNESS_RATIO = 1e-3
 
+#: A point farther from a cloud's median than this many times the radius holding 99 % of its points is a
+#: stray (a reflection, a point on the far wall), not the object: a flat or line-like verdict that such
+#: points alone cause says so (``cloud.check_estimable``). 10x is far past any object's own tail.
+OUTLIER_REACH = 10.0
+
+#: 'auto': most fine nodes its narrow band may hold (tens of bytes each). The bench shapes need under 2 M at
+#: 200k points (a thin torus 1.3 M); a 10 cm sphere with one stray point 1 km off asked for 4e11 (3.2 TiB).
+MAX_BAND_NODES = 30_000_000
+
 #: Grid cells along the object's longest OBB side for the 'obb' downsampling and the 'surface'
 #: method's grid. 'auto' takes its fine cell from the point spacing instead (``FINE_CELL_SPACINGS``).
 GRID_RESOLUTION = 128

@@ -70,6 +70,23 @@ def test_line_cloud():
         estimate(make_cloud(np.c_[t, 2 * t, -t]), 1000.0)
 
 
+@pytest.mark.parametrize(("far", "reach", "verdict"), [
+    # One stray point asked for a 3.2 TiB grid (MemoryError); five made the cloud "line-like" with no word on why.
+    ([[1000.0, 0, 0]], r"1e\+03", r"the points span 1e\+03 m at a 0.0\d+ m spacing: \S+ grid nodes, more than the 3e\+07 "
+                                  r"an estimate holds; "),
+    ([[1000.0 + i / 4, 0, 0] for i in range(5)], r"1e\+03", r"line-like, it encloses no volume; but that is "),
+    ([[1e200, 0, 0]], r"1e\+200", r"coordinates reach 1e\+200 m from the origin, beyond the 10000 m an estimate "
+                                   r"accepts; that is "),
+])
+def test_a_few_far_points_are_named(far, reach, verdict):
+    with pytest.raises(CloudError, match=verdict + rf"{len(far)} far point\(s\), up to {reach} m from the rest, which "
+                                                   r"lies within 0.0\d+ m: remove them$"):
+        estimate(make_cloud(np.r_[_sphere(2000), far]), 1000.0)
+    t = np.linspace(0, 1, 500)  # a real line stays a plain line
+    with pytest.raises(CloudError, match=r"line-like, it encloses no volume$"):
+        estimate(make_cloud(np.c_[t, 2 * t, -t]), 1000.0)
+
+
 def test_identical_points():
     with pytest.raises(CloudError, match="identical"):
         estimate(make_cloud(np.ones((500, 3))), 1000.0)
