@@ -318,6 +318,10 @@ def _cmd_estimate(args: argparse.Namespace) -> int:
     from estimation.views import assess, estimate_views
 
     scale = unit_scale(args.units)
+    if args.mesh_out is not None:
+        for view in args.views:  # before the work, and before anything is written
+            if _same_file(args.mesh_out, view):
+                raise TwinError(f"--mesh-out {args.mesh_out} is the input {view}; writing it would destroy the input")
     density, mat = resolve_density(args.material, args.density)
     name = None if mat is None else mat.name
     support = _support_plane(args.support_plane, scale)
@@ -480,13 +484,41 @@ def _print_estimate(record: dict) -> None:
         console.print(f"[yellow]warning:[/yellow] {warning}")
 
 
-def _write_mesh(vertices, faces, path: Path) -> None:  # type: ignore[no-untyped-def]
-    import trimesh
+def _same_file(a: Path, b: Path) -> bool:
+    """``a`` and ``b`` name one file: the same inode when both exist (hard links, symbolic links), else the
+    same resolved path."""
+    import os
 
     try:
-        trimesh.Trimesh(vertices, faces, process=False).export(path)
+        if a.exists() and b.exists():
+            return os.path.samefile(a, b)
+        return a.resolve() == b.resolve()
+    except OSError:  # unreadable or a name too long: reading or writing it fails with its own error
+        return False
+
+
+def _write_mesh(vertices, faces, path: Path) -> None:  # type: ignore[no-untyped-def]
+    """Write the mesh next to ``path`` and move it there: a failed export leaves an existing file whole."""
+    import os
+    import tempfile
+
+    import trimesh
+
+    tmp = None
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=".twin-mesh-", suffix=path.suffix, dir=path.parent)
+        os.close(fd)
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)  # what a plain open() would have made, not mkstemp's 0600
+        trimesh.Trimesh(vertices, faces, process=False).export(tmp, file_type=path.suffix.lstrip(".").lower())
+        os.replace(tmp, path)
+        tmp = None
     except (OSError, ValueError) as exc:
         raise TwinError(f"{path}: cannot write mesh ({exc})") from exc
+    finally:
+        if tmp is not None:
+            Path(tmp).unlink(missing_ok=True)
 
 
 def _coacd_options(p: argparse.ArgumentParser) -> None:

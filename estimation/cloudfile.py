@@ -21,6 +21,7 @@ as "no viewpoint" (None), not as a sensor at the origin.
 from __future__ import annotations
 
 import logging
+import stat
 import warnings
 import zipfile
 from collections.abc import Callable
@@ -30,7 +31,8 @@ from pathlib import Path
 import numpy as np
 
 from estimation.cloud import PointCloud, is_single_origin, make_cloud
-from estimation.errors import CloudFileError
+from estimation.contracts import unit_quaternion
+from estimation.errors import CloudError, CloudFileError
 
 log = logging.getLogger(__name__)
 
@@ -100,12 +102,7 @@ def load_cloud(path: str | Path, *, scale: float = 1.0, max_points: int = MAX_PO
         CloudError: the file holds no usable points.
     """
     path = Path(path)
-    if path.is_dir():
-        raise CloudFileError(f"{path}: is a directory, not a cloud file")
-    if not path.exists():
-        raise CloudFileError(f"{path}: no such file")
-    if not path.is_file():
-        raise CloudFileError(f"{path}: not a regular file")
+    check_input_file(path)
     suffix = path.suffix.lower()
     if suffix not in SUFFIXES:
         raise CloudFileError(f"{path}: unknown cloud format {suffix!r}; use one of {sorted(SUFFIXES)}")
@@ -128,6 +125,26 @@ def load_cloud(path: str | Path, *, scale: float = 1.0, max_points: int = MAX_PO
     return make_cloud(
         cols.points, cols.normals, cols.colors, scale=scale, sensor_origins=cols.sensor_origins, copy=False
     )
+
+
+def check_input_file(path: Path) -> None:
+    """Raise unless ``path`` is an existing regular file whose metadata can be read.
+
+    Raises:
+        CloudFileError: a directory, missing, not a regular file (a FIFO, a device), or any OS error on
+            the way (a name too long, a permission denied on a folder, a loop of links):
+            ``cannot read PATH: reason``.
+    """
+    try:
+        mode = path.stat().st_mode
+    except FileNotFoundError:
+        raise CloudFileError(f"{path}: no such file") from None
+    except OSError as exc:
+        raise CloudFileError(f"cannot read {path}: {exc.strerror or exc}") from None
+    if stat.S_ISDIR(mode):
+        raise CloudFileError(f"{path}: is a directory, not a cloud file")
+    if not stat.S_ISREG(mode):
+        raise CloudFileError(f"{path}: not a regular file")
 
 
 def save_cloud(cloud: PointCloud, path: str | Path, *, ascii: bool = False) -> None:
@@ -552,10 +569,13 @@ def _viewpoint(path: Path, words: list[str] | None) -> np.ndarray | None:
         raise CloudFileError(f"{path}: VIEWPOINT needs 7 finite numbers (tx ty tz qw qx qy qz), got {' '.join(words)[:80]!r}")
     if values == _DEFAULT_VIEWPOINT:
         return None
-    if not any(values[3:]):
-        # The rotation is not used (an origin does not turn), but a zero quaternion is no rotation at all:
-        # the header is damaged, and so may be its translation.
-        raise CloudFileError(f"{path}: VIEWPOINT's quaternion qw qx qy qz is zero, not a rotation")
+    # The rotation is not used (an origin does not turn), but a quaternion that is no rotation (zero, or
+    # of norm 2: 5 5 5 5) says the header is damaged, and so may be its translation. The rule is
+    # --viewpoint-pose's.
+    try:
+        unit_quaternion(values[3:], "VIEWPOINT's quaternion qw qx qy qz")
+    except CloudError as exc:
+        raise CloudFileError(f"{path}: {exc}") from None
     return np.array(values[:3])
 
 
@@ -620,12 +640,55 @@ def _read_pcd_compressed(
 # --- numpy and text ----------------------------------------------------------------------------------
 
 
+#: numpy dtype kinds a cloud or depth array may hold: signed and unsigned integers and floats. Complex
+#: values would lose their imaginary part (numpy only warns), booleans, strings and records are no coordinates.
+REAL_KINDS = "iuf"
+
+
+def npy_header(path: Path) -> tuple[tuple[int, ...], np.dtype]:
+    """The shape and dtype an .npy file's header declares, checked against the file's size; no data is read.
+
+    Raises:
+        CloudFileError: not an .npy header, or fewer data bytes than the shape claims (a small file whose
+            header claims (90000, 90000) would otherwise be a 60 GiB allocation).
+    """
+    with path.open("rb") as fh:
+        try:
+            version = np.lib.format.read_magic(fh)
+            if version == (1, 0):
+                shape, _, dtype = np.lib.format.read_array_header_1_0(fh)
+            elif version == (2, 0):
+                shape, _, dtype = np.lib.format.read_array_header_2_0(fh)
+            else:  # 3.0 (utf-8 field names) has no public reader
+                shape, _, dtype = np.lib.format._read_array_header(fh, version)
+        except (ValueError, EOFError) as exc:
+            raise CloudFileError(f"{path}: not a readable .npy array ({str(exc).splitlines()[0]})") from None
+        offset = fh.tell()
+    claimed = int(np.prod(shape, dtype=object)) * dtype.itemsize
+    available = path.stat().st_size - offset
+    if claimed > available:
+        raise CloudFileError(f"{path}: truncated: the header claims shape {shape} of {dtype} ({claimed} bytes), but "
+                             f"{available} bytes follow it")
+    return shape, dtype
+
+
+def check_real(path: Path, dtype: np.dtype, what: str) -> None:
+    """Raise unless ``dtype`` holds real numbers (``REAL_KINDS``)."""
+    if dtype.kind not in REAL_KINDS or dtype.fields is not None:
+        raise CloudFileError(f"{path}: {what} must hold real numbers (integer or float), got {dtype}")
+
+
 def _read_numpy(path: Path, max_points: int) -> _Columns:
     if path.suffix.lower() == ".npy":
-        # Memory-mapping reads only the header and fails on a file shorter than its header claims.
+        # Everything is checked on the header before any data is read: a 1-D or 3-D array skipped the
+        # row cap (an 800 MB (100000000,) file reached 1.6 GB before its shape was refused).
+        shape, dtype = npy_header(path)
+        check_real(path, dtype, "a cloud array")
+        if len(shape) != 2 or shape[1] not in (3, 6, 9):
+            raise CloudFileError(f"{path}: expected an (n, 3), (n, 6) or (n, 9) array (xyz, normals, colours), "
+                                 f"got shape {shape}")
+        _check_max(path, shape[0], max_points)
         table = np.load(path, mmap_mode="r", allow_pickle=False)
-        if table.ndim == 2:
-            _check_max(path, len(table), max_points)
         return _Columns(*_split_columns(np.array(table)))
     with zipfile.ZipFile(path) as archive:
         members = {Path(name).stem: name for name in archive.namelist() if name.endswith(".npy")}
@@ -645,6 +708,10 @@ def _check_npz_member(path: Path, archive: zipfile.ZipFile, name: str, max_point
         version = np.lib.format.read_magic(fh)
         reader = np.lib.format.read_array_header_1_0 if version == (1, 0) else np.lib.format.read_array_header_2_0
         shape, _, dtype = reader(fh)
+    key = Path(name).stem
+    check_real(path, dtype, f"array {key!r}")
+    if key == "points" and (len(shape) != 2 or shape[1] != 3):
+        raise CloudFileError(f"{path}: array {key!r} must be (n, 3), got shape {shape}")
     if shape and shape[0] > max_points:
         _check_max(path, shape[0], max_points)
     nbytes = int(np.prod(shape, dtype=object)) * dtype.itemsize

@@ -19,6 +19,9 @@ from pathlib import Path
 
 import numpy as np
 
+from estimation import tolerances as tol
+from estimation.cloudfile import MAX_POINTS, REAL_KINDS, check_input_file, npy_header
+from estimation.contracts import unit_quaternion
 from estimation.errors import CloudError, CloudFileError
 from estimation.fusion import Intrinsics, depth_to_points
 
@@ -36,9 +39,20 @@ FLOAT_DEPTH_SCALE = 1.0
 #: metre, 1000 for millimetres): 10 m per unit fits no depth sensor.
 MAX_DEPTH_SCALE = 10.0
 
-#: A quaternion's norm must be within this of 1 (files carry ~7 significant digits; a wrong order or a
-#: missing component is off by far more).
-QUAT_NORM_TOLERANCE = 1e-3
+#: Most pixels a depth image may have: a 4K depth frame is 8.3 M; as many as ``cloudfile.MAX_POINTS``, since
+#: every pixel may become a point (a 16-bit PNG header claiming 20000x20000 would be 400 M).
+MAX_DEPTH_PIXELS = MAX_POINTS
+
+#: Smallest depth scale, metres per unit: a micrometre, finer than any sensor stores depth (RealSense's
+#: finest depth unit is 1e-5 m); far below it every depth collapses under ``tolerances.MIN_EXTENT_M``.
+MIN_DEPTH_SCALE = 1e-6
+
+#: Focal lengths, pixels, a camera can have: 1 px is a ~180 degree view across a 100-pixel image, 1e6 px a
+#: 0.01 degree one, past any lens we will see; outside, rays reach 1e300 m or all pixels collapse to one.
+FOCAL_RANGE_PX = (1.0, 1e6)
+
+#: Kept for old callers: the quaternion tolerance lives with the others in ``tolerances``.
+QUAT_NORM_TOLERANCE = tol.QUAT_NORM_TOLERANCE
 
 
 def read_depth(path: str | Path, *, scale: float | None = None) -> np.ndarray:
@@ -53,25 +67,29 @@ def read_depth(path: str | Path, *, scale: float | None = None) -> np.ndarray:
         (h, w) float64 metres, NaN where there was no return (zero, negative or non-finite).
 
     Raises:
-        CloudFileError: missing or unreadable file, not single-channel, 8-bit PNG.
+        CloudFileError: missing or unreadable file, not single-channel, 8-bit PNG, not real numbers, more
+            than ``MAX_DEPTH_PIXELS``.
         CloudError: a bad ``scale``, an empty image, or one with no valid depth.
     """
     path = Path(path)
-    if scale is not None and not (np.isfinite(scale) and 0 < scale <= MAX_DEPTH_SCALE):
-        raise CloudError(f"depth scale must be metres per unit in (0, {MAX_DEPTH_SCALE:g}] (0.001 for millimetres; "
+    if scale is not None and not (np.isfinite(scale) and MIN_DEPTH_SCALE <= scale <= MAX_DEPTH_SCALE):
+        raise CloudError(f"depth scale must be metres per unit in [{MIN_DEPTH_SCALE:g}, {MAX_DEPTH_SCALE:g}] (0.001 for millimetres; "
                          f"Open3D's depth_scale is the inverse), got {scale:g}")
-    if not path.is_file():
-        raise CloudFileError(f"{path}: no such file")
+    check_input_file(path)
     suffix = path.suffix.lower()
     if suffix == ".png":
         raw = _read_png(path)
     elif suffix == ".npy":
+        # Shape, type and size from the header, before any data is read.
+        shape, dtype = npy_header(path)
+        if len(shape) != 2 or dtype.kind not in REAL_KINDS or dtype.fields is not None:
+            raise CloudFileError(f"{path}: a depth image must be a numeric (h, w) array of real numbers, got {dtype} "
+                                 f"{shape}")
+        _check_pixels(path, shape[1], shape[0])
         try:
             raw = np.load(path, allow_pickle=False)
         except (OSError, ValueError) as exc:
             raise CloudFileError(f"{path}: not a readable .npy array ({exc})") from None
-        if raw.ndim != 2 or not (np.issubdtype(raw.dtype, np.floating) or np.issubdtype(raw.dtype, np.integer)):
-            raise CloudFileError(f"{path}: a depth image must be a numeric (h, w) array, got {raw.dtype} {raw.shape}")
     else:
         raise CloudFileError(f"{path}: depth images are read from .png or .npy, not {suffix or 'no suffix'}")
     if raw.size == 0:
@@ -86,14 +104,30 @@ def read_depth(path: str | Path, *, scale: float | None = None) -> np.ndarray:
     return depth
 
 
+def _check_pixels(path: Path, width: int, height: int) -> None:
+    if width * height > MAX_DEPTH_PIXELS:
+        raise CloudFileError(f"{path}: a {width}x{height} depth image is more than the {MAX_DEPTH_PIXELS:,} pixels "
+                             f"one view may hold")
+
+
 def _read_png(path: Path) -> np.ndarray:
+    import warnings
+
     from PIL import Image, UnidentifiedImageError
 
+    # The size, from the PNG header (signature, then the IHDR chunk's big-endian width and height), is held
+    # to our own cap before PIL opens it: PIL warns past 89 M pixels and raises its own error past 179 M.
+    with path.open("rb") as fh:
+        head = fh.read(24)
+    if head[:8] == b"\x89PNG\r\n\x1a\n" and head[12:16] == b"IHDR":
+        _check_pixels(path, int.from_bytes(head[16:20], "big"), int.from_bytes(head[20:24], "big"))
     try:
-        with Image.open(path) as image:
-            mode = image.mode
-            raw = np.asarray(image)
-    except (OSError, UnidentifiedImageError) as exc:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", Image.DecompressionBombWarning)  # under our cap: wanted
+            with Image.open(path) as image:
+                mode = image.mode
+                raw = np.asarray(image)
+    except (OSError, UnidentifiedImageError, Image.DecompressionBombError) as exc:
         raise CloudFileError(f"{path}: not a readable PNG ({exc})") from None
     if mode in ("L", "P", "1") or raw.dtype == np.uint8:
         raise CloudFileError(f"{path}: an 8-bit PNG cannot hold depth; expected a 16-bit single-channel PNG "
@@ -107,13 +141,15 @@ def intrinsics(fx: float, fy: float, cx: float, cy: float, *, width: int, height
     """Intrinsics in OpenCV's convention (pixel centres at integers) checked against the image size.
 
     Raises:
-        CloudError: non-finite or non-positive focal lengths, a principal point outside the image.
+        CloudError: non-finite focal lengths or ones outside ``FOCAL_RANGE_PX``, a principal point outside the
+            image.
     """
     values = (fx, fy, cx, cy)
     if not all(np.isfinite(v) for v in values):
         raise CloudError(f"intrinsics must be finite, got fx fy cx cy = {' '.join(f'{v:g}' for v in values)}")
-    if fx <= 0 or fy <= 0:
-        raise CloudError(f"focal lengths must be > 0 pixels, got fx {fx:g}, fy {fy:g}")
+    low, high = FOCAL_RANGE_PX
+    if not (low <= fx <= high and low <= fy <= high):
+        raise CloudError(f"focal lengths must be {low:g} to {high:g} pixels, got fx {fx:g}, fy {fy:g}")
     if not (0 <= cx <= width and 0 <= cy <= height):
         raise CloudError(f"principal point ({cx:g}, {cy:g}) lies outside the {width}x{height} image (intrinsics "
                          f"for another resolution?)")
@@ -125,18 +161,21 @@ def pose(values: object) -> tuple[np.ndarray, np.ndarray]:
     """Camera-to-world rotation (3, 3) and position (3,) metres from ``tx ty tz qw qx qy qz``.
 
     Raises:
-        CloudError: not seven finite numbers, or a quaternion whose norm is not 1.
+        CloudError: not seven finite numbers, a position beyond ``tolerances.MAX_COORDINATE_M``, or a
+            quaternion whose norm is not 1 (``contracts.unit_quaternion``).
     """
     from scipy.spatial.transform import Rotation
 
     v = np.asarray(values, dtype=np.float64).ravel()
     if v.shape != (7,) or not np.isfinite(v).all():
         raise CloudError(f"pose: expected seven finite numbers tx ty tz qw qx qy qz, got {v.tolist()}")
-    norm = float(np.linalg.norm(v[3:]))
-    if abs(norm - 1) > QUAT_NORM_TOLERANCE:
-        raise CloudError(f"pose: the quaternion qw qx qy qz must have norm 1, got {norm:.4g}")
+    far = float(np.abs(v[:3]).max())
+    if far > tol.MAX_COORDINATE_M:
+        raise CloudError(f"pose: the camera is {far:.3g} m from the origin, beyond the {tol.MAX_COORDINATE_M:g} m "
+                         f"an estimate accepts")
+    q = unit_quaternion(v[3:], "pose: the quaternion qw qx qy qz")
     # scipy's order is x y z w; ours (MuJoCo's, PCD's VIEWPOINT) is w x y z.
-    return Rotation.from_quat(np.r_[v[4:7], v[3]] / norm).as_matrix(), v[:3].copy()
+    return Rotation.from_quat(np.r_[q[1:], q[0]]).as_matrix(), v[:3].copy()
 
 
 def depth_view(depth: np.ndarray, camera: Intrinsics, rotation: np.ndarray,

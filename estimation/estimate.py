@@ -332,6 +332,14 @@ def _auto_pass(cloud: PointCloud, box: OrientedBox, local: np.ndarray, spacing: 
             normals = orient_outward(points, normals, coarse, occ, tree, noise, neighbours=neighbours)
     t0 = lap("normals", t0)
 
+    nodes = int(occ.shell.sum()) * ratio**3
+    if nodes > tol.MAX_BAND_NODES:
+        from estimation.cloud import far_points
+
+        far = far_points(local)
+        raise CloudError(f"the points span {float(box.extents.max()):.3g} m at a {h:.3g} m spacing: {nodes:.3g} grid "
+                         f"nodes, more than the {tol.MAX_BAND_NODES:.3g} an estimate holds"
+                         + (f"; {far}: remove them" if far else " (several objects, or --method obb?)"))
     band = narrow_band(coarse, occ, ratio)
     values, measured = band_field(points, normals, band)
     surface = contour(points, normals, band, values, measured, noise=noise, tilt=tilt)

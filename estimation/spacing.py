@@ -65,8 +65,16 @@ def point_spacing(points: np.ndarray, tree=None) -> float:  # type: ignore[no-un
     tree = _sample_tree(points) if tree is None else tree
     k = min(SPACING_NEIGHBOURS, len(points) - 1)
     sample = points[:: max(1, len(points) // SAMPLE)]
-    r = tree.query(sample, k=k + 1, workers=-1)[0][:, -1]
-    return float(np.sqrt(np.pi / k) * np.median(r))
+    dist = tree.query(sample, k=k + 1, workers=-1)[0]
+    if (dist[:, 1] == 0).any():
+        # Repeated positions (a quantised sensor, rounded coordinates): a copy is no neighbour on the
+        # surface, and a position repeated k times reads a spacing of 0. Measure over distinct points.
+        from estimation.cloud import distinct_rows
+
+        distinct = points[distinct_rows(points)]
+        if len(distinct) < len(points):
+            return point_spacing(distinct)
+    return float(np.sqrt(np.pi / k) * np.median(dist[:, -1]))
 
 
 def surface_noise(points: np.ndarray, tree=None) -> float:  # type: ignore[no-untyped-def]

@@ -7,12 +7,36 @@ a 1 m crate.
 from __future__ import annotations
 
 #: Fewer points than this cannot fix a closed surface of any interest (a cube needs ~8 per face to
-#: estimate normals with 10 neighbours); the CLI contract says "~100".
+#: estimate normals with 10 neighbours); the CLI contract says "~100". Distinct positions are counted: a
+#: repeated row (a quantised sensor, rounded coordinates, copies of one scan) adds no surface.
 MIN_POINTS = 100
+
+#: Largest coordinate, metres, an estimate accepts. 10 km is beyond any object placed in a workspace
+#: (PLAUSIBLE_EXTENT_M warns from 5 m) and keeps float64 resolution near 1e-12 m; far beyond it squared
+#: distances overflow (a cloud at 1e50 m failed inside the SVD) or the file's units are simply wrong.
+MAX_COORDINATE_M = 1e4
+
+#: Smallest object extent, metres, an estimate accepts: 1 um, a thousandth of the smallest extent
+#: PLAUSIBLE_EXTENT_M lets pass without a warning and below any depth sensor's resolution. Much smaller
+#: clouds (1e-200 m) underflow the volumes (extent cubed) and spacings to zero.
+MIN_EXTENT_M = 1e-6
+
+#: A quaternion's norm must be within this of 1 (files carry ~7 significant digits; a wrong order or a
+#: missing component is off by far more). Within it, the quaternion is normalised before use.
+QUAT_NORM_TOLERANCE = 1e-3
 
 #: A cloud whose smallest principal extent is below this fraction of its largest is flat (a sheet) or
 #: line-like: it encloses no volume. 1e-3 is a 1 mm thick sheet at 1 m, far below any real object.
 FLATNESS_RATIO = 1e-3
+
+#: A point farther from a cloud's median than this many times the radius holding 99 % of its points is a
+#: stray (a reflection, a point on the far wall), not the object: a flat or line-like verdict that such
+#: points alone cause says so (``cloud.check_estimable``). 10x is far past any object's own tail.
+OUTLIER_REACH = 10.0
+
+#: 'auto': most fine nodes its narrow band may hold (tens of bytes each). The bench shapes need under 2 M at
+#: 200k points (a thin torus 1.3 M); a 10 cm sphere with one stray point 1 km off asked for 4e11 (3.2 TiB).
+MAX_BAND_NODES = 30_000_000
 
 #: Grid cells along the object's longest OBB side for the 'obb' downsampling and the 'surface'
 #: method's grid. 'auto' takes its fine cell from the point spacing instead (``FINE_CELL_SPACINGS``).

@@ -224,7 +224,8 @@ def compile_spec(spec):  # type: ignore[no-untyped-def]
     try:
         return spec.compile()
     except ValueError as exc:
-        raise BuildError(f"MuJoCo could not compile the model: {exc}") from exc
+        # MuJoCo's message spans lines ("Error: ...\nElement name 'a', id 3"); the CLI prints one.
+        raise BuildError(f"MuJoCo could not compile the model: {' '.join(str(exc).split())}") from exc
 
 
 def check_output(out: Path, *, keep: tuple[Path, ...] = ()) -> None:
@@ -235,9 +236,19 @@ def check_output(out: Path, *, keep: tuple[Path, ...] = ()) -> None:
     (the scene file and its sources).
 
     Raises:
-        BuildError: naming the folder and why.
+        BuildError: naming the folder and why (a symbolic link is refused: replacing it would follow it to
+            the folder it names, or fail half way).
     """
-    out = Path(out).resolve()
+    try:
+        _check_output(Path(out), keep)
+    except OSError as exc:  # a name too long, a permission denied on the way
+        raise BuildError(f"cannot use --out {out}: {exc.strerror or exc}") from None
+
+
+def _check_output(out: Path, keep: tuple[Path, ...]) -> None:
+    if out.is_symlink():
+        raise BuildError(f"{out}: is a symbolic link; give --out a real folder (a build replaces it whole)")
+    out = out.resolve()
     cwd = Path.cwd().resolve()
     if out == cwd or out in cwd.parents:
         raise BuildError(f"{out}: refusing to build into the current folder or one of its parents; "

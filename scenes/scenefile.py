@@ -26,6 +26,7 @@ import json
 import math
 import re
 import sys
+from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Annotated, Literal
@@ -62,12 +63,24 @@ MAX_POINTS = 10_000_000
 ROTATION_TOLERANCE = 1e-3
 #: Viewpoints one cloud may list: more sensors than any rig we know of, and a bound on the per-point work.
 MAX_VIEWPOINTS = 64
+#: Objects one scene may hold: ten times the largest shipped scene (mixed100); every object is estimated,
+#: decomposed and simulated, so a scene of 10^6 (which once hung the duplicate-id check) is no scene.
+MAX_OBJECTS = 1000
+#: Sizes (primitive sizes, table size and height, end-effector radius), metres. 1 mm is about the smallest
+#: thing a tabletop twin pushes, and the smallest whose inertia MuJoCo still compiles at water's density
+#: (a 0.5 mm box is "inertia must have positive eigenvalues"; a 1e-300 m sphere was a LinAlgError, a
+#: 1e-300 m table a MuJoCo error); 100 m is past any table (a 1e10 m sphere failed writing its STL).
+SIZE_RANGE_M = (1e-3, 100.0)
+#: Mesh formats a ``mesh`` source may have: the ones trimesh reads as a mesh. Anything else (/etc/passwd)
+#: is refused by name here instead of failing inside trimesh.
+MESH_SUFFIXES = (".stl", ".obj", ".ply", ".off", ".glb", ".gltf", ".3mf", ".dae")
 
 # -- the document's shape ----------------------------------------------------------------------------------
 # Struct defaults are the loader's defaults; UNSET marks a key whose absence means something (no table,
 # no source of that kind). TOML has no null, so no field takes None.
 
 Positive = Annotated[float, Meta(gt=0)]
+Size = Annotated[float, Meta(ge=SIZE_RANGE_M[0], le=SIZE_RANGE_M[1])]
 Vec3 = tuple[float, float, float]
 Text = Annotated[str, Meta(min_length=1)]
 
@@ -75,8 +88,8 @@ Text = Annotated[str, Meta(min_length=1)]
 class TableDoc(Struct, forbid_unknown_fields=True):
     """A box table whose top is at ``height``; omit ``[table]`` for objects on the floor."""
 
-    size: Annotated[tuple[Positive, Positive, Positive], Meta(description="full extents x, y, z, m")] = TableSpec.size
-    height: Annotated[Positive, Meta(description="top surface above the floor, m")] = TableSpec.height
+    size: Annotated[tuple[Size, Size, Size], Meta(description="full extents x, y, z, m")] = TableSpec.size
+    height: Annotated[Size, Meta(description="top surface above the floor, m")] = TableSpec.height
     material: Annotated[Text, Meta(description="material name or alias; sets the table's friction")] = \
         TableSpec.material
 
@@ -84,7 +97,7 @@ class TableDoc(Struct, forbid_unknown_fields=True):
 class EndEffectorDoc(Struct, forbid_unknown_fields=True):
     """The operator's sphere."""
 
-    radius: Annotated[Positive, Meta(description="sphere radius, m")] = EndEffectorSpec.radius
+    radius: Annotated[Size, Meta(description="sphere radius, m")] = EndEffectorSpec.radius
     position: Annotated[Vec3, Meta(description="start position, world frame, m")] = EndEffectorSpec.position
 
 
@@ -98,31 +111,31 @@ class WorkspaceDoc(Struct, forbid_unknown_fields=True):
 class BoxDoc(Struct, tag="box", tag_field="type", forbid_unknown_fields=True):
     """A box of full extents ``size`` = [x, y, z], m."""
 
-    size: tuple[Positive, Positive, Positive]
+    size: tuple[Size, Size, Size]
 
 
 class CylinderDoc(Struct, tag="cylinder", tag_field="type", forbid_unknown_fields=True):
     """A cylinder along z: ``size`` = [radius, height], m."""
 
-    size: tuple[Positive, Positive]
+    size: tuple[Size, Size]
 
 
 class SphereDoc(Struct, tag="sphere", tag_field="type", forbid_unknown_fields=True):
     """A sphere: ``size`` = [radius], m."""
 
-    size: tuple[Positive]
+    size: tuple[Size]
 
 
 class CapsuleDoc(Struct, tag="capsule", tag_field="type", forbid_unknown_fields=True):
     """A capsule along z: ``size`` = [radius, height of the cylinder part], m."""
 
-    size: tuple[Positive, Positive]
+    size: tuple[Size, Size]
 
 
 class TorusDoc(Struct, tag="torus", tag_field="type", forbid_unknown_fields=True):
     """A torus about z: ``size`` = [major radius, minor radius], m."""
 
-    size: tuple[Positive, Positive]
+    size: tuple[Size, Size]
 
 
 _PRIMITIVE_DOCS = (BoxDoc, CylinderDoc, SphereDoc, CapsuleDoc, TorusDoc)
@@ -168,7 +181,7 @@ class SceneDoc(Struct, forbid_unknown_fields=True):
     table: TableDoc | UnsetType = UNSET
     end_effector: EndEffectorDoc | UnsetType = UNSET
     workspace: WorkspaceDoc | UnsetType = UNSET
-    objects: list[ObjectDoc] = []
+    objects: Annotated[list[ObjectDoc], Meta(max_length=MAX_OBJECTS)] = []
 
 
 _TOP_KEYS = set(SceneDoc.__struct_fields__)
@@ -251,12 +264,18 @@ def load_scene(path: str | Path) -> SceneSpec:
         SceneError: unreadable TOML, unknown keys, missing or duplicate ids, bad values, missing files.
     """
     path = Path(path)
-    if not path.is_file():
-        raise SceneError(f"{path}: no such scene file")
     try:
-        doc = tomllib.loads(path.read_text())
+        if not path.is_file():
+            raise SceneError(f"{path}: no such scene file")
+        text = path.read_text()
+    except OSError as exc:  # a name too long, a permission denied
+        raise SceneError(f"cannot read {path}: {exc.strerror or exc}") from None
+    try:
+        doc = tomllib.loads(text)
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise SceneError(f"{path}: not valid TOML ({exc})") from exc
+    except RecursionError:  # tomllib recurses once per level of nesting: 5000 levels of [[[...
+        raise SceneError(f"{path}: nested too deeply to be a scene file") from None
     return parse_scene(doc, base=path.parent, path=path)
 
 
@@ -292,8 +311,8 @@ def parse_scene(doc: dict, *, base: Path = Path("."), path: Path | None = None) 
             raise SceneError(f"workspace: min must be below max on every axis, got min {list(low)}, max {list(high)}")
         workspace = (low, high)
     objects = tuple(_object(o, i, base, doc) for i, o in enumerate(scene.objects))
-    ids = [o.id for o in objects]
-    dupes = {i for i in ids if ids.count(i) > 1}
+    counts = Counter(o.id for o in objects)  # ids.count(i) for each i was quadratic: 25 s at 40k objects
+    dupes = {i for i, n in counts.items() if n > 1}
     if dupes:
         raise SceneError(f"scene: duplicate object id(s) {sorted(dupes)}")
     return SceneSpec(name=scene.name, objects=objects, table=table, end_effector=ee, path=path, workspace=workspace)
@@ -316,6 +335,9 @@ def _object(o: ObjectDoc, index: int, base: Path, doc: dict) -> ObjectSpec:
             raise SceneError(f"{where}: {source} path {file!r} is not usable ({exc})") from None
         if not found:
             raise SceneError(f"{where}: {source} file {value} does not exist")
+        if source == "mesh" and value.suffix.lower() not in MESH_SUFFIXES:  # type: ignore[attr-defined]
+            raise SceneError(f"{where}: mesh file {value} is not a mesh format we read; use one of "
+                             f"{', '.join(MESH_SUFFIXES)}")
     elif source == "primitive":
         value = {"type": o.primitive.__struct_config__.tag, "size": o.primitive.size}  # type: ignore[union-attr]
     else:
@@ -399,7 +421,9 @@ def _translate(message: str, doc: dict) -> str:
             return f"{_where(tokens[:2], doc)}: primitive needs type = one of {', '.join(PRIMITIVES)}"
         return f"{where}: missing {key!r}"
     if found and isinstance(value, float | int) and not isinstance(value, bool) and not _finite(value):
-        return f"{where}: must be finite, got {float(value)}"
+        return f"{where}: must be finite, got {_number(value)}"
+    if tokens == ["objects"] and what.startswith("Expected `array` of length <="):
+        return f"scene: at most {MAX_OBJECTS} objects, got {len(value)}"  # type: ignore[arg-type]
     if tokens == ["objects"]:
         return f"scene: 'objects' must be an array of tables ([[objects]]), got {_kind(value)}"
     if len(tokens) == 2 and tokens[0] == "objects":
@@ -419,8 +443,11 @@ def _translate(message: str, doc: dict) -> str:
     if last == "position" and len(tokens) == 3:
         return f"{where}: must be [x, y] (rest on the table) or [x, y, z], got {value!r}"
     expected = what.partition(",")[0]
+    if expected.startswith((f"Expected `float` >= {SIZE_RANGE_M[0]}", f"Expected `float` <= {SIZE_RANGE_M[1]}")):
+        low, high = SIZE_RANGE_M
+        return f"{where}: must be {low:g} to {high:g} m, got {_number(value)}"
     if expected.startswith("Expected `float` >"):
-        return f"{where}: must be positive, got {float(value)}"  # type: ignore[arg-type]
+        return f"{where}: must be positive, got {_number(value)}"
     if expected.startswith(("Expected `float`", "Expected `int`")):
         return f"{where}: expected a number, got {_kind(value)}"
     if expected.startswith("Expected `str`"):
@@ -531,6 +558,15 @@ def _finite(value: float | int) -> bool:
         return math.isfinite(value)
     except OverflowError:  # an integer beyond float range
         return False
+
+
+def _number(value: object) -> str:
+    """A number for a message: ``float(value)`` overflows on a TOML integer like 10**400."""
+    try:
+        return str(float(value))  # type: ignore[arg-type]
+    except (OverflowError, TypeError, ValueError):
+        text = repr(value)
+        return text if len(text) <= 40 else f"{text[:12]}... ({len(text)} digits)"
 
 
 def _kind(value: object) -> str:

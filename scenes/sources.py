@@ -9,6 +9,7 @@ measuring the twin against, never for the twin itself.
 from __future__ import annotations
 
 import logging
+import struct
 import zlib
 from dataclasses import replace
 from pathlib import Path
@@ -46,8 +47,14 @@ def source_mesh(spec: ObjectSpec) -> trimesh.Trimesh | None:
     else:
         try:
             mesh = trimesh.load_mesh(spec.value, force="mesh")
-        except (OSError, ValueError) as exc:
-            raise SceneError(f"object {spec.id!r}: cannot read mesh {spec.value} ({exc})") from exc
+        # What trimesh raises on a file that is not what its suffix says: NotImplementedError (a format it
+        # has no loader for), IndexError (an .stl holding text), KeyError and struct errors (damaged
+        # binaries), besides OSError and ValueError.
+        except (OSError, ValueError, NotImplementedError, IndexError, KeyError, struct.error, EOFError) as exc:
+            reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+            raise SceneError(f"object {spec.id!r}: cannot read mesh {spec.value} ({reason})") from exc
+        if len(getattr(mesh, "faces", ())) == 0:
+            raise SceneError(f"object {spec.id!r}: mesh {spec.value} holds no triangles")
         mesh.apply_scale(unit_scale(spec.units))
         if not mesh.is_watertight:
             log.warning("object %r: mesh %s is not watertight", spec.id, spec.value)

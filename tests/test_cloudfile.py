@@ -350,11 +350,39 @@ def test_text_without_numbers(tmp_path, capfd, suffix, content):
     assert capfd.readouterr() == ("", "")
 
 
+@pytest.mark.parametrize(("shape", "dtype", "match"), [
+    ((10_000_000,), "<f8", r"expected an \(n, 3\), \(n, 6\) or \(n, 9\) array .* got shape \(10000000,\)"),
+    ((2_000_000, 3, 2), "<f8", r"got shape \(2000000, 3, 2\)"),
+    ((2000, 3), "<c16", r"must hold real numbers \(integer or float\), got complex128"),
+    ((2000, 3), "|b1", r"must hold real numbers \(integer or float\), got bool"),
+])
+def test_npy_shape_and_type_are_checked_before_reading(tmp_path, shape, dtype, match):
+    # A 1-D or 3-D array skipped the row cap and was read whole (an 800 MB sparse file reached 1.6 GB before
+    # its shape was refused); complex values lost their imaginary part with only a ComplexWarning.
+    path = tmp_path / "c.npy"
+    with open(path, "wb") as fh:
+        np.lib.format.write_array_header_1_0(fh, {"descr": dtype, "fortran_order": False, "shape": shape})
+        fh.truncate(fh.tell() + np.dtype(dtype).itemsize * int(np.prod(shape)))  # sparse: no blocks written
+    tracemalloc.start()
+    try:
+        with pytest.raises(CloudFileError, match=match):
+            load_cloud(path)
+        assert tracemalloc.get_traced_memory()[1] < 10 * 2**20  # peak: the header, not the data
+    finally:
+        tracemalloc.stop()
+
+
+def test_npz_points_must_be_n_by_3(tmp_path):
+    np.savez(tmp_path / "c.npz", points=np.zeros(6000))
+    with pytest.raises(CloudFileError, match=r"c\.npz: array 'points' must be \(n, 3\), got shape \(6000,\)"):
+        load_cloud(tmp_path / "c.npz")
+
+
 def test_npy_shorter_than_its_header(tmp_path, cloud):
     np.save(tmp_path / "c.npy", cloud.points)
     data = (tmp_path / "c.npy").read_bytes()
     (tmp_path / "c.npy").write_bytes(data[:-100])
-    with pytest.raises(CloudFileError, match=r"c\.npy: unreadable"):
+    with pytest.raises(CloudFileError, match=r"c\.npy: truncated: the header claims shape \(500, 3\)"):
         load_cloud(tmp_path / "c.npy")
 
 

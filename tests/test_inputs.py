@@ -70,9 +70,69 @@ def test_line_cloud():
         estimate(make_cloud(np.c_[t, 2 * t, -t]), 1000.0)
 
 
+@pytest.mark.parametrize(("far", "reach", "verdict"), [
+    # One stray point asked for a 3.2 TiB grid (MemoryError); five made the cloud "line-like" with no word on why.
+    ([[1000.0, 0, 0]], r"1e\+03", r"the points span 1e\+03 m at a 0.0\d+ m spacing: \S+ grid nodes, more than the 3e\+07 "
+                                  r"an estimate holds; "),
+    ([[1000.0 + i / 4, 0, 0] for i in range(5)], r"1e\+03", r"line-like, it encloses no volume; but that is "),
+    ([[1e200, 0, 0]], r"1e\+200", r"coordinates reach 1e\+200 m from the origin, beyond the 10000 m an estimate "
+                                   r"accepts; that is "),
+])
+def test_a_few_far_points_are_named(far, reach, verdict):
+    with pytest.raises(CloudError, match=verdict + rf"{len(far)} far point\(s\), up to {reach} m from the rest, which "
+                                                   r"lies within 0.0\d+ m: remove them$"):
+        estimate(make_cloud(np.r_[_sphere(2000), far]), 1000.0)
+    t = np.linspace(0, 1, 500)  # a real line stays a plain line
+    with pytest.raises(CloudError, match=r"line-like, it encloses no volume$"):
+        estimate(make_cloud(np.c_[t, 2 * t, -t]), 1000.0)
+
+
 def test_identical_points():
     with pytest.raises(CloudError, match="identical"):
         estimate(make_cloud(np.ones((500, 3))), 1000.0)
+
+
+def _sphere(n: int, radius: float = 0.05) -> np.ndarray:
+    v = np.random.default_rng(3).normal(size=(n, 3))
+    return radius * v / np.linalg.norm(v, axis=1, keepdims=True)
+
+
+def test_repeated_rows_count_once():
+    # 20 distinct positions written five times each are 100 rows, but not 100 points.
+    with pytest.raises(CloudError, match="too few distinct points: 20 distinct positions among 100"):
+        estimate(make_cloud(np.repeat(_sphere(20), 5, axis=0)), 1000.0)
+
+
+@pytest.mark.parametrize("method", ["auto", "obb", "hull", "surface"])
+def test_repeated_positions_are_estimated(tmp_path, method):
+    # Every position repeated 20 times (more than the spacing's 8 neighbours) used to read a point spacing
+    # of 0 and divide by it; rounded coordinates (a quantised sensor) repeat positions the same way.
+    path = tmp_path / "dup.xyz"
+    np.savetxt(path, np.repeat(_sphere(400), 20, axis=0))
+    once = estimate(make_cloud(_sphere(400)), 1000.0, method=method)
+    repeated = estimate(load_cloud(path), 1000.0, method=method)
+    assert repeated.volume == pytest.approx(once.volume, rel=0.05)
+    rounded = tmp_path / "rounded.xyz"
+    np.savetxt(rounded, np.round(_sphere(3000), 2))
+    assert estimate(load_cloud(rounded), 1000.0, method=method).volume > 0
+
+
+@pytest.mark.parametrize("method", ["auto", "obb"])
+@pytest.mark.parametrize(("scale", "match"), [(1e50, r"reach \S+e\+49 m .* beyond the 10000 m"),
+                                              (1e6, "beyond the 10000 m"),
+                                              (1e-200, r"e-200 m across, below the 1e-06 m"),
+                                              (1e-7, "below the 1e-06 m")])
+def test_out_of_range_scale(scale, match, method):
+    with pytest.raises(CloudError, match=match):
+        estimate(make_cloud(_sphere(500, 1.0) * scale), 1000.0, method=method)
+
+
+@pytest.mark.parametrize("method", ["auto", "obb", "hull"])
+@pytest.mark.parametrize("radius", [2e-6, 2e3])
+def test_scales_within_range_are_estimated(radius, method):
+    unit = estimate(make_cloud(_sphere(2000, 1.0)), 1000.0, method=method).volume
+    assert estimate(make_cloud(_sphere(2000, radius)), 1000.0, method=method).volume / radius**3 == \
+        pytest.approx(unit, rel=1e-3)
 
 
 @pytest.mark.parametrize("density", [0.0, -5.0, float("nan"), float("inf")])

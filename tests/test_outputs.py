@@ -14,7 +14,7 @@ import trimesh
 
 from cli.demo import object_records
 from cli.main import main
-from estimation import MaterialError, estimate, from_mesh, make_cloud, material
+from estimation import MaterialError, estimate, from_mesh, make_cloud, material, save_cloud
 from estimation.materials import aliases, materials
 from scenes.build import BuiltScene, build_scene, estimates_record, write_scene
 from scenes.scenefile import load_scene, parse_scene
@@ -197,6 +197,35 @@ def test_cli_material_alias(tmp_path, capsys):
     assert main(["materials"]) == 0
     listing = capsys.readouterr().out
     assert "pla_plastic" in listing and "also: pla" in listing and "aluminum" in listing
+
+
+def test_mesh_out_never_overwrites_an_input(tmp_path, capsys):
+    import os
+
+    cloud = tmp_path / "in.ply"
+    cloud.write_bytes(b"")
+    save_cloud(make_cloud(trimesh.creation.box(extents=[0.1, 0.06, 0.04]).sample(2000, return_index=False)), cloud)
+    before = cloud.read_bytes()
+    (tmp_path / "link.ply").symlink_to(cloud)
+    os.link(cloud, tmp_path / "hard.ply")
+    for out in (cloud, tmp_path / "link.ply", tmp_path / "hard.ply", tmp_path / "sub" / ".." / "in.ply"):
+        (tmp_path / "sub").mkdir(exist_ok=True)
+        assert main(["estimate", str(cloud), "--method", "hull", "--mesh-out", str(out)]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and "is the input" in err and "would destroy the input" in err, err
+        assert cloud.read_bytes() == before
+
+
+def test_a_mesh_write_that_fails_leaves_the_old_file_whole(tmp_path, capsys):
+    cloud = tmp_path / "box.npy"
+    np.save(cloud, trimesh.creation.box(extents=[0.1, 0.06, 0.04]).sample(2000, return_index=False))
+    old = tmp_path / "old.xyz"  # trimesh writes no mesh as .xyz: it used to truncate the file, then fail
+    old.write_text("precious\n")
+    assert main(["estimate", str(cloud), "--method", "hull", "--mesh-out", str(old)]) == 2
+    assert "cannot write mesh" in capsys.readouterr().err
+    assert old.read_text() == "precious\n" and sorted(p.name for p in tmp_path.iterdir()) == ["box.npy", "old.xyz"]
+    assert main(["estimate", str(cloud), "--method", "hull", "--mesh-out", str(tmp_path / "m.stl")]) == 0
+    assert len(trimesh.load_mesh(tmp_path / "m.stl").faces) > 0
 
 
 def test_scene_material_alias():

@@ -59,7 +59,15 @@ def _top(**top: object) -> dict:
         (_top(table={"height": "high"}), r"^table.height: expected a number, got str 'high'$"),
         (_top(table={"height": NAN}), r"^table.height: must be finite, got nan$"),
         (_top(table={"height": INF}), r"^table.height: must be finite, got inf$"),
-        (_top(table={"height": 0}), r"^table.height: must be positive, got 0.0$"),
+        (_top(table={"height": 0}), r"^table.height: must be 0.001 to 100 m, got 0.0$"),
+        (_top(table={"size": [1e-300, 1, 1]}), r"^table.size\[0\]: must be 0.001 to 100 m, got 1e-300$"),
+        (_top(end_effector={"radius": 1e300}), r"^end_effector.radius: must be 0.001 to 100 m, got 1e\+300$"),
+        (_scene(primitive={"type": "sphere", "size": [1e10]}),
+         r"^object 'mug' primitive.size\[0\]: must be 0.001 to 100 m, got 10000000000.0$"),
+        (_scene(primitive={"type": "sphere", "size": [1e-300]}),
+         r"^object 'mug' primitive.size\[0\]: must be 0.001 to 100 m, got 1e-300$"),
+        # An integer beyond float range used to be an OverflowError inside the message itself.
+        (_scene(position=[10**400, 0]), r"^object 'mug' position\[0\]: must be finite, got 100000000000\.\.\. \(401 digits\)$"),
         (_top(table={"height": True}), r"^table.height: expected a number, got bool True$"),
         (_top(table={"size": [1, NAN, 0.04]}), r"^table.size\[1\]: must be finite, got nan$"),
         (_top(table={"material": "cheese"}), r"^table.material: unknown material 'cheese'"),
@@ -89,6 +97,46 @@ def test_a_file_with_a_nan_position_never_reaches_the_model(tmp_path):
     path.write_text('name = "x"\n[table]\nheight = inf\n')
     with pytest.raises(SceneError, match=r"table.height: must be finite, got inf"):
         load_scene(path)
+
+
+def test_object_count_is_capped_and_duplicates_are_found_in_linear_time():
+    import time
+
+    from scenes.scenefile import MAX_OBJECTS
+
+    # 10^6 objects never finished (ids.count per id); the cap refuses them before any per-object work.
+    many = {"name": "x", "objects": [{"id": f"o{i}", "paper": "box"} for i in range(1_000_000)]}
+    t0 = time.perf_counter()
+    with pytest.raises(SceneError, match=rf"^scene: at most {MAX_OBJECTS} objects, got 1000000$"):
+        parse_scene(many)
+    assert time.perf_counter() - t0 < 5
+    dupes = {"name": "x", "objects": [{"id": f"o{i % (MAX_OBJECTS - 1)}", "paper": "box"} for i in range(MAX_OBJECTS)]}
+    with pytest.raises(SceneError, match=r"^scene: duplicate object id\(s\) \['o0'\]$"):
+        parse_scene(dupes)
+
+
+@pytest.mark.parametrize("nested", ["x = " + "[" * 5000 + "]" * 5000, "x = " + "{a=" * 5000 + "1" + "}" * 5000])
+def test_deeply_nested_toml_is_a_scene_error(tmp_path, nested):
+    path = tmp_path / "deep.toml"
+    path.write_text(f'name = "t"\n{nested}\n')
+    with pytest.raises(SceneError, match=r"deep\.toml: nested too deeply to be a scene file$"):
+        load_scene(path)
+
+
+def test_a_mesh_that_is_no_mesh_is_a_scene_error_naming_the_file(tmp_path):
+    from scenes.sources import source_mesh
+
+    (tmp_path / "passwd").write_text("root:x:0:0:root:/root:/bin/bash\n")
+    with pytest.raises(SceneError, match=r"^object 'a': mesh file .*passwd is not a mesh format we read; use one of "
+                                         r"\.stl"):
+        parse_scene({"name": "x", "objects": [{"id": "a", "mesh": "passwd"}]}, base=tmp_path)
+    (tmp_path / "text.stl").write_text("solid x\nnot a facet\n")  # an IndexError inside trimesh
+    (tmp_path / "junk.ply").write_bytes(b"\x00\x01junk" * 100)
+    for name, match in (("text.stl", "holds no triangles"), ("junk.ply", r"cannot read mesh .*junk\.ply")):
+        spec = parse_scene({"name": "x", "objects": [{"id": "a", "mesh": name}]}, base=tmp_path).objects[0]
+        with pytest.raises(SceneError, match=rf"^object 'a': .*{match}") as info:
+            source_mesh(spec)
+        assert "\n" not in str(info.value) and name in str(info.value)
 
 
 def test_good_values_still_parse():

@@ -172,7 +172,7 @@ def test_open_mesh_gives_closed_hulls_inside_its_hull(tmp_path):
         ('name="x"\n[[objects]]\nid="a"\nprimitive={type="box",size=[1,1,1]}\nmaterail="steel"', "did you mean 'material'"),
         ('name="x"\n[[objects]]\nid="a"\nmesh="missing.stl"', "does not exist"),
         ('name="x"\n[[objects]]\nid="a"\nprimitive={type="box",size=[1,1,1]}\ndensity=-3', "must be positive"),
-        ('name="x"\n[[objects]]\nid="a"\nprimitive={type="box",size=[1,0,1]}', "must be positive"),
+        ('name="x"\n[[objects]]\nid="a"\nprimitive={type="box",size=[1,0,1]}', "must be 0.001 to 100 m, got 0.0"),
         ('name="x"\n[[objects]]\nid="a"\nprimitive={type="box",size=[1,1,1]}\nmaterial="unobtainium"', "unknown material"),
         ('name="x"\n[[objects]]\nid="a"\nprimitive={type="box",size=[1,1,1]}\n[[objects]]\nid="a"\npaper="cone"', "duplicate"),
         ('name="x"\n[[objects]]\nid="a"', "exactly one source"),
@@ -244,6 +244,28 @@ def test_cli_build_never_replaces_what_it_did_not_write(small_scene, tmp_path, m
     assert main(["build", str(scene), "--out", str(home)]) == 2  # the folder holding the scene
     assert "holds" in capsys.readouterr().err
     assert scene.read_text() == small_scene.read_text() and (mine / "keep.txt").is_file()
+
+
+def test_cli_build_refuses_a_symlinked_out(small_scene, tmp_path, capsys):
+    # Replacing a link to an earlier build would fail half way (rmtree refuses links) or follow it.
+    earlier = tmp_path / "earlier"
+    earlier.mkdir()
+    (earlier / ".tactile-twin-build").write_text("written by 'twin build'\n")
+    (tmp_path / "link").symlink_to(earlier)
+    assert main(["build", str(small_scene), "--out", str(tmp_path / "link"), "--cache-dir", str(tmp_path / "c")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "link: is a symbolic link" in err, err
+    assert (tmp_path / "link").is_symlink() and (earlier / ".tactile-twin-build").is_file()
+
+
+def test_cli_file_names_too_long_are_one_line_errors(small_scene, tmp_path, capsys):
+    long = tmp_path / ("a" * 300)
+    for argv in (["estimate", f"{long}.xyz"], ["estimate", f"{long}.png", "--intrinsics", "50", "50", "10", "10"],
+                 ["build", f"{long}.toml", "--out", str(tmp_path / "o")],
+                 ["build", str(small_scene), "--out", str(long)]):
+        assert main(argv) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and f"{long}" in err and "File name too long" in err, (argv, err)
 
 
 def test_cli_viewer_without_display(small_scene, monkeypatch, capsys):

@@ -263,6 +263,12 @@ def test_a_view_with_no_points_is_refused(capsys, tmp_path, pcds):
     ("empty.npy", lambda p: np.save(p, np.zeros((0, 40))), r"the depth image is empty"),
     ("eight.png", lambda p: _png(p, np.full((30, 40), 200, np.uint8)), r"8-bit PNG cannot hold depth"),
     ("rgb.npy", lambda p: np.save(p, np.ones((30, 40, 3))), r"numeric \(h, w\) array"),
+    ("complex.npy", lambda p: np.save(p, np.ones((30, 40), complex)), r"real numbers, got complex128"),
+    # A small file whose header claims 90000 x 90000 was a 60 GiB allocation; refused from the header.
+    ("lie.npy", lambda p: _npy_claiming(p, (90000, 90000)), r"truncated: the header claims shape \(90000, 90000\)"),
+    ("huge.npy", lambda p: _npy_claiming(p, (8000, 8000), sparse=True), r"8000x8000 depth image is more than the 50,000,000"),
+    # A 16-bit PNG header claiming 20000 x 20000 was PIL's DecompressionBombError; refused before decoding.
+    ("bomb.png", lambda p: _png_header(p, 20000, 20000), r"20000x20000 depth image is more than the 50,000,000"),
 ])
 def test_bad_depth_frames_are_one_line_errors(capsys, tmp_path, name, write, message):
     import re
@@ -275,10 +281,15 @@ def test_bad_depth_frames_are_one_line_errors(capsys, tmp_path, name, write, mes
 
 @pytest.mark.parametrize(("extra", "message"), [
     (["--intrinsics", "50", "50", "319.5", "14.5"], r"principal point \(319.5, 14.5\) lies outside the 40x30"),
-    (["--intrinsics", "0", "50", "19.5", "14.5"], r"focal lengths must be > 0"),
+    (["--intrinsics", "0", "50", "19.5", "14.5"], r"focal lengths must be 1 to 1e\+06 pixels"),
+    (["--intrinsics", "1e-300", "1e-300", "19.5", "14.5"], r"focal lengths must be 1 to 1e\+06 pixels"),
+    (["--intrinsics", "1e300", "50", "19.5", "14.5"], r"focal lengths must be 1 to 1e\+06 pixels"),
     (["--intrinsics", "50", "50", "19.5", "14.5", "--depth-scale", "1000"], r"inverse"),
+    (["--intrinsics", "50", "50", "19.5", "14.5", "--depth-scale", "1e-300"], r"depth scale must be .* in \[1e-06, 10\]"),
     (["--intrinsics", "50", "50", "19.5", "14.5", "--viewpoint-pose", "0", "0", "0", "2", "0", "0", "0"],
-     r"norm 1, got 2"),
+     r"norm 1 \(within 0.001\), got 2"),
+    (["--intrinsics", "50", "50", "19.5", "14.5", "--viewpoint-pose", "1e300", "0", "0", "1", "0", "0", "0"],
+     r"pose: the camera is 1e\+300 m from the origin, beyond the 10000 m"),
 ])
 def test_bad_intrinsics_and_poses_are_one_line_errors(capsys, tmp_path, extra, message):
     import re
@@ -289,16 +300,39 @@ def test_bad_intrinsics_and_poses_are_one_line_errors(capsys, tmp_path, extra, m
     assert re.search(message, err) and err.count("\n") == 1, err
 
 
+def _npy_claiming(path, shape, *, sparse=False):  # type: ignore[no-untyped-def]
+    """An .npy header for ``shape`` float64, then 1 KB of data, or (sparse) a file of its full size with no
+    blocks written."""
+    with open(path, "wb") as fh:
+        np.lib.format.write_array_header_1_0(fh, {"descr": "<f8", "fortran_order": False, "shape": shape})
+        if sparse:
+            fh.truncate(fh.tell() + 8 * int(np.prod(shape)))
+        else:
+            fh.write(bytes(1024))
+
+
+def _png_header(path, width, height):  # type: ignore[no-untyped-def]
+    """A PNG signature and IHDR chunk (16-bit greyscale) for ``width`` x ``height``, and nothing after."""
+    import struct
+    import zlib
+
+    ihdr = b"IHDR" + struct.pack(">IIBBBBB", width, height, 16, 0, 0, 0, 0)
+    path.write_bytes(b"\x89PNG\r\n\x1a\n" + struct.pack(">I", 13) + ihdr + struct.pack(">I", zlib.crc32(ihdr)))
+
+
 def _png(path, array):  # type: ignore[no-untyped-def]
     from PIL import Image
 
     Image.fromarray(array).save(path)
 
 
-def test_a_pcd_viewpoint_with_a_zero_quaternion_is_refused(capsys, tmp_path):
+@pytest.mark.parametrize(("quat", "norm"), [("0 0 0 0", "0"), ("5 5 5 5", "10")])
+def test_a_pcd_viewpoint_with_a_non_unit_quaternion_is_refused(capsys, tmp_path, quat, norm):
+    # The same rule as --viewpoint-pose (contracts.unit_quaternion): 5 5 5 5 used to pass silently.
     path = tmp_path / "z.pcd"
     path.write_text("VERSION .7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH 1\nHEIGHT 1\n"
-                    "VIEWPOINT 1 2 3 0 0 0 0\nPOINTS 1\nDATA ascii\n1 2 3\n")
+                    f"VIEWPOINT 1 2 3 {quat}\nPOINTS 1\nDATA ascii\n1 2 3\n")
     assert main(["estimate", str(path)]) == 2
     err = capsys.readouterr().err
-    assert "z.pcd: VIEWPOINT's quaternion qw qx qy qz is zero" in err and err.count("\n") == 1
+    assert f"z.pcd: VIEWPOINT's quaternion qw qx qy qz must have norm 1 (within 0.001), got {norm}\n" in err
+    assert err.count("\n") == 1
