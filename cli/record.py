@@ -83,7 +83,7 @@ def recorded_scene(recording: Recording):  # type: ignore[no-untyped-def]
         RecordingError: the recording carries no scene (``twin local`` records none: pass ``--scene``).
         SceneError: the text is not a valid scene here (e.g. a mesh path missing on this machine).
     """
-    from scenes.scenefile import parse_scene, tomllib
+    from scenes.scenefile import SceneError, parse_scene, tomllib
 
     text = recording.metadata.get("scene_toml", "")
     if not text:
@@ -99,6 +99,8 @@ def recorded_scene(recording: Recording):  # type: ignore[no-untyped-def]
         return parse_scene(doc, base=base)
     except (OverflowError, RecursionError) as exc:  # e.g. an integer too large for a float
         raise RecordingError(f"{recording.path}: the recorded scene is not a valid scene ({exc})") from None
+    except SceneError as exc:  # said of the recording, not of a file the user gave
+        raise SceneError(f"{recording.path}: the recorded scene is not a valid scene ({exc})") from None
 
 
 def recorded_network(recording: Recording) -> Network | None:
