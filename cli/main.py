@@ -318,10 +318,10 @@ def _cmd_estimate(args: argparse.Namespace) -> int:
     from estimation.views import assess, estimate_views
 
     scale = unit_scale(args.units)
-    if args.mesh_out is not None:
-        for view in args.views:  # before the work, and before anything is written
-            if _same_file(args.mesh_out, view):
-                raise TwinError(f"--mesh-out {args.mesh_out} is the input {view}; writing it would destroy the input")
+    if args.mesh_out is not None:  # before the work, and before anything is written
+        from cli.outputs import check_not_input
+
+        check_not_input(args.mesh_out, args.views, "--mesh-out")
     density, mat = resolve_density(args.material, args.density)
     name = None if mat is None else mat.name
     support = _support_plane(args.support_plane, scale)
@@ -482,19 +482,6 @@ def _print_estimate(record: dict) -> None:
     console.print(table)
     for warning in record["warnings"]:
         console.print(f"[yellow]warning:[/yellow] {warning}")
-
-
-def _same_file(a: Path, b: Path) -> bool:
-    """``a`` and ``b`` name one file: the same inode when both exist (hard links, symbolic links), else the
-    same resolved path."""
-    import os
-
-    try:
-        if a.exists() and b.exists():
-            return os.path.samefile(a, b)
-        return a.resolve() == b.resolve()
-    except OSError:  # unreadable or a name too long: reading or writing it fails with its own error
-        return False
 
 
 def _write_mesh(vertices, faces, path: Path) -> None:  # type: ignore[no-untyped-def]

@@ -37,7 +37,7 @@ def check_not_input(output: Path, inputs: Iterable[Path | None], flag: str) -> N
     """
     for source in inputs:
         if source is not None and same_file(Path(output), Path(source)):
-            raise TwinError(f"{flag} {output}: is the input {source}; writing it would destroy it, choose another file")
+            raise TwinError(f"{flag} {output}: is the input {source}; writing it would destroy the input, choose another file")
 
 
 def check_output_folder(out: Path, *, marker: str, flag: str = "--out", writes: Iterable[str] = (),
