@@ -36,9 +36,21 @@ def main(argv: list[str] | None = None) -> int:
     logging.basicConfig(level=logging.DEBUG if args.verbose else logging.WARNING, handlers=[stream])
     handler: Callable[[argparse.Namespace], int] = args.handler
     # Warnings (numpy's overflow RuntimeWarnings, say) are held: a failed command's stderr is its one error
-    # line; a command that succeeds shows them afterwards, one line each.
-    with warnings.catch_warnings(record=True) as held:
+    # line; a command that succeeds shows them afterwards, one line each. Only the first few are kept, so a
+    # live command that runs for hours does not collect them without limit.
+    held: list[tuple[type[Warning], str]] = []
+    more = 0
+
+    def hold(message, category, *_: object, **__: object) -> None:  # type: ignore[no-untyped-def]
+        nonlocal more
+        if len(held) < MAX_HELD_WARNINGS:
+            held.append((category, str(message)))
+        else:
+            more += 1
+
+    with warnings.catch_warnings():
         warnings.simplefilter("default")
+        warnings.showwarning = hold
         try:
             check_args(args)  # before any work: a bad number should not cost a build
             code = handler(args)
@@ -47,14 +59,14 @@ def main(argv: list[str] | None = None) -> int:
             return EXIT_BAD_INPUT
         except KeyboardInterrupt:
             return 130
-    for w in held[:MAX_HELD_WARNINGS]:
-        log.warning("%s: %s", w.category.__name__, one_line(str(w.message)))
-    if len(held) > MAX_HELD_WARNINGS:
-        log.warning("%d more warnings", len(held) - MAX_HELD_WARNINGS)
+    for category, message in held:
+        log.warning("%s: %s", category.__name__, one_line(message))
+    if more:
+        log.warning("%d more warnings", more)
     return code
 
 
-#: Warnings shown after a command that succeeded; the rest are counted.
+#: Warnings kept and shown after a command that succeeded; the rest are counted.
 MAX_HELD_WARNINGS = 20
 
 
@@ -319,8 +331,6 @@ def _cmd_estimate(args: argparse.Namespace) -> int:
 
     scale = unit_scale(args.units)
     if args.mesh_out is not None:  # before the work, and before anything is written
-        from cli.outputs import check_not_input
-
         check_not_input(args.mesh_out, args.views, "--mesh-out")
     density, mat = resolve_density(args.material, args.density)
     name = None if mat is None else mat.name

@@ -456,3 +456,32 @@ def test_the_twin_estimates_a_cloud_with_the_normals_that_came_with_it(tmp_path)
     points_only = estimate(make_cloud(sent), 1000.0).volume
     assert with_normals != points_only
     assert obj.estimate.volume == with_normals
+
+
+def test_warnings_wait_for_success_and_only_the_first_few_are_kept(monkeypatch, capsys, caplog):
+    """A failed command's stderr is its one error line; one that succeeds shows the warnings it raised
+    afterwards, at most MAX_HELD_WARNINGS of them and a count of the rest."""
+    import warnings
+
+    import cli.main as cli
+    from estimation.errors import TwinError
+
+    def noisy(fail: bool):  # type: ignore[no-untyped-def]
+        def handler(args) -> int:  # type: ignore[no-untyped-def]
+            for k in range(cli.MAX_HELD_WARNINGS + 5):
+                warnings.warn(f"overflow {k}", RuntimeWarning, stacklevel=1)
+            if fail:
+                raise TwinError("bad input\nsecond line")
+            return 0
+        return handler
+
+    monkeypatch.setattr(cli, "_cmd_materials", noisy(True))
+    assert main(["materials"]) == 2
+    err = capsys.readouterr().err
+    assert err == "twin materials: error: bad input; second line\n", err
+    monkeypatch.setattr(cli, "_cmd_materials", noisy(False))
+    caplog.clear()
+    assert main(["materials"]) == 0
+    shown = [r.getMessage() for r in caplog.records]  # the log's records (pytest holds the handlers)
+    assert sum(m.startswith("RuntimeWarning: overflow") for m in shown) == cli.MAX_HELD_WARNINGS, shown
+    assert "5 more warnings" in shown, shown
