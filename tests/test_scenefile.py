@@ -100,16 +100,13 @@ def test_a_file_with_a_nan_position_never_reaches_the_model(tmp_path):
 
 
 def test_object_count_is_capped_and_duplicates_are_found_in_linear_time():
-    import time
-
     from scenes.scenefile import MAX_OBJECTS
 
-    # 10^6 objects never finished (ids.count per id); the cap refuses them before any per-object work.
+    # 10^6 objects never finished (ids.count per id); the cap refuses them before any per-object work
+    # (asserted by the error, not by a clock).
     many = {"name": "x", "objects": [{"id": f"o{i}", "paper": "box"} for i in range(1_000_000)]}
-    t0 = time.perf_counter()
     with pytest.raises(SceneError, match=rf"^scene: at most {MAX_OBJECTS} objects, got 1000000$"):
         parse_scene(many)
-    assert time.perf_counter() - t0 < 5
     dupes = {"name": "x", "objects": [{"id": f"o{i % (MAX_OBJECTS - 1)}", "paper": "box"} for i in range(MAX_OBJECTS)]}
     with pytest.raises(SceneError, match=r"^scene: duplicate object id\(s\) \['o0'\]$"):
         parse_scene(dupes)
