@@ -37,6 +37,7 @@ from msgspec import UNSET, Meta, Struct, UnsetType
 
 from estimation import tolerances as tol
 from estimation.errors import TwinError
+from sync.messages import MAX_COORDINATE
 from twin.model import DEFAULT_PHYSICS, EndEffectorSpec, PhysicsSettings, TableSpec, new_spec
 
 if sys.version_info >= (3, 11):
@@ -82,6 +83,10 @@ MESH_SUFFIXES = (".stl", ".obj", ".ply", ".off", ".glb", ".gltf", ".3mf", ".dae"
 Positive = Annotated[float, Meta(gt=0)]
 Size = Annotated[float, Meta(ge=SIZE_RANGE_M[0], le=SIZE_RANGE_M[1])]
 Vec3 = tuple[float, float, float]
+#: A position in the world, m: within the wire's bound on coordinates (a 1e300 m start built, and its
+#: poses could never be sent).
+Coordinate = Annotated[float, Meta(ge=-MAX_COORDINATE, le=MAX_COORDINATE)]
+Point3 = tuple[Coordinate, Coordinate, Coordinate]
 Text = Annotated[str, Meta(min_length=1)]
 
 
@@ -98,14 +103,14 @@ class EndEffectorDoc(Struct, forbid_unknown_fields=True):
     """The operator's sphere."""
 
     radius: Annotated[Size, Meta(description="sphere radius, m")] = EndEffectorSpec.radius
-    position: Annotated[Vec3, Meta(description="start position, world frame, m")] = EndEffectorSpec.position
+    position: Annotated[Point3, Meta(description="start position, world frame, m")] = EndEffectorSpec.position
 
 
 class WorkspaceDoc(Struct, forbid_unknown_fields=True):
     """The box, world frame, metres, every object pose must lie in (a twin drops poses outside it)."""
 
-    min: Annotated[Vec3, Meta(description="low corner [x, y, z], m")]
-    max: Annotated[Vec3, Meta(description="high corner [x, y, z], m; each above min")]
+    min: Annotated[Point3, Meta(description="low corner [x, y, z], m")]
+    max: Annotated[Point3, Meta(description="high corner [x, y, z], m; each above min")]
 
 
 class BoxDoc(Struct, tag="box", tag_field="type", forbid_unknown_fields=True):
@@ -158,7 +163,7 @@ class ObjectDoc(Struct, forbid_unknown_fields=True):
     units: Annotated[Literal["m", "cm", "mm"], Meta(description="units of a mesh or cloud file")] = "m"
     material: Annotated[Text, Meta(description="material name or alias: density and friction")] | UnsetType = UNSET
     density: Annotated[Positive, Meta(description="kg/m^3, instead of material")] | UnsetType = UNSET
-    position: Annotated[tuple[float, ...], Meta(
+    position: Annotated[tuple[Coordinate, ...], Meta(
         min_length=2, max_length=3,
         description="world frame, m: [x, y] rests on the table, [x, y, z] exactly there (see docs/scenes.md)")] = (0.0, 0.0)
     rotation_deg: Annotated[Vec3, Meta(
@@ -440,12 +445,14 @@ def _translate(message: str, doc: dict) -> str:
         if what.startswith("Expected `int`,"):
             return f"{where}: expected a whole number, got {value!r}"
         return f"{where}: must be {MIN_POINTS} to {MAX_POINTS:,}, got {value}"
-    if last == "position" and len(tokens) == 3:
+    if last == "position" and len(tokens) == 3 and tokens[0] == "objects":
         return f"{where}: must be [x, y] (rest on the table) or [x, y, z], got {value!r}"
     expected = what.partition(",")[0]
     if expected.startswith((f"Expected `float` >= {SIZE_RANGE_M[0]}", f"Expected `float` <= {SIZE_RANGE_M[1]}")):
         low, high = SIZE_RANGE_M
         return f"{where}: must be {low:g} to {high:g} m, got {_number(value)}"
+    if expected.startswith((f"Expected `float` >= {-MAX_COORDINATE}", f"Expected `float` <= {MAX_COORDINATE}")):
+        return f"{where}: must be within {MAX_COORDINATE:g} m of the origin, got {_number(value)}"
     if expected.startswith("Expected `float` >"):
         return f"{where}: must be positive, got {_number(value)}"
     if expected.startswith(("Expected `float`", "Expected `int`")):

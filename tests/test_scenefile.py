@@ -68,6 +68,12 @@ def _top(**top: object) -> dict:
          r"^object 'mug' primitive.size\[0\]: must be 0.001 to 100 m, got 1e-300$"),
         # An integer beyond float range used to be an OverflowError inside the message itself.
         (_scene(position=[10**400, 0]), r"^object 'mug' position\[0\]: must be finite, got 100000000000\.\.\. \(401 digits\)$"),
+        # Positions within the wire's 1 km: a 1e300 m start built, and its poses could never be sent.
+        (_scene(position=[1e300, 0]), r"^object 'mug' position\[0\]: must be within 1000 m of the origin, got 1e\+300$"),
+        (_top(end_effector={"position": [0, 0, -5000]}),
+         r"^end_effector.position\[2\]: must be within 1000 m of the origin, got -5000.0$"),
+        (_top(workspace={"min": [-1e9, 0, 0], "max": [1, 1, 1]}),
+         r"^workspace.min\[0\]: must be within 1000 m of the origin, got -1000000000.0$"),
         (_top(table={"height": True}), r"^table.height: expected a number, got bool True$"),
         (_top(table={"size": [1, NAN, 0.04]}), r"^table.size\[1\]: must be finite, got nan$"),
         (_top(table={"material": "cheese"}), r"^table.material: unknown material 'cheese'"),
