@@ -37,6 +37,7 @@ from msgspec import UNSET, Meta, Struct, UnsetType
 
 from estimation import tolerances as tol
 from estimation.errors import TwinError
+from estimation.materials import MAX_DENSITY, MIN_DENSITY
 from sync.messages import MAX_COORDINATE
 from twin.model import DEFAULT_PHYSICS, EndEffectorSpec, PhysicsSettings, TableSpec, new_spec
 
@@ -81,6 +82,9 @@ MESH_SUFFIXES = (".stl", ".obj", ".ply", ".off", ".glb", ".gltf", ".3mf", ".dae"
 # no source of that kind). TOML has no null, so no field takes None.
 
 Positive = Annotated[float, Meta(gt=0)]
+#: What the wire carries (:data:`estimation.materials.MIN_DENSITY` .. ``MAX_DENSITY``): a scene object outside it
+#: would be published and then refused by every twin.
+Density = Annotated[float, Meta(ge=MIN_DENSITY, le=MAX_DENSITY)]
 Size = Annotated[float, Meta(ge=SIZE_RANGE_M[0], le=SIZE_RANGE_M[1])]
 Vec3 = tuple[float, float, float]
 #: A position in the world, m: within the wire's bound on coordinates (a 1e300 m start built, and its
@@ -162,7 +166,7 @@ class ObjectDoc(Struct, forbid_unknown_fields=True):
     primitive: PrimitiveDoc | UnsetType = UNSET
     units: Annotated[Literal["m", "cm", "mm"], Meta(description="units of a mesh or cloud file")] = "m"
     material: Annotated[Text, Meta(description="material name or alias: density and friction")] | UnsetType = UNSET
-    density: Annotated[Positive, Meta(description="kg/m^3, instead of material")] | UnsetType = UNSET
+    density: Annotated[Density, Meta(description="kg/m^3, instead of material")] | UnsetType = UNSET
     position: Annotated[tuple[Coordinate, ...], Meta(
         min_length=2, max_length=3,
         description="world frame, m: [x, y] rests on the table, [x, y, z] exactly there (see docs/scenes.md)")] = (0.0, 0.0)
@@ -451,6 +455,8 @@ def _translate(message: str, doc: dict) -> str:
     if expected.startswith((f"Expected `float` >= {SIZE_RANGE_M[0]}", f"Expected `float` <= {SIZE_RANGE_M[1]}")):
         low, high = SIZE_RANGE_M
         return f"{where}: must be {low:g} to {high:g} m, got {_number(value)}"
+    if last == "density" and expected.startswith(("Expected `float` >=", "Expected `float` <=")):
+        return f"{where}: must be {MIN_DENSITY:g} to {MAX_DENSITY:g} kg/m^3, got {_number(value)}"
     if expected.startswith((f"Expected `float` >= {-MAX_COORDINATE}", f"Expected `float` <= {MAX_COORDINATE}")):
         return f"{where}: must be within {MAX_COORDINATE:g} m of the origin, got {_number(value)}"
     if expected.startswith("Expected `float` >"):
