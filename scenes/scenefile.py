@@ -456,6 +456,8 @@ def _translate(message: str, doc: dict) -> str:
         low, high = SIZE_RANGE_M
         return f"{where}: must be {low:g} to {high:g} m, got {_number(value)}"
     if last == "density" and expected.startswith(("Expected `float` >=", "Expected `float` <=")):
+        if isinstance(value, int | float) and value <= 0:
+            return f"{where}: must be positive, got {_number(value)}"
         return f"{where}: must be {MIN_DENSITY:g} to {MAX_DENSITY:g} kg/m^3, got {_number(value)}"
     if expected.startswith((f"Expected `float` >= {-MAX_COORDINATE}", f"Expected `float` <= {MAX_COORDINATE}")):
         return f"{where}: must be within {MAX_COORDINATE:g} m of the origin, got {_number(value)}"

@@ -47,7 +47,8 @@ def _top(**top: object) -> dict:
         (_scene(density="heavy"), r"object 'mug' density: expected a number, got str 'heavy'"),
         # The wire's densities: outside them the remote would publish a cloud every twin refuses.
         (_scene(density=1e300), r"^object 'mug' density: must be 0.1 to 100000 kg/m\^3, got 1e\+300$"),
-        (_scene(density=-1), r"^object 'mug' density: must be 0.1 to 100000 kg/m\^3, got -1.0$"),
+        (_scene(density=0.01), r"^object 'mug' density: must be 0.1 to 100000 kg/m\^3, got 0.01$"),
+        (_scene(density=-1), r"^object 'mug' density: must be positive, got -1.0$"),
         (_scene(material=7), r"object 'mug' material: expected a non-empty string, got int 7"),
         (_scene(units=["m"]), r"object 'mug' units: must be m, cm or mm, got \['m'\]"),
         (_scene(primitive={"type": "box", "size": [0.1, NAN, 0.1]}),
