@@ -130,14 +130,6 @@ def scene_of(key: str) -> str:
     return parts[1]
 
 
-def object_of(key: str) -> str | None:
-    """The object id in an object key (``twin/<scene>/objects/<id>/<kind>``) of any scene, else None."""
-    parts = key.split("/")
-    if len(parts) == 5 and parts[0] == PREFIX and parts[2] == "objects" and parts[4] in OBJECT_KINDS:
-        return parts[3]
-    return None
-
-
 def intersects(a: str, b: str) -> bool:
     """Whether two key expressions share at least one key, as Zenoh matches them.
 

@@ -228,11 +228,8 @@ class Recorder:
     def close(self, **end: object) -> None:
         """Drain the queue, finish the file and rename it onto ``path`` (idempotent); ``end`` goes into
         ``tactile_twin.end``."""
-        if self._closed:
+        if not self._stop():
             return
-        self._closed = True
-        self._queue.put(None)
-        self._thread.join()
         duration = 0.0 if self._first_ns is None else (self._last_ns - self._first_ns) * 1e-9
         self._writer.add_metadata("tactile_twin.end", {"messages": str(self.messages), "duration_s": repr(duration),
                                                        **{k: str(v) for k, v in end.items()}})
@@ -242,13 +239,19 @@ class Recorder:
 
     def discard(self) -> None:
         """Stop recording and delete what was written; ``path`` is left as it was (idempotent)."""
-        if self._closed:
+        if not self._stop():
             return
+        self._file.close()
+        self._partial.unlink(missing_ok=True)
+
+    def _stop(self) -> bool:
+        """Stop the writer thread once it has written what is queued; False if it was stopped before."""
+        if self._closed:
+            return False
         self._closed = True
         self._queue.put(None)
         self._thread.join()
-        self._file.close()
-        self._partial.unlink(missing_ok=True)
+        return True
 
     # internals
 
