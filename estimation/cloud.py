@@ -10,6 +10,7 @@ import numpy as np
 from estimation import tolerances as tol
 from estimation.contracts import as_points
 from estimation.errors import CloudError
+from estimation.obb import column_bounds
 
 log = logging.getLogger(__name__)
 
@@ -172,7 +173,8 @@ def check_estimable(cloud: PointCloud) -> None:
     # Singular values of the centred cloud are its spread along the principal axes (a uniform subset of
     # 20,000 tells flat from solid as well as a million points, at a 50th of the cost).
     sample = cloud.points[:: max(1, n // 20000)]
-    across = float(np.ptp(cloud.points, axis=0).max())
+    low, high = column_bounds(cloud.points)  # np.ptp(axis=0) took 70 ms of a 1M-point estimate
+    across = float((high - low).max())
     if across == 0:
         raise CloudError("degenerate cloud: all points are identical")
     if across < tol.MIN_EXTENT_M:
