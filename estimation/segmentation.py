@@ -4,7 +4,8 @@ Pure numpy/scipy. The plane is found by RANSAC and refined by least squares on i
 above it is clustered by connectivity of occupied voxels (two points are in one object when a chain of
 occupied cells at most ``cell`` apart joins them), with the cell taken from the data's own spacing. A
 simulator's ground-truth labels can be passed to :func:`check_segments` to count merges and splits; they
-never replace the clustering.
+never replace the clustering. Where the caller knows several objects are in one cluster (a tracker's
+predictions), :func:`split_cluster` parts it at finer cells.
 """
 
 from __future__ import annotations
@@ -159,6 +160,76 @@ def cluster(points: np.ndarray, *, cell: float, min_points: int = MIN_CLUSTER_PO
     out = rank[labels]
     out[sizes[labels] < min_points] = -1
     return out
+
+
+#: Finer cells tried on a cluster that several known objects are in (:func:`split_cluster`), as fractions of
+#: the clustering cell: down to one median spacing, below which one object falls apart along every dropout
+#: and edge (its pieces then go back together by :func:`split_cluster`'s nearest rule, but it splits no
+#: better).
+SPLIT_FACTORS = (2 / 3, 1 / 2, 1 / CLUSTER_SPACINGS)
+
+#: The pieces the seeds take at a finer cell must hold this share of the cluster's points: below it the cell
+#: broke the objects themselves into fragments, and a seed's piece is one of them, not its object.
+SPLIT_KEPT = 0.9
+
+
+def split_cluster(points: np.ndarray, seeds: np.ndarray, cell: float) -> np.ndarray | None:
+    """Split one cluster that ``seeds`` say holds several objects: (n,) int seed index per point, or None.
+
+    The cluster is clustered again at finer cells (``SPLIT_FACTORS`` of ``cell``); each seed takes the piece
+    most points near it belong to (``_pieces_at``; noise left out). Of the cells at which the pieces taken hold ``SPLIT_KEPT``
+    of the points, the coarsest at which the most seeds take pieces of their own wins;
+    every point of a piece no seed took (a fragment of an object, noise) goes with the seed of the nearest
+    point that is in a taken piece. Seeds that share a piece share it: its points carry the lowest of their
+    indices. None when no finer cell parts any two seeds (the objects touch, or one seed is not in it).
+
+    Args:
+        points: (n, 3) float64 metres, one cluster.
+        seeds: (k, 3) metres, k >= 2: where the objects are known to be (their predicted frame centres).
+        cell: the clustering cell that joined them, metres.
+    """
+    pts = as_points(points, "points")
+    seeds = np.asarray(seeds, dtype=np.float64).reshape(-1, 3)
+    if len(seeds) < 2 or len(pts) < 2 * MIN_CLUSTER_POINTS:
+        return None
+    best: tuple[int, np.ndarray, np.ndarray] | None = None
+    for factor in SPLIT_FACTORS:
+        labels = cluster(pts, cell=factor * cell)
+        pieces = np.flatnonzero(labels >= 0)
+        if len(pieces) == 0:
+            continue
+        taken = _pieces_at(pts[pieces], labels[pieces], seeds, cell)
+        parts = len(set(taken.tolist()))
+        if np.isin(labels, taken).mean() < SPLIT_KEPT:
+            continue  # the objects themselves fell apart: a seed's piece is a fragment
+        if parts > 1 and (best is None or parts > best[0]):
+            best = (parts, labels, taken)
+        if parts == len(seeds):
+            break
+    if best is None:
+        return None
+    _, labels, taken = best
+    owner = np.full(int(labels.max()) + 1, -1, dtype=np.int64)
+    for k in range(len(seeds) - 1, -1, -1):  # a piece seeds share goes with the lowest of their indices
+        owner[taken[k]] = k
+    out = np.where(labels >= 0, owner[np.maximum(labels, 0)], -1)
+    claimed = out >= 0
+    if not claimed.all():
+        near = cKDTree(pts[claimed]).query(pts[~claimed])[1]
+        out[~claimed] = out[claimed][near]
+    return out
+
+
+def _pieces_at(points: np.ndarray, labels: np.ndarray, seeds: np.ndarray, patch: float) -> np.ndarray:
+    """(k,) the piece each seed takes: the largest piece with a point within ``patch`` (metres) of the
+    seed's nearest point's distance. A seed sits inside its object, and at a fine cell the nearest surface
+    may hold small fragments of it beside its main piece; a neighbour that near is taken instead, so the
+    two stay together (as they were)."""
+    tree = cKDTree(points)
+    near = tree.query(seeds)[0]
+    sizes = np.bincount(labels)
+    return np.array([max(set(labels[ball].tolist()), key=lambda k: (sizes[k], -k))
+                     for ball in tree.query_ball_point(seeds, near + patch)], dtype=np.int64)
 
 
 @dataclass(frozen=True)

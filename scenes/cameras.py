@@ -331,6 +331,7 @@ class FeedStats:
     empty_frames: int = 0
     unseen: int = 0
     merged: int = 0
+    parted: int = 0  # segments parted among the objects in them (scenes.sensing.CameraSensor._split_shared)
     lost_tracks: int = 0
     failed_scans: int = 0
 
@@ -346,6 +347,10 @@ class Segment:
     @cached_property
     def centroid(self) -> np.ndarray:
         return self.points.mean(axis=0)
+
+    def part(self, mask: np.ndarray) -> Segment:
+        """The segment of the points where ``mask`` ((n,) bool) is true."""
+        return Segment(self.points[mask], self.origins[mask], self.geom[mask])
 
     @cached_property
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:

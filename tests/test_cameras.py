@@ -333,6 +333,21 @@ def test_touching_objects_first_seen_in_one_scan_are_both_observed():
     assert sensor.feed.stats.merged == 1 and sensor.feed.stats.unseen == 0
 
 
+
+def test_objects_a_centimetre_apart_clustered_as_one_are_parted_before_their_first_view():
+    # 12 mm apart, 3 cameras: one cluster at the feed's cell (its own check says merged); each object's first
+    # view is its own part of it, found at a finer cell, not the two fused into one.
+    x = (BOX[0] + 0.012) / 2
+    model, data = _model({"a": (-x, 0.0), "b": (x, 0.0)})
+    sensor, truth = CameraSensor(CameraFeed(_rig(3), WORKSPACE, seed=7)), _Truth(model, data)
+    seen = [sensor.observe(truth, i, 0, shot=1) for i in "ab"]  # type: ignore[arg-type]
+    assert sensor._scan.check.merged  # type: ignore[union-attr]
+    assert sensor.feed.stats.parted == 1 and sensor.feed.stats.merged == 0
+    for view, centre in zip(seen, (-x, x), strict=True):
+        assert abs(view.frame_position[0] - centre) < 0.006 and abs(view.frame_position[1]) < 0.006
+        assert (np.sign(view.points[~view.completed, 0]) == np.sign(centre)).mean() > 0.99  # type: ignore[index]
+
+
 def test_an_object_moved_out_from_behind_another_is_seen_better_and_its_cloud_refreshed():
     # One camera; a stands 2 cm behind b and is mostly hidden. Moved clear of b it shows more of itself: once
     # at rest the sensor offers the better view (refreshed), in the frame it tracks, and goes on tracking.

@@ -6,7 +6,15 @@ import numpy as np
 import pytest
 
 from estimation.errors import CloudError
-from estimation.segmentation import check_segments, cluster, fit_plane, segment
+from estimation.segmentation import (
+    CLUSTER_SPACINGS,
+    check_segments,
+    cluster,
+    fit_plane,
+    median_spacing,
+    segment,
+    split_cluster,
+)
 
 
 def _box_surface(centre, size, n, rng):  # type: ignore[no-untyped-def]
@@ -55,6 +63,36 @@ def test_touching_boxes_are_reported_merged():
     seg = segment(pts, toward=np.array([0.0, 0.0, 1.0]), rng=rng, plane_threshold=0.004)
     check = check_segments(seg.labels, truth, [1, 2])
     assert len(check.merged) == 1
+
+
+
+
+def _two_boxes(gap, seed):  # type: ignore[no-untyped-def]
+    """Two boxes' surfaces ``gap`` apart (0.5 mm noise), their true labels (0, 1) and the clustering cell."""
+    rng = np.random.default_rng(seed)
+    a = _box_surface((-0.05 - gap / 2, 0.0), (0.1, 0.08, 0.06), 6000, rng)
+    b = _box_surface((0.04 + gap / 2, 0.0), (0.08, 0.08, 0.1), 6000, rng)
+    pts = np.concatenate([a, b]) + rng.normal(0, 0.0005, (12000, 3))
+    return pts, np.repeat([0, 1], 6000), CLUSTER_SPACINGS * median_spacing(pts)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_boxes_a_centimetre_apart_are_parted_by_where_they_are_known_to_be(seed):
+    # One cluster at the clustering cell; the finer cells part them, each box's points going to the seed at
+    # its centre. The third seed, also in the first box (a stale prediction), shares its piece.
+    pts, truth, cell = _two_boxes(0.01, seed)
+    assert (cluster(pts, cell=cell) == 0).all()
+    seeds = np.array([[-0.055, 0.0, 0.03], [0.045, 0.0, 0.05], [-0.06, 0.01, 0.02]])
+    parts = split_cluster(pts, seeds, cell)
+    assert parts is not None and set(parts.tolist()) == {0, 1}
+    assert (parts == truth).mean() > 0.999
+
+
+def test_boxes_closer_than_the_noise_allows_and_one_box_with_two_seeds_are_left_whole():
+    pts, _, cell = _two_boxes(0.003, 0)
+    assert split_cluster(pts, np.array([[-0.05, 0.0, 0.03], [0.04, 0.0, 0.05]]), cell) is None
+    box = pts[:6000]
+    assert split_cluster(box, np.array([[-0.05, 0.0, 0.03], [-0.02, 0.02, 0.02]]), cell) is None
 
 
 def test_an_objects_lowest_band_is_its_own_and_the_tables_stray_noise_is_not():
