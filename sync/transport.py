@@ -29,7 +29,8 @@ class Transport(Protocol):
         """Call ``callback`` for every publication whose key ``keyexpr`` matches, until :meth:`close`."""
 
     def queryable(self, keyexpr: str, answer: Answer) -> None:
-        """Answer queries whose selector intersects ``keyexpr`` with what ``answer`` returns."""
+        """Answer queries whose selector intersects ``keyexpr`` with what ``answer`` returns, less the replies
+        whose keys the selector does not match."""
 
     def get(self, selector: str, timeout: float) -> list[tuple[str, bytes]]:
         """Ask every queryable that ``selector`` intersects; their replies, within ``timeout`` seconds."""

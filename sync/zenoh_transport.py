@@ -150,10 +150,18 @@ class ZenohTransport:
             keyexpr, lambda s: callback(str(s.key_expr), s.payload.to_bytes())))
 
     def queryable(self, keyexpr: str, answer: Answer) -> None:
+        import zenoh
+
         def on_query(query) -> None:  # type: ignore[no-untyped-def]
+            # Only the replies whose keys the query matches, as the in-process bus does: Zenoh refuses a reply
+            # on any other key with an error, which ended the answer there (a query for one object's keys
+            # got at most its cloud) and logged a traceback per query (a flood of narrow queries, a flood
+            # of tracebacks).
+            asked = query.key_expr
             try:
-                for reply_key, data in answer(str(query.key_expr)):
-                    query.reply(reply_key, data)
+                for reply_key, data in answer(str(asked)):
+                    if asked.intersects(zenoh.KeyExpr(reply_key)):
+                        query.reply(reply_key, data)
             except Exception:
                 log.exception("answering a query on %s failed", keyexpr)
 
