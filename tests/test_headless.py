@@ -22,6 +22,7 @@ from sync.link import Link
 from sync.messages import (
     VERSION,
     Cloud,
+    Gone,
     OperatorCommand,
     OperatorTarget,
     Pose,
@@ -256,6 +257,84 @@ def test_a_cloud_superseded_before_its_estimation_started_is_cancelled(cache):
             clock.advance(local.twin.model.opt.timestep)
             time.sleep(0.005)
         assert local.report.objects_synced == 1 and local._clouds["cube"] == (1, 10)
+    finally:
+        local.close()
+
+
+def test_a_cloud_older_than_the_objects_removal_does_not_bring_it_back(cache):
+    with Headless(load_scene(SMALL), cache_dir=cache) as session:
+        session.run(0.2)
+        keys, remote, local = Keys("small"), session.remote, session.local
+        old_cloud, old_pose = (remote._replies[keys.object("crate", kind)] for kind in ("cloud", "pose"))
+        remote.remove("crate")
+        session.run(0.1)
+        assert local.objects == ["can"]
+        # What a late joiner's query brought, taken before the removal and arriving after the live Gone (or a
+        # replay): older than the Gone, so not news of the crate. The remote never sends a second Gone.
+        replay = session.bus.transport()
+        replay.put(keys.object("crate", "pose"), old_pose)
+        replay.put(keys.object("crate", "cloud"), old_cloud)
+        session.run(0.2)
+        assert local.objects == ["can"] and local.twin.object_ids() == ["can"]
+        assert local.report.out_of_order >= 2 and "crate" not in local._latest
+        # The remote adding it again (later sequence numbers than its Gone) is followed.
+        remote.add(next(o for o in remote.scene.objects if o.id == "crate"))
+        session.run(0.3)
+        assert sorted(local.objects) == ["can", "crate"]
+
+
+def _twin_with_a_worker(cache: Path) -> tuple[Local, SimClock, Link, Keys]:
+    """A live twin (an estimation worker, models compiled in the background) on the in-process bus with a bare
+    remote that answers the scene; a Link to publish as the remote's sensor."""
+    bus, clock, keys = InProcessBus(), SimClock(), Keys("s")
+    info = SceneInfo(v=VERSION, stamp_ns=0, name="s", table_size=(1.0, 0.6, 0.04), table_height=0.5,
+                     table_material="wood_pine", ee_radius=0.02, ee_position=(-0.3, 0.0, 0.56))
+    bus.transport("remote").queryable("twin/s/**", lambda _selector: [(keys.info, encode(info))])
+    local = Local(bus.transport("twin"), clock=clock, scene="s", settings=LocalSettings(workers=1, cache_dir=cache))
+    return local, clock, Link(bus.transport("sensor")), keys
+
+
+def _until(local: Local, clock: SimClock, condition, step=None) -> None:  # type: ignore[no-untyped-def]
+    """Run the twin's loop (or ``step``) until ``condition()``; the deadline is a failsafe for a hung worker."""
+    deadline = time.monotonic() + 120.0
+    while not condition():
+        assert time.monotonic() < deadline, "the twin never got there"
+        (step or local.iterate)()
+        clock.advance(local.twin.model.opt.timestep)
+        time.sleep(0.002)
+
+
+def test_an_object_removed_while_its_model_compiles_does_not_stay_in_the_twin(cache):
+    local, clock, sensor, keys = _twin_with_a_worker(cache)
+    try:
+        centre = np.array([0.0, 0.0, 0.53])
+        sensor.put(keys.object("cube", "cloud"), _box_cloud("cube", centre, epoch=1, seq=1))
+        _until(local, clock, lambda: local.twin.edits_pending > 0)  # estimated; its model compiling
+        sensor.put(keys.object("cube", "gone"), Gone(v=VERSION, stamp_ns=0, object_id="cube", epoch=1, seq=2))
+        _until(local, clock, lambda: not local.adding)
+        # The twin had checked whether its model held the cube (not yet) and removed nothing, then added it.
+        assert local.twin.object_ids() == [] and local.objects == [] and not local._offsets
+    finally:
+        local.close()
+
+
+def test_a_newer_view_estimated_while_the_first_compiles_replaces_it(cache):
+    local, clock, sensor, keys = _twin_with_a_worker(cache)
+    try:
+        centre = np.array([0.0, 0.0, 0.53])
+
+        def collect() -> None:  # the loop's work without swapping models in: the first edit stays pending
+            local._drain()
+            local._collect()
+
+        sensor.put(keys.object("cube", "cloud"), _box_cloud("cube", centre, epoch=1, seq=1))
+        _until(local, clock, lambda: local.twin.edits_pending == 1, collect)
+        sensor.put(keys.object("cube", "cloud"), _box_cloud("cube", centre + 0.01, epoch=1, seq=2))
+        _until(local, clock, lambda: local.twin.edits_pending == 2, collect)
+        _until(local, clock, lambda: not local.adding)
+        # The second edit was made when the running model had no cube: it added one more, which did not compile.
+        assert local.twin.failed_edits == 0 and local.report.failed_edits == 0
+        assert local.objects == ["cube"] and local._clouds["cube"] == (1, 2)
     finally:
         local.close()
 

@@ -186,6 +186,12 @@ def _geom_types() -> dict[str, object]:
             "capsule": mujoco.mjtGeom.mjGEOM_CAPSULE, "sphere": mujoco.mjtGeom.mjGEOM_SPHERE}
 
 
+def has_object(spec, object_id: str) -> bool:  # type: ignore[no-untyped-def]
+    """Whether ``spec`` holds the object ``object_id`` (a body with the free joint ``<id>/free``; the end effector's
+    body, say, is not an object whatever its name)."""
+    return spec.joint(f"{object_id}/free") is not None
+
+
 def remove_object(spec, object_id: str) -> None:  # type: ignore[no-untyped-def]
     """Delete an object's body and its meshes from ``spec``."""
     body = spec.body(object_id)

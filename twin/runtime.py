@@ -64,7 +64,7 @@ from twin.decompose import DEFAULT_SETTINGS, CoacdSettings
 from twin.history import CORRECTION, STATE, History
 from twin.hold import DEFAULT_HOLD, Hold, HoldSettings
 from twin.loop import LoopStats, run_loop
-from twin.model import EndEffectorSpec, TableSpec, add_object, new_spec, remove_object
+from twin.model import EndEffectorSpec, TableSpec, add_object, has_object, new_spec, remove_object
 from twin.objects import DEFAULT_FRICTION, TwinObject, lowest_point, object_at_estimate
 from twin.poses import from_rotvec, quat_conj, quat_mul, quat_product, rotation, to_rotvec
 from twin.samples import Samples
@@ -209,6 +209,11 @@ class LocalReport:
 #: (forged, or a remote's mistake) must not grow memory without limit. Past this many, the oldest is forgotten.
 MAX_ORPHAN_POSES = 1024
 
+#: Ids the twin remembers the removal of (the ``(epoch, seq)`` of their :class:`Gone`), so that an older cloud or
+#: pose of them does not bring the object back: the late-join reply, taken before the removal, can arrive after
+#: the live Gone, and the remote sends no second Gone. Past this many, the oldest removal is forgotten.
+MAX_GONE = 1024
+
 #: How often (twin time, seconds) the report samples each object's divergence from the remote.
 DIVERGENCE_EVERY = 0.01
 
@@ -288,6 +293,7 @@ class Local:
         self._unseen: set[str] = set()  # objects the remote's sensor has lost (Pose.seen False)
         self._pose_mark: dict[str, tuple[int, int]] = {}  # id -> (epoch, seq) of the newest pose taken
         self._orphans: dict[str, None] = {}  # ids with a pose and no cloud, oldest first (MAX_ORPHAN_POSES)
+        self._gone: dict[str, tuple[int, int]] = {}  # id -> (epoch, seq) of its Gone, oldest first (MAX_GONE)
         self._targets: dict[str, Pose] = {}  # id -> its newest pose from C, until measured (_measure)
         self._errors: dict[str, tuple[np.ndarray, bool]] = {}  # id -> (correction left (12,), snap it)
         self._history = History(round(settings.align_window / self.twin.model.opt.timestep))
@@ -452,8 +458,9 @@ class Local:
     def _newer(self, marks: dict[str, tuple[int, int]], msg) -> bool:  # type: ignore[no-untyped-def]
         """Take ``msg`` if it is newer than the mark for its object (and move the mark), else count it."""
         mark = marks.get(msg.object_id)
-        if mark is not None and (msg.epoch, msg.seq) <= mark:
-            self.report.out_of_order += 1  # e.g. the late-join reply raced a newer live message
+        gone = self._gone.get(msg.object_id)
+        if (mark is not None and (msg.epoch, msg.seq) <= mark) or (gone is not None and (msg.epoch, msg.seq) <= gone):
+            self.report.out_of_order += 1  # e.g. the late-join reply raced a newer live message, or the Gone
             return False
         marks[msg.object_id] = (msg.epoch, msg.seq)
         return True
@@ -461,7 +468,7 @@ class Local:
     def _on_heartbeat(self, msg: Heartbeat) -> None:
         """Pull back every mark past the remote's own counter: no honest message is newer than it."""
         now = (msg.epoch, msg.seq)
-        for marks in (self._pose_mark, self._clouds):
+        for marks in (self._pose_mark, self._clouds, self._gone):
             for object_id, mark in marks.items():
                 if mark > now:
                     log.warning("object %r: a message claimed sequence %s beyond the remote's %s; ignoring the claim",
@@ -586,6 +593,7 @@ class Local:
             if mark is not None and (msg.epoch, msg.seq) < mark:
                 self.report.out_of_order += 1  # older than the cloud the twin has: not about this object
                 return
+            self._forget_later(msg)
             self._jobs.pop(msg.object_id, None)
             self._clouds.pop(msg.object_id, None)
             self._offsets.pop(msg.object_id, None)
@@ -597,11 +605,21 @@ class Local:
             self._orphans.pop(msg.object_id, None)
             self._unseen.discard(msg.object_id)
             self.hold.forget(msg.object_id)
+            # An object whose model is compiling now is not in the twin yet: its add's ``done`` removes it.
             if self.twin.has(msg.object_id):
-                self.twin.edit_async(lambda spec, i=msg.object_id: remove_object(spec, i))
+                self.twin.edit_async(lambda spec, i=msg.object_id: _remove_if_there(spec, i))
             for side in ("twin", "remote"):
                 self.rlog.removed(side, msg.object_id, self.twin.time)
             self.rlog.event(self.twin.time, f"{msg.object_id}: removed by the remote")
+
+    def _forget_later(self, msg: Gone) -> None:
+        """Remember that ``msg``'s object is gone as of its ``(epoch, seq)``, newest last; past :data:`MAX_GONE`
+        ids, forget the oldest (counted)."""
+        self._gone.pop(msg.object_id, None)
+        self._gone[msg.object_id] = (msg.epoch, msg.seq)
+        if len(self._gone) > MAX_GONE:
+            del self._gone[next(iter(self._gone))]
+            self.report.evicted["gone"] += 1
 
     def _orphan(self, object_id: str) -> None:
         """Note a pose of an object the twin has no cloud of, newest last; past :data:`MAX_ORPHAN_POSES` such ids,
@@ -642,14 +660,17 @@ class Local:
                 log.warning("object %r: could not estimate its cloud: %s", object_id, exc)
                 self.rlog.event(self.twin.time, f"{object_id}: could not estimate its cloud: {exc}", "ERROR")
                 continue
-            exists = self.twin.has(object_id)
 
-            def edit(spec, obj=obj, exists=exists) -> None:  # type: ignore[no-untyped-def]
-                if exists:
-                    remove_object(spec, obj.id)
+            def edit(spec, obj=obj) -> None:  # type: ignore[no-untyped-def]
+                # Whether the object is there is asked of the spec this edit starts from, not of the running
+                # model: an earlier view of it may be compiling still (edits apply in order).
+                _remove_if_there(spec, obj.id)
                 add_object(spec, obj)
 
             def done(obj=obj, msg=msg, received=received, display=display) -> None:  # type: ignore[no-untyped-def]
+                if obj.id not in self._clouds:  # a Gone came while it compiled: out again
+                    self.twin.edit_async(lambda spec, i=obj.id: _remove_if_there(spec, i))
+                    return
                 self._offsets[obj.id] = _offset(obj, msg)
                 latest = self._latest.get(obj.id)
                 if latest is not None and latest.seq > msg.seq and latest.seen:
@@ -948,6 +969,12 @@ def _scene_box(info: SceneInfo) -> tuple[np.ndarray, np.ndarray]:
     if info.workspace_min is not None and info.workspace_max is not None:
         return np.asarray(info.workspace_min, dtype=float), np.asarray(info.workspace_max, dtype=float)
     return reach_box(info, SCENE_REACH)
+
+
+def _remove_if_there(spec, object_id: str) -> None:  # type: ignore[no-untyped-def]
+    """Remove the object from ``spec`` if it holds it (edits queued one after another each check the spec)."""
+    if has_object(spec, object_id):
+        remove_object(spec, object_id)
 
 
 def _float3(v: np.ndarray) -> tuple[float, float, float]:
