@@ -8,9 +8,11 @@ import time
 from dataclasses import replace
 from pathlib import Path
 
+import msgspec
 import numpy as np
 import pytest
 
+from scenes import scenefile
 from scenes.headless import Headless
 from scenes.remote import Remote
 from scenes.scenefile import load_scene
@@ -31,7 +33,7 @@ from sync.messages import (
     encode,
 )
 from sync.ordering import MARK_EXPIRY, MAX_SENDERS
-from twin.runtime import MAX_ORPHAN_POSES, Local, LocalSettings, OperatorSettings
+from twin.runtime import MAX_OBJECTS, MAX_ORPHAN_POSES, Local, LocalSettings, OperatorSettings
 from twin.trajectory import push_trajectory
 
 SMALL = Path(__file__).parent / "data" / "small.toml"
@@ -335,6 +337,24 @@ def test_a_newer_view_estimated_while_the_first_compiles_replaces_it(cache):
         # The second edit was made when the running model had no cube: it added one more, which did not compile.
         assert local.twin.failed_edits == 0 and local.report.failed_edits == 0
         assert local.objects == ["cube"] and local._clouds["cube"] == (1, 2)
+    finally:
+        local.close()
+
+
+def test_clouds_of_ever_new_ids_are_taken_only_up_to_the_object_limit(cache):
+    assert MAX_OBJECTS >= scenefile.MAX_OBJECTS  # every scene a remote can load fits
+    local, _, sensor, keys = _twin_with_a_worker(cache)
+    try:
+        cube = _box_cloud("cube", np.array([0.0, 0.0, 0.53]), epoch=1, seq=1)
+        for k in range(MAX_OBJECTS + 5):  # each would be estimated, then added to the model
+            sensor.put(keys.object(f"o{k}", "cloud"), msgspec.structs.replace(cube, object_id=f"o{k}"))
+        local.iterate()
+        assert local.expected == MAX_OBJECTS
+        assert local.link.counters.dropped_by_reason["too-many-objects"] == 5
+        # A newer view of an object it has is still taken.
+        sensor.put(keys.object("o0", "cloud"), msgspec.structs.replace(cube, object_id="o0", seq=2))
+        local.iterate()
+        assert local._clouds["o0"] == (1, 2) and local.link.counters.dropped_by_reason["too-many-objects"] == 5
     finally:
         local.close()
 

@@ -209,6 +209,12 @@ class LocalReport:
 #: (forged, or a remote's mistake) must not grow memory without limit. Past this many, the oldest is forgotten.
 MAX_ORPHAN_POSES = 1024
 
+#: Objects the twin takes at once (in it, or being estimated or compiled): as many as a scene file may hold
+#: (:data:`scenes.scenefile.MAX_OBJECTS`). Each costs an estimate in a worker and a body in the model, so clouds of
+#: ever new ids (forged, or a remote's bug) must not queue estimates and grow the model without limit: past it,
+#: a cloud of a new id is dropped and counted (``"too-many-objects"``); one of an object the twin has is taken.
+MAX_OBJECTS = 1000
+
 #: Ids the twin remembers the removal of (the ``(epoch, seq)`` of their :class:`Gone`), so that an older cloud or
 #: pose of them does not bring the object back: the late-join reply, taken before the removal, can arrive after
 #: the live Gone, and the remote sends no second Gone. Past this many, the oldest removal is forgotten.
@@ -579,7 +585,13 @@ class Local:
                 if self.rlog.enabled:  # every pose passes here: no string building with rerun off
                     self.rlog.event(self.twin.time, f"{msg.object_id}: pose correction (seq {msg.seq})", "DEBUG")
         elif isinstance(msg, Cloud):
-            if not self._in_scene(msg, msg.frame_position) or not self._newer(self._clouds, msg):
+            if not self._in_scene(msg, msg.frame_position):
+                return
+            if msg.object_id not in self._clouds and len(self._clouds) >= MAX_OBJECTS:
+                self.link.dropped("too-many-objects", "dropped a cloud of %r: the twin has %d objects already",
+                                  msg.object_id, len(self._clouds))
+                return
+            if not self._newer(self._clouds, msg):
                 return
             self._orphans.pop(msg.object_id, None)  # its pose, if one came first, is kept for it
             superseded = self._jobs.get(msg.object_id)
