@@ -107,6 +107,20 @@ def test_a_forged_sequence_number_silences_an_object_only_until_a_heartbeat_and_
         assert np.linalg.norm(session.local.twin.pose("crate")[0] - target) < 0.005
 
 
+def test_forged_sequence_numbers_of_many_ids_are_logged_rate_limited(cache, caplog):
+    with Headless(load_scene(SMALL), cache_dir=cache) as session:
+        session.run(0.1)
+        forger, keys, epoch = Link(session.bus.transport()), Keys("small"), session.remote.epoch
+        for k in range(100):
+            forger.put(keys.object(f"ghost{k}", "pose"), Pose(
+                v=VERSION, stamp_ns=0, object_id=f"ghost{k}", epoch=epoch, seq=10**7, sim_time=0.0,
+                position=(0.0, 0.0, 0.6), quat=(1.0, 0.0, 0.0, 0.0), linvel=(0.0,) * 3, angvel=(0.0,) * 3))
+        with caplog.at_level(logging.WARNING, logger="twin.runtime"):
+            session.run(session.remote.heartbeat_s + 0.05)  # a heartbeat pulls every forged mark back
+        assert max(session.local._pose_mark.values()) < (epoch, 10**7)
+        assert len([r for r in caplog.records if "beyond the remote's" in r.getMessage()]) <= 10  # not one each
+
+
 def test_a_command_stamped_at_the_int64_limit_does_not_push_the_remotes_poses_out_of_range(cache):
     with Headless(load_scene(SMALL), cache_dir=cache) as session:
         session.run(0.2)

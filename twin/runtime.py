@@ -476,9 +476,9 @@ class Local:
         now = (msg.epoch, msg.seq)
         for marks in (self._pose_mark, self._clouds, self._gone):
             for object_id, mark in marks.items():
-                if mark > now:
-                    log.warning("object %r: a message claimed sequence %s beyond the remote's %s; ignoring the claim",
-                                object_id, mark, now)
+                if mark > now:  # one line per forged message at most: rate-limited like every drop
+                    self.dropped_log.warning("forged-seq", "object %r: a message claimed sequence %s beyond the remote's "
+                                             "%s; ignoring the claim", object_id, mark, now)
                     marks[object_id] = now
 
     def _operator_target(self, trajectory) -> np.ndarray | None:  # type: ignore[no-untyped-def]
