@@ -198,6 +198,23 @@ def test_poses_of_ids_without_a_cloud_are_bounded_and_one_just_before_its_cloud_
         assert np.linalg.norm(local.twin.pose("cube")[0] - moved) < 0.005
 
 
+def test_a_pose_of_an_earlier_epoch_does_not_move_an_object_its_new_cloud_placed(cache):
+    with Headless(load_scene(SMALL), cache_dir=cache) as session:
+        session.run(0.1)
+        local, keys, epoch = session.local, Keys("small"), session.remote.epoch
+        forger = Link(session.bus.transport())
+        taken = np.array([-0.25, -0.2, 0.53])
+        # A pose from before a restart (a larger seq, a smaller epoch) just before the new epoch's first cloud.
+        forger.put(keys.object("cube", "pose"), Pose(
+            v=VERSION, stamp_ns=0, object_id="cube", epoch=epoch, seq=10**6, sim_time=0.0, position=(-0.25, -0.1, 0.53),
+            quat=(1.0, 0.0, 0.0, 0.0), linvel=(0.0,) * 3, angvel=(0.0,) * 3))
+        session.tick()
+        forger.put(keys.object("cube", "cloud"), _box_cloud("cube", taken, epoch=epoch + 1, seq=1))
+        session.run(0.1)
+        assert "cube" in local.objects
+        assert np.linalg.norm(local.twin.pose("cube")[0] - taken) < 0.005
+
+
 def test_a_forged_device_mark_freezes_the_device_no_longer_than_the_mark_expiry(cache):
     with Headless(load_scene(SMALL), cache_dir=cache, operator=OperatorSettings(listen=True)) as session:
         local, driver, keys = session.local, Link(session.bus.transport()), Keys("small")

@@ -685,7 +685,12 @@ class Local:
                     return
                 self._offsets[obj.id] = _offset(obj, msg)
                 latest = self._latest.get(obj.id)
-                if latest is not None and latest.seq > msg.seq and latest.seen:
+                if latest is not None and (latest.epoch, latest.seq) < (msg.epoch, msg.seq):
+                    # Older than the cloud, whose frame is where the object was since (a pose of a remote's
+                    # earlier run has a larger seq and a smaller epoch): neither corrected nor held towards.
+                    del self._latest[obj.id]
+                    self._mapped.pop(obj.id, None)
+                elif latest is not None and latest.seen:
                     self._targets[obj.id] = latest
                     self._to_correct.append(obj.id)
                 self._hold_at(obj.id)
