@@ -215,6 +215,28 @@ def test_a_pose_of_an_earlier_epoch_does_not_move_an_object_its_new_cloud_placed
         assert np.linalg.norm(local.twin.pose("cube")[0] - taken) < 0.005
 
 
+def test_of_many_poses_queued_for_one_object_the_loop_handles_only_the_newest(cache):
+    with Headless(load_scene(SMALL), cache_dir=cache) as session:
+        session.run(0.2)
+        local, remote, keys = session.local, session.remote, Keys("small")
+        forger = Link(session.bus.transport())
+        start, quat = remote.twin.pose("crate")
+        before, flood = local.twin.pose("crate")[0], 5000
+        updates, skipped = local.report.pose_updates, local.report.out_of_order + local.report.poses_superseded
+        # Handling a pose costs the loop more than receiving one costs the transport: handled one by one, a
+        # flood of valid poses (forged ones, here 5 mm apart along x) held the loop in one drain for seconds.
+        for k in range(flood, 0, -1):  # the newest first: the rest are older, and all of them skipped
+            forger.put(keys.object("crate", "pose"), Pose(
+                v=VERSION, stamp_ns=0, object_id="crate", epoch=remote.epoch, seq=10**6 + k, sim_time=0.0,
+                position=tuple((start + np.array([0.05 * k / flood, 0.0, 0.0])).tolist()), quat=tuple(quat.tolist()),
+                linvel=(0.0,) * 3, angvel=(0.0,) * 3))
+        session.tick()
+        assert local.report.pose_updates == updates + 1
+        assert local.report.out_of_order + local.report.poses_superseded - skipped == flood - 1
+        session.run(0.15)  # before a heartbeat pulls the forged mark back: the newest pose is what the twin follows
+        assert np.linalg.norm(local.twin.pose("crate")[0] - (before + np.array([0.05, 0.0, 0.0]))) < 0.005
+
+
 def test_a_forged_device_mark_freezes_the_device_no_longer_than_the_mark_expiry(cache):
     with Headless(load_scene(SMALL), cache_dir=cache, operator=OperatorSettings(listen=True)) as session:
         local, driver, keys = session.local, Link(session.bus.transport()), Keys("small")
