@@ -22,11 +22,13 @@ from __future__ import annotations
 
 import logging
 import stat
+import tokenize
 import warnings
 import zipfile
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import BinaryIO
 
 import numpy as np
 
@@ -649,26 +651,51 @@ def npy_header(path: Path) -> tuple[tuple[int, ...], np.dtype]:
     """The shape and dtype an .npy file's header declares, checked against the file's size; no data is read.
 
     Raises:
-        CloudFileError: not an .npy header, or fewer data bytes than the shape claims (a small file whose
-            header claims (90000, 90000) would otherwise be a 60 GiB allocation).
+        CloudFileError: not an .npy header (or one of a format version numpy does not write), an array of
+            Python objects, or fewer data bytes than the shape claims (a small file whose header claims
+            (90000, 90000) would otherwise be a 60 GiB allocation).
     """
     with path.open("rb") as fh:
-        try:
-            version = np.lib.format.read_magic(fh)
-            if version == (1, 0):
-                shape, _, dtype = np.lib.format.read_array_header_1_0(fh)
-            elif version == (2, 0):
-                shape, _, dtype = np.lib.format.read_array_header_2_0(fh)
-            else:  # 3.0 (utf-8 field names) has no public reader
-                shape, _, dtype = np.lib.format._read_array_header(fh, version)
-        except (ValueError, EOFError) as exc:
-            raise CloudFileError(f"{path}: not a readable .npy array ({str(exc).splitlines()[0]})") from None
+        shape, dtype = _read_npy_header(fh, f"{path}")
         offset = fh.tell()
     claimed = int(np.prod(shape, dtype=object)) * dtype.itemsize
     available = path.stat().st_size - offset
     if claimed > available:
         raise CloudFileError(f"{path}: truncated: the header claims shape {shape} of {dtype} ({claimed} bytes), but "
                              f"{available} bytes follow it")
+    return shape, dtype
+
+
+def _read_npy_header(fh: BinaryIO, where: str) -> tuple[tuple[int, ...], np.dtype]:
+    """Read an .npy magic string and header from ``fh``; ``where`` names the file (and member) in errors.
+
+    numpy's readers raise more than ValueError on a damaged header: an unknown version reached a private
+    reader numpy 2 no longer has (AttributeError), and a header that is no Python literal goes through
+    numpy's Python 2 fallback, which raises tokenize.TokenError or warns.
+    """
+    try:
+        version = np.lib.format.read_magic(fh)
+    except (ValueError, EOFError) as exc:
+        raise CloudFileError(f"{where}: not an .npy array ({str(exc).splitlines()[0][:200]})") from None
+    if version == (1, 0):
+        reader = np.lib.format.read_array_header_1_0
+    elif version in ((2, 0), (3, 0)):
+        # 3.0 differs from 2.0 only in allowing utf-8 field names, and fields are refused anyway.
+        reader = np.lib.format.read_array_header_2_0
+    else:
+        raise CloudFileError(f"{where}: .npy format version {version[0]}.{version[1]} is not one numpy writes "
+                             "(1.0, 2.0 or 3.0)")
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", UserWarning)
+            shape, _, dtype = reader(fh)
+    except (ValueError, EOFError, tokenize.TokenError, UserWarning) as exc:
+        reason = str(exc.args[0] if exc.args else exc).splitlines()[0] or type(exc).__name__
+        raise CloudFileError(f"{where}: not a readable .npy header ({reason[:200]})") from None
+    if dtype.hasobject:
+        raise CloudFileError(f"{where}: the array holds Python objects (pickled data), which are not read")
+    if any(n < 0 for n in shape):
+        raise CloudFileError(f"{where}: the .npy header declares a negative size, shape {shape}")
     return shape, dtype
 
 
@@ -705,9 +732,7 @@ def _read_numpy(path: Path, max_points: int) -> _Columns:
 def _check_npz_member(path: Path, archive: zipfile.ZipFile, name: str, max_points: int) -> None:
     """Refuse a member whose header claims more rows than allowed or more bytes than it unpacks to."""
     with archive.open(name) as fh:
-        version = np.lib.format.read_magic(fh)
-        reader = np.lib.format.read_array_header_1_0 if version == (1, 0) else np.lib.format.read_array_header_2_0
-        shape, _, dtype = reader(fh)
+        shape, dtype = _read_npy_header(fh, f"{path}: member {name!r}")
     key = Path(name).stem
     check_real(path, dtype, f"array {key!r}")
     if key == "points" and (len(shape) != 2 or shape[1] != 3):

@@ -6,6 +6,7 @@ import subprocess
 import sys
 import textwrap
 import tracemalloc
+import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -384,6 +385,41 @@ def test_npy_shorter_than_its_header(tmp_path, cloud):
     (tmp_path / "c.npy").write_bytes(data[:-100])
     with pytest.raises(CloudFileError, match=r"c\.npy: truncated: the header claims shape \(500, 3\)"):
         load_cloud(tmp_path / "c.npy")
+
+
+def _npy_with_header(path: Path, version: bytes, header: bytes) -> Path:
+    """An .npy file with a hand-made magic version and header (the length field is right)."""
+    length = len(header).to_bytes(2 if version == b"\x01\x00" else 4, "little")
+    path.write_bytes(b"\x93NUMPY" + version + length + header + b"\0" * 96)
+    return path
+
+
+@pytest.mark.parametrize(("version", "header", "match"), [
+    # numpy 2 has no np.lib.format._read_array_header: any version but 1.0 and 2.0 was an AttributeError.
+    (b"\x09\x00", b"", r"x\.npy: \.npy format version 9\.0 is not one numpy writes"),
+    # a header that is no Python literal goes through numpy's Python 2 fallback: tokenize.TokenError.
+    (b"\x01\x00", b"{'descr': '<f8',\n", r"x\.npy: not a readable \.npy header \(EOF in multi-line statement\)"),
+    (b"\x03\x00", b"{'descr': '<f8',\n", r"x\.npy: not a readable \.npy header"),
+    (b"\x01\x00", b"{'descr': '|O', 'fortran_order': False, 'shape': (32, 3), }\n",
+     r"x\.npy: the array holds Python objects \(pickled data\), which are not read"),
+    (b"\x01\x00", b"{'descr': '<f8', 'fortran_order': False, 'shape': (-4, 3), }\n",
+     r"x\.npy: the \.npy header declares a negative size, shape \(-4, 3\)"),
+])
+def test_damaged_npy_header_is_one_line_error(tmp_path, version, header, match):
+    path = _npy_with_header(tmp_path / "x.npy", version, header)
+    with pytest.raises(CloudFileError, match=match):
+        load_cloud(path)
+    np.savez(tmp_path / "x.npz", points=np.zeros((8, 3)))  # the same header as an .npz member
+    with zipfile.ZipFile(tmp_path / "x.npz", "w") as archive:
+        archive.writestr("points.npy", path.read_bytes())
+    with pytest.raises(CloudFileError, match=r"x\.npz: member 'points\.npy': "):
+        load_cloud(tmp_path / "x.npz")
+
+
+def test_npy_format_version_3_is_read(tmp_path, cloud):
+    with open(tmp_path / "c.npy", "wb") as fh:
+        np.lib.format.write_array(fh, cloud.points, version=(3, 0))
+    np.testing.assert_array_equal(load_cloud(tmp_path / "c.npy").points, cloud.points)
 
 
 def test_warnings_go_to_the_log_not_stdout(tmp_path, cloud, capfd, caplog):
