@@ -16,7 +16,7 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
-from cli.outputs import check_not_input, check_record_file
+from cli.outputs import check_not_input, check_output_file, check_record_file
 from estimation.errors import TwinError
 
 log = logging.getLogger("twin")
@@ -86,6 +86,9 @@ class _OneLineFormatter(logging.Formatter):
 #: The loop's ceiling: one step of the smallest scene takes ~10 us, so faster asks only queue work (1e9 Hz grew
 #: memory without bound).
 MAX_RATE_HZ = 100_000.0
+
+#: What ``--mesh-out`` writes: the formats trimesh exports a triangle mesh to (it has no .xyz or .npy writer).
+MESH_SUFFIXES = (".stl", ".ply", ".obj")
 
 #: Numeric options: attribute -> (flag, lowest allowed, whether the lowest itself is allowed, highest).
 _NUMBERS: dict[str, tuple[str, float, bool, float]] = {
@@ -331,7 +334,7 @@ def _cmd_estimate(args: argparse.Namespace) -> int:
 
     scale = unit_scale(args.units)
     if args.mesh_out is not None:  # before the work, and before anything is written
-        check_not_input(args.mesh_out, args.views, "--mesh-out")
+        check_output_file(args.mesh_out, args.views, "--mesh-out", suffixes=MESH_SUFFIXES)
     density, mat = resolve_density(args.material, args.density)
     name = None if mat is None else mat.name
     support = _support_plane(args.support_plane, scale)

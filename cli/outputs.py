@@ -40,6 +40,25 @@ def check_not_input(output: Path, inputs: Iterable[Path | None], flag: str) -> N
             raise TwinError(f"{flag} {output}: is the input {source}; writing it would destroy the input, choose another file")
 
 
+def check_output_file(path: Path, inputs: Iterable[Path | None], flag: str, *, suffixes: Iterable[str]) -> None:
+    """Refuse an output file before any work: one of the inputs, a format not among ``suffixes``, a folder that
+    does not exist, or an existing path that is not a regular file (a FIFO or a device, which the file moved
+    into place would delete; a folder).
+
+    Raises:
+        TwinError: naming the flag, the file and why.
+    """
+    check_not_input(path, inputs, flag)
+    suffixes = sorted(suffixes)
+    if path.suffix.lower() not in suffixes:
+        named = repr(path.suffix) if path.suffix else "(no suffix)"
+        raise TwinError(f"{flag} {path}: unknown format {named}; use one of {', '.join(suffixes)}")
+    if not path.parent.is_dir():
+        raise TwinError(f"{flag} {path}: the folder {path.parent} does not exist")
+    if path.exists() and not path.is_file():
+        raise TwinError(f"{flag} {path}: exists and is not a regular file; refusing to replace it")
+
+
 def check_output_folder(out: Path, *, marker: str, flag: str = "--out", writes: Iterable[str] = (),
                         inputs: Iterable[Path | None] = ()) -> None:
     """Refuse an output folder this command must not write into: it exists and is not a folder, or holds
