@@ -155,6 +155,22 @@ def _origins(value: object, good: np.ndarray, dropped: int, scale: float) -> np.
     return as_points(arr, "sensor_origins") * scale
 
 
+def check_sensor_origin(origin: np.ndarray, what: str) -> None:
+    """Raise unless ``origin`` ((3,) or (n, 3) metres) lies within ``tolerances.MAX_COORDINATE_M`` of the origin.
+
+    A sensor beyond any coordinate an estimate accepts is a damaged header or the wrong units, and orienting
+    normals towards it overflows (at 1e160 m numpy warned of a divide by zero and an invalid cast and the
+    estimate went on); a depth camera's pose is held to the same bound (``estimation.depthimage.pose``).
+
+    Raises:
+        CloudError: naming ``what`` and how far the sensor is.
+    """
+    far = float(np.abs(origin).max(initial=0.0))
+    if not far <= tol.MAX_COORDINATE_M:  # NaN too
+        raise CloudError(f"{what}: the sensor is {far:.3g} m from the origin, beyond the {tol.MAX_COORDINATE_M:g} m "
+                         "an estimate accepts (wrong --units, or a damaged VIEWPOINT?)")
+
+
 def check_estimable(cloud: PointCloud) -> None:
     """Raise if ``cloud`` cannot enclose a volume: too few distinct points, out of range, flat or line-like.
 

@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from estimation import tolerances as tol
-from estimation.cloud import PointCloud, check_estimable
+from estimation.cloud import PointCloud, check_estimable, check_sensor_origin
 from estimation.downsample import voxel_downsample, voxel_subsample
 from estimation.errors import CloudError
 from estimation.inertia import MassProperties, mass_properties, triangle_areas
@@ -125,7 +125,8 @@ def estimate(
         read_seconds: time spent reading the file, carried into ``timings``.
 
     Raises:
-        CloudError: too few points, a flat or line-like cloud.
+        CloudError: too few points, a flat or line-like cloud, a viewpoint beyond
+            ``tolerances.MAX_COORDINATE_M``.
         MaterialError: a non-positive or non-finite density.
         ValueError: an unknown method.
         ReconstructionError: 'auto' found no closed solid.
@@ -134,6 +135,8 @@ def estimate(
         raise ValueError(f"unknown method {method!r}; choose from {', '.join(METHODS)}")
     density = check_density(density)
     check_estimable(cloud)
+    if viewpoint is not None:
+        check_sensor_origin(np.asarray(viewpoint, dtype=np.float64), "viewpoint")
     warnings = [f"dropped {cloud.dropped_nonfinite} rows with NaN or inf"] if cloud.dropped_nonfinite else []
 
     box, local = oriented_box_local(cloud.points)

@@ -20,7 +20,9 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from estimation import tolerances as tol
 from estimation.carving import DepthView
+from estimation.cloud import check_sensor_origin
 from estimation.completion import close_on_plane, coverage, honest_bounds
 from estimation.contracts import as_points
 from estimation.errors import CloudError
@@ -114,7 +116,8 @@ def plane_from_abcd(abcd: object) -> Plane:
     """The plane ``A x + B y + C z + D = 0`` (metres), normal ``(A, B, C)`` normalised.
 
     Raises:
-        CloudError: not four finite numbers, or a zero normal.
+        CloudError: not four finite numbers, a zero normal, or a plane farther than
+            ``tolerances.MAX_COORDINATE_M`` from the origin.
     """
     try:
         values = np.asarray(abcd, dtype=np.float64).ravel()
@@ -122,10 +125,18 @@ def plane_from_abcd(abcd: object) -> Plane:
         raise CloudError(f"support plane: expected four numbers A B C D, got {abcd!r}") from exc
     if values.shape != (4,) or not np.isfinite(values).all():
         raise CloudError(f"support plane: expected four finite numbers A B C D, got {values.tolist()}")
-    length = float(np.linalg.norm(values[:3]))
-    if length == 0:
+    # Scaled by the largest of A B C before the norm: 0 0 1e308 0 (the plane z = 0) overflowed the norm to
+    # inf and became a zero normal ("only 0 points lie above the support plane").
+    biggest = float(np.abs(values[:3]).max())
+    if biggest == 0:
         raise CloudError("support plane: the normal (A, B, C) is zero")
-    return Plane(values[:3] / length, float(values[3]) / length, 0.0, 0)
+    values = values / biggest
+    length = float(np.linalg.norm(values[:3]))
+    distance = float(values[3]) / length
+    if abs(distance) > tol.MAX_COORDINATE_M:
+        raise CloudError(f"support plane: it passes {abs(distance):.3g} m from the origin, beyond the "
+                         f"{tol.MAX_COORDINATE_M:g} m an estimate accepts (D is in the file's units)")
+    return Plane(values[:3] / length, distance, 0.0, 0)
 
 
 def plane_below(points: np.ndarray) -> Plane:
@@ -269,7 +280,7 @@ def estimate_views(views: list[View], density: float, *, support: Plane | str | 
         seed: RANSAC's randomness (``"auto"``).
 
     Raises:
-        CloudError: a view without origin, a view with no points, a plane with most points below it, or
+        CloudError: a view without origin or with one beyond ``tolerances.MAX_COORDINATE_M``, a view with no points, a plane with most points below it, or
             too few object points left.
         ReconstructionError: as :func:`estimation.estimate`.
     """
@@ -279,6 +290,7 @@ def estimate_views(views: list[View], density: float, *, support: Plane | str | 
         label = view.name or f"view {k + 1}"
         if view.origin is None:
             raise CloudError(f"{label}: no sensor origin (no VIEWPOINT header; pass --viewpoint X Y Z)")
+        check_sensor_origin(view.origin, label)
         if len(view.points) == 0:
             raise CloudError(f"{label}: the view has no points")
     points, origins = fuse_views([(v.points, v.origin) for v in views])

@@ -227,6 +227,11 @@ def test_whole_frames_with_the_floor_in_view_take_the_table_not_the_floor():
     (["--support-plane", "0", "0", "0", "1"], r"the normal \(A, B, C\) is zero"),
     (["--support-plane", "0", "0", "1", "nan"], r"four finite numbers"),
     (["--support-plane", "up"], r"'auto' or four numbers"),
+    (["--support-plane", "0", "0", "1", "1e308"], r"support plane: it passes 1e\+308 m from the origin, beyond the "
+                                                  r"10000 m"),
+    # a sensor 1e160 m away went through (numpy warned of a divide by zero and an invalid cast)
+    (["--viewpoint", "0", "0", "1e160", "--viewpoint", "1e160", "0", "0"],
+     r"view0\.pcd: the sensor is 1e\+160 m from the origin, beyond the 10000 m"),
     (["--viewpoint", "0", "0", "1"], r"--viewpoint given 1 times for 2 views"),
     (["--method", "obb"], r"need --method auto"),
     (["--depth-scale", "0.001"], r"pass --intrinsics"),
@@ -236,6 +241,21 @@ def test_bad_options_are_one_line_errors(capsys, pcds, extra, message):
     err = capsys.readouterr().err
     assert err.count("\n") == 1
     assert pytest.importorskip("re").search(message, err), err
+
+
+def test_a_support_plane_of_huge_coefficients_is_normalised():
+    from estimation.views import plane_from_abcd
+
+    # 0 0 1e308 D overflowed the normal's length to inf: a zero normal, "only 0 points lie above" the plane
+    plane = plane_from_abcd([0.0, 0.0, 1e308, -TOP * 1e308])
+    assert plane.normal.tolist() == [0.0, 0.0, 1.0] and plane.offset == pytest.approx(-TOP)
+
+
+def test_a_pcd_viewpoint_far_away_is_refused(capsys, tmp_path, views):
+    save_cloud(make_cloud(views[0][0], sensor_origins=np.array([0.0, 0.0, 1e300])), tmp_path / "far.pcd")
+    assert main(["estimate", str(tmp_path / "far.pcd"), "--density", "1000"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "far.pcd: the sensor is 1e+300 m from the origin, beyond the 10000 m" in err, err
 
 
 def test_a_view_without_viewpoint_is_refused(capsys, tmp_path, views, pcds):
