@@ -276,12 +276,17 @@ def load_scene(path: str | Path) -> SceneSpec:
     try:
         if not path.is_file():
             raise SceneError(f"{path}: no such scene file")
-        text = path.read_text()
+        data = path.read_bytes()
     except OSError as exc:  # a name too long, a permission denied
         raise SceneError(f"cannot read {path}: {exc.strerror or exc}") from None
     try:
+        # TOML is UTF-8; a byte-order mark (what Windows editors put first) is dropped, not "Invalid statement".
+        text = data.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:  # read_text() let it out as a traceback
+        raise SceneError(f"{path}: not UTF-8 text, so not TOML ({exc.reason} at byte {exc.start})") from None
+    try:
         doc = tomllib.loads(text)
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+    except tomllib.TOMLDecodeError as exc:
         raise SceneError(f"{path}: not valid TOML ({exc})") from exc
     except RecursionError:  # tomllib recurses once per level of nesting: 5000 levels of [[[...
         raise SceneError(f"{path}: nested too deeply to be a scene file") from None

@@ -146,6 +146,30 @@ def test_a_mesh_that_is_no_mesh_is_a_scene_error_naming_the_file(tmp_path):
         assert "\n" not in str(info.value) and name in str(info.value)
 
 
+def test_a_mesh_with_nan_vertices_is_a_scene_error(tmp_path):
+    import numpy as np
+    import trimesh
+
+    from scenes.sources import source_mesh
+
+    box = trimesh.creation.box(extents=[0.05] * 3)
+    vertices = box.vertices.copy()
+    vertices[0] = np.nan
+    trimesh.Trimesh(vertices, box.faces, process=False).export(tmp_path / "nan.stl")
+    spec = parse_scene({"name": "x", "objects": [{"id": "a", "mesh": "nan.stl"}]}, base=tmp_path).objects[0]
+    with pytest.raises(SceneError, match=r"^object 'a': mesh .*nan\.stl has \d+ vertices with NaN or inf coordinates$"):
+        source_mesh(spec)
+
+
+def test_a_scene_file_that_is_not_utf8_is_a_scene_error(tmp_path):
+    path = tmp_path / "s.toml"
+    path.write_bytes(bytes(range(256)))  # a UnicodeDecodeError traceback from read_text()
+    with pytest.raises(SceneError, match=r"s\.toml: not UTF-8 text, so not TOML \(invalid start byte at byte 128\)$"):
+        load_scene(path)
+    path.write_bytes(b"\xef\xbb\xbf" + b'name = "x"\n[[objects]]\nid = "mug"\npaper = "mug"\n')  # a BOM first
+    assert load_scene(path).objects[0].id == "mug"
+
+
 def test_good_values_still_parse():
     spec = parse_scene(_scene(position=[1, 2], rotation_deg=[0, 0, 30], points=5000, density=800, units="cm"))
     obj = spec.objects[0]
