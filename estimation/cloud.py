@@ -171,21 +171,32 @@ def check_sensor_origin(origin: np.ndarray, what: str) -> None:
                          "an estimate accepts (wrong --units, or a damaged VIEWPOINT?)")
 
 
+def check_count_and_range(points: np.ndarray) -> None:
+    """Raise unless ``points`` ((n, 3) finite, metres) are at least ``tolerances.MIN_POINTS`` rows, all within
+    ``tolerances.MAX_COORDINATE_M`` of the origin: what a spacing or a neighbour search needs to be defined.
+
+    Raises:
+        CloudError: with the count, or how far the points reach (and the stray points, if a few make it).
+    """
+    n = len(points)
+    if n < tol.MIN_POINTS:
+        raise CloudError(f"too few points: {n} (need at least {tol.MIN_POINTS})")
+    far = float(np.abs(points).max())
+    if far > tol.MAX_COORDINATE_M:
+        stray = far_points(points)
+        raise CloudError(f"coordinates reach {far:.3g} m from the origin, beyond the {tol.MAX_COORDINATE_M:g} m "
+                         f"an estimate accepts" + (f"; that is {stray}: remove them" if stray else
+                                                   " (wrong --units or scale?)"))
+
+
 def check_estimable(cloud: PointCloud) -> None:
     """Raise if ``cloud`` cannot enclose a volume: too few distinct points, out of range, flat or line-like.
 
     Raises:
         CloudError: with the count, the coordinates' range or the principal extents in the message.
     """
+    check_count_and_range(cloud.points)
     n = len(cloud)
-    if n < tol.MIN_POINTS:
-        raise CloudError(f"too few points: {n} (need at least {tol.MIN_POINTS})")
-    far = float(np.abs(cloud.points).max())
-    if far > tol.MAX_COORDINATE_M:
-        stray = far_points(cloud.points)
-        raise CloudError(f"coordinates reach {far:.3g} m from the origin, beyond the {tol.MAX_COORDINATE_M:g} m "
-                         f"an estimate accepts" + (f"; that is {stray}: remove them" if stray else
-                                                   " (wrong --units or scale?)"))
     # Singular values of the centred cloud are its spread along the principal axes (a uniform subset of
     # 20,000 tells flat from solid as well as a million points, at a 50th of the cost).
     sample = cloud.points[:: max(1, n // 20000)]

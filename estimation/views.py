@@ -22,7 +22,7 @@ import numpy as np
 
 from estimation import tolerances as tol
 from estimation.carving import DepthView
-from estimation.cloud import check_sensor_origin
+from estimation.cloud import check_count_and_range, check_sensor_origin
 from estimation.completion import close_on_plane, coverage, honest_bounds
 from estimation.contracts import as_points
 from estimation.errors import CloudError
@@ -280,8 +280,9 @@ def estimate_views(views: list[View], density: float, *, support: Plane | str | 
         seed: RANSAC's randomness (``"auto"``).
 
     Raises:
-        CloudError: a view without origin or with one beyond ``tolerances.MAX_COORDINATE_M``, a view with no points, a plane with most points below it, or
-            too few object points left.
+        CloudError: a view without origin or with one beyond ``tolerances.MAX_COORDINATE_M``, a view with no
+            points, fewer than ``tolerances.MIN_POINTS`` points in all or any beyond
+            ``tolerances.MAX_COORDINATE_M``, a plane with most points below it, or too few object points left.
         ReconstructionError: as :func:`estimation.estimate`.
     """
     from estimation.spacing import point_spacing, surface_noise
@@ -294,6 +295,9 @@ def estimate_views(views: list[View], density: float, *, support: Plane | str | 
         if len(view.points) == 0:
             raise CloudError(f"{label}: the view has no points")
     points, origins = fuse_views([(v.points, v.origin) for v in views])
+    # Before the spacing and the noise: a 1-pixel depth frame (one point) or one of 1e300 m depths was an
+    # IndexError inside them.
+    check_count_and_range(points)
     spacing = point_spacing(points)
     noise = surface_noise(points)
     threshold = max(PLANE_NOISE_SIGMAS * noise, PLANE_SPACINGS * spacing)

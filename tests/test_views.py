@@ -283,6 +283,9 @@ def test_a_view_with_no_points_is_refused(capsys, tmp_path, pcds):
     ("empty.npy", lambda p: np.save(p, np.zeros((0, 40))), r"the depth image is empty"),
     ("eight.png", lambda p: _png(p, np.full((30, 40), 200, np.uint8)), r"8-bit PNG cannot hold depth"),
     ("rgb.npy", lambda p: np.save(p, np.ones((30, 40, 3))), r"numeric \(h, w\) array"),
+    # one pixel with a depth, and depths of 1e300 m: IndexErrors in the spacing and the noise of the views
+    ("one.npy", lambda p: np.save(p, np.pad([[1.0]], ((15, 14), (20, 19)))), r"too few points: 1 \(need at least 100\)"),
+    ("far.npy", lambda p: np.save(p, np.full((30, 40), 1e300)), r"coordinates reach 1e\+300 m from the origin"),
     ("complex.npy", lambda p: np.save(p, np.ones((30, 40), complex)), r"real numbers, got complex128"),
     # A small file whose header claims 90000 x 90000 was a 60 GiB allocation; refused from the header.
     ("lie.npy", lambda p: _npy_claiming(p, (90000, 90000)), r"truncated: the header claims shape \(90000, 90000\)"),
