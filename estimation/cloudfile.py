@@ -20,6 +20,7 @@ as "no viewpoint" (None), not as a sensor at the origin.
 
 from __future__ import annotations
 
+import codecs
 import logging
 import stat
 import tokenize
@@ -746,7 +747,8 @@ def _check_npz_member(path: Path, archive: zipfile.ZipFile, name: str, max_point
 
 def _read_text(path: Path, max_points: int) -> _Columns:
     suffix = path.suffix.lower()
-    text = path.read_bytes()
+    # A spreadsheet's CSV starts with a UTF-8 byte-order mark: "could not convert string 'ï»¿0.1'".
+    text = path.read_bytes().removeprefix(codecs.BOM_UTF8)
     if text.count(b"\n") > max_points + 1:
         raise CloudFileError(f"{path}: more than max_points={max_points} lines (pass a larger max_points if real)")
     claimed = None

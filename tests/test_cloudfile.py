@@ -175,6 +175,13 @@ def test_npz_sensor_origins(tmp_path, cloud):
         back = load_cloud(tmp_path / "o.npz")
         np.testing.assert_array_equal(back.sensor_origins, original.sensor_origins)
 
+def test_a_text_cloud_with_a_byte_order_mark(tmp_path, cloud):
+    for suffix in (".xyz", ".csv"):
+        sep = "," if suffix == ".csv" else " "
+        rows = "".join(sep.join(repr(float(v)) for v in p) + "\n" for p in cloud.points)
+        (tmp_path / f"c{suffix}").write_bytes(b"\xef\xbb\xbf" + rows.encode())
+        np.testing.assert_array_equal(load_cloud(tmp_path / f"c{suffix}").points, cloud.points)
+
 
 @pytest.mark.parametrize("suffix", [".xyz", ".xyzn", ".xyzrgb", ".pts"])
 def test_xyz_family_round_trip(tmp_path, cloud, suffix):

@@ -15,7 +15,7 @@ def _write(tmp_path, text: str, name: str = "path.csv"):  # type: ignore[no-unty
     return path
 
 
-@pytest.mark.parametrize("header", ["t,x,y,z\n", "", "# a push\nT, X, Y, Z\n\n"])
+@pytest.mark.parametrize("header", ["t,x,y,z\n", "", "# a push\nT, X, Y, Z\n\n", "\ufefft,x,y,z\n", "\ufeff"])
 def test_waypoints_are_interpolated_linearly_and_the_ends_held(tmp_path, header):
     path = _write(tmp_path, header + "0.0,0.1,0.0,0.2\n1.0,0.3,-0.2,0.2\n3.0,0.3,-0.2,0.6\n")
     at = load_trajectory(path)

@@ -80,7 +80,8 @@ def load_trajectory(path: str | Path) -> Trajectory:
     if path.exists() and not path.is_file() and not path.is_dir():  # a FIFO or device: reading blocks forever
         raise TrajectoryError(f"{path}: not a regular file")
     try:
-        text = path.read_text(encoding="utf-8")
+        # utf-8-sig: a spreadsheet's CSV starts with a byte-order mark, which made the header "not a number".
+        text = path.read_text(encoding="utf-8-sig")
     except (OSError, UnicodeDecodeError) as exc:
         raise TrajectoryError(f"{path}: cannot read trajectory ({exc.__class__.__name__}: {exc})") from None
     rows: list[tuple[float, ...]] = []
