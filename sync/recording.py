@@ -558,7 +558,7 @@ def read_recording(path: str | Path) -> Recording:
         except RecordLengthLimitExceeded as exc:
             raise RecordingError(f"{path}: a record is larger than the {MAX_RECORD_BYTES >> 20} MiB limit ({exc})") from None
         except (McapError, ValueError, struct.error, zlib.error, EOFError, MemoryError, UnicodeDecodeError) as exc:
-            # ValueError covers the reader's CRC mismatch and zstd's own errors (a ZstdError is one).
+            # ValueError covers the reader's CRC mismatch; _inflate turns zstd's and lz4's errors into McapError.
             what = type(exc).__name__ + (f": {exc}" if str(exc) else "")
             if metadata is None:
                 raise RecordingError(f"{path}: not a readable tactile-twin recording ({what})") from None
@@ -580,7 +580,7 @@ def _inflate(path: Path, chunk) -> bytes:  # type: ignore[no-untyped-def]
 
     Raises:
         RecordingError: the chunk claims or decompresses to more than the limit.
-        McapError: an unknown compression or a CRC mismatch (damage).
+        McapError: an unknown compression, damaged compressed data or a CRC mismatch (damage).
     """
     from mcap.exceptions import McapError
 
@@ -595,20 +595,26 @@ def _inflate(path: Path, chunk) -> bytes:  # type: ignore[no-untyped-def]
 
         import zstandard
 
-        with zstandard.ZstdDecompressor().stream_reader(io.BytesIO(chunk.data)) as stream:
-            parts, size = [], 0
-            while piece := stream.read(1 << 20):
-                size += len(piece)
-                if size > MAX_RECORD_BYTES:
-                    raise too_big
-                parts.append(piece)
+        try:
+            with zstandard.ZstdDecompressor().stream_reader(io.BytesIO(chunk.data)) as stream:
+                parts, size = [], 0
+                while piece := stream.read(1 << 20):
+                    size += len(piece)
+                    if size > MAX_RECORD_BYTES:
+                        raise too_big
+                    parts.append(piece)
+        except zstandard.ZstdError as exc:  # not a ValueError in the C backend: it was a traceback
+            raise McapError(f"a chunk's zstd data is damaged ({exc})") from None
         data = b"".join(parts)
     elif chunk.compression == "lz4":
         try:
             import lz4.frame
         except ImportError:
             raise McapError("lz4 compression, and the lz4 package is not installed") from None
-        data = lz4.frame.LZ4FrameDecompressor().decompress(chunk.data, max_length=MAX_RECORD_BYTES + 1)
+        try:
+            data = lz4.frame.LZ4FrameDecompressor().decompress(chunk.data, max_length=MAX_RECORD_BYTES + 1)
+        except RuntimeError as exc:  # what lz4 raises on damaged frames
+            raise McapError(f"a chunk's lz4 data is damaged ({exc})") from None
         if len(data) > MAX_RECORD_BYTES:
             raise too_big
     else:

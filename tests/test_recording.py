@@ -308,6 +308,29 @@ def test_malformed_records_are_one_line_errors_naming_the_record_and_field(recor
     assert not (tmp_path / "x").exists()
 
 
+def test_a_damaged_zstd_chunk_is_damage_not_a_traceback(recorded, tmp_path):
+    from mcap.writer import CompressionType, Writer
+
+    session = read_recording(recorded[0]).metadata
+    path = tmp_path / "damaged.mcap"
+    with path.open("wb") as f:
+        w = Writer(f, compression=CompressionType.ZSTD, chunk_size=1 << 10)
+        w.start(profile="tactile-twin")
+        w.add_metadata("tactile_twin.session", session)
+        channel = w.register_channel(FORCE_TOPIC, "json", 0)
+        for i in range(200):
+            w.add_message(channel, i, b'{"sim_time": %d, "force": [0.0, 0.0, 0.0]}' % i, i)
+        w.finish()
+    data = bytearray(path.read_bytes())
+    frame = data.index(b"\x28\xb5\x2f\xfd", data.index(b"\x28\xb5\x2f\xfd") + 4)  # the second chunk's frame
+    data[frame + 4 : frame + 40] = b"\xff" * 36
+    path.write_bytes(bytes(data))
+    # zstandard's C backend raises ZstdError, which is no ValueError: it escaped as a traceback (exit 1)
+    rec = read_recording(path)
+    assert rec.damage is not None and "a chunk's zstd data is damaged" in rec.damage and "\n" not in rec.damage
+    assert 0 < len(rec.records) < 200
+
+
 def test_a_decompression_bomb_is_refused_naming_the_limit(recorded, tmp_path, capsys):
     from mcap.writer import CompressionType, Writer
 
