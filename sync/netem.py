@@ -49,6 +49,11 @@ NORMAL_SIGMAS = 3.0
 #: jitter given as exactly delay / 3 must pass; a part in a billion is far below any timing that matters.
 JITTER_LIMIT_SLACK = 1e-9
 
+#: The longest one-way delay, seconds: an hour, as long as a replay runs (``sync.recording.MAX_REPLAY_SECONDS``),
+#: beyond which nothing sent would arrive within the session; 1e308 s made an arrival time infinite and the
+#: in-process transport's nanosecond clock an OverflowError.
+MAX_DELAY_S = 3600.0
+
 #: The slowest bandwidth cap, bit/s: below it one message's transmission time overflows the clock's
 #: nanoseconds (1e-300 bit/s did); 1 bit/s is already no usable link.
 MIN_RATE_BPS = 1.0
@@ -110,7 +115,7 @@ class Conditions:
     """One direction's link, all optional. Seconds, bit/s and bytes; see the module docstring for the model.
 
     Args:
-        delay: mean one-way delay, seconds, >= 0.
+        delay: mean one-way delay, seconds, from 0 to :data:`MAX_DELAY_S`.
         jitter: standard deviation of the one-way delay, seconds, >= 0 (and within what ``distribution``
             allows: ``delay / 3`` for ``"normal"``, ``delay`` for ``"exponential"``).
         distribution: ``"normal"`` or ``"exponential"`` (only read when ``jitter > 0``).
@@ -135,7 +140,7 @@ class Conditions:
     queue_bytes: int | None = None
 
     def __post_init__(self) -> None:
-        delay = _number("delay", self.delay)
+        delay = _number("delay", self.delay, high=MAX_DELAY_S)
         jitter = _number("jitter", self.jitter)
         if self.distribution not in DISTRIBUTIONS:
             raise ConditionsError(f"distribution must be one of {', '.join(DISTRIBUTIONS)}, got {self.distribution!r}")

@@ -161,6 +161,9 @@ def test_impossible_conditions_and_a_recording_without_a_scene_exit_2(recorded, 
     path, _, _ = recorded
     assert main(["replay", str(path), "--delay", "10", "--jitter", "9"]) == 2  # normal jitter <= delay / 3
     assert "jitter" in capsys.readouterr().err
+    assert main(["replay", str(path), "--delay", "1e308"]) == 2  # was an OverflowError traceback
+    err = capsys.readouterr().err
+    assert "delay must be finite and in [0, 3600]" in err and err.count("\n") == 1, err
     bare = tmp_path / "bare.mcap"
     with Recorder(bare, clock=SimClock(), metadata={"scene_name": "x", "scene_toml": ""}) as r:
         r.target(0.5, np.zeros(3))
