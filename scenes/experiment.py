@@ -215,6 +215,11 @@ MASS_SCALE_RANGE = (0.01, 100.0)
 #: end effector moves tens of metres per second.
 SPEED_RANGE = (0.05, 20.0)
 
+#: Runs one sweep may hold (tasks x delays x mass scales x seeds, each run a direct and a twin session of
+#: seconds): 10,000 is days of sessions on two cores already; --seeds 99999999999 built its list of runs
+#: until memory ran out, with no output.
+MAX_RUNS = 10_000
+
 
 def check_condition(c: Condition) -> None:
     """Refuse a condition before any work.
@@ -539,12 +544,18 @@ class Sweep:
         (normal jitter needs ``jitter <= delay / 3``, so any jitter at zero delay) is refused, not clipped.
 
         Raises:
-            ExperimentError: an empty list, fewer than one seed, or a condition :func:`check_condition` refuses.
+            ExperimentError: an empty list, fewer than one seed, more than :data:`MAX_RUNS` runs, or a condition
+                :func:`check_condition` refuses.
         """
         if not self.tasks or not self.delays or not self.mass_scales:
             raise ExperimentError("tasks, delays and mass scales must each have at least one value")
         if not isinstance(self.seeds, int) or self.seeds < 1:
             raise ExperimentError(f"seeds must be a whole number >= 1, got {self.seeds!r}")
+        count = len(self.tasks) * len(self.delays) * len(self.mass_scales) * self.seeds
+        if count > MAX_RUNS:
+            raise ExperimentError(f"{len(self.tasks)} task(s) x {len(self.delays)} delay(s) x {len(self.mass_scales)} mass "
+                                  f"scale(s) x {self.seeds} seed(s) is {count:,} runs, more than the {MAX_RUNS:,} a "
+                                  "sweep holds")
         runs = [Condition(task=t, delay=d, jitter=self.jitter, loss=self.loss, mass_scale=m, seed=s, speed=self.speed)
                 for t in self.tasks for d in self.delays for m in self.mass_scales for s in range(self.seeds)]
         for r in runs:

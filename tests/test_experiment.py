@@ -106,6 +106,12 @@ def test_the_cli_writes_every_column_and_the_same_rows_with_workers(rows, cache,
     (["--jitter", "1", "--delays", "0"], "delay 0 ms: jitter 0.001 s is more than normal jitter allows"),
     (["--tasks", "push,wave"], "unknown task 'wave' \\(known: push, press\\)"),
     (["--seeds", "0"], "--seeds must be at least 1, got 0"),
+    # built a list of 2e11 runs until memory ran out, printing nothing
+    (["--seeds", "99999999999", "--mass-scale", "1"],
+     "1 task\\(s\\) x 2 delay\\(s\\) x 1 mass scale\\(s\\) x 99999999999 seed\\(s\\) is 199,999,999,998 runs, more than the "
+     "10,000 a sweep holds"),
+    # a delay of 1e308 ms passed the checks; its arrival times were infinite (an OverflowError once run)
+    (["--delays", "0,1e308"], "delay 1e\\+308 ms: delay must be finite and in \\[0, 3600\\]"),
 ])
 def test_bad_arguments_are_one_line_and_exit_2(extra, message, tmp_path, capsys):
     assert main([*ARGS, *extra, "--out", str(tmp_path / "o")]) == 2
