@@ -186,7 +186,10 @@ class ObjectDoc(Struct, forbid_unknown_fields=True):
 class SceneDoc(Struct, forbid_unknown_fields=True):
     """A tactile-twin scene file (TOML). SI units; positions in the world frame, z up, floor at z = 0."""
 
-    name: Annotated[Text, Meta(description="the scene's name; also its Zenoh key prefix")]
+    # A key chunk, as sync.keys holds it: 'a/*' or '..' built, then twin remote and twin demo died with a
+    # ValueError traceback from sync.keys.Keys.
+    name: Annotated[str, Meta(pattern=_ID_PATTERN, description="the scene's name (1-64 of A-Z a-z 0-9 _ -); also "
+                                                               "its Zenoh key prefix")]
     table: TableDoc | UnsetType = UNSET
     end_effector: EndEffectorDoc | UnsetType = UNSET
     workspace: WorkspaceDoc | UnsetType = UNSET
@@ -444,6 +447,8 @@ def _translate(message: str, doc: dict) -> str:
         return f"{where}: expected a table ([[objects]]), got {_kind(value)}"
     if in_primitive and (len(tokens) == 3 or last == "type"):
         return f"{_where(tokens[:2], doc)}: primitive needs type = one of {', '.join(PRIMITIVES)}"
+    if tokens == ["name"] and isinstance(value, str):
+        return f"scene: 'name' must be 1-64 characters of letters, digits, '_' or '-' (a Zenoh key chunk), got {value!r}"
     if last == "id" and len(tokens) == 3 and tokens[0] == "objects":
         return f"{_where(tokens[:2], doc)}: 'id' must be 1-64 characters of letters, digits, '_' or '-'"
     if last == "paper" and len(tokens) == 3:

@@ -170,6 +170,14 @@ def test_a_scene_file_that_is_not_utf8_is_a_scene_error(tmp_path):
     assert load_scene(path).objects[0].id == "mug"
 
 
+@pytest.mark.parametrize("name", ["a/*", "..", "日本", "", "x" * 65])
+def test_a_scene_name_must_be_a_key_chunk(name):
+    # 'a/*' built, then twin remote and twin demo died with a ValueError traceback from sync.keys.Keys
+    with pytest.raises(SceneError, match=r"^scene: 'name' must be 1-64 characters of letters, digits, '_' or '-' "
+                                         r"\(a Zenoh key chunk\), got "):
+        parse_scene({"name": name, "objects": [{"id": "a", "paper": "box"}]})
+
+
 def test_good_values_still_parse():
     spec = parse_scene(_scene(position=[1, 2], rotation_deg=[0, 0, 30], points=5000, density=800, units="cm"))
     obj = spec.objects[0]
