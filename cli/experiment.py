@@ -63,12 +63,15 @@ def add_parser(sub) -> None:  # type: ignore[no-untyped-def]
 
 
 def _floats(text: str, flag: str) -> tuple[float, ...]:
+    parts = [x.strip() for x in text.split(",")]
+    if not any(parts):
+        raise TwinError(f"{flag}: no values in {text!r}")
+    if not all(parts):  # '0,,5' or a trailing comma: a value left out by mistake, not skipped quietly
+        raise TwinError(f"{flag}: an empty value in {text!r}")
     try:
-        values = tuple(float(x) for x in text.split(",") if x.strip())
+        values = tuple(float(x) for x in parts)
     except ValueError:
         raise TwinError(f"{flag}: not a comma-separated list of numbers: {text!r}") from None
-    if not values:
-        raise TwinError(f"{flag}: no values in {text!r}")
     for v in values:
         if not math.isfinite(v):
             raise TwinError(f"{flag}: {v} is not a finite number")

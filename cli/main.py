@@ -405,6 +405,8 @@ def _estimate_views(args: argparse.Namespace, scale: float) -> list[tuple]:  # t
         raise TwinError(f"--viewpoint given {len(args.viewpoint)} times for {n} views: give it once per VIEW, in order")
     if not depth and (args.depth_scale is not None or args.viewpoint_pose is not None):
         raise TwinError("--depth-scale and --viewpoint-pose are for depth images: pass --intrinsics FX FY CX CY")
+    if depth and args.units != "m":
+        raise TwinError("--units is for point files: a depth image's unit is set by --depth-scale")
     if depth and args.viewpoint is not None:
         raise TwinError("a depth image's sensor origin is its camera: give --viewpoint-pose, not --viewpoint")
     if depth and args.viewpoint_pose is not None and len(args.viewpoint_pose) != n:

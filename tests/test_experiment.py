@@ -97,6 +97,8 @@ def test_the_cli_writes_every_column_and_the_same_rows_with_workers(rows, cache,
     (["--delays", "0,-10"], "--delays: a delay cannot be negative, got -10 ms"),
     (["--loss", "101"], "--loss is a percentage: at most 100, got 101"),
     (["--delays", "0,inf"], "--delays: inf is not a finite number"),
+    (["--delays", "0,,50"], "--delays: an empty value in '0,,50'"),  # the empty one was skipped
+    (["--mass-scale", "1,"], "--mass-scale: an empty value in '1,'"),
     (["--mass-scale", "1,nan"], "--mass-scale: nan is not a finite number"),
     (["--mass-scale", "0"], "--mass-scale: a mass scale must be from 0.01 to 100, got 0"),
     (["--mass-scale", "1,1e-300"], "--mass-scale: a mass scale must be from 0.01 to 100, got 1e-300"),

@@ -308,6 +308,8 @@ def test_bad_depth_frames_are_one_line_errors(capsys, tmp_path, name, write, mes
     (["--intrinsics", "1e-300", "1e-300", "19.5", "14.5"], r"focal lengths must be 1 to 1e\+06 pixels"),
     (["--intrinsics", "1e300", "50", "19.5", "14.5"], r"focal lengths must be 1 to 1e\+06 pixels"),
     (["--intrinsics", "50", "50", "19.5", "14.5", "--depth-scale", "1000"], r"inverse"),
+    # was ignored: the image read in millimetres, as if --units mm applied to it or did nothing
+    (["--intrinsics", "50", "50", "19.5", "14.5", "--units", "mm"], r"--units is for point files"),
     (["--intrinsics", "50", "50", "19.5", "14.5", "--depth-scale", "1e-300"], r"depth scale must be .* in \[1e-06, 10\]"),
     (["--intrinsics", "50", "50", "19.5", "14.5", "--viewpoint-pose", "0", "0", "0", "2", "0", "0", "0"],
      r"norm 1 \(within 0.001\), got 2"),
