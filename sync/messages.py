@@ -425,6 +425,9 @@ def _check_scene_sizes(msg: SceneInfo) -> None:
             raise MessageError("out-of-range", f"scene: table size or height outside {MIN_SIZE:g} .. "
                                                f"{MAX_SCENE_SIZE:g} m")
         _material(msg, msg.table_material)
+    elif len(msg.table_material) > MAX_ID_LENGTH:  # unused without a table, but carried along and printable
+        raise MessageError("bad-material", f"scene: table material of {len(msg.table_material):,} characters, more "
+                                           f"than {MAX_ID_LENGTH}")
     if msg.ee_radius != 0 and not MIN_SIZE <= msg.ee_radius <= MAX_EE_RADIUS:
         raise MessageError("out-of-range", f"scene: end-effector radius {msg.ee_radius:g} m outside {MIN_SIZE:g} .. "
                                            f"{MAX_EE_RADIUS:g}")

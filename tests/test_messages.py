@@ -218,6 +218,9 @@ def test_scenes_without_a_table_or_end_effector_still_decode():
     bare = _scene(table_size=None, table_height=0.0, table_material="", ee_radius=0.0)
     assert decode(encode(bare)) == bare
     assert decode(encode(_scene(table_material="PLA"))).table_material == "PLA"  # aliases too
+    with pytest.raises(MessageError) as err:  # a tableless scene's material is unused, but bounded all the same
+        decode(encode(_scene(table_size=None, table_height=0.0, table_material="z" * 10_000, ee_radius=0.0)))
+    assert err.value.reason == "bad-material"
 
 
 @pytest.mark.parametrize(("fields", "said"), [
