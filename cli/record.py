@@ -169,7 +169,7 @@ def replay(path: str | Path, *, script: Path | None = None, scene: Path | None =
 
     recording = read_recording(path)
     if recording.damage:
-        log.warning("%s", recording.damage)
+        log.info("%s", recording.damage)  # the summary's "damage"; `twin replay` prints it once, as a warning
     spec = load_scene(scene) if scene is not None else recorded_scene(recording)
     trajectory = load_trajectory(script) if script is not None else recorded_trajectory(recording)
     if network is None:

@@ -133,6 +133,7 @@ def test_a_torn_tail_is_reported_and_the_intact_part_replays(recorded, cache, tm
     captured = capsys.readouterr()
     summary = json.loads(captured.out)
     assert f"after {len(rec.records)} messages" in captured.err and "warning" in captured.err
+    assert captured.err.count("damaged after") == 1  # said once (it was logged, then printed again)
     assert summary["damage"] == rec.damage and summary["duration_s"] < SECONDS
 
 
