@@ -351,7 +351,9 @@ def _object(o: ObjectDoc, index: int, base: Path, doc: dict) -> ObjectSpec:
         except (OSError, ValueError) as exc:  # a NUL byte, a loop of links
             raise SceneError(f"{where}: {source} path {file!r} is not usable ({exc})") from None
         if not found:
-            raise SceneError(f"{where}: {source} file {value} does not exist")
+            what = ("is a directory" if value.is_dir() else "is not a regular file" if value.exists()  # type: ignore[attr-defined]
+                    else "does not exist")
+            raise SceneError(f"{where}: {source} file {value} {what}")
         if source == "mesh" and value.suffix.lower() not in MESH_SUFFIXES:  # type: ignore[attr-defined]
             raise SceneError(f"{where}: mesh file {value} is not a mesh format we read; use one of "
                              f"{', '.join(MESH_SUFFIXES)}")

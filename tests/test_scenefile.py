@@ -146,6 +146,13 @@ def test_a_mesh_that_is_no_mesh_is_a_scene_error_naming_the_file(tmp_path):
         assert "\n" not in str(info.value) and name in str(info.value)
 
 
+def test_a_mesh_path_that_is_a_folder_or_missing_says_which(tmp_path):
+    (tmp_path / "meshes.stl").mkdir()
+    for name, what in (("meshes.stl", "is a directory"), ("gone.stl", "does not exist")):
+        with pytest.raises(SceneError, match=rf"^object 'a': mesh file .*{name} {what}$"):
+            parse_scene({"name": "x", "objects": [{"id": "a", "mesh": name}]}, base=tmp_path)
+
+
 def test_a_mesh_with_nan_vertices_is_a_scene_error(tmp_path):
     import numpy as np
     import trimesh
