@@ -13,7 +13,7 @@ from scenes.headless import Headless
 from scenes.scenefile import SceneError, load_scene, parse_scene
 from sync.keys import Keys
 from sync.link import Link
-from sync.messages import VERSION, MessageError, Pose, SceneInfo, decode, encode
+from sync.messages import VERSION, MessageError, Pose, SceneInfo, cloud_message, decode, encode
 
 SMALL = Path(__file__).parent / "data" / "small.toml"
 #: Around small.toml's table (1.0 x 0.6, top at 0.5 m) and a little beyond: the crate and can start inside.
@@ -125,3 +125,17 @@ def test_without_a_declared_workspace_the_default_box_applies(cache):
         _forge(session, (0.8, 0.0, 0.56), 10**6)
         session.run(0.2)
         assert session.local.report.out_of_scene == 0
+
+
+def test_a_cloud_placed_inside_whose_points_lie_outside_is_dropped(cache):
+    scene = replace(load_scene(SMALL), workspace=BOX)
+    with Headless(scene, cache_dir=cache) as session:
+        session.run(0.2)
+        remote = session.remote
+        points = np.random.default_rng(0).normal((2.0, 0.0, 0.6), 0.02, (2000, 3))  # 2 m out, past the box
+        msg = cloud_message("stray", points, stamp_ns=0, epoch=remote.epoch, seq=10**6, material="abs_plastic",
+                            density=None, frame_position=np.array([0.0, 0.0, 0.6]), frame_quat=np.array([1.0, 0, 0, 0]))
+        Link(session.bus.transport()).put(Keys("small").object("stray", "cloud"), msg)
+        session.run(0.2)
+        assert session.local.report.out_of_scene == 1
+        assert "stray" not in session.local.objects and "stray" not in session.local.pending

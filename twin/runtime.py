@@ -608,7 +608,9 @@ class Local:
                 if self.rlog.enabled:  # every pose passes here: no string building with rerun off
                     self.rlog.event(self.twin.time, f"{msg.object_id}: pose correction (seq {msg.seq})", "DEBUG")
         elif isinstance(msg, Cloud):
-            if not self._in_scene(msg, msg.frame_position):
+            # The frame and the points' lowest corner: a cloud placed in the scene whose points lie 1 km away
+            # would build a body far off the table.
+            if not self._in_scene(msg, msg.frame_position) or not self._in_scene(msg, msg.origin):
                 return
             if msg.object_id not in self._clouds and len(self._clouds) >= MAX_OBJECTS:
                 self.link.dropped("too-many-objects", "dropped a cloud of %r: the twin has %d objects already",
