@@ -216,6 +216,14 @@ def _estimate_auto(
         warnings.append(f"{100 * unmeasured:.1f} % of the surface "
                         f"was not measured (holes closed by a {run.closing}-cell shell): the volume is "
                         f"only known to {bounds[0]:.4g}..{bounds[1]:.4g} m^3")
+    if run.sealed > tol.VOLUME_DOUBT_FRACTION * props.volume:
+        # No closing radius closed the cloud for good: the inside is what the widest shell enclosed, behind
+        # walls thinner than it or openings it sealed (a hollow ball's mouth, with noise as thick as its
+        # wall: +560 %). Whether that space is the object's is not in the points.
+        bounds = (max(0.0, bounds[0] - run.sealed), bounds[1])
+        warnings.append(f"no closing radius closed the cloud for good (walls thinner than the noise, or openings up "
+                        f"to {run.closing} cells wide sealed): {run.sealed:.4g} m^3 of the volume may be open "
+                        f"space; the volume is only known to {bounds[0]:.4g}..{bounds[1]:.4g} m^3")
     if not run.encloses and unmeasured > tol.LEAK_UNMEASURED_SHARE:
         # Holes wider than any closing radius: the flood fill ran inside and the surface is a shell around
         # nothing (a box whose back no camera saw). What the points would enclose if closed is unknown, up
@@ -255,7 +263,8 @@ class _AutoPass:
         points, normals: (m, 3) the points used and their outward normals. h: fine cell, metres.
         surface: the contoured surface. props: its mass properties (box frame). closing: the coarse
         shell's radius, cells. hole, thin: m^3 of volume the cloud leaves open (see ``volume_bounds_m3``).
-        encloses: the coarse flood fill found an inside (``grid.Occupancy.encloses``).
+        encloses: the coarse flood fill found an inside (``grid.Occupancy.encloses``). sealed: m^3 of that
+        inside when no closing radius settled it (``grid.Occupancy.unsettled``): it may be open space.
     """
 
     points: np.ndarray
@@ -267,6 +276,7 @@ class _AutoPass:
     hole: float
     thin: float
     encloses: bool = True
+    sealed: float = 0.0
 
     @property
     def points_used(self) -> int:
@@ -357,9 +367,10 @@ def _auto_pass(cloud: PointCloud, box: OrientedBox, local: np.ndarray, spacing: 
     # the mesh put there, the truth may differ by up to the cell).
     hole = surface.unmeasured_area * (occ.closing + 0.5) * coarse.cell
     thin = surface.opposed_cells * h**3
+    sealed = occ.unsettled * coarse.cell**3
     lap("mass_properties", t0)
     return _AutoPass(points=points, normals=normals, h=h, surface=surface, props=props, closing=occ.closing,
-                     hole=hole, thin=thin, encloses=occ.encloses)
+                     hole=hole, thin=thin, encloses=occ.encloses, sealed=sealed)
 
 
 def _area(surface) -> float:  # type: ignore[no-untyped-def]

@@ -76,12 +76,17 @@ class Occupancy:
         closing: the dilation radius, in cells, that closed the shell.
         encloses: the shell encloses the object's inside (``ENCLOSED_SHARE``); False for a solid thinner
             than the shell, and for a cloud whose holes no closing radius closed (the flood leaked in).
+        unsettled: nodes of the inside, and of the shell more than a cell from any point, when no closing
+            radius closed the shell for good (a wider one enclosing no more) and the widest that encloses
+            anything was taken: space behind walls thinner than the shell, or behind openings it sealed,
+            which may be the object's own (a hollow ball's mouth). 0 when settled.
     """
 
     shell: np.ndarray
     outside: np.ndarray
     closing: int
     encloses: bool = True
+    unsettled: int = 0
 
     @property
     def inside(self) -> np.ndarray:
@@ -117,7 +122,10 @@ def occupancy(points: np.ndarray, grid: Grid) -> Occupancy:
     # Nothing closed for good: a thin-walled object (or a very open one). Crumbs enclosed by a wide
     # shell are not the object's inside; keep the thinnest shell and let the band decide.
     enclosing = [r for r in results if r.inside.sum() > ENCLOSED_SHARE * surface_nodes]
-    return enclosing[-1] if enclosing else replace(results[0], encloses=False)
+    if not enclosing:
+        return replace(results[0], encloses=False)
+    widest = enclosing[-1]
+    return replace(widest, unsettled=int((~widest.outside & (distance2 > _ball_radius2(1))).sum()))
 
 
 def _outside(shell: np.ndarray) -> np.ndarray:

@@ -149,9 +149,9 @@ def find_support_plane(points: np.ndarray, origins: np.ndarray, *, threshold: fl
                        rng: np.random.Generator) -> Plane | None:
     """The support plane in the data (RANSAC), or None when none of the largest planes is one.
 
-    A plane is the support when it holds at least ``MIN_PLANE_SHARE`` of the points and almost all the
-    others (``1 - MAX_BELOW_SHARE``, besides the plane's own noise tail) lie on its sensors' side: an
-    object's own face has the rest of the object behind it. The largest plane is tried first; when it is
+    A plane is the support when it holds at least ``MIN_PLANE_SHARE`` of the points, almost all the
+    others (``1 - MAX_BELOW_SHARE``, besides the plane's own noise tail) lie on its sensors' side (an
+    object's own face has the rest of the object behind it) and so does every sensor. The largest plane is tried first; when it is
     refused, its points are set aside and the next largest is tried, up to ``PLANE_CANDIDATES`` planes: in a
     crop close around a box or a book, the object's top outweighs the ring of table around it.
 
@@ -172,7 +172,10 @@ def find_support_plane(points: np.ndarray, origins: np.ndarray, *, threshold: fl
         inliers = int((np.abs(h) < threshold).sum())
         if inliers < MIN_PLANE_SHARE * len(points):
             return None  # the next ones are smaller still
-        if _supports(h, plane.clearance(threshold), inliers):
+        # Every camera must be above it: a support's top is seen from its upper side only. An object's side
+        # face passes the other test where the object's rest is too short behind it to count (the bracket's
+        # upright and foot end, read with their true noise), but some camera looks at it from below.
+        if _supports(h, plane.clearance(threshold), inliers) and bool((plane.height(origins) > 0).all()):
             return plane
         rest = rest[np.abs(h[rest]) >= threshold]
     return None
