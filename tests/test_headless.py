@@ -169,6 +169,13 @@ def _box_cloud(object_id: str, centre: np.ndarray, *, epoch: int, seq: int) -> C
                          density=None, frame_position=centre, frame_quat=np.array([1.0, 0.0, 0.0, 0.0]))
 
 
+def _pose(object_id: str, position, *, epoch: int, seq: int, **extra: object) -> Pose:  # type: ignore[no-untyped-def]
+    """A forged pose of ``object_id`` at rest at ``position`` (m, world frame), unturned unless ``quat`` is given."""
+    fields: dict = {"quat": (1.0, 0.0, 0.0, 0.0), **extra}
+    return Pose(v=VERSION, stamp_ns=0, object_id=object_id, epoch=epoch, seq=seq, sim_time=0.0,
+                position=tuple(position), linvel=(0.0,) * 3, angvel=(0.0,) * 3, **fields)
+
+
 def test_poses_of_ids_without_a_cloud_are_bounded_and_one_just_before_its_cloud_is_used(cache):
     with Headless(load_scene(SMALL), cache_dir=cache) as session:
         session.run(0.1)
@@ -176,10 +183,8 @@ def test_poses_of_ids_without_a_cloud_are_bounded_and_one_just_before_its_cloud_
         forger = Link(session.bus.transport())
         flood = 3 * MAX_ORPHAN_POSES
         for k in range(flood):
-            forger.put(keys.object(f"ghost{k}", "pose"), Pose(
-                v=VERSION, stamp_ns=0, object_id=f"ghost{k}", epoch=epoch, seq=1, sim_time=0.0,
-                position=(0.0, 0.0, 0.6), quat=(1.0, 0.0, 0.0, 0.0), linvel=(0.0,) * 3, angvel=(0.0,) * 3,
-                seen=k % 2 == 0))
+            forger.put(keys.object(f"ghost{k}", "pose"), _pose(f"ghost{k}", (0.0, 0.0, 0.6), epoch=epoch, seq=1,
+                                                                seen=k % 2 == 0))
             if k % 500 == 0:
                 session.tick()
         session.tick()
@@ -188,9 +193,7 @@ def test_poses_of_ids_without_a_cloud_are_bounded_and_one_just_before_its_cloud_
             assert len(held) <= MAX_ORPHAN_POSES + 2, held  # the ghosts kept, and the crate and can
         # A cube whose pose (10 cm from where its cloud was taken, and newer) comes just before its cloud.
         taken, moved = np.array([-0.25, -0.2, 0.53]), (-0.25, -0.1, 0.53)
-        forger.put(keys.object("cube", "pose"), Pose(
-            v=VERSION, stamp_ns=0, object_id="cube", epoch=epoch, seq=2, sim_time=0.0, position=moved,
-            quat=(1.0, 0.0, 0.0, 0.0), linvel=(0.0,) * 3, angvel=(0.0,) * 3))
+        forger.put(keys.object("cube", "pose"), _pose("cube", moved, epoch=epoch, seq=2))
         session.tick()
         forger.put(keys.object("cube", "cloud"), _box_cloud("cube", taken, epoch=epoch, seq=1))
         session.run(0.1)
@@ -205,9 +208,7 @@ def test_a_pose_of_an_earlier_epoch_does_not_move_an_object_its_new_cloud_placed
         forger = Link(session.bus.transport())
         taken = np.array([-0.25, -0.2, 0.53])
         # A pose from before a restart (a larger seq, a smaller epoch) just before the new epoch's first cloud.
-        forger.put(keys.object("cube", "pose"), Pose(
-            v=VERSION, stamp_ns=0, object_id="cube", epoch=epoch, seq=10**6, sim_time=0.0, position=(-0.25, -0.1, 0.53),
-            quat=(1.0, 0.0, 0.0, 0.0), linvel=(0.0,) * 3, angvel=(0.0,) * 3))
+        forger.put(keys.object("cube", "pose"), _pose("cube", (-0.25, -0.1, 0.53), epoch=epoch, seq=10**6))
         session.tick()
         forger.put(keys.object("cube", "cloud"), _box_cloud("cube", taken, epoch=epoch + 1, seq=1))
         session.run(0.1)
@@ -226,10 +227,8 @@ def test_of_many_poses_queued_for_one_object_the_loop_handles_only_the_newest(ca
         # Handling a pose costs the loop more than receiving one costs the transport: handled one by one, a
         # flood of valid poses (forged ones, here 5 mm apart along x) held the loop in one drain for seconds.
         for k in range(flood, 0, -1):  # the newest first: the rest are older, and all of them skipped
-            forger.put(keys.object("crate", "pose"), Pose(
-                v=VERSION, stamp_ns=0, object_id="crate", epoch=remote.epoch, seq=10**6 + k, sim_time=0.0,
-                position=tuple((start + np.array([0.05 * k / flood, 0.0, 0.0])).tolist()), quat=tuple(quat.tolist()),
-                linvel=(0.0,) * 3, angvel=(0.0,) * 3))
+            forger.put(keys.object("crate", "pose"), _pose("crate", (start + np.array([0.05 * k / flood, 0.0, 0.0])).tolist(),
+                                                          epoch=remote.epoch, seq=10**6 + k, quat=tuple(quat.tolist())))
         session.tick()
         assert local.report.pose_updates == updates + 1
         assert local.report.out_of_order + local.report.poses_superseded - skipped == flood - 1
