@@ -103,7 +103,13 @@ def surface_noise(points: np.ndarray, tree=None) -> float:  # type: ignore[no-un
     dist, nbr = nearest(tree, sample, k)
     patches = points[nbr]
     centre = patches.mean(axis=1)
-    normal = _smallest_axis(patches - centre[:, None, :])
+    local = patches - centre[:, None, :]
+    values, vectors = np.linalg.eigh(np.einsum("nki,nkj->nij", local, local))
+    spacing = float(np.sqrt(np.pi / k) * np.median(dist[:, -1]))
+    if np.sqrt(np.median(np.maximum(values[:, 0], 0.0)) / max(k - 3, 1)) < NOISE_VISIBLE_SPACINGS * spacing:
+        # Too little noise to matter even with a wall's other face in some patches: read as it is.
+        return float(np.sqrt(np.median(np.maximum(values[:, 0], 0.0)) / max(k - 3, 1)))
+    normal = vectors[:, :, 0]
     # The sheet through each sample: the plane at its patch's median offset, and a first sigma from the
     # offsets' median absolute deviation. Both hold while the sample's own face is most of the patch; a
     # plain fit would sit between the two faces of a wall a few spacings thick and read the gap as noise.
@@ -113,7 +119,6 @@ def surface_noise(points: np.ndarray, tree=None) -> float:  # type: ignore[no-un
     spread = float(np.median(np.median(np.abs(offset - middle[:, None]), axis=1))) * MAD_TO_SIGMA
     sigma = _sheet_sigma(patches, centre, normal, spread)
     radius = float(np.median(dist[:, -1]))
-    spacing = float(np.sqrt(np.pi / k) * np.median(dist[:, -1]))
     if sigma < NOISE_VISIBLE_SPACINGS * spacing or radius >= NOISE_PATCH_SIGMAS * sigma:
         # Too little noise to matter, or the small patch already spans the slab: widening it would only
         # reach the other face of a thin wall (a 3 mm hollow ball at sigma 0.1 mm read 1.5 mm, and came
@@ -146,6 +151,9 @@ MAD_TO_SIGMA = 1.4826
 #: truth (a small patch deep in the noise), the third pass is within 0.5 % of it.
 SHEET_ITERATIONS = 4
 
+#: ...stopping early once a pass moves the estimate by less than this share of it.
+SHEET_SETTLED = 0.005
+
 
 def _smallest_axis(local: np.ndarray) -> np.ndarray:
     """(n, 3) unit normals of the planes fitted to (n, k, 3) centred patches (their least spread axis)."""
@@ -168,8 +176,10 @@ def _sheet_sigma(patches: np.ndarray, centre: np.ndarray, normal: np.ndarray, si
         local = (patches - mean[:, None, :]) * w
         values, vectors = np.linalg.eigh(np.einsum("nki,nkj->nij", local, local))
         smallest = np.maximum(values[:, 0], 0.0) / np.maximum(count - 3, 1)
-        sigma = float(np.sqrt(np.median(smallest[count > 3]) / kept_variance)) if (count > 3).any() else sigma
+        last, sigma = sigma, float(np.sqrt(np.median(smallest[count > 3]) / kept_variance)) if (count > 3).any() else sigma
         centre, normal = mean, vectors[:, :, 0]
+        if abs(sigma - last) <= SHEET_SETTLED * sigma:
+            break
     return sigma
 
 
