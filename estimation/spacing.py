@@ -106,14 +106,14 @@ def surface_noise(points: np.ndarray, tree=None) -> float:  # type: ignore[no-un
     local = patches - centre[:, None, :]
     values, vectors = np.linalg.eigh(np.einsum("nki,nkj->nij", local, local))
     spacing = float(np.sqrt(np.pi / k) * np.median(dist[:, -1]))
-    if np.sqrt(np.median(np.maximum(values[:, 0], 0.0)) / max(k - 3, 1)) < NOISE_VISIBLE_SPACINGS * spacing:
-        # Too little noise to matter even with a wall's other face in some patches: read as it is.
-        return float(np.sqrt(np.median(np.maximum(values[:, 0], 0.0)) / max(k - 3, 1)))
+    plain = float(np.sqrt(np.median(np.maximum(values[:, 0], 0.0)) / max(k - 3, 1)))
+    if plain < NOISE_VISIBLE_SPACINGS * spacing:
+        return plain  # too little noise to matter, even with a wall's other face in some patches
     normal = vectors[:, :, 0]
     # The sheet through each sample: the plane at its patch's median offset, and a first sigma from the
     # offsets' median absolute deviation. Both hold while the sample's own face is most of the patch; a
     # plain fit would sit between the two faces of a wall a few spacings thick and read the gap as noise.
-    offset = np.einsum("nki,ni->nk", patches - centre[:, None, :], normal)
+    offset = np.einsum("nki,ni->nk", local, normal)
     middle = np.median(offset, axis=1)
     centre = centre + normal * middle[:, None]
     spread = float(np.median(np.median(np.abs(offset - middle[:, None]), axis=1))) * MAD_TO_SIGMA
@@ -153,11 +153,6 @@ SHEET_ITERATIONS = 4
 
 #: ...stopping early once a pass moves the estimate by less than this share of it.
 SHEET_SETTLED = 0.005
-
-
-def _smallest_axis(local: np.ndarray) -> np.ndarray:
-    """(n, 3) unit normals of the planes fitted to (n, k, 3) centred patches (their least spread axis)."""
-    return np.linalg.eigh(np.einsum("nki,nkj->nij", local, local))[1][:, :, 0]
 
 
 def _sheet_sigma(patches: np.ndarray, centre: np.ndarray, normal: np.ndarray, sigma: float) -> float:

@@ -418,8 +418,8 @@ class CameraSensor:
         from estimation.segmentation import split_cluster
 
         scan = self._scan
-        if len(scan.segments) == 0 or len(ids) < 2:
-            return
+        if len(scan.segments) == 0 or len(ids) < 2 or all(i in self._observed for i in ids):
+            return  # (a tracking scan: nothing to part, and no tree of every point to build)
         # An object is in the segment of the scan's point nearest its prediction, if that segment's box (grown
         # by ASSOCIATION_RADIUS) holds it. Not _gated's nearest centroid: a segment of several objects has its
         # centroid between them, nearer other segments than some of its own objects.
