@@ -105,7 +105,8 @@ def surface_noise(points: np.ndarray, tree=None) -> float:  # type: ignore[no-un
     centre = patches.mean(axis=1)
     local = patches - centre[:, None, :]
     values, vectors = np.linalg.eigh(np.einsum("nki,nkj->nij", local, local))
-    spacing = float(np.sqrt(np.pi / k) * np.median(dist[:, -1]))
+    radius = float(np.median(dist[:, -1]))
+    spacing = float(np.sqrt(np.pi / k)) * radius
     plain = float(np.sqrt(np.median(np.maximum(values[:, 0], 0.0)) / max(k - 3, 1)))
     if plain < NOISE_VISIBLE_SPACINGS * spacing:
         return plain  # too little noise to matter, even with a wall's other face in some patches
@@ -118,7 +119,6 @@ def surface_noise(points: np.ndarray, tree=None) -> float:  # type: ignore[no-un
     centre = centre + normal * middle[:, None]
     spread = float(np.median(np.median(np.abs(offset - middle[:, None]), axis=1))) * MAD_TO_SIGMA
     sigma = _sheet_sigma(patches, centre, normal, spread)
-    radius = float(np.median(dist[:, -1]))
     if sigma < NOISE_VISIBLE_SPACINGS * spacing or radius >= NOISE_PATCH_SIGMAS * sigma:
         # Too little noise to matter, or the small patch already spans the slab: widening it would only
         # reach the other face of a thin wall (a 3 mm hollow ball at sigma 0.1 mm read 1.5 mm, and came
