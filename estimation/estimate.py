@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from estimation import tolerances as tol
-from estimation.cloud import PointCloud, check_estimable, check_sensor_origin
+from estimation.cloud import PointCloud, check_estimable, check_sensor_origin, distinct_rows
 from estimation.downsample import voxel_downsample, voxel_subsample
 from estimation.errors import CloudError
 from estimation.inertia import MassProperties, mass_properties, triangle_areas
@@ -337,7 +337,13 @@ def _auto_pass(cloud: PointCloud, box: OrientedBox, local: np.ndarray, spacing: 
         # One neighbour search serves the fit and both orientation tests (the thin-wall one looks
         # at THIN_WALL_NEIGHBOURS).
         tree = cKDTree(points)
-        neighbours = nearest(tree, points, min(max(k, THIN_WALL_NEIGHBOURS), len(points)))[1]
+        reach, neighbours = nearest(tree, points, min(max(k, THIN_WALL_NEIGHBOURS), len(points)))
+        if (reach[:, 1] == 0).any():
+            # Repeated positions (a quantised sensor, copies of one scan): a patch of copies fits no plane
+            # (a 400-point ball written 20 times: 59 % of its normals more than 60 degrees off, +5 %).
+            points = points[distinct_rows(points)]
+            tree = cKDTree(points)
+            neighbours = nearest(tree, points, min(max(k, THIN_WALL_NEIGHBOURS), len(points)))[1]
         normals, tilt = fit_normals(points, k, neighbours=neighbours)
         if viewpoint is not None:
             normals = orient_to_viewpoint(points, normals, box.to_local(np.asarray(viewpoint, dtype=np.float64)[None])[0])

@@ -18,6 +18,9 @@ from estimation.neighbours import nearest
 #: How far (cells) beyond the shell's closing radius we look for the outside on either side of a point.
 PROBE_CELLS = 1.0
 
+#: How far (cells) the probe looks when the shell encloses nothing (``orient_outward``).
+NEAR_PROBE_CELLS = 0.5
+
 #: Blur (cells) of the outside indicator: turns the 0/1 mask into a ramp we can compare on both sides.
 OUTSIDE_BLUR_CELLS = 1.5
 
@@ -107,22 +110,39 @@ def orient_outward(
     (itself first), to save the two searches here.
     """
     outside = ndimage.gaussian_filter(occ.outside.astype(np.float32), OUTSIDE_BLUR_CELLS)
-    # The shell reaches ``closing`` cells from the points; the outside starts just beyond.
-    step = (occ.closing + PROBE_CELLS) * grid.cell * normals
-    ahead = ndimage.map_coordinates(outside, grid.fractional(points + step), order=1, mode="nearest")
-    behind = ndimage.map_coordinates(outside, grid.fractional(points - step), order=1, mode="nearest")
-    difference = ahead - behind
-    sign = np.where(difference < 0, -1.0, 1.0)
-    unsure = np.abs(difference) < CONFIDENT_DIFFERENCE
-    if unsure.any() and (~unsure).any():
-        # Take the side that agrees with the confident neighbours' (already flipped) normals.
-        oriented = normals * sign[:, None]
+    # The shell reaches ``closing`` cells from the points; the outside starts just beyond. The nearest
+    # probe that tells the sides apart decides: a farther one may cross a part thinner than itself and
+    # read the outside beyond it as this point's inside. A solid that encloses nothing is thinner than
+    # the shell everywhere, so only the shell's own blur half a cell out is read there (a 4 mm wire in
+    # 2.3 mm cells under 0.5 mm noise: 9 % of its normals flipped by the far probes, 0.1 % without).
+    reach = occ.closing + PROBE_CELLS if occ.encloses else NEAR_PROBE_CELLS
+    sign = np.ones(len(points))
+    unsure = np.ones(len(points), dtype=bool)
+    for cells in np.arange(1, 2 * reach + 1) / 2:
+        at = np.flatnonzero(unsure)
+        step = cells * grid.cell * normals[at]
+        ahead = ndimage.map_coordinates(outside, grid.fractional(points[at] + step), order=1, mode="nearest")
+        behind = ndimage.map_coordinates(outside, grid.fractional(points[at] - step), order=1, mode="nearest")
+        difference = ahead - behind
+        sure = np.abs(difference) >= CONFIDENT_DIFFERENCE
+        sign[at[sure]] = np.where(difference[sure] < 0, -1.0, 1.0)
+        unsure[at[sure]] = False
+        if not unsure.any():
+            break
+    at = np.flatnonzero(unsure)
+    if len(at) and len(at) < len(points):
+        # Take the side of the sure neighbours' (already flipped) normals, growing out from the sure
+        # points round by round, so a stretch the probe could not read follows its sure ends.
         k = min(tol.NORMAL_NEIGHBOURS, len(points))
-        nbr = (nearest(tree, points[unsure], k)[1] if neighbours is None
-               else neighbours[unsure, :k])
-        weight = (~unsure[nbr]).astype(float)
-        votes = np.einsum("nk,nkj,nj->n", weight, oriented[nbr], normals[unsure])
-        sign[unsure] = np.where(votes < 0, -1.0, 1.0)
+        nbr = nearest(tree, points[at], k)[1] if neighbours is None else neighbours[at, :k]
+        while len(at):
+            votes = np.einsum("nk,nkj,nj->n", (~unsure[nbr]).astype(float), normals[nbr] * sign[nbr, None], normals[at])
+            decided = votes != 0
+            if not decided.any():
+                break
+            sign[at[decided]] = np.where(votes[decided] < 0, -1.0, 1.0)
+            unsure[at[decided]] = False
+            at, nbr = at[~decided], nbr[~decided]
     if noise is not None:
         side = thin_wall_side(points, normals, tree, min_offset=THIN_WALL_NOISE * noise, neighbours=neighbours)
         sign = np.where(side != 0, side, sign)

@@ -111,7 +111,9 @@ def test_repeated_positions_are_estimated(tmp_path, method):
     np.savetxt(path, np.repeat(_sphere(400), 20, axis=0))
     once = estimate(make_cloud(_sphere(400)), 1000.0, method=method)
     repeated = estimate(load_cloud(path), 1000.0, method=method)
-    assert repeated.volume == pytest.approx(once.volume, rel=0.05)
+    # The copies add no surface: the same answer, not one near it (auto fitted normals to patches of
+    # copies and came out 1 % and then 5 % off).
+    assert repeated.volume == pytest.approx(once.volume, rel=0.005)
     rounded = tmp_path / "rounded.xyz"
     np.savetxt(rounded, np.round(_sphere(3000), 2))
     assert estimate(load_cloud(rounded), 1000.0, method=method).volume > 0
