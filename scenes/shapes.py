@@ -322,3 +322,106 @@ def make_shapes(count: int = 44, seed: int = 0) -> list[Shape]:
         mesh.apply_transform(pose)
         shapes.append(Shape(f"{recipe.family}-{recipe.kind}-{i:02d}", recipe.family, mesh, float(wall)))
     return shapes
+
+
+# ---- parts near the noise limit: 3-5 mm wires, fins, teeth and slots, not in ``make_shapes`` ---------------
+
+def coil(wire: float, radius: float, turns: float, pitch: float, sections: int = 24) -> trimesh.Trimesh:
+    """A closed helical spring, metres: a round ``wire`` (diameter) swept along a helix about z, ends capped."""
+    t = np.linspace(0.0, 2 * np.pi * turns, int(100 * turns))
+    path = np.c_[radius * np.cos(t), radius * np.sin(t), pitch * t / (2 * np.pi)]
+    tangent = np.gradient(path, axis=0)
+    tangent /= np.linalg.norm(tangent, axis=1, keepdims=True)
+    u = np.cross(tangent, (0.0, 0.0, 1.0))
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    v = np.cross(tangent, u)
+    a = np.linspace(0.0, 2 * np.pi, sections, endpoint=False)
+    ring = np.cos(a)[None, :, None] * u[:, None] + np.sin(a)[None, :, None] * v[:, None]
+    vertices = np.vstack([(path[:, None] + wire / 2 * ring).reshape(-1, 3), path[0], path[-1]])
+    i, j = np.meshgrid(np.arange(len(path) - 1), np.arange(sections), indexing="ij")
+    p, q = (i * sections + j).ravel(), (i * sections + (j + 1) % sections).ravel()
+    j = np.arange(sections)
+    end = (len(path) - 1) * sections
+    faces = np.vstack([np.c_[p, p + sections, q], np.c_[q, p + sections, q + sections],
+                       np.c_[np.full(sections, len(vertices) - 2), j, (j + 1) % sections],
+                       np.c_[np.full(sections, len(vertices) - 1), end + (j + 1) % sections, end + j]])
+    mesh = trimesh.Trimesh(vertices, faces)
+    if mesh.volume < 0:
+        mesh.invert()
+    return mesh
+
+
+def _coil(rng: np.random.Generator) -> tuple[trimesh.Trimesh, float]:
+    wire = rng.uniform(0.003, 0.005)
+    return coil(wire, rng.uniform(0.01, 0.02), rng.uniform(2.5, 4.5), wire + rng.uniform(0.004, 0.008)), wire
+
+
+def _comb(rng: np.random.Generator) -> tuple[trimesh.Trimesh, float]:
+    tooth, gap, thick = rng.uniform(0.003, 0.005), rng.uniform(0.003, 0.006), rng.uniform(0.003, 0.006)
+    n, length = int(rng.integers(5, 10)), rng.uniform(0.015, 0.03)
+    width = n * (tooth + gap)
+    parts = [_box((width, 0.006, thick), (width / 2, 0, 0))]
+    parts += [_box((tooth, length, thick), (i * (tooth + gap) + tooth / 2, 0.003 + length / 2 - 5e-4, 0)) for i in range(n)]
+    return _union(*parts), min(tooth, thick)
+
+
+def _heatsink(rng: np.random.Generator) -> tuple[trimesh.Trimesh, float]:
+    fin, gap, base = rng.uniform(0.003, 0.004), rng.uniform(0.004, 0.007), rng.uniform(0.004, 0.006)
+    n, height, depth = int(rng.integers(4, 8)), rng.uniform(0.015, 0.03), rng.uniform(0.03, 0.05)
+    width = n * fin + (n - 1) * gap
+    parts = [_box((width, depth, base), (width / 2, 0, base / 2))]
+    parts += [_box((fin, depth, height), (i * (fin + gap) + fin / 2, 0, base + height / 2 - 5e-4)) for i in range(n)]
+    return _union(*parts), min(fin, base)
+
+
+def _slotted(rng: np.random.Generator) -> tuple[trimesh.Trimesh, float]:
+    side, height, slot = rng.uniform(0.04, 0.08), rng.uniform(0.02, 0.04), rng.uniform(0.003, 0.006)
+    n = int(rng.integers(2, 6))
+    cuts = [_box((slot, 2 * side, height), (-side / 2 + (i + 1) * side / (n + 1), 0, height / 2)) for i in range(n)]
+    return _diff(_box((side, side, height)), *cuts), side / (n + 1) - slot
+
+
+def _pipe(rng: np.random.Generator) -> tuple[trimesh.Trimesh, float]:
+    radius, wall, length = rng.uniform(0.01, 0.03), rng.uniform(0.003, 0.005), rng.uniform(0.04, 0.1)
+    return _diff(_cyl(radius, length), _cyl(radius - wall, 2 * length)), wall
+
+
+def _wire_ring(rng: np.random.Generator) -> tuple[trimesh.Trimesh, float]:
+    wire = rng.uniform(0.003, 0.005)
+    return trimesh.creation.torus(rng.uniform(0.01, 0.025), wire / 2, major_sections=96, minor_sections=24), wire
+
+
+def _nut(rng: np.random.Generator) -> tuple[trimesh.Trimesh, float]:
+    across, height = rng.uniform(0.012, 0.03), rng.uniform(0.005, 0.012)
+    bore = across * rng.uniform(0.4, 0.6)
+    a = np.linspace(0, 2 * np.pi, 7)[:-1]
+    hexagon = np.c_[np.cos(a), np.sin(a)] * across / np.sqrt(3)
+    return _diff(_extrude(hexagon, height), _cyl(bore / 2, 3 * height, sections=64)), min(height, (across - bore) / 2)
+
+
+def _stool(rng: np.random.Generator) -> tuple[trimesh.Trimesh, float]:
+    leg, side = rng.uniform(0.004, 0.006), rng.uniform(0.04, 0.07)
+    parts = [_box((side, side, leg), (0, 0, side))]
+    parts += [_box((leg, leg, side), (x * (side - leg) / 2, y * (side - leg) / 2, side / 2)) for x in (-1, 1) for y in (-1, 1)]
+    return _union(*parts), leg
+
+
+#: Parts whose thinnest feature is 3-6 mm: at sigma 0.5 mm noise, six to twelve sigmas.
+_PARTS = (_coil, _comb, _heatsink, _slotted, _pipe, _wire_ring, _nut, _stool)
+
+
+def make_parts(count: int = 16, seed: int = 0) -> list[Shape]:
+    """``count`` seeded parts near the noise limit (wires, fins, teeth, slots, 3-6 mm), at random poses."""
+    shapes = []
+    for i in range(count):
+        make = _PARTS[i % len(_PARTS)]
+        rng = np.random.default_rng([seed, 1000 + i])
+        mesh, wall = make(rng)
+        if not (mesh.is_watertight and mesh.is_winding_consistent and mesh.volume > 0):
+            raise RuntimeError(f"generated part {make.__name__} {i} is not a closed solid")
+        pose = np.eye(4)
+        pose[:3, :3] = Rotation.random(random_state=int(rng.integers(2**31))).as_matrix()
+        pose[:3, 3] = rng.uniform(-1.0, 1.0, 3)
+        mesh.apply_transform(pose)
+        shapes.append(Shape(f"part-{make.__name__.strip('_').replace('_', '-')}-{i:02d}", "part", mesh, float(wall)))
+    return shapes

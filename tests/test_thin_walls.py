@@ -10,6 +10,7 @@ import trimesh
 from estimation import estimate, make_cloud
 from estimation.spacing import surface_noise
 from scenes.sampling import sample_surface
+from scenes.shapes import coil
 
 
 def _hollow_ball(radius: float, wall: float, hole: float) -> trimesh.Trimesh:
@@ -19,32 +20,6 @@ def _hollow_ball(radius: float, wall: float, hole: float) -> trimesh.Trimesh:
     bore = trimesh.creation.cylinder(radius=hole, height=radius)
     bore.apply_translation((0.0, 0.0, radius))
     return trimesh.boolean.difference([outer, inner, bore], engine="manifold")
-
-
-def _coil(wire: float, radius: float, turns: float, pitch: float, sections: int = 24) -> trimesh.Trimesh:
-    """A closed helical spring: a round ``wire`` (diameter, metres) swept along a helix, ends capped."""
-    t = np.linspace(0.0, 2 * np.pi * turns, int(100 * turns))
-    path = np.c_[radius * np.cos(t), radius * np.sin(t), pitch * t / (2 * np.pi)]
-    tangent = np.gradient(path, axis=0)
-    tangent /= np.linalg.norm(tangent, axis=1, keepdims=True)
-    u = np.cross(tangent, (0.0, 0.0, 1.0))
-    u /= np.linalg.norm(u, axis=1, keepdims=True)
-    v = np.cross(tangent, u)
-    a = np.linspace(0.0, 2 * np.pi, sections, endpoint=False)
-    ring = np.cos(a)[None, :, None] * u[:, None] + np.sin(a)[None, :, None] * v[:, None]
-    vertices = np.vstack([(path[:, None] + wire / 2 * ring).reshape(-1, 3), path[0], path[-1]])
-    i, j = np.meshgrid(np.arange(len(path) - 1), np.arange(sections), indexing="ij")
-    p, q = i * sections + j, i * sections + (j + 1) % sections
-    faces = [np.c_[p.ravel(), p.ravel() + sections, q.ravel()], np.c_[q.ravel(), p.ravel() + sections, q.ravel() + sections]]
-    first, last = len(vertices) - 2, len(vertices) - 1
-    j = np.arange(sections)
-    faces += [np.c_[np.full(sections, first), j, (j + 1) % sections],
-              np.c_[np.full(sections, last), (len(path) - 1) * sections + (j + 1) % sections, (len(path) - 1) * sections + j]]
-    mesh = trimesh.Trimesh(vertices, np.vstack(faces))
-    if mesh.volume < 0:
-        mesh.invert()
-    assert mesh.is_watertight
-    return mesh
 
 
 @pytest.mark.parametrize("sigma", [0.0001, 0.0005, 0.001])
@@ -89,7 +64,7 @@ def test_a_noisy_wire_thinner_than_the_flood_cells_is_not_filled(seed):
     # A 4 mm wire under 0.5 mm noise, no normals: the coarse cells are 2.3 mm and the shell encloses nothing.
     # The orientation probe looked two cells along each normal, across the wire to the outside beyond it,
     # and flipped ~9 % of the normals: the coil's gaps filled, +38 % and +45 % at these seeds.
-    mesh = _coil(wire=0.004, radius=0.015, turns=4, pitch=0.01)
+    mesh = coil(wire=0.004, radius=0.015, turns=4, pitch=0.01)
     cloud = sample_surface(mesh, 30_000, seed=seed, noise_sigma=0.0005, with_normals=False)
     result = estimate(make_cloud(cloud.points), 1000.0)
     assert result.volume == pytest.approx(mesh.volume, rel=0.1)
@@ -102,3 +77,4 @@ def test_a_noisy_wire_thinner_than_the_flood_cells_is_not_filled(seed):
     _, nearest = cKDTree(line).query(points)
     outward = np.einsum("ij,ij->i", normals, points - line[nearest]) > 0
     assert outward.mean() > 0.97  # 0.91 and 0.89 before
+
