@@ -189,7 +189,9 @@ def _estimate_auto(
     than ``tol.REFINE_DOUBT`` of the volume and the budget left points out, a second pass runs on
     enough points to bring them to that (the thin-wall bound shrinks about linearly with the cell, so
     the points grow with the square of the doubt), at least ``tol.REFINE_MIN_FACTOR`` times as many and
-    at most ``tol.REFINE_POINTS``.
+    at most ``tol.REFINE_POINTS``. Where the noise sets the cell the second pass is no finer, but it
+    averages more points in each cell: skipping it there took the noisy shapes of ``bench/shapes.py`` from
+    0.51 to 1.31 % at worst.
     """
     from estimation.spacing import point_spacing, surface_noise
 
@@ -344,7 +346,7 @@ def _auto_pass(cloud: PointCloud, box: OrientedBox, local: np.ndarray, spacing: 
             points = points[distinct_rows(points)]
             tree = cKDTree(points)
             neighbours = nearest(tree, points, min(max(k, THIN_WALL_NEIGHBOURS), len(points)))[1]
-        normals, tilt = fit_normals(points, k, neighbours=neighbours)
+        normals, tilt = fit_normals(points, k, neighbours=neighbours, noise=noise)
         if viewpoint is not None:
             normals = orient_to_viewpoint(points, normals, box.to_local(np.asarray(viewpoint, dtype=np.float64)[None])[0])
         else:

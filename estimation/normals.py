@@ -36,6 +36,10 @@ THIN_WALL_NEIGHBOURS = 32
 #: The nearest neighbours that place a point's own sheet (closer than a wall two spacings thick).
 OWN_SHEET_NEIGHBOURS = 8
 
+#: A wide normal patch is fitted again on the points within this many noise sigmas of its main sheet
+#: (``_refit_own_sheet``): 3.5 sigma keeps all but ~0.05 % of that sheet's noise.
+OWN_SHEET_SIGMAS = 3.5
+
 #: Neighbours whose unoriented normals are within ~25 degrees of the point's count as sheets parallel
 #: to it (the same face, or the wall's other face); crossing faces at a crease do not.
 PARALLEL_COSINE = 0.9
@@ -71,13 +75,17 @@ def estimate_normals(points: np.ndarray, k: int = tol.NORMAL_NEIGHBOURS, *,
 
 
 def fit_normals(points: np.ndarray, k: int = tol.NORMAL_NEIGHBOURS, *,
-                neighbours: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+                neighbours: np.ndarray | None = None, noise: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
     """:func:`estimate_normals`, and how far noise may have tilted each: (normals (n, 3), tilt (n,)).
 
     ``tilt`` is the variance (radians^2) of the normal's tilt towards the patch's narrower tangent
     direction: a plane fitted to k points spread ``lambda_1 / k`` along it, each ``residual`` off it,
     has a slope variance of ``residual / lambda_1``. Noise tilts normals on a flat face; the contouring
     must not read that as a crease (``dualcontour``).
+
+    With ``noise`` (metres, the points' sigma about their surface) and a patch wider than
+    ``tol.NORMAL_NEIGHBOURS``, each patch keeps only the points on its own point's sheet (see
+    ``OWN_SHEET_SIGMAS``) and is fitted again.
     """
     k = min(k, len(points))
     if neighbours is None:
@@ -86,13 +94,48 @@ def fit_normals(points: np.ndarray, k: int = tol.NORMAL_NEIGHBOURS, *,
     normals = np.empty_like(points)
     tilt = np.empty(len(points))
     for start in range(0, len(points), NORMAL_BLOCK):
-        patch = points[neighbours[start:start + NORMAL_BLOCK]]
+        block = slice(start, start + NORMAL_BLOCK)
+        patch = points[neighbours[block]]
         patch -= patch.mean(axis=1, keepdims=True)
         # eigh sorts eigenvalues ascending: column 0 is the direction of least spread.
-        lam, vec = np.linalg.eigh(np.einsum("nki,nkj->nij", patch, patch))
-        normals[start:start + NORMAL_BLOCK] = vec[:, :, 0]
-        tilt[start:start + NORMAL_BLOCK] = np.maximum(lam[:, 0], 0.0) / (k * np.maximum(lam[:, 1], np.finfo(float).tiny))
+        lam, vec = np.linalg.eigh(patch.transpose(0, 2, 1) @ patch)
+        normals[block] = vec[:, :, 0]
+        tilt[block] = np.maximum(lam[:, 0], 0.0) / (k * np.maximum(lam[:, 1], np.finfo(float).tiny))
+    if noise > 0 and k > tol.NORMAL_NEIGHBOURS:
+        _refit_own_sheet(points, neighbours, normals, tilt, noise)
     return normals, tilt
+
+
+def _refit_own_sheet(points: np.ndarray, neighbours: np.ndarray, normals: np.ndarray, tilt: np.ndarray,
+                     noise: float) -> None:
+    """Fit each wide patch again (in place) on the points of its own point's sheet.
+
+    A patch wide enough to average the noise reaches across a wall a few sigmas thick, and for a point
+    the noise moved into the wall the other face is nearly as close as its own: the two sheets' spread
+    across the wall then exceeds the patch's along it, and the fit turns sideways (a 3 mm plate at sigma
+    0.5 mm: such points' normals 60 degrees off on average; their planes, dropped as facing away, left
+    the ones the noise moved outward, and the plate came out +1.8 % thick). The patch's direction across
+    its sheets is its neighbours' consensus (the principal axis of their unsigned normals: both faces
+    of a wall agree on it, and most neighbours' own fits are sound); along it, the patch's median offset
+    lies on the point's own face, which holds most of the patch, and the points within
+    ``OWN_SHEET_SIGMAS`` of it are fitted again. Measured by hand on that plate: the inward points'
+    normals 0.34 -> 0.75 in mean |cosine| to the truth, the plate +1.8 -> +0.6 %.
+    """
+    first = normals.copy()
+    for start in range(0, len(points), NORMAL_BLOCK):
+        block = slice(start, start + NORMAL_BLOCK)
+        nbr = neighbours[block]
+        beside = first[nbr]
+        across = np.linalg.eigh(beside.transpose(0, 2, 1) @ beside)[1][:, :, -1:]
+        patch = points[nbr]
+        offset = (patch @ across)[:, :, 0]
+        level = np.median(offset, axis=1, keepdims=True)
+        weight = (np.abs(offset - level) <= OWN_SHEET_SIGMAS * noise).astype(float)[:, None, :]
+        count = weight.sum(axis=2)[:, 0]
+        patch -= (weight @ patch) / count[:, None, None]
+        lam, vec = np.linalg.eigh((patch.transpose(0, 2, 1) * weight) @ patch)
+        normals[block] = vec[:, :, 0]
+        tilt[block] = np.maximum(lam[:, 0], 0.0) / (count * np.maximum(lam[:, 1], np.finfo(float).tiny))
 
 
 def orient_outward(
