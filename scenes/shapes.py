@@ -314,14 +314,19 @@ def make_shapes(count: int = 44, seed: int = 0) -> list[Shape]:
             wall *= scale
         if not wall:
             wall = float(min(mesh.extents))
-        if not (mesh.is_watertight and mesh.is_winding_consistent and mesh.volume > 0):
-            raise RuntimeError(f"generated shape {recipe.kind} {i} is not a closed solid")
-        pose = np.eye(4)
-        pose[:3, :3] = Rotation.random(random_state=int(rng.integers(2**31))).as_matrix()
-        pose[:3, 3] = rng.uniform(-1.0, 1.0, 3)
-        mesh.apply_transform(pose)
+        _place(mesh, rng, f"shape {recipe.kind} {i}")
         shapes.append(Shape(f"{recipe.family}-{recipe.kind}-{i:02d}", recipe.family, mesh, float(wall)))
     return shapes
+
+
+def _place(mesh: trimesh.Trimesh, rng: np.random.Generator, what: str) -> None:
+    """Check ``mesh`` is a closed solid, then move it (in place) to a seeded random pose within 1 m of the origin."""
+    if not (mesh.is_watertight and mesh.is_winding_consistent and mesh.volume > 0):
+        raise RuntimeError(f"generated {what} is not a closed solid")
+    pose = np.eye(4)
+    pose[:3, :3] = Rotation.random(random_state=int(rng.integers(2**31))).as_matrix()
+    pose[:3, 3] = rng.uniform(-1.0, 1.0, 3)
+    mesh.apply_transform(pose)
 
 
 # ---- parts near the noise limit: 3-5 mm wires, fins, teeth and slots, not in ``make_shapes`` ---------------
@@ -417,11 +422,6 @@ def make_parts(count: int = 16, seed: int = 0) -> list[Shape]:
         make = _PARTS[i % len(_PARTS)]
         rng = np.random.default_rng([seed, 1000 + i])
         mesh, wall = make(rng)
-        if not (mesh.is_watertight and mesh.is_winding_consistent and mesh.volume > 0):
-            raise RuntimeError(f"generated part {make.__name__} {i} is not a closed solid")
-        pose = np.eye(4)
-        pose[:3, :3] = Rotation.random(random_state=int(rng.integers(2**31))).as_matrix()
-        pose[:3, 3] = rng.uniform(-1.0, 1.0, 3)
-        mesh.apply_transform(pose)
+        _place(mesh, rng, f"part {make.__name__} {i}")
         shapes.append(Shape(f"part-{make.__name__.strip('_').replace('_', '-')}-{i:02d}", "part", mesh, float(wall)))
     return shapes
