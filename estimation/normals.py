@@ -84,8 +84,8 @@ def fit_normals(points: np.ndarray, k: int = tol.NORMAL_NEIGHBOURS, *,
     must not read that as a crease (``dualcontour``).
 
     With ``noise`` (metres, the points' sigma about their surface) and a patch wider than
-    ``tol.NORMAL_NEIGHBOURS``, each patch keeps only the points on its own point's sheet (see
-    ``OWN_SHEET_SIGMAS``) and is fitted again.
+    ``tol.NORMAL_NEIGHBOURS``, each patch is fitted again on the points of its main sheet, the point's
+    own face (``_refit_own_sheet``).
     """
     k = min(k, len(points))
     if neighbours is None:
@@ -108,7 +108,7 @@ def fit_normals(points: np.ndarray, k: int = tol.NORMAL_NEIGHBOURS, *,
 
 def _refit_own_sheet(points: np.ndarray, neighbours: np.ndarray, normals: np.ndarray, tilt: np.ndarray,
                      noise: float) -> None:
-    """Fit each wide patch again (in place) on the points of its own point's sheet.
+    """Fit each wide patch again (in place) on the points of its main sheet, the point's own face.
 
     A patch wide enough to average the noise reaches across a wall a few sigmas thick, and for a point
     the noise moved into the wall the other face is nearly as close as its own: the two sheets' spread
