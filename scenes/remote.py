@@ -28,7 +28,7 @@ from sync.keys import Keys
 from sync.link import Link
 from sync.messages import MAX_INT64, VERSION, Gone, Heartbeat, OperatorCommand, Pose, SceneInfo, cloud_message
 from sync.ordering import Marks
-from sync.ratelimit import RateLimitedLog
+from sync.ratelimit import RateLimitedLog, TokenBucket
 from sync.recording import Recorder
 from sync.transport import Transport
 from twin.debuglog import OFF, DebugLog
@@ -62,6 +62,11 @@ class _Truth:
 
 #: Joint speed below which the ground truth counts as at rest, m/s or rad/s: a millimetre per second.
 SETTLED_SPEED = 1e-3
+
+#: State queries answered at once, and per second after that: each answer is every cloud the remote has. A
+#: twin asks once when it starts, so a handful of twins starting together are all answered; a peer asking in
+#: a loop gets one answer a second and the remote's uplink stays for its poses.
+STATE_QUERY_BURST, STATE_QUERY_RATE = 8, 1.0
 
 
 class Remote:
@@ -131,7 +136,8 @@ class Remote:
         self._info = self.link.put(self.keys.info, self._scene_info()) if publish else None
         self._workspace = reach_box(self._scene_info(), OPERATOR_REACH)
         self.link.queryable(self.keys.info, lambda _k: [(self.keys.info, self._info or b"")])
-        self.link.queryable(self.keys.state, lambda _k: list(self._replies_snapshot()))
+        self.link.queryable(self.keys.state, lambda _k: list(self._replies_snapshot()),
+                            budget=TokenBucket(STATE_QUERY_BURST, STATE_QUERY_RATE, self.clock))
         self.link.subscribe(self.keys.operator, self._on_operator)
         if publish:
             for spec_obj in scene.objects:

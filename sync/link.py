@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 from sync.clock import REAL_CLOCK, Clock
 from sync.keys import carried_by
 from sync.messages import Message, MessageError, SceneInfo, decode, encode
-from sync.ratelimit import RateLimitedLog
+from sync.ratelimit import RateLimitedLog, TokenBucket
 from sync.transport import Transport
 
 log = logging.getLogger(__name__)
@@ -40,6 +40,7 @@ class LinkCounters:
     dropped_malformed: int = 0  # every message dropped: decode's reasons, and the receiver's (see Link.dropped)
     dropped_by_reason: Counter = field(default_factory=Counter)
     last_received: float | None = None  # clock.now() of the last good message
+    queries_refused: int = 0  # queries answered with nothing: past the queryable's budget
 
 
 class Link:
@@ -64,10 +65,18 @@ class Link:
         """Call ``handler(key, message)`` for each good message on ``key`` (from the transport's thread)."""
         self.transport.subscribe(key, lambda k, data: self.receive(k, data, handler))
 
-    def queryable(self, key: str, answer: Callable[[str], list[tuple[str, bytes]]]) -> None:
-        """Answer queries on ``key`` with the (key, encoded bytes) pairs ``answer(selector)`` returns."""
+    def queryable(self, key: str, answer: Callable[[str], list[tuple[str, bytes]]],
+                  budget: TokenBucket | None = None) -> None:
+        """Answer queries on ``key`` with the (key, encoded bytes) pairs ``answer(selector)`` returns; past
+        ``budget``, with nothing (the asker times out; counted in :attr:`LinkCounters.queries_refused`)."""
 
         def counted(selector: str) -> list[tuple[str, bytes]]:
+            if budget is not None and not budget.take():
+                with self._lock:
+                    self.counters.queries_refused += 1
+                self.dropped_log.warning("query-over-budget", "query on %s refused: more than %d at once or "
+                                         "%g per second", selector[:_KEY_LOGGED], budget.burst, budget.rate)
+                return []
             replies = answer(selector)
             for _, data in replies:
                 self._sent(data)

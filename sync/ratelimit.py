@@ -1,6 +1,7 @@
-"""Warnings that a flood of bad input cannot turn into a flood of log lines.
+"""Budgets that a flood of input cannot overrun: log lines (:class:`RateLimitedLog`) and answers
+(:class:`TokenBucket`).
 
-Each reason (``"non-finite"``, ``"wrong-key"``, ``"out-of-scene"``, ...) has its own budget: the first
+:class:`RateLimitedLog`: each reason (``"non-finite"``, ``"wrong-key"``, ``"out-of-scene"``, ...) has its own budget: the first
 ``burst`` go to WARNING; after that, at most one WARNING per ``period`` seconds of the given clock, saying how
 many of that reason were held back since the last one. Held-back lines go to DEBUG, so nothing is lost to
 anyone who asks for it. One noisy reason never silences another.
@@ -61,3 +62,30 @@ class RateLimitedLog:
         else:
             self.logger.warning(msg, *args, exc_info=exc_info)
         return loud
+
+
+class TokenBucket:
+    """At most ``burst`` events at once and ``rate`` per second of ``clock`` on average; safe from any thread.
+
+    The remote answers a state query with every cloud it has (megabytes): without a budget, a peer asking in
+    a loop turns the remote's uplink into a stream of clouds (``tests/test_sync_zenoh.py``).
+    """
+
+    def __init__(self, burst: int, rate: float, clock: Clock = REAL_CLOCK) -> None:
+        if burst < 1 or not rate > 0:
+            raise ValueError(f"burst must be >= 1 and rate > 0, got {burst}, {rate}")
+        self.burst, self.rate, self.clock = burst, rate, clock
+        self._tokens = float(burst)
+        self._at = clock.now()
+        self._lock = threading.Lock()
+
+    def take(self) -> bool:
+        """Spend one token if there is one: whether the event may go ahead."""
+        now = self.clock.now()
+        with self._lock:
+            self._tokens = min(self.burst, self._tokens + max(0.0, now - self._at) * self.rate)
+            self._at = max(self._at, now)
+            if self._tokens < 1:
+                return False
+            self._tokens -= 1
+            return True

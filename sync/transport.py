@@ -18,6 +18,14 @@ OnSample = Callable[[str, bytes], None]
 #: ``answer(selector) -> [(key, payload), ...]``: a queryable's replies to one query.
 Answer = Callable[[str], list[tuple[str, bytes]]]
 
+#: What one :meth:`Transport.get` takes in before it stops reading: replies come from any peer that declares a
+#: matching queryable, and a hostile one could answer with replies without end. A full scene is two replies
+#: per object (its cloud and its pose) for up to 1000 objects (:data:`scenes.scenefile.MAX_OBJECTS`), and a
+#: 1M-point cloud of a 10 cm ball encodes to 2.1 MB (3.1 MB with normals); past either cap the rest of the
+#: replies are not read (logged).
+MAX_REPLIES = 4096
+MAX_REPLY_BYTES = 2**30
+
 
 class Transport(Protocol):
     """Bytes under keys. Callbacks may run on the transport's own threads: they must only enqueue."""

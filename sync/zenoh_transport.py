@@ -15,7 +15,7 @@ import socket
 from pathlib import Path
 
 from estimation.errors import TwinError
-from sync.transport import Answer, OnSample
+from sync.transport import MAX_REPLIES, MAX_REPLY_BYTES, Answer, OnSample
 
 log = logging.getLogger(__name__)
 
@@ -168,8 +168,21 @@ class ZenohTransport:
         self._handles.append(self.session.declare_queryable(keyexpr, on_query))
 
     def get(self, selector: str, timeout: float) -> list[tuple[str, bytes]]:
-        return [(str(r.ok.key_expr), r.ok.payload.to_bytes())
-                for r in self.session.get(selector, timeout=timeout) if r.ok is not None]
+        replies: list[tuple[str, bytes]] = []
+        total = 0
+        for r in self.session.get(selector, timeout=timeout):
+            if r.ok is None:
+                continue
+            data = r.ok.payload.to_bytes()
+            total += len(data)
+            if len(replies) >= MAX_REPLIES or total > MAX_REPLY_BYTES:
+                # Replies are read as they come, so stopping here bounds memory (collecting them all first
+                # did not); the handler's channel and the rest go with it.
+                log.warning("query %s: more than %d replies or %d MiB; the rest were not read", selector[:200],
+                            MAX_REPLIES, MAX_REPLY_BYTES >> 20)
+                break
+            replies.append((str(r.ok.key_expr), data))
+        return replies
 
     def close(self) -> None:
         for h in self._handles:

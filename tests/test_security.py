@@ -403,3 +403,51 @@ def test_a_bad_zenoh_config_is_one_line_with_its_position(tmp_path, capsys):
     assert main(["local", "--zenoh-config", str(bad)]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "at line 1, column 2" in err and ".rs:" not in err, err
+
+
+def test_a_peer_asking_for_the_state_in_a_loop_gets_a_burst_then_one_answer_a_second(tmp_path_factory):
+    from scenes.remote import STATE_QUERY_BURST, STATE_QUERY_RATE
+    from sync.zenoh_transport import ZenohTransport
+
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    with running_remote(endpoint, tmp_path_factory.getbasetemp() / "coacd") as runner:
+        asker = open_session(make_config(connect=[endpoint]))
+        try:
+            transport = ZenohTransport(asker)
+            wait_until(lambda: transport.get(KEYS.info, 1.0) != [], what="the remote's queryables")
+            t0, answered, asked = time.monotonic(), 0, 30
+            for _ in range(asked):
+                replies = transport.get(KEYS.state, 1.0)
+                # An answer is the whole state (both clouds first); a refused query is answered with nothing.
+                assert replies == [] or sum(k.endswith("/cloud") for k, _ in replies) == 2
+                answered += replies != []
+            elapsed = time.monotonic() - t0
+            assert STATE_QUERY_BURST <= answered <= STATE_QUERY_BURST + STATE_QUERY_RATE * elapsed + 1
+            assert runner.remote.link.counters.queries_refused == asked - answered
+        finally:
+            asker.close()
+
+
+def test_a_peer_answering_without_end_is_read_only_up_to_the_caps(monkeypatch):
+    import sync.zenoh_transport as zt
+
+    port = free_port()
+    server = open_session(make_config(listen=[f"tcp/127.0.0.1:{port}"]))
+    client = open_session(make_config(connect=[f"tcp/127.0.0.1:{port}"]))
+    try:
+        def flood(query) -> None:  # type: ignore[no-untyped-def]
+            for i in range(300):
+                query.reply(f"twin/x/{i}", bytes(1000))
+
+        queryable = server.declare_queryable("twin/x/**", flood)
+        transport = zt.ZenohTransport(client)
+        wait_until(lambda: len(transport.get("twin/x/**", 2.0)) == 300, what="the hostile queryable")
+        monkeypatch.setattr(zt, "MAX_REPLIES", 50)
+        assert len(transport.get("twin/x/**", 2.0)) == 50
+        monkeypatch.setattr(zt, "MAX_REPLIES", 10_000)
+        monkeypatch.setattr(zt, "MAX_REPLY_BYTES", 20_500)
+        assert len(transport.get("twin/x/**", 2.0)) == 20
+        queryable.undeclare()
+    finally:
+        client.close()
+        server.close()
