@@ -222,6 +222,9 @@ def _parser() -> argparse.ArgumentParser:
                    help="a depth image's camera-to-world pose (metres; camera axes x right, y down, z forward), "
                         "once per depth image (default: identity, points in the camera frame)")
     p.add_argument("--mesh-out", type=Path, help="write the reconstructed mesh (.stl, .ply, .obj)")
+    p.add_argument("--keep-strays", action="store_true",
+                   help="keep clusters of points apart from the object, each under 1 %% of the points (by default "
+                        "they are dropped as outliers, with a warning)")
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     _rerun_option(p)
     p.set_defaults(handler=_cmd_estimate)
@@ -351,11 +354,12 @@ def _cmd_estimate(args: argparse.Namespace) -> int:
             cloud = loaded[0][1] if loaded[0][1] is not None else make_cloud(views[0].points)
             origin = views[0].origin
             result = estimate(cloud, density, method=args.method, material=name, read_seconds=read,
-                              viewpoint=origin if origin is not None and origin.ndim == 1 else None)
+                              viewpoint=origin if origin is not None and origin.ndim == 1 else None,
+                              keep_strays=args.keep_strays)
             cov = assess(result, cloud.points, 0.0)[0] if result.method == "auto" else None
             bounds, warnings, plane = result.volume_bounds_m3, result.warnings, None
         else:
-            fused = estimate_views(views, density, support=support, material=name)
+            fused = estimate_views(views, density, support=support, material=name, keep_strays=args.keep_strays)
             result, cov, bounds, warnings, plane = (fused.estimate, fused.coverage, fused.volume_bounds_m3,
                                                     fused.warnings, fused.plane)
         if args.mesh_out is not None:

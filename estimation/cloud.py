@@ -49,6 +49,15 @@ class PointCloud:
     def without_normals(self) -> PointCloud:
         return replace(self, normals=None)
 
+    def subset(self, keep: np.ndarray) -> PointCloud:
+        """The points ``keep`` selects ((n,) bool or indices), with their normals, colours and origins."""
+        take = lambda a: None if a is None else a[keep]  # noqa: E731
+        points, origins = self.points[keep], self.sensor_origins
+        if origins is not None:  # one origin stays one broadcast row
+            origins = np.broadcast_to(origins[0], points.shape) if is_single_origin(origins) else origins[keep]
+        return replace(self, points=points, normals=take(self.normals), colors=take(self.colors),
+                       sensor_origins=origins)
+
     def transformed(self, rotation: np.ndarray, translation: np.ndarray) -> PointCloud:
         """Return the cloud moved by ``x -> R x + t`` (normals rotated, sensor origins moved too)."""
         rotation = np.asarray(rotation, dtype=np.float64)

@@ -20,7 +20,13 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from estimation import tolerances as tol
-from estimation.cloud import PointCloud, check_estimable, check_sensor_origin, distinct_rows
+from estimation.cloud import (
+    PointCloud,
+    check_count_and_range,
+    check_estimable,
+    check_sensor_origin,
+    distinct_rows,
+)
 from estimation.downsample import voxel_downsample, voxel_subsample
 from estimation.errors import CloudError
 from estimation.inertia import MassProperties, mass_properties, triangle_areas
@@ -109,6 +115,7 @@ def estimate(
     viewpoint: np.ndarray | None = None,
     resolution: int = tol.GRID_RESOLUTION,
     read_seconds: float = 0.0,
+    keep_strays: bool = False,
 ) -> PhysicalEstimate:
     """Estimate one object's geometry and mass properties from its surface cloud.
 
@@ -123,6 +130,8 @@ def estimate(
             its cell from the point spacing (``tolerances.FINE_CELL_SPACINGS``) of at most
             ``tolerances.POINT_BUDGET`` points (see ``_estimate_auto``).
         read_seconds: time spent reading the file, carried into ``timings``.
+        keep_strays: keep the points ``estimation.strays`` finds apart from the object (by default they are
+            dropped, with a warning saying how many).
 
     Raises:
         CloudError: too few points, a flat or line-like cloud, a viewpoint beyond
@@ -134,10 +143,13 @@ def estimate(
     if method not in METHODS:
         raise ValueError(f"unknown method {method!r}; choose from {', '.join(METHODS)}")
     density = check_density(density)
-    check_estimable(cloud)
+    check_count_and_range(cloud.points)
     if viewpoint is not None:
         check_sensor_origin(np.asarray(viewpoint, dtype=np.float64), "viewpoint")
     warnings = [f"dropped {cloud.dropped_nonfinite} rows with NaN or inf"] if cloud.dropped_nonfinite else []
+    # Strays go before the shape checks: a stray point 1 km off made a ball look line-like.
+    cloud, spacing = _drop_strays(cloud, warnings, keep_strays)
+    check_estimable(cloud)
 
     box, local = oriented_box_local(cloud.points)
     if (hint := units_warning(box.extents)) is not None:
@@ -166,7 +178,7 @@ def estimate(
                        warnings, stages, time.perf_counter())
 
     if method == "auto":
-        return _estimate_auto(cloud, box, local, density, material, viewpoint, warnings, stages)
+        return _estimate_auto(cloud, box, local, spacing, density, material, viewpoint, warnings, stages)
     return _estimate_from_surface(cloud, box, density, method, material, viewpoint, resolution, warnings, stages)
 
 
@@ -174,6 +186,7 @@ def _estimate_auto(
     cloud: PointCloud,
     box: OrientedBox,
     local: np.ndarray,
+    spacing: float,
     density: float,
     material: str | None,
     viewpoint: np.ndarray | None,
@@ -193,11 +206,10 @@ def _estimate_auto(
     averages more points in each cell: skipping it there took the noisy shapes of ``bench/shapes.py`` from
     0.51 to 1.31 % at worst.
     """
-    from estimation.spacing import point_spacing, surface_noise
+    from estimation.spacing import surface_noise
 
     # The principal frame: the grid, and so the result, does not depend on the cloud's rotation.
     t0 = time.perf_counter()
-    spacing = point_spacing(local)
     noise = surface_noise(local)  # before thinning: see ``spacing.NOISE_SUBSET``
     stages["downsample"] = time.perf_counter() - t0
     run = _auto_pass(cloud, box, local, spacing, noise, tol.POINT_BUDGET, density, viewpoint, stages)
@@ -379,6 +391,31 @@ def _auto_pass(cloud: PointCloud, box: OrientedBox, local: np.ndarray, spacing: 
     lap("mass_properties", t0)
     return _AutoPass(points=points, normals=normals, h=h, surface=surface, props=props, closing=occ.closing,
                      hole=hole, thin=thin, encloses=occ.encloses, sealed=sealed)
+
+
+def _drop_strays(cloud: PointCloud, warnings: list[str], keep: bool) -> tuple[PointCloud, float]:
+    """The cloud without its strays (``estimation.strays``; all of it with ``keep``), and its point spacing
+    (metres); what was dropped, or kept, and a cloud in several parts go into ``warnings``."""
+    from estimation.spacing import point_spacing
+    from estimation.strays import STRAY_CELL_SPACINGS, STRAY_SHARE, islands
+
+    spacing = point_spacing(cloud.points)
+    found = islands(cloud.points, spacing)
+    gap = f"{1000 * STRAY_CELL_SPACINGS * spacing:.2g} mm"
+    if found.strays:
+        what = (f"{found.strays} stray point(s) in {found.stray_islands} cluster(s) more than {gap} from the rest, "
+                f"each under {100 * STRAY_SHARE:g} % of the points")
+        if keep:
+            warnings.append(f"kept {what} (keep_strays)")
+        else:
+            cloud = cloud.subset(found.keep)
+            warnings.append(f"dropped {what}")
+            spacing = point_spacing(cloud.points)
+    if found.parts > 1:
+        shares = ", ".join(f"{100 * s:.0f} %" for s in found.part_shares)
+        warnings.append(f"the cloud is {found.parts} separate parts ({shares} of the points) more than {gap} apart: "
+                        f"estimated as one rigid object (split the cloud if they are separate objects)")
+    return cloud, spacing
 
 
 def _area(surface) -> float:  # type: ignore[no-untyped-def]

@@ -58,6 +58,8 @@ def point_spacing(points: np.ndarray, tree=None) -> float:  # type: ignore[no-un
     Args:
         points: (n, 3) float64, metres. tree: a ``cKDTree`` over ``points`` (built when None).
     """
+    if len(points) < 2:
+        return 0.0  # one distinct position: no neighbour to be spaced from (check_estimable says so)
     if tree is None and len(points) > SPACING_SUBSET:
         # A uniform subset of m of the n points is spaced sqrt(n / m) times wider; building its tree
         # instead of the full one is what makes this cheap on a million points.

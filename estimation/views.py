@@ -271,7 +271,7 @@ def _within_extent(points: np.ndarray, plane: Plane, inliers: np.ndarray, margin
 
 
 def estimate_views(views: list[View], density: float, *, support: Plane | str | None = None,
-                   material: str | None = None, seed: int = 0) -> ViewsEstimate:
+                   material: str | None = None, seed: int = 0, keep_strays: bool = False) -> ViewsEstimate:
     """Fuse ``views`` of one object, close its base on the support plane, estimate, and say how sure.
 
     Args:
@@ -281,6 +281,7 @@ def estimate_views(views: list[View], density: float, *, support: Plane | str | 
             the horizontal plane through the lowest point) or None (no plane: nothing is cut or closed).
         material: recorded with the estimate.
         seed: RANSAC's randomness (``"auto"``).
+        keep_strays: see :func:`estimation.estimate.estimate`.
 
     Raises:
         CloudError: a view without origin or with one beyond ``tolerances.MAX_COORDINATE_M``, a view with no
@@ -365,7 +366,7 @@ def estimate_views(views: list[View], density: float, *, support: Plane | str | 
     # Observed normals are refitted (NaN here): with the base and skirt as neighbours, those near the base turn.
     alln = np.where(closed.completed[:, None], closed.normals, np.nan)
     cloud = fused_cloud(closed.points, closed.origins, completed=closed.completed, completed_normals=alln)
-    result = estimate(cloud, density, material=material)
+    result = estimate(cloud, density, material=material, keep_strays=keep_strays)
     share, bounds = assess(result, points, noise)
     warnings.extend(result.warnings)
     if len(completion.points):

@@ -70,18 +70,34 @@ def test_line_cloud():
         estimate(make_cloud(np.c_[t, 2 * t, -t]), 1000.0)
 
 
-@pytest.mark.parametrize(("far", "reach", "verdict"), [
+@pytest.mark.parametrize("far", [
     # One stray point asked for a 3.2 TiB grid (MemoryError); five made the cloud "line-like" with no word on why.
-    ([[1000.0, 0, 0]], r"1e\+03", r"the points span 1e\+03 m at a 0.0\d+ m spacing: \S+ grid nodes, more than the 3e\+07 "
-                                  r"an estimate holds; "),
-    ([[1000.0 + i / 4, 0, 0] for i in range(5)], r"1e\+03", r"line-like, it encloses no volume; but that is "),
-    ([[1e200, 0, 0]], r"1e\+200", r"coordinates reach 1e\+200 m from the origin, beyond the 10000 m an estimate "
-                                   r"accepts; that is "),
+    [[1000.0, 0, 0]],
+    [[1000.0 + i / 4, 0, 0] for i in range(5)],
 ])
-def test_a_few_far_points_are_named(far, reach, verdict):
-    with pytest.raises(CloudError, match=verdict + rf"{len(far)} far point\(s\), up to {reach} m from the rest, which "
+def test_a_few_far_points_are_dropped_as_strays_and_said(far):
+    ball = estimate(make_cloud(_sphere(2000)), 1000.0)
+    est = estimate(make_cloud(np.r_[_sphere(2000), far]), 1000.0)
+    assert est.mass.volume == pytest.approx(ball.mass.volume, rel=1e-3)
+    assert any(w.startswith(f"dropped {len(far)} stray point(s) in {len(far)} cluster(s)") for w in est.warnings)
+
+
+@pytest.mark.parametrize(("far", "verdict"), [
+    ([[1000.0, 0, 0]], r"the points span 1e\+03 m at a 0.0\d+ m spacing: \S+ grid nodes, more than the 3e\+07 "
+                       r"an estimate holds; "),
+    ([[1000.0 + i / 4, 0, 0] for i in range(5)], r"degenerate cloud: line-like, it encloses no volume; but that is "),
+])
+def test_far_points_kept_on_request_are_named_when_they_make_the_cloud_unusable(far, verdict):
+    with pytest.raises(CloudError, match=verdict + rf"{len(far)} far point\(s\), up to 1e\+03 m from the rest, which "
                                                    r"lies within 0.0\d+ m: remove them$"):
-        estimate(make_cloud(np.r_[_sphere(2000), far]), 1000.0)
+        estimate(make_cloud(np.r_[_sphere(2000), far]), 1000.0, keep_strays=True)
+
+
+def test_points_beyond_range_are_named():
+    with pytest.raises(CloudError, match=r"coordinates reach 1e\+200 m from the origin, beyond the 10000 m an estimate "
+                                         r"accepts; that is 1 far point\(s\), up to 1e\+200 m from the rest, which "
+                                         r"lies within 0.0\d+ m: remove them$"):
+        estimate(make_cloud(np.r_[_sphere(2000), [[1e200, 0, 0]]]), 1000.0)
     t = np.linspace(0, 1, 500)  # a real line stays a plain line
     with pytest.raises(CloudError, match=r"line-like, it encloses no volume$"):
         estimate(make_cloud(np.c_[t, 2 * t, -t]), 1000.0)
