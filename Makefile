@@ -6,7 +6,7 @@ STAMP  := $(VENV)/.installed
 APT_STAMP := $(VENV)/.apt-installed
 DEBS   := libusb-1.0-0 libgl1 libgomp1 openssl
 
-.PHONY: demo test lint clean
+.PHONY: demo test test-slow lint clean
 
 $(PY):
 	python3 -m venv $(VENV)
@@ -25,6 +25,10 @@ demo: $(APT_STAMP) $(STAMP)
 
 test: $(APT_STAMP) $(STAMP)
 	$(VENV)/bin/python -m pytest -q -m "not slow"
+
+# The long tests (a few minutes more; CI runs them after `make test`).
+test-slow: $(APT_STAMP) $(STAMP)
+	$(VENV)/bin/python -m pytest -q -m slow
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check .

@@ -165,6 +165,7 @@ def test_a_large_correction_snaps_in_one_step(pushed):
     assert np.linalg.norm(local.twin.pose(oid)[0] - far) < 0.005
 
 
+@pytest.mark.slow
 def test_the_pushed_twin_feels_the_same_force_at_any_delay(tmp_path, cache):
     """The experiment's finding: with corrections aligned, the twin's force does not depend on the delay
     (before, its contact force error rose from -5 % at 0 ms to +17 % at 200 ms one way)."""

@@ -267,6 +267,7 @@ def test_objects_pushed_together_are_tracked_through_the_merged_segment():
 
 
 
+@pytest.mark.slow
 def test_a_track_that_fits_a_neighbours_surface_is_not_said_found():
     """A crate pushed into a taller can, the two one segment: ICP from where the can was fitted the crate's
     surface there, and the track was said found 73-130 mm from the can for 5 scans. A fit that puts its

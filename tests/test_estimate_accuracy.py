@@ -140,6 +140,7 @@ def _shape(kind: str) -> trimesh.Trimesh:
     shift=st.lists(st.floats(-20, 20), min_size=3, max_size=3),
     normals=st.booleans(),
 )
+@pytest.mark.slow
 def test_error_does_not_depend_on_pose_or_size(kind, size, quat, shift, normals):
     mesh = _shape(kind)
     mesh.apply_scale(size / float(np.max(mesh.extents)))

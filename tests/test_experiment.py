@@ -76,6 +76,7 @@ def test_twin_rows_carry_divergence_and_traffic(rows):
     assert direct.bytes_per_s > twin.bytes_per_s > 0
 
 
+@pytest.mark.slow
 def test_the_cli_writes_every_column_and_the_same_rows_with_workers(rows, cache, tmp_path, monkeypatch):
     monkeypatch.setenv("TWIN_CACHE_DIR", str(cache))
     out = tmp_path / "sweep"
@@ -136,6 +137,7 @@ def test_help_names_both_inputs():
     assert "SCENE_OR_RECORDING" in out and "recorded" in out and "--dask" in out
 
 
+@pytest.mark.slow
 def test_a_dask_local_cluster_gives_the_rows_local_processes_give(rows, cache):
     from scenes.experiment import dask_executor
 
@@ -147,6 +149,7 @@ def test_a_dask_local_cluster_gives_the_rows_local_processes_give(rows, cache):
     assert repr(on_dask) == repr([r for r in rows if r.delay_ms == 50 and r.mass_scale == 1.5])
 
 
+@pytest.mark.slow
 def test_an_unreachable_dask_scheduler_is_one_line(tmp_path, capsys):
     from sync.zenoh_transport import free_port
 

@@ -180,6 +180,7 @@ def test_twin_replay_runs_as_a_command(recorded, cache):
     assert "replayed" in done.stdout and "x real time" in done.stdout
 
 
+@pytest.mark.slow
 def test_an_experiment_on_a_recording_replays_its_operator_under_each_delay(recorded, cache, tmp_path, monkeypatch):
     import csv
 

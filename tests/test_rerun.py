@@ -259,6 +259,7 @@ def _listening(port: int) -> bool:
         return s.connect_ex(("127.0.0.1", port)) == 0
 
 
+@pytest.mark.slow
 def test_an_unreachable_viewer_costs_a_warning_not_the_result(box_cloud, caplog, capsys):
     port = free_port()  # nobody listens there
     with caplog.at_level("WARNING", logger="twin.rerunlog"):
@@ -268,6 +269,7 @@ def test_an_unreachable_viewer_costs_a_warning_not_the_result(box_cloud, caplog,
     assert any("could not deliver the recording" in r.getMessage() for r in caplog.records)
 
 
+@pytest.mark.slow
 def test_run_on_a_built_directory_logs_the_compiled_geometry(tmp_path, capsys):
     scene, built = Path(__file__).parent / "data" / "small.toml", tmp_path / "built"
     built_rrd = tmp_path / "build.rrd"

@@ -14,6 +14,7 @@ from cli.main import main
 SMALL = Path(__file__).parent / "data" / "small.toml"
 
 
+@pytest.mark.slow
 def test_the_camera_sensor_of_the_flag_builds_every_object_headless(tmp_path):
     from cli.demo import remote_sensor
     from scenes.headless import Headless

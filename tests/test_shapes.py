@@ -49,7 +49,7 @@ def _errors(shape, condition: str, seed: int) -> tuple[float, float, float, obje
             100 * float(np.linalg.norm(est.mass.inertia - truth) / np.linalg.norm(truth)), est)
 
 
-@pytest.mark.parametrize("condition", ["given", "estimated", "noisy"])
+@pytest.mark.parametrize("condition", ["given", "estimated", pytest.param("noisy", marks=pytest.mark.slow)])
 def test_volume_com_and_inertia_meet_the_targets(shapes, condition):
     rows = []
     for i in SUBSET:

@@ -337,6 +337,7 @@ def test_the_scene_can_be_moved_from_another_thread_while_the_remote_steps(remot
         remote.start()
 
 
+@pytest.mark.slow
 def test_a_twin_object_straying_on_its_own_is_held_at_the_remote_pose(tmp_path):
     from twin.hold import HoldSettings
 

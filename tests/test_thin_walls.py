@@ -47,6 +47,7 @@ def test_a_thin_walled_ball_with_a_little_noise_is_not_filled_solid():
     assert np.isfinite(result.mass.mass)
 
 
+@pytest.mark.slow
 def test_a_hollow_ball_whose_wall_the_noise_hides_gives_an_interval_holding_the_truth():
     # Sigma 0.5 mm on a 3 mm wall, no normals: the faces' noisy shells touch, no inside between them is
     # found, and only the widest closing shell encloses anything, by sealing the ball's mouth: the estimate
