@@ -224,6 +224,8 @@ def _estimate_auto(
 
     t0 = time.perf_counter()
     props, surface, h = run.props, run.surface, run.h
+    if run.note is not None:
+        warnings.append(run.note)
     bounds = (max(0.0, props.volume - run.hole - run.thin), props.volume + run.hole + run.thin)
     unmeasured = surface.unmeasured_area / max(_area(surface), 1e-30)
     if run.hole > tol.VOLUME_DOUBT_FRACTION * props.volume:
@@ -291,6 +293,7 @@ class _AutoPass:
     thin: float
     encloses: bool = True
     sealed: float = 0.0
+    note: str | None = None  # what was done to given normals (normals.orient_given)
 
     @property
     def points_used(self) -> int:
@@ -308,7 +311,13 @@ def _auto_pass(cloud: PointCloud, box: OrientedBox, local: np.ndarray, spacing: 
     from estimation.grid import grid_around, occupancy
     from estimation.implicit import band_field
     from estimation.neighbours import nearest
-    from estimation.normals import THIN_WALL_NEIGHBOURS, fit_normals, orient_outward, orient_to_viewpoint
+    from estimation.normals import (
+        THIN_WALL_NEIGHBOURS,
+        fit_normals,
+        orient_given,
+        orient_outward,
+        orient_to_viewpoint,
+    )
     from estimation.spacing import point_spacing
     from estimation.sparsegrid import narrow_band
 
@@ -343,7 +352,10 @@ def _auto_pass(cloud: PointCloud, box: OrientedBox, local: np.ndarray, spacing: 
 
     occ = occupancy(points, coarse)
     tilt = None  # given normals: exact
-    if normals is None:
+    note = None
+    if normals is not None:
+        normals, note = orient_given(points, normals, coarse, occ, noise)
+    else:
         # Fit normals over about a cell of surface: where noise sets the cell, a wider patch than the
         # default neighbours span (voxel-averaging the points instead biases noisy curved surfaces
         # outward by a good fraction of sigma).
@@ -390,7 +402,7 @@ def _auto_pass(cloud: PointCloud, box: OrientedBox, local: np.ndarray, spacing: 
     sealed = occ.unsettled * coarse.cell**3
     lap("mass_properties", t0)
     return _AutoPass(points=points, normals=normals, h=h, surface=surface, props=props, closing=occ.closing,
-                     hole=hole, thin=thin, encloses=occ.encloses, sealed=sealed)
+                     hole=hole, thin=thin, encloses=occ.encloses, sealed=sealed, note=note)
 
 
 def _drop_strays(cloud: PointCloud, warnings: list[str], keep: bool) -> tuple[PointCloud, float]:
