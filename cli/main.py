@@ -707,8 +707,8 @@ def _sensor_option(p: argparse.ArgumentParser) -> None:
                    help="what the remote publishes: 'surface' (default: whole true surfaces, simulator poses) or "
                         "'cameras' (3 ray-cast depth cameras around the table with a Kinect v1 noise model, "
                         "segmented and fused, ICP poses; not the default: on the demo's paper scene, whose objects "
-                        "sit where that noise is ~17 mm, volumes are off by 18.5 %% at the median and up to 222 %%; "
-                        "the 20-object clutter 2.0 / 6.3 %%; bench/results/cameras.txt)")
+                        "sit where that noise is ~17 mm, volumes are off by 18.4 %% at the median and up to 223 %%; "
+                        "the 20-object clutter 1.8 / 7.7 %%; bench/results/cameras.txt)")
 
 
 def _hold_option(p: argparse.ArgumentParser) -> None:
