@@ -69,7 +69,7 @@ def main(argv: list[str] | None = None) -> int:
                                        noise_sigma=0.0005 if noisy else 0.0)
                 spoiled = make_cloud(cloud.points, spoil(cloud.normals, condition, np.random.default_rng([i, c, 1])))
                 for mode in ("checked", "trusted"):
-                    normals_module.orient_given = checked if mode == "checked" else (lambda p, n, g, o, noise=None: (n, None))
+                    normals_module.orient_given = checked if mode == "checked" else (lambda p, n, g, o: (n, None))
                     try:
                         est = estimate(spoiled, 1000.0)
                     finally:

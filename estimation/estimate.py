@@ -354,7 +354,7 @@ def _auto_pass(cloud: PointCloud, box: OrientedBox, local: np.ndarray, spacing: 
     tilt = None  # given normals: exact
     note = None
     if normals is not None:
-        normals, note = orient_given(points, normals, coarse, occ, noise)
+        normals, note = orient_given(points, normals, coarse, occ)
     else:
         # Fit normals over about a cell of surface: where noise sets the cell, a wider patch than the
         # default neighbours span (voxel-averaging the points instead biases noisy curved surfaces

@@ -261,8 +261,7 @@ def orient_to_viewpoint(points: np.ndarray, normals: np.ndarray, viewpoint: np.n
     return np.where(facing[:, None] < 0, -normals, normals)
 
 
-def orient_given(points: np.ndarray, normals: np.ndarray, grid: Grid, occ: Occupancy,
-                 noise: float | None = None) -> tuple[np.ndarray, str | None]:
+def orient_given(points: np.ndarray, normals: np.ndarray, grid: Grid, occ: Occupancy) -> tuple[np.ndarray, str | None]:
     """Given normals ((n, 3), unit), checked and, where they are not consistently outward, re-signed.
 
     Files carry normals from tools that do not orient them (PCA normals with arbitrary signs), that orient
@@ -272,8 +271,7 @@ def orient_given(points: np.ndarray, normals: np.ndarray, grid: Grid, occ: Occup
     Consistent and outward: returned as they are. Consistent and inward: flipped. Otherwise their
     directions are kept and their signs propagated along each sheet (over its most parallel neighbours),
     each connected sheet then turned to the side its points read as out: towards the other face's
-    material where a wall is thin (:func:`thin_wall_side`), else by the probe. ``noise``: metres, as for
-    :func:`orient_outward`.
+    material where a wall is thin (:func:`thin_wall_side`), else by the probe.
 
     Returns:
         The normals, and a warning saying what was done (None when they were used as given).
@@ -336,9 +334,8 @@ def orient_given(points: np.ndarray, normals: np.ndarray, grid: Grid, occ: Occup
     votes = lambda mask: np.bincount(label, weights=mask, minlength=count)  # noqa: E731
     out, into = votes(~unsure & (sign > 0)), votes(~unsure & (sign < 0))
     keep, turn = votes(side > 0), votes(side < 0)
-    probe_turns = (into > out) & (np.maximum(out, into) >= SHEET_DECISIVE * (out + into))
-    probe_decides = np.maximum(out, into) >= SHEET_DECISIVE * (out + into)
-    probe_decides &= out + into >= MIN_SHEET_VOTES
+    probe_turns = into > out
+    probe_decides = (np.maximum(out, into) >= SHEET_DECISIVE * (out + into)) & (out + into >= MIN_SHEET_VOTES)
     walls_sure = (np.maximum(keep, turn) >= MIN_SHEET_VOTES) & (np.minimum(keep, turn) == 0)
     turn_it = np.where(walls_sure & (~probe_decides | ((turn > 0) != probe_turns)), turn > keep,
                        np.where(probe_decides, probe_turns, turn > keep))
