@@ -165,10 +165,11 @@ def run(args: argparse.Namespace) -> int:
     sweep = parse(args)
     scene, recorded = source(args)
     out: Path = args.out
-    claim_output_folder(out, marker=MARKER, command="twin experiment")
     engine = nullcontext(None) if args.dask is None else dask_executor(args.dask, args.workers)
     with engine as executor, Progress(TextColumn("sessions"), BarColumn(), MofNCompleteColumn(),
                                       TimeElapsedColumn(), transient=False) as bar:
+        # Claimed once the engine is up: an unreachable scheduler left an out folder holding only the marker.
+        claim_output_folder(out, marker=MARKER, command="twin experiment")
         task = bar.add_task("sessions", total=None)
 
         def progress(done: int, total: int) -> None:

@@ -156,3 +156,4 @@ def test_an_unreachable_dask_scheduler_is_one_line(tmp_path, capsys):
     assert main([*ARGS, "--dask", f"tcp://127.0.0.1:{free_port()}", "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "no Dask scheduler at" in err, err
+    assert not (tmp_path / "o").exists()  # nothing was run, so nothing is left behind
