@@ -5,9 +5,9 @@ of background left by a crop. Each one is a tiny island the reconstruction must 
 must get around: 46 points scattered around a 10 cm ball of 20,000 put its volume 5.7 % high and called its
 surface open, and small objects came out several times their size (``bench/strays.py``). The points are split
 into islands by proximity (cells of ``STRAY_CELL_SPACINGS`` point spacings, neighbouring cells joined) and the
-islands holding less than
-``STRAY_SHARE`` of the points are dropped, if what is left is most of the cloud. Several large islands stay:
-they may be one object seen in pieces, or several objects, which the caller is told of.
+islands holding less than ``STRAY_SHARE`` of the points are dropped, if what is left is most of the cloud.
+Several large islands stay: they may be one object seen in pieces, or several objects, which the caller is
+told of.
 """
 
 from __future__ import annotations

@@ -68,7 +68,7 @@ class TokenBucket:
     """At most ``burst`` events at once and ``rate`` per second of ``clock`` on average; safe from any thread.
 
     The remote answers a state query with every cloud it has (megabytes): without a budget, a peer asking in
-    a loop turns the remote's uplink into a stream of clouds (``tests/test_sync_zenoh.py``).
+    a loop turns the remote's uplink into a stream of clouds (``tests/test_security.py``).
     """
 
     def __init__(self, burst: int, rate: float, clock: Clock = REAL_CLOCK) -> None:
