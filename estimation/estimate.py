@@ -359,7 +359,8 @@ def _auto_pass(cloud: PointCloud, box: OrientedBox, local: np.ndarray, spacing: 
         # Fit normals over about a cell of surface: where noise sets the cell, a wider patch than the
         # default neighbours span (voxel-averaging the points instead biases noisy curved surfaces
         # outward by a good fraction of sigma).
-        k = int(np.clip(tol.NORMAL_NEIGHBOURS * (h / spacing) ** 2, tol.NORMAL_NEIGHBOURS, tol.MAX_NORMAL_NEIGHBOURS))
+        wanted = tol.NORMAL_NEIGHBOURS * (h / spacing) ** 2
+        k = int(np.clip(wanted, tol.NORMAL_NEIGHBOURS, tol.MAX_NORMAL_NEIGHBOURS))
         # One neighbour search serves the fit and both orientation tests (the thin-wall one looks
         # at THIN_WALL_NEIGHBOURS).
         tree = cKDTree(points)
@@ -370,7 +371,10 @@ def _auto_pass(cloud: PointCloud, box: OrientedBox, local: np.ndarray, spacing: 
             points = points[distinct_rows(points)]
             tree = cKDTree(points)
             neighbours = nearest(tree, points, min(max(k, THIN_WALL_NEIGHBOURS), len(points)))[1]
-        normals, tilt = fit_normals(points, k, neighbours=neighbours, noise=noise)
+        fit_neighbours = neighbours
+        if wanted > k:
+            fit_neighbours = _spread_neighbours(points, k, wanted)
+        normals, tilt = fit_normals(points, k, neighbours=fit_neighbours, noise=noise)
         if viewpoint is not None:
             normals = orient_to_viewpoint(points, normals, box.to_local(np.asarray(viewpoint, dtype=np.float64)[None])[0])
         else:
@@ -403,6 +407,24 @@ def _auto_pass(cloud: PointCloud, box: OrientedBox, local: np.ndarray, spacing: 
     lap("mass_properties", t0)
     return _AutoPass(points=points, normals=normals, h=h, surface=surface, props=props, closing=occ.closing,
                      hole=hole, thin=thin, encloses=occ.encloses, sealed=sealed, note=note)
+
+
+def _spread_neighbours(points: np.ndarray, k: int, wanted: float) -> np.ndarray:
+    """(n, k) indices: each point's ``k`` nearest among a seeded random share ``k / wanted`` of ``points``.
+
+    They span the patch ``wanted`` neighbours would (the noise's width), with ``k`` points. Capped at
+    the ``k`` nearest instead, a dense noisy cloud's patch shrinks inside the noise slab and its plane
+    fit follows the noise: a 3.2 mm wire ring at sigma 0.5 mm, 100k points (96 neighbours 0.55 mm out)
+    had 83 % of its cells taken for creases, their vertices on the tangent planes, and came out +5.8 %.
+    The share is drawn by index, so it does not depend on where the points are.
+    """
+    from scipy.spatial import cKDTree
+
+    from estimation.neighbours import nearest
+
+    share = max(k + 1, int(len(points) * k / wanted))
+    reference = np.sort(np.random.default_rng(0).choice(len(points), min(share, len(points)), replace=False))
+    return reference[nearest(cKDTree(points[reference]), points, k)[1]]
 
 
 def _drop_strays(cloud: PointCloud, warnings: list[str], keep: bool) -> tuple[PointCloud, float]:
