@@ -168,6 +168,7 @@ def run_demo(*, duration: float = 5.0, scene_path: Path | None = None, zenoh_con
         "poses_while_pushing": int(len(lat_all) - pushed_from),
         "pose_latency_while_adding_p99_ms": float(np.percentile(joining, 99)),
         "poses_while_adding": int(pushed_from),
+        "pose_stamps_off": report.stamps_off,  # poses whose stamp was no latency (twin.runtime.LATENCY_RANGE)
         "dropped_malformed": counters.dropped_malformed + remote_stats["dropped_malformed"],
         "add_latency_s": [round(x, 3) for x in report.add_latency],
         "worst_step_while_adding_ms": report.worst_step_while_adding * 1e3,

@@ -433,6 +433,25 @@ def test_a_pose_far_outside_the_scene_is_dropped_and_counted(cache):
         assert np.linalg.norm(session.local.twin.pose("crate")[0] - before) < 0.002
 
 
+def test_a_pose_whose_stamp_is_no_latency_is_applied_and_counted_not_measured(cache):
+    # A stamp of 0 on a wall clock read as a 56-year latency, one ahead as a negative one, into the report's p99.
+    with Headless(load_scene(SMALL), cache_dir=cache) as session:
+        session.run(0.2)
+        remote, keys, report = session.remote, Keys("small"), session.local.report
+        measured = len(report.pose_latency)
+        target = session.local.twin.pose("crate")[0] + np.array([0.0, 0.0, 0.0005])
+        link = Link(session.bus.transport())
+        for n, ahead_s in enumerate((86_400, 2)):  # the sim clock starts at 0: no stamp lies a minute back
+            stamp = session.clock.stamp_ns() + ahead_s * 10**9
+            link.put(keys.object("crate", "pose"), Pose(
+                v=VERSION, stamp_ns=stamp, object_id="crate", epoch=remote.epoch, seq=10**6 + n, sim_time=0.0,
+                position=tuple(map(float, target)), quat=(1.0, 0.0, 0.0, 0.0), linvel=(0.0,) * 3, angvel=(0.0,) * 3))
+            session.run(0.01)
+            assert session.local._latest["crate"].seq == 10**6 + n  # applied: order is by (epoch, seq)
+        assert report.stamps_off == 2
+        assert len(report.pose_latency) == measured  # neither is a latency sample
+
+
 class _Losing(SurfaceSensor):
     """The surface sensor, losing the objects in ``hidden`` (``Track.seen`` False) while they are there."""
 

@@ -188,6 +188,7 @@ class LocalReport:
     poses_superseded: int = 0  # poses skipped unhandled: a newer pose of the object was queued with them
     failed_edits: int = 0  # objects whose model did not compile: the twin went on without them
     out_of_order: int = 0  # messages older than what the twin already had from the remote
+    stamps_off: int = 0  # poses whose stamp is outside LATENCY_RANGE of the twin's clock: applied, not in pose_latency
     out_of_scene: int = 0  # poses and clouds placed outside the scene's box (its workspace, or SCENE_REACH around the table)
     unseen: int = 0  # times the remote's sensor lost an object (Pose.seen False): the twin simulated it alone
     holds: int = 0  # times an object strayed from the remote's pose on its own and was pinned to it
@@ -220,6 +221,12 @@ MAX_OBJECTS = 1000
 #: pose of them does not bring the object back: the late-join reply, taken before the removal, can arrive after
 #: the live Gone, and the remote sends no second Gone. Past this many, the oldest removal is forgotten.
 MAX_GONE = 1024
+
+#: A pose's age (the twin's clock less the sender's ``stamp_ns``, seconds) counts as a latency only within this
+#: range: clocks of two machines that agree to within a second, and a link slower than a minute is no link.
+#: Outside it the stamp is broken or forged (a stamp of 0 read as a 56-year latency and set the report's p99);
+#: the pose is still applied (order is by ``(epoch, seq)``), and the stamp counted (``LocalReport.stamps_off``).
+LATENCY_RANGE = (-1.0, 60.0)
 
 #: How often (twin time, seconds) the report samples each object's divergence from the remote.
 DIVERGENCE_EVERY = 0.01
@@ -604,7 +611,15 @@ class Local:
                 if self.rlog.enabled:
                     self._flush_corrections()  # keep the debug log's events in arrival order
                 self.report.pose_updates += 1
-                self.report.pose_latency.append((self.clock.stamp_ns() - msg.stamp_ns) * 1e-9)
+                age = (self.clock.stamp_ns() - msg.stamp_ns) * 1e-9
+                if LATENCY_RANGE[0] <= age <= LATENCY_RANGE[1]:
+                    self.report.pose_latency.append(age)
+                else:
+                    self.report.stamps_off += 1
+                    if self.report.stamps_off == 1:
+                        log.warning("%s: pose stamped %.3g s from the twin's clock, outside %s s: not a latency "
+                                    "(unsynchronised clocks, or a broken sender); such stamps are counted, not "
+                                    "measured", msg.object_id, -age, LATENCY_RANGE)
                 if self.rlog.enabled:  # every pose passes here: no string building with rerun off
                     self.rlog.event(self.twin.time, f"{msg.object_id}: pose correction (seq {msg.seq})", "DEBUG")
         elif isinstance(msg, Cloud):
