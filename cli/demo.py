@@ -10,6 +10,7 @@ leave the deadband. Nothing to start by hand, no router.
 from __future__ import annotations
 
 import multiprocessing as mp
+import queue
 import time
 from importlib import resources
 from pathlib import Path
@@ -42,6 +43,7 @@ def remote_sensor(name: str, scene):  # type: ignore[no-untyped-def]
 def _remote_main(scene_path: str, endpoint: str, zenoh_config: str | None, ready, stop, results,  # type: ignore[no-untyped-def]
                  record: str | None = None, sensor: str = "surface") -> None:
     from cli.record import open_recorder, recording_transport
+    from estimation.errors import TwinError
     from scenes.remote import Remote
     from scenes.scenefile import load_scene
     from sync.clock import REAL_CLOCK
@@ -54,9 +56,13 @@ def _remote_main(scene_path: str, endpoint: str, zenoh_config: str | None, ready
                              side="remote", scene_path=Path(scene_path))
     started = False
     try:
-        scene = load_scene(scene_path)
-        remote = Remote(scene, recording_transport(ZenohTransport(session), recorder, "remote"),
-                        recorder=recorder, sensor=remote_sensor(sensor, scene))
+        try:
+            scene = load_scene(scene_path)
+            remote = Remote(scene, recording_transport(ZenohTransport(session), recorder, "remote"),
+                            recorder=recorder, sensor=remote_sensor(sensor, scene))
+        except TwinError as exc:  # a scene the remote refuses: the parent says so, in one line
+            results.put({"error": str(exc)})
+            return
         started = True
         ready.set()
         stats = remote.run(24 * 3600.0, stop=stop)
@@ -109,6 +115,14 @@ def run_demo(*, duration: float = 5.0, scene_path: Path | None = None, zenoh_con
     try:
         while not ready.wait(0.2):
             if not remote.is_alive():
+                try:
+                    said = results.get(timeout=1.0)
+                except queue.Empty:
+                    said = {}
+                if "error" in said:
+                    from scenes.scenefile import SceneError
+
+                    raise SceneError(said["error"])
                 raise SessionError("the remote process exited before it was ready (see its error above)")
     except BaseException:
         remote.terminate()

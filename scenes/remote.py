@@ -20,7 +20,8 @@ from pathlib import Path
 
 import numpy as np
 
-from scenes.scenefile import ObjectSpec, SceneSpec
+from scenes.placement import describe, overlaps
+from scenes.scenefile import ObjectSpec, SceneError, SceneSpec
 from scenes.sensing import Sensor, SurfaceSensor, Track
 from scenes.sources import prepare_objects, reference_estimate, source_mesh
 from sync.clock import REAL_CLOCK, Clock
@@ -130,6 +131,11 @@ class Remote:
             add_object(spec, obj)
             self._remember(spec_obj, obj)
         self.twin = Twin(spec, background=clock.realtime)
+        found = overlaps(self.twin.model, self.twin.data, set(self._objects))
+        if found:
+            self.twin.close()
+            self.link.close()
+            raise SceneError(f"{scene.name}: {describe(found)}")
         self.settled_after = self._settle(settle_s)
         if scene.table is not None:
             rlog.table(scene.table.size, scene.table.height)

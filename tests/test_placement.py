@@ -1,0 +1,55 @@
+"""Objects a scene file places inside each other are refused before the remote runs them."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from cli.main import main
+from scenes.headless import Headless
+from scenes.placement import OVERLAP_DEPTH
+from scenes.scenefile import SceneError, parse_scene
+
+TABLE = {"size": [1.0, 0.6, 0.04], "height": 0.5}
+CRATE = {"id": "crate", "primitive": {"type": "box", "size": [0.12, 0.08, 0.06]}, "material": "wood_pine"}
+CAN = {"id": "can", "primitive": {"type": "cylinder", "size": [0.03, 0.1]}, "density": 700}
+
+
+@pytest.fixture(scope="module")
+def cache(tmp_path_factory) -> Path:
+    return tmp_path_factory.getbasetemp() / "coacd"
+
+
+def _scene(can_at: list[float]):  # type: ignore[no-untyped-def]
+    return parse_scene({"name": "placed", "table": TABLE, "objects": [{**CRATE, "position": [0.0, 0.0]},
+                                                                      {**CAN, "position": can_at}]})
+
+
+@pytest.mark.parametrize(("can_at", "depth_mm"), [([0.05, 0.01], 40.0), ([0.0, 0.0], 60.0)])
+def test_objects_placed_inside_each_other_are_one_scene_error_naming_both(cache, can_at, depth_mm):
+    # Before, the remote stepped them apart and went on with another scene: this can came to rest on the crate.
+    with pytest.raises(SceneError, match=rf"^placed: objects placed inside each other: 'can' and 'crate' by "
+                                         rf"{depth_mm:.1f} mm; move them apart"):
+        Headless(_scene(can_at), cache_dir=cache)
+
+
+def test_objects_that_touch_or_stack_are_accepted(cache):
+    # Side by side with a hair between them, and the can standing on the crate (its top at 0.56 m, the can's
+    # centre half its 0.1 m height above that): in contact or close, not inside each other.
+    beside = 0.06 + 0.03 + 0.2 * OVERLAP_DEPTH
+    for can_at in ([beside, 0.0], [0.0, 0.0, 0.5 + 0.06 + 0.05]):
+        with Headless(_scene(can_at), cache_dir=cache) as session:
+            assert sorted(session.remote._objects) == ["can", "crate"]
+
+
+def test_the_cli_says_it_in_one_line_and_exits_2(tmp_path, capsys):
+    scene = tmp_path / "overlap.toml"
+    scene.write_text('name = "overlap"\n[table]\nsize = [1.0, 0.6, 0.04]\nheight = 0.5\n'
+                     '[[objects]]\nid = "crate"\nprimitive = { type = "box", size = [0.12, 0.08, 0.06] }\n'
+                     'material = "wood_pine"\nposition = [0.0, 0.0]\n'
+                     '[[objects]]\nid = "can"\nprimitive = { type = "cylinder", size = [0.03, 0.1] }\n'
+                     'density = 700\nposition = [0.0, 0.0]\n')
+    assert main(["remote", str(scene), "--duration", "0.1"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[-1].startswith("twin remote: error: overlap: objects placed inside each other: 'can' and 'crate'")
