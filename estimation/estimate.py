@@ -372,7 +372,7 @@ def _auto_pass(cloud: PointCloud, box: OrientedBox, local: np.ndarray, spacing: 
             tree = cKDTree(points)
             neighbours = nearest(tree, points, min(max(k, THIN_WALL_NEIGHBOURS), len(points)))[1]
         fit_neighbours = neighbours
-        if wanted > k:
+        if wanted > k and len(points) > tol.POINT_BUDGET:
             fit_neighbours = _spread_neighbours(points, k, wanted)
         normals, tilt = fit_normals(points, k, neighbours=fit_neighbours, noise=noise)
         if viewpoint is not None:
@@ -410,19 +410,22 @@ def _auto_pass(cloud: PointCloud, box: OrientedBox, local: np.ndarray, spacing: 
 
 
 def _spread_neighbours(points: np.ndarray, k: int, wanted: float) -> np.ndarray:
-    """(n, k) indices: each point's ``k`` nearest among a seeded random share ``k / wanted`` of ``points``.
+    """(n, k) indices: each point's ``k`` nearest among a seeded random share of ``points``, ``k / wanted``
+    of them but at least ``tol.POINT_BUDGET``.
 
-    They span the patch ``wanted`` neighbours would (the noise's width), with ``k`` points. Capped at
-    the ``k`` nearest instead, a dense noisy cloud's patch shrinks inside the noise slab and its plane
-    fit follows the noise: a 3.2 mm wire ring at sigma 0.5 mm, 100k points (96 neighbours 0.55 mm out)
-    had 83 % of its cells taken for creases, their vertices on the tangent planes, and came out +5.8 %.
-    The share is drawn by index, so it does not depend on where the points are.
+    A refining pass (``_estimate_auto``) takes more points than the first, and the ``k`` nearest of a denser
+    cloud span a smaller patch: on a small part sampled densely it shrank inside the noise slab and its plane
+    fit followed the noise (a 3.2 mm wire ring at sigma 0.5 mm, 100k points: the 96 nearest within 0.55 mm,
+    83 % of its cells taken for creases, their vertices on the tangent planes, +5.8 %). Drawn from a share,
+    the ``k`` span the patch ``wanted`` neighbours would, but no wider than the first pass's on its
+    ``tol.POINT_BUDGET`` points: wider patches wrap round a thin wire (a 4 mm coil's, 2.6 mm across, took it
+    from -9.7 to -10.2 %). The share is drawn by index, so it does not depend on where the points are.
     """
     from scipy.spatial import cKDTree
 
     from estimation.neighbours import nearest
 
-    share = max(k + 1, int(len(points) * k / wanted))
+    share = max(k + 1, int(len(points) * k / wanted), tol.POINT_BUDGET)
     reference = np.sort(np.random.default_rng(0).choice(len(points), min(share, len(points)), replace=False))
     return reference[nearest(cKDTree(points[reference]), points, k)[1]]
 
