@@ -53,4 +53,3 @@ def describe(found: list[Overlap]) -> str:
     shown = "; ".join(f"'{o.first}' and '{o.second}' by {1000 * o.depth:.1f} mm" for o in found[:3])
     more = f" (and {len(found) - 3} more pairs)" if len(found) > 3 else ""
     return f"objects placed inside each other: {shown}{more}; move them apart (deeper than {1000 * OVERLAP_DEPTH:g} mm)"
-
