@@ -362,18 +362,20 @@ def _auto_pass(cloud: PointCloud, box: OrientedBox, local: np.ndarray, spacing: 
         wanted = tol.NORMAL_NEIGHBOURS * (h / spacing) ** 2
         k = int(np.clip(wanted, tol.NORMAL_NEIGHBOURS, tol.MAX_NORMAL_NEIGHBOURS))
         # One neighbour search serves the fit and both orientation tests (the thin-wall one looks
-        # at THIN_WALL_NEIGHBOURS).
+        # at THIN_WALL_NEIGHBOURS); a spread fit (``_spread_neighbours``) searches its own, so this one
+        # fetches only what the orientation reads.
+        spread = wanted > k and len(points) > tol.POINT_BUDGET
         tree = cKDTree(points)
-        reach, neighbours = nearest(tree, points, min(max(k, THIN_WALL_NEIGHBOURS), len(points)))
+        fetch = THIN_WALL_NEIGHBOURS if spread else max(k, THIN_WALL_NEIGHBOURS)
+        reach, neighbours = nearest(tree, points, min(fetch, len(points)))
         if (reach[:, 1] == 0).any():
             # Repeated positions (a quantised sensor, copies of one scan): a patch of copies fits no plane
             # (a 400-point ball written 20 times: 59 % of its normals more than 60 degrees off, +5 %).
             points = points[distinct_rows(points)]
+            spread = spread and len(points) > tol.POINT_BUDGET
             tree = cKDTree(points)
             neighbours = nearest(tree, points, min(max(k, THIN_WALL_NEIGHBOURS), len(points)))[1]
-        fit_neighbours = neighbours
-        if wanted > k and len(points) > tol.POINT_BUDGET:
-            fit_neighbours = _spread_neighbours(points, k, wanted)
+        fit_neighbours = _spread_neighbours(points, k, wanted) if spread else neighbours
         normals, tilt = fit_normals(points, k, neighbours=fit_neighbours, noise=noise)
         if viewpoint is not None:
             normals = orient_to_viewpoint(points, normals, box.to_local(np.asarray(viewpoint, dtype=np.float64)[None])[0])
