@@ -39,3 +39,24 @@ def test_ties_are_taken_in_index_order_and_k_may_be_every_point():
     assert index.tolist() == [[0, 1, 2]] and dist.tolist() == [[0.0, 1.0, 1.0]]
     dist, index = nearest(cKDTree(points), points[:1], 5)
     assert index.tolist() == [[0, 1, 2, 3, 4]]
+
+
+def test_a_mixed_cloud_matches_a_brute_force_order():
+    """Rows with and without ties in one query (the untied ones skip the sort): each row is its ``k``
+    nearest by distance, ties by index, as a brute-force sort of every distance gives."""
+    rng = np.random.default_rng(5)
+    rot = Rotation.random(random_state=rng).as_matrix()  # the tree's own order of ties is then not the index's
+    points = np.concatenate([_lattice() @ rot.T, rng.uniform(0.03, 0.05, (300, 3))])
+    full = np.linalg.norm(points[:, None] - points[None], axis=2)
+    for k in range(1, 18):  # every k: the k-th sits at the start of a lattice shell for some
+        _check_brute_force(points, k, full)
+
+
+def _check_brute_force(points: np.ndarray, k: int, full: np.ndarray) -> None:
+    dist, index = nearest(cKDTree(points), points, k)
+    for row in range(len(points)):
+        # Distances that differ only by rounding are one distance, as in ``nearest``.
+        level = np.round(full[row] / 1e-12)
+        want = np.lexsort((np.arange(len(points)), level))[:k]
+        assert index[row].tolist() == want.tolist(), row
+        np.testing.assert_allclose(dist[row], full[row, want], rtol=1e-12, atol=1e-15)
