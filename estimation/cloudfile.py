@@ -4,7 +4,8 @@ PLY (ascii, binary little and big endian) and PCD (ascii, binary) are read by ou
 header is parsed, a structured dtype is built from it, and the vertex block is read in one
 ``np.fromfile``. Open3d is not imported on the read path (its import alone costs 0.7 s); it is only the
 fallback for PCD ``binary_compressed`` (LZF), after our header checks passed. XYZ-family and TXT/CSV
-files go through ``numpy.loadtxt``, NPY/NPZ through numpy.
+files go through ``numpy.loadtxt`` (a header row of column names, as pandas and CloudCompare write one,
+picks the columns by name), NPY/NPZ through numpy.
 
 Every reader checks what the header claims against the file before it allocates: the point count against
 ``max_points`` and, for binary data, the exact byte size (for text, at least one short line a point).
@@ -758,13 +759,22 @@ def _read_text(path: Path, max_points: int) -> _Columns:
             claimed, text = int(first), rest
     if not text.strip():
         raise CloudFileError(f"{path}: holds no numbers, only whitespace")
-    delimiter = "," if b"," in text.split(b"\n", 1)[0] else None
+    lines = text.decode("latin-1").splitlines()
+    named = _header_row(path, lines)
+    if named is not None:
+        lines = lines[named.line + 1:]
+    first = next((line for line in lines if line.strip() and not line.lstrip().startswith("#")), "")
+    delimiter = "," if "," in first else None
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # loadtxt warns (to stderr) on a file of comments only; make it an error
         try:
-            table = np.loadtxt(text.decode("latin-1").splitlines(), delimiter=delimiter, ndmin=2)
+            table = np.loadtxt(lines, delimiter=delimiter, ndmin=2)
         except UserWarning as exc:
             raise CloudFileError(f"{path}: holds no numbers ({exc})") from None
+    if named is not None:
+        if table.shape[1] != named.width:
+            raise CloudFileError(f"{path}: the header row names {named.width} columns, the rows hold {table.shape[1]}")
+        return named.columns(table)
     if suffix in (".txt", ".csv", ".asc"):
         return _Columns(*_split_columns(table))
     if claimed is not None and claimed != len(table):
@@ -782,6 +792,66 @@ def _read_text(path: Path, max_points: int) -> _Columns:
     if suffix == ".pts" and table.shape[1] in (6, 7):  # x y z [intensity] r g b, colours 0-255
         return _Columns(points, None, table[:, -3:] / 255.0)
     return _Columns(points)
+
+
+#: Column names a text file's header row may use (case and surrounding quotes ignored), by what they hold.
+_HEADER_NAMES = {
+    "points": (("x",), ("y",), ("z",)),
+    "normals": (("nx", "normal_x", "normalx"), ("ny", "normal_y", "normaly"), ("nz", "normal_z", "normalz")),
+    "colors": (("r", "red"), ("g", "green"), ("b", "blue")),
+}
+
+
+@dataclass(frozen=True)
+class _HeaderRow:
+    """A text file's row of column names: its line index, how many columns it names, and where each of
+    ``_HEADER_NAMES``' triples is (None: not all three named)."""
+
+    line: int
+    width: int
+    found: dict[str, tuple[int, int, int] | None]
+
+    def columns(self, table: np.ndarray) -> _Columns:
+        picked = {kind: None if at is None else table[:, list(at)] for kind, at in self.found.items()}
+        colors = picked["colors"]
+        if colors is not None and colors.size and colors.max() > 1.0:  # 0-255, as spreadsheets and PLY write them
+            colors = colors / 255.0
+        return _Columns(picked["points"], picked["normals"], colors)  # type: ignore[arg-type]
+
+
+def _header_row(path: Path, lines: list[str]) -> _HeaderRow | None:
+    """The row of column names a spreadsheet, pandas or CloudCompare (``//X,Y,Z``) writes before the numbers, or
+    None when the first line that is not a ``#`` comment holds numbers. Columns are then taken by name, and
+    the others (an index, intensity, scalar fields) are left out.
+
+    Raises:
+        CloudFileError: a header row without x, y and z, or naming one of them twice.
+    """
+    index = next((i for i, line in enumerate(lines) if line.strip() and not line.lstrip().startswith("#")), None)
+    if index is None:
+        return None
+    line = lines[index]
+    stripped = line.strip().removeprefix("//")
+    tokens = [t.strip().strip("'\"").lower() for t in (stripped.split(",") if "," in stripped else stripped.split())]
+    try:
+        [float(t) for t in tokens if t]  # a trailing comma is the rows' problem, not a header
+        return None
+    except ValueError:
+        pass
+    found: dict[str, tuple[int, int, int] | None] = {}
+    for kind, triple in _HEADER_NAMES.items():
+        at = []
+        for names in triple:
+            hits = [i for i, t in enumerate(tokens) if t in names]
+            if len(hits) > 1:
+                raise CloudFileError(f"{path}: the header row names column {names[0]!r} {len(hits)} times")
+            at.append(hits[0] if hits else None)
+        found[kind] = None if None in at else (at[0], at[1], at[2])  # type: ignore[assignment]
+    if found["points"] is None:
+        shown = line.strip()[:80]
+        raise CloudFileError(f"{path}: line {index + 1} is not numbers and not a header row naming x, y and z "
+                             f"columns: {shown!r}")
+    return _HeaderRow(index, len(tokens), found)
 
 
 def _split_columns(table: np.ndarray) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:

@@ -183,6 +183,42 @@ def test_a_text_cloud_with_a_byte_order_mark(tmp_path, cloud):
         np.testing.assert_array_equal(load_cloud(tmp_path / f"c{suffix}").points, cloud.points)
 
 
+def _rows(table: np.ndarray, sep: str) -> str:
+    return "".join(sep.join(repr(float(v)) for v in row) + "\n" for row in table)
+
+
+def test_text_columns_are_taken_by_the_header_rows_names(tmp_path, cloud):
+    """A header row as pandas (an unnamed index column first), a spreadsheet or CloudCompare (``//X Y Z``)
+    writes it: columns by name, in any order, the unnamed and unknown ones (index, intensity) left out."""
+    n = len(cloud)
+    bytes_colours = np.round(cloud.colors * 255)
+    pandas = np.column_stack([np.arange(n), cloud.normals[:, 2], cloud.points, np.full(n, 0.5),
+                              cloud.normals[:, :2]])
+    (tmp_path / "pandas.csv").write_text(",Nz,X,Y,Z,intensity,nx,NY\n" + _rows(pandas, ","))
+    back = load_cloud(tmp_path / "pandas.csv")
+    np.testing.assert_array_equal(back.points, cloud.points)
+    np.testing.assert_allclose(back.normals, cloud.normals, rtol=0, atol=1e-12)  # normalised again on loading
+    assert back.colors is None
+    (tmp_path / "cc.txt").write_text("# exported\n//X Y Z R G B\n" + _rows(np.hstack([cloud.points, bytes_colours]), " "))
+    back = load_cloud(tmp_path / "cc.txt")
+    np.testing.assert_array_equal(back.points, cloud.points)
+    np.testing.assert_allclose(back.colors, cloud.colors)  # 0-255 in the file
+    (tmp_path / "q.xyz").write_text('"x" "y" "z"\n' + _rows(cloud.points, " "))
+    np.testing.assert_array_equal(load_cloud(tmp_path / "q.xyz").points, cloud.points)
+
+
+@pytest.mark.parametrize(("header", "match"), [
+    ("a,b,c", r"line 1 is not numbers and not a header row naming x, y and z columns: 'a,b,c'"),
+    ("x,y,nx,ny,nz,extra", r"not a header row naming x, y and z"),
+    ("x,y,z,X", r"names column 'x' 2 times"),
+    ("x,y,z,w", r"the header row names 4 columns, the rows hold 3"),
+])
+def test_a_header_row_that_does_not_fit_is_refused(tmp_path, cloud, header, match):
+    (tmp_path / "c.csv").write_text(header + "\n" + _rows(cloud.points, ","))
+    with pytest.raises(CloudFileError, match=match):
+        load_cloud(tmp_path / "c.csv")
+
+
 @pytest.mark.parametrize("suffix", [".xyz", ".xyzn", ".xyzrgb", ".pts"])
 def test_xyz_family_round_trip(tmp_path, cloud, suffix):
     save_cloud(cloud, tmp_path / f"c{suffix}")
