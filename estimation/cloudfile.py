@@ -34,6 +34,7 @@ from typing import BinaryIO
 
 import numpy as np
 
+from estimation import tolerances as tol
 from estimation.cloud import PointCloud, is_single_origin, make_cloud
 from estimation.contracts import unit_quaternion
 from estimation.errors import CloudError, CloudFileError
@@ -375,6 +376,11 @@ def _read_ply(path: Path, max_points: int) -> _Columns:
         table, types = _read_ply_ascii(path, size, offset, elements, index)
     else:
         table, types = _read_ply_binary(path, size, offset, elements, index, order)
+    faces = sum(e.count for e in elements if e.name == "face")
+    if faces and vertex.count < tol.MIN_POINTS:
+        # A CAD or modelling export: its few corners are no scan of the surface.
+        raise CloudFileError(f"{path}: a mesh of {vertex.count} vertices and {faces} faces, not a point cloud (need at "
+                             f"least {tol.MIN_POINTS} points): sample its surface, e.g. trimesh.sample.sample_surface")
     return _columns_from(table, types, normals=("nx", "ny", "nz"), colors=_ply_color_names(names))
 
 

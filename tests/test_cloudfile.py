@@ -585,3 +585,14 @@ def test_an_ascii_pcd_colour_no_uint32_holds_is_black_without_a_warning(tmp_path
     assert cloud.points.shape == (4, 3)
     assert cloud.colors[:3].tolist() == [[0.0, 0.0, 0.0]] * 3
     assert cloud.colors[3] == pytest.approx(np.array([0xFF, 0x80, 0x01]) / 255.0)
+
+
+def test_a_mesh_file_with_few_vertices_says_it_is_a_mesh(tmp_path):
+    import trimesh
+
+    trimesh.creation.box([0.05, 0.04, 0.03]).export(tmp_path / "box.ply")
+    with pytest.raises(CloudFileError, match=r"box\.ply: a mesh of 8 vertices and 12 faces, not a point cloud"):
+        load_cloud(tmp_path / "box.ply")
+    dense = trimesh.creation.icosphere(4, 0.05)  # a mesh with enough vertices is read as its vertices
+    dense.export(tmp_path / "sphere.ply")
+    assert len(load_cloud(tmp_path / "sphere.ply")) == len(dense.vertices)
