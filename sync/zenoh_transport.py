@@ -4,7 +4,7 @@ and :class:`ZenohTransport`, the :class:`sync.transport.Transport` over one sess
 Defaults: peer mode, multicast and gossip scouting off, and listening on 127.0.0.1 only (Zenoh's own
 default listens on every interface), so nothing is reachable from another machine unless an endpoint
 says so. A config file (Zenoh's JSON5) is taken as it is, then ``listen``/``connect`` given here override
-its endpoints: that is where TLS, access control and routers are set (see README, "Beyond one machine").
+its endpoints: that is where TLS, access control and routers are set (see docs/sync.md, "Beyond one machine").
 """
 
 from __future__ import annotations
