@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from estimation.errors import TwinError
+from scenes.placement import check_placement
 from scenes.scenefile import ObjectSpec, SceneSpec
 from scenes.sources import estimate_object, prepare_objects
 from twin.decompose import DEFAULT_SETTINGS, CoacdSettings, ProgressBar, concavity, skips_coacd
@@ -105,7 +106,9 @@ def build_scene(scene: SceneSpec, *, coacd: CoacdSettings = DEFAULT_SETTINGS, ca
     reports them instead.
 
     Raises:
-        SceneError: bad objects. BuildError: MuJoCo rejected the model, or a worker process died.
+        SceneError: bad objects, or objects placed inside each other, the table, the floor or the end
+            effector (:func:`scenes.placement.check_placement`). BuildError: MuJoCo rejected the model, or a
+            worker process died.
     """
     t0 = time.perf_counter()
     workers = default_workers(len(scene.objects)) if workers is None else workers
@@ -120,6 +123,7 @@ def build_scene(scene: SceneSpec, *, coacd: CoacdSettings = DEFAULT_SETTINGS, ca
     for obj in objects:
         add_object(spec, obj)
     model = compile_spec(spec)
+    check_placement(scene.name, model, {obj.id for obj in objects})
     compile_s = time.perf_counter() - t
     return BuiltScene(scene, spec, model, objects, time.perf_counter() - t0,
                       {i: r.source_seconds + r.estimate_seconds for i, r in reports.items()},

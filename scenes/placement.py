@@ -1,9 +1,11 @@
 """Whether a scene's objects fit where its file puts them: two solids cannot share space.
 
 A scene file places objects and does not promise they rest there (a stack may topple, and the remote lets
-it settle), but objects placed inside each other are no scene at all: MuJoCo pushes them apart in the first
-steps, and the remote scene C silently became another one (a can placed in a crate came to rest on top of
-it). The remote checks its model's contacts at the file's poses before it steps, and refuses the scene.
+it settle), but objects placed inside each other, inside the table or the floor, or round the operator's end
+effector are no scene at all: MuJoCo pushes them apart in the first steps, and the scene silently became
+another one (a can placed in a crate came to rest on top of it; a box placed 3 cm into the table fell
+through it to the floor). :func:`check_placement` reads a model's contacts at the file's poses before
+anything steps, and refuses the scene; ``twin build``, ``twin run`` and the remote all call it.
 """
 
 from __future__ import annotations
@@ -12,44 +14,95 @@ from dataclasses import dataclass
 
 import mujoco
 
+from scenes.scenefile import SceneError
+from twin.model import EE_BODY
+
 #: Metres. Objects whose collision shapes (primitives, convex hulls) interpenetrate deeper than this at the
 #: file's poses overlap. The slack is for shapes that touch: a hull of a concave part fills its hollows by
 #: up to about this (``twin.decompose``'s settings), and objects stacked by hand carry rounding.
 OVERLAP_DEPTH = 0.002
 
+#: Metres an object may reach into the table or the floor. A scan placed by its own frame (``position`` with
+#: a height) rests where the cameras saw it, and its reconstructed bottom lies within the sensor's noise of
+#: the table it stood on: a depth camera at a table's distance has an axial sigma of a few millimetres
+#: (``scenes.cameras``' Kinect model, ~5 mm at 1.5 m), so twice that is lifted out, not refused.
+SUPPORT_DEPTH = 0.01
+
+#: What the contacts name the scene's own geometry by (``twin.model``'s geom and body names).
+_FIXED = {"table": "the table", "floor": "the floor", EE_BODY: "the end effector"}
+
 
 @dataclass(frozen=True)
 class Overlap:
-    """Two objects whose collision shapes interpenetrate: ``depth`` metres at the deepest contact."""
+    """An object and what its collision shapes interpenetrate: another object (``second`` its id) or the
+    scene's own geometry (``fixed``: ``second`` is "the table", "the floor" or "the end effector");
+    ``depth`` metres at the deepest contact."""
 
     first: str
     second: str
     depth: float
+    fixed: bool = False
+
+    def __str__(self) -> str:
+        other = self.second if self.fixed else f"'{self.second}'"
+        return f"'{self.first}' and {other} by {1000 * self.depth:.1f} mm"
 
 
-def overlaps(model: mujoco.MjModel, data: mujoco.MjData, names: set[str], *,
-             depth: float = OVERLAP_DEPTH) -> list[Overlap]:
-    """Pairs of the bodies named in ``names`` whose contacts in ``data`` (after ``mj_forward``) are deeper
-    than ``depth`` metres, deepest first; each pair once. Contacts with other bodies (the table) are not
-    looked at."""
+def overlaps(model: mujoco.MjModel, data: mujoco.MjData, names: set[str], *, depth: float = OVERLAP_DEPTH,
+             support_depth: float = SUPPORT_DEPTH) -> list[Overlap]:
+    """What the bodies named in ``names`` (the objects) interpenetrate in ``data`` (after ``mj_forward``),
+    deepest first, each pair once: another object or the end effector deeper than ``depth`` metres, the
+    table or the floor deeper than ``support_depth``."""
     n = data.ncon
     if n == 0:
         return []
-    bodies = model.geom_bodyid[data.contact.geom[:n]]  # (n, 2)
-    deepest: dict[tuple[str, str], float] = {}
-    for (a, b), dist in zip(bodies.tolist(), data.contact.dist[:n].tolist(), strict=True):
-        if -dist <= depth or a == b:
+    geoms = data.contact.geom[:n]  # (n, 2)
+    bodies = model.geom_bodyid[geoms]
+    deepest: dict[tuple[str, str, bool], float] = {}
+    for (ga, gb), (a, b), dist in zip(geoms.tolist(), bodies.tolist(), data.contact.dist[:n].tolist(), strict=True):
+        if a == b:
             continue
-        pair = tuple(sorted((mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_BODY, a) or "",
-                             mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_BODY, b) or "")))
-        if pair[0] in names and pair[1] in names:
-            deepest[pair] = max(deepest.get(pair, 0.0), -dist)
-    found = [Overlap(a, b, d) for (a, b), d in deepest.items()]
+        ends = [_name(model, g, body) for g, body in ((ga, a), (gb, b))]
+        if ends[0] not in names:
+            ends.reverse()
+        first, second = ends
+        if first not in names:
+            continue
+        if second in names:
+            first, second = sorted((first, second))
+            key, limit = (first, second, False), depth
+        elif second in _FIXED:
+            key, limit = (first, _FIXED[second], True), depth if second == EE_BODY else support_depth
+        else:
+            continue
+        if -dist > limit:
+            deepest[key] = max(deepest.get(key, 0.0), -dist)
+    found = [Overlap(a, b, d, fixed) for (a, b, fixed), d in deepest.items()]
     return sorted(found, key=lambda o: (-o.depth, o.first, o.second))
 
 
 def describe(found: list[Overlap]) -> str:
-    """One line naming the overlapping pairs (at most three, deepest first), millimetres."""
-    shown = "; ".join(f"'{o.first}' and '{o.second}' by {1000 * o.depth:.1f} mm" for o in found[:3])
-    more = f" (and {len(found) - 3} more pairs)" if len(found) > 3 else ""
-    return f"objects placed inside each other: {shown}{more}; move them apart (deeper than {1000 * OVERLAP_DEPTH:g} mm)"
+    """One line naming what overlaps (at most three, deepest first), millimetres."""
+    shown = "; ".join(str(o) for o in found[:3])
+    more = f" (and {len(found) - 3} more)" if len(found) > 3 else ""
+    return (f"objects placed inside each other or the scene: {shown}{more}; move them apart (deeper than "
+            f"{1000 * OVERLAP_DEPTH:g} mm; {1000 * SUPPORT_DEPTH:g} mm into the table or floor)")
+
+
+def check_placement(scene: str, model: mujoco.MjModel, names: set[str],
+                    data: mujoco.MjData | None = None) -> None:
+    """Raise :class:`SceneError` (one line, naming the scene) if the objects ``names`` overlap at the model's
+    initial poses; ``data``: that state already forwarded (else a fresh one is made)."""
+    if data is None:
+        data = mujoco.MjData(model)
+        mujoco.mj_forward(model, data)
+    found = overlaps(model, data, names)
+    if found:
+        raise SceneError(f"{scene}: {describe(found)}")
+
+
+def _name(model: mujoco.MjModel, geom: int, body: int) -> str:
+    """A world geom by its own name (the table, the floor), any other by its body's."""
+    if body == 0:
+        return mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_GEOM, geom) or ""
+    return mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_BODY, body) or ""

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from scenes.placement import describe, overlaps
+from scenes.placement import check_placement
 from scenes.scenefile import ObjectSpec, SceneError, SceneSpec
 from scenes.sensing import Sensor, SurfaceSensor, Track
 from scenes.sources import prepare_objects, reference_estimate, source_mesh
@@ -131,11 +131,12 @@ class Remote:
             add_object(spec, obj)
             self._remember(spec_obj, obj)
         self.twin = Twin(spec, background=clock.realtime)
-        found = overlaps(self.twin.model, self.twin.data, set(self._objects))
-        if found:
+        try:
+            check_placement(scene.name, self.twin.model, set(self._objects), self.twin.data)
+        except SceneError:
             self.twin.close()
             self.link.close()
-            raise SceneError(f"{scene.name}: {describe(found)}")
+            raise
         self.settled_after = self._settle(settle_s)
         if scene.table is not None:
             rlog.table(scene.table.size, scene.table.height)

@@ -1,4 +1,5 @@
-"""Objects a scene file places inside each other are refused before the remote runs them."""
+"""Objects a scene file places inside each other, the table, the floor or the end effector are refused before
+anything runs them (the remote, ``twin build`` and ``twin run``)."""
 
 from __future__ import annotations
 
@@ -7,8 +8,9 @@ from pathlib import Path
 import pytest
 
 from cli.main import main
+from scenes.build import build_scene
 from scenes.headless import Headless
-from scenes.placement import OVERLAP_DEPTH
+from scenes.placement import OVERLAP_DEPTH, SUPPORT_DEPTH
 from scenes.scenefile import SceneError, parse_scene
 
 TABLE = {"size": [1.0, 0.6, 0.04], "height": 0.5}
@@ -29,7 +31,7 @@ def _scene(can_at: list[float]):  # type: ignore[no-untyped-def]
 @pytest.mark.parametrize(("can_at", "depth_mm"), [([0.05, 0.01], 40.0), ([0.0, 0.0], 60.0)])
 def test_objects_placed_inside_each_other_are_one_scene_error_naming_both(cache, can_at, depth_mm):
     # Before, the remote stepped them apart and went on with another scene: this can came to rest on the crate.
-    with pytest.raises(SceneError, match=rf"^placed: objects placed inside each other: 'can' and 'crate' by "
+    with pytest.raises(SceneError, match=rf"^placed: objects placed inside each other or the scene: 'can' and 'crate' by "
                                          rf"{depth_mm:.1f} mm; move them apart"):
         Headless(_scene(can_at), cache_dir=cache)
 
@@ -52,4 +54,33 @@ def test_the_cli_says_it_in_one_line_and_exits_2(tmp_path, capsys):
                      'density = 700\nposition = [0.0, 0.0]\n')
     assert main(["remote", str(scene), "--duration", "0.1"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert err[-1].startswith("twin remote: error: overlap: objects placed inside each other: 'can' and 'crate'")
+    assert err[-1].startswith("twin remote: error: overlap: objects placed inside each other or the scene: 'can' and "
+                              "'crate'")
+
+
+def _alone(position: list[float], **scene):  # type: ignore[no-untyped-def]
+    return parse_scene({"name": "placed", "table": TABLE, **scene, "objects": [{**CRATE, "position": position}]})
+
+
+@pytest.mark.parametrize(("z", "what", "depth_mm"), [
+    (0.5 + 0.03 - 0.02, "the table", 20.0),  # its bottom 2 cm into the table top: MuJoCo lifts it out
+    (0.47, "the table", 40.0),  # across the whole 4 cm slab: MuJoCo pushed it down through, onto the floor
+    (0.02, "the floor", 10.0),
+])
+def test_an_object_inside_the_table_or_the_floor_is_refused(cache, z, what, depth_mm):
+    with pytest.raises(SceneError, match=rf"^placed: objects placed inside each other or the scene: 'crate' and "
+                                         rf"{what} by {depth_mm:.1f} mm"):
+        build_scene(_alone([0.0, 0.0, z]), cache_dir=cache, progress=False, workers=1)
+
+
+def test_an_object_round_the_end_effector_is_refused_by_the_remote(cache):
+    scene = _alone([-0.3, 0.0], end_effector={"radius": 0.02, "position": [-0.3, 0.0, 0.52]})
+    with pytest.raises(SceneError, match=r"'crate' and the end effector by "):
+        Headless(scene, cache_dir=cache)
+
+
+def test_an_object_sunk_within_the_support_slack_is_accepted(cache):
+    # A scan placed by its own frame rests within the sensor's noise of the table it stood on.
+    sunk = 0.5 + 0.03 - 0.5 * SUPPORT_DEPTH
+    built = build_scene(_alone([0.0, 0.0, sunk]), cache_dir=cache, progress=False, workers=1)
+    assert [o.id for o in built.objects] == ["crate"]
