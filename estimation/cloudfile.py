@@ -766,9 +766,11 @@ def _read_text(path: Path, max_points: int) -> _Columns:
     if not text.strip():
         raise CloudFileError(f"{path}: holds no numbers, only whitespace")
     lines = text.decode("latin-1").splitlines()
-    named = _header_row(path, lines)
+    named = _header_row(path, lines, first_line=1 if claimed is None else 2)
     if named is not None:
         lines = lines[named.line + 1:]
+        if not any(line.split("#", 1)[0].strip() for line in lines):
+            raise CloudFileError(f"{path}: a header row and no rows of numbers after it")
     first = next((line for line in lines if line.strip() and not line.lstrip().startswith("#")), "")
     delimiter = "," if "," in first else None
     with warnings.catch_warnings():
@@ -777,16 +779,16 @@ def _read_text(path: Path, max_points: int) -> _Columns:
             table = np.loadtxt(lines, delimiter=delimiter, ndmin=2)
         except UserWarning as exc:
             raise CloudFileError(f"{path}: holds no numbers ({exc})") from None
+    if claimed is not None and claimed != len(table):
+        if claimed > len(table):
+            raise CloudFileError(f"{path}: truncated: the first line claims {claimed} points but the file holds {len(table)}")
+        log.warning("%s: the first line claims %d points but the file holds %d; reading all", path, claimed, len(table))
     if named is not None:
         if table.shape[1] != named.width:
             raise CloudFileError(f"{path}: the header row names {named.width} columns, the rows hold {table.shape[1]}")
         return named.columns(table)
     if suffix in (".txt", ".csv", ".asc"):
         return _Columns(*_split_columns(table))
-    if claimed is not None and claimed != len(table):
-        if claimed > len(table):
-            raise CloudFileError(f"{path}: truncated: the first line claims {claimed} points but the file holds {len(table)}")
-        log.warning("%s: the first line claims %d points but the file holds %d; reading all", path, claimed, len(table))
     need = {".xyz": 3, ".xyzn": 6, ".xyzrgb": 6, ".pts": 3}[suffix]
     if table.shape[1] < need:
         raise CloudFileError(f"{path}: a {suffix} file needs at least {need} columns, got {table.shape[1]}")
@@ -804,7 +806,7 @@ def _read_text(path: Path, max_points: int) -> _Columns:
 _HEADER_NAMES = {
     "points": (("x",), ("y",), ("z",)),
     "normals": (("nx", "normal_x", "normalx"), ("ny", "normal_y", "normaly"), ("nz", "normal_z", "normalz")),
-    "colors": (("r", "red"), ("g", "green"), ("b", "blue")),
+    "colors": (("r", "red", "rf"), ("g", "green", "gf"), ("b", "blue", "bf")),  # rf gf bf: CloudCompare's 0-1 floats
 }
 
 
@@ -825,10 +827,11 @@ class _HeaderRow:
         return _Columns(picked["points"], picked["normals"], colors)  # type: ignore[arg-type]
 
 
-def _header_row(path: Path, lines: list[str]) -> _HeaderRow | None:
+def _header_row(path: Path, lines: list[str], first_line: int = 1) -> _HeaderRow | None:
     """The row of column names a spreadsheet, pandas or CloudCompare (``//X,Y,Z``) writes before the numbers, or
-    None when the first line that is not a ``#`` comment holds numbers. Columns are then taken by name, and
-    the others (an index, intensity, scalar fields) are left out.
+    None when the first line that is not a ``#`` comment holds a number (it is data, good or bad, for
+    ``numpy.loadtxt`` to read or name). Columns are then taken by name, and the others (an index, intensity,
+    scalar fields) are left out. ``first_line``: the file's line number of ``lines[0]``, for messages.
 
     Raises:
         CloudFileError: a header row without x, y and z, or naming one of them twice.
@@ -837,13 +840,10 @@ def _header_row(path: Path, lines: list[str]) -> _HeaderRow | None:
     if index is None:
         return None
     line = lines[index]
-    stripped = line.strip().removeprefix("//")
+    stripped = line.split("#", 1)[0].strip().removeprefix("//")  # '#' starts a comment, as numpy.loadtxt reads it
     tokens = [t.strip().strip("'\"").lower() for t in (stripped.split(",") if "," in stripped else stripped.split())]
-    try:
-        [float(t) for t in tokens if t]  # a trailing comma is the rows' problem, not a header
+    if any(_is_number(t) for t in tokens):
         return None
-    except ValueError:
-        pass
     found: dict[str, tuple[int, int, int] | None] = {}
     for kind, triple in _HEADER_NAMES.items():
         at = []
@@ -855,9 +855,21 @@ def _header_row(path: Path, lines: list[str]) -> _HeaderRow | None:
         found[kind] = None if None in at else (at[0], at[1], at[2])  # type: ignore[assignment]
     if found["points"] is None:
         shown = line.strip()[:80]
-        raise CloudFileError(f"{path}: line {index + 1} is not numbers and not a header row naming x, y and z "
+        raise CloudFileError(f"{path}: line {index + first_line} is not numbers and not a header row naming x, y and z "
                              f"columns: {shown!r}")
+    used = {i for at in found.values() if at is not None for i in at}
+    if len(used) < len(tokens):
+        log.info("%s: columns left out (not x y z, nx ny nz or r g b): %s", path,
+                 ", ".join(repr(t) for i, t in enumerate(tokens) if i not in used))
     return _HeaderRow(index, len(tokens), found)
+
+
+def _is_number(token: str) -> bool:
+    try:
+        float(token)
+    except ValueError:
+        return False
+    return True
 
 
 def _split_columns(table: np.ndarray) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:

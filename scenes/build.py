@@ -123,7 +123,8 @@ def build_scene(scene: SceneSpec, *, coacd: CoacdSettings = DEFAULT_SETTINGS, ca
     for obj in objects:
         add_object(spec, obj)
     model = compile_spec(spec)
-    check_placement(scene.name, model, {obj.id for obj in objects})
+    check_placement(scene.name, model, {obj.id for obj in objects},
+                    scanned={o.id for o in scene.objects if o.source == "cloud" and len(o.position) == 3})
     compile_s = time.perf_counter() - t
     return BuiltScene(scene, spec, model, objects, time.perf_counter() - t0,
                       {i: r.source_seconds + r.estimate_seconds for i, r in reports.items()},

@@ -5,7 +5,8 @@ it settle), but objects placed inside each other, inside the table or the floor,
 effector are no scene at all: MuJoCo pushes them apart in the first steps, and the scene silently became
 another one (a can placed in a crate came to rest on top of it; a box placed 3 cm into the table fell
 through it to the floor). :func:`check_placement` reads a model's contacts at the file's poses before
-anything steps, and refuses the scene; ``twin build``, ``twin run`` and the remote all call it.
+anything steps, and refuses the scene; ``twin build``, ``twin run`` of a scene file and the remote all call it
+(a folder ``twin build`` wrote was checked when it was built).
 """
 
 from __future__ import annotations
@@ -28,8 +29,9 @@ OVERLAP_DEPTH = 0.002
 #: (``scenes.cameras``' Kinect model, ~5 mm at 1.5 m), so twice that is lifted out, not refused.
 SUPPORT_DEPTH = 0.01
 
-#: What the contacts name the scene's own geometry by (``twin.model``'s geom and body names).
-_FIXED = {"table": "the table", "floor": "the floor", EE_BODY: "the end effector"}
+#: The scene's own geometry as messages name it: world geoms by their ``twin.model`` names, and the end effector.
+_FIXED = {"table": "the table", "floor": "the floor"}
+_END_EFFECTOR = "the end effector"
 
 
 @dataclass(frozen=True)
@@ -49,30 +51,32 @@ class Overlap:
 
 
 def overlaps(model: mujoco.MjModel, data: mujoco.MjData, names: set[str], *, depth: float = OVERLAP_DEPTH,
-             support_depth: float = SUPPORT_DEPTH) -> list[Overlap]:
+             support_depth: float = SUPPORT_DEPTH, scanned: frozenset[str] | set[str] = frozenset()) -> list[Overlap]:
     """What the bodies named in ``names`` (the objects) interpenetrate in ``data`` (after ``mj_forward``),
     deepest first, each pair once: another object or the end effector deeper than ``depth`` metres, the
-    table or the floor deeper than ``support_depth``."""
+    table or the floor deeper than ``support_depth``. A pair with an object in ``scanned`` (a cloud placed by
+    its own frame, whose surface is as noisy as its sensor) is held to ``support_depth`` too."""
     n = data.ncon
     if n == 0:
         return []
-    geoms = data.contact.geom[:n]  # (n, 2)
-    bodies = model.geom_bodyid[geoms]
+    ee = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, EE_BODY)
     deepest: dict[tuple[str, str, bool], float] = {}
-    for (ga, gb), (a, b), dist in zip(geoms.tolist(), bodies.tolist(), data.contact.dist[:n].tolist(), strict=True):
-        if a == b:
-            continue
-        ends = [_name(model, g, body) for g, body in ((ga, a), (gb, b))]
-        if ends[0] not in names:
-            ends.reverse()
-        first, second = ends
-        if first not in names:
-            continue
-        if second in names:
-            first, second = sorted((first, second))
-            key, limit = (first, second, False), depth
-        elif second in _FIXED:
-            key, limit = (first, _FIXED[second], True), depth if second == EE_BODY else support_depth
+    geoms = data.contact.geom[:n]  # (n, 2)
+    for pair, dist in zip(geoms.tolist(), data.contact.dist[:n].tolist(), strict=True):
+        # The scene's own parts by body id (world geoms: the table and the floor; the end effector's body),
+        # never by name: an object may be called 'table'.
+        ends = [_part(model, g, ee) for g in pair]
+        objects = [name for name, fixed in ends if not fixed and name in names]
+        if len(objects) == 2 and objects[0] != objects[1]:
+            first, second = sorted(objects)
+            key = (first, second, False)
+            limit = support_depth if scanned & {first, second} else depth
+        elif len(objects) == 1:
+            other = next(((name, fixed) for name, fixed in ends if fixed), None)
+            if other is None:
+                continue
+            key = (objects[0], other[0], True)
+            limit = depth if other[0] == _END_EFFECTOR and objects[0] not in scanned else support_depth
         else:
             continue
         if -dist > limit:
@@ -89,20 +93,26 @@ def describe(found: list[Overlap]) -> str:
             f"{1000 * OVERLAP_DEPTH:g} mm; {1000 * SUPPORT_DEPTH:g} mm into the table or floor)")
 
 
-def check_placement(scene: str, model: mujoco.MjModel, names: set[str],
-                    data: mujoco.MjData | None = None) -> None:
+def check_placement(scene: str, model: mujoco.MjModel, names: set[str], data: mujoco.MjData | None = None, *,
+                    scanned: frozenset[str] | set[str] = frozenset()) -> None:
     """Raise :class:`SceneError` (one line, naming the scene) if the objects ``names`` overlap at the model's
-    initial poses; ``data``: that state already forwarded (else a fresh one is made)."""
+    initial poses (:func:`overlaps`; ``scanned``: the objects that are clouds placed by their own frame);
+    ``data``: that state already forwarded (else a fresh one is made)."""
     if data is None:
         data = mujoco.MjData(model)
         mujoco.mj_forward(model, data)
-    found = overlaps(model, data, names)
+    found = overlaps(model, data, names, scanned=scanned)
     if found:
         raise SceneError(f"{scene}: {describe(found)}")
 
 
-def _name(model: mujoco.MjModel, geom: int, body: int) -> str:
-    """A world geom by its own name (the table, the floor), any other by its body's."""
+def _part(model: mujoco.MjModel, geom: int, ee: int) -> tuple[str, bool]:
+    """(name, is the scene's own part) of a contact's geom: a world geom by its own name ("the table", "the
+    floor"), the end effector's, any other by its body's name (an object)."""
+    body = int(model.geom_bodyid[geom])
     if body == 0:
-        return mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_GEOM, geom) or ""
-    return mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_BODY, body) or ""
+        name = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_GEOM, geom) or "world"
+        return _FIXED.get(name, f"the scene's {name!r}"), True
+    if body == ee:
+        return _END_EFFECTOR, True
+    return mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_BODY, body) or "", False

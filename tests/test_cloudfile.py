@@ -203,8 +203,28 @@ def test_text_columns_are_taken_by_the_header_rows_names(tmp_path, cloud):
     back = load_cloud(tmp_path / "cc.txt")
     np.testing.assert_array_equal(back.points, cloud.points)
     np.testing.assert_allclose(back.colors, cloud.colors)  # 0-255 in the file
-    (tmp_path / "q.xyz").write_text('"x" "y" "z"\n' + _rows(cloud.points, " "))
+    (tmp_path / "q.xyz").write_text('"x" "y" "z"  # metres\n' + _rows(cloud.points, " "))
     np.testing.assert_array_equal(load_cloud(tmp_path / "q.xyz").points, cloud.points)
+
+
+def test_a_first_row_of_numbers_with_a_comment_is_data_not_a_header(tmp_path, cloud):
+    rows = _rows(cloud.points, " ").splitlines()
+    (tmp_path / "c.xyz").write_text(rows[0] + "  # the first point\n" + "\n".join(rows[1:]) + "\n")
+    np.testing.assert_array_equal(load_cloud(tmp_path / "c.xyz").points, cloud.points)
+    # A bad number is numpy's message about that number, not a header's.
+    (tmp_path / "bad.xyz").write_text("1.0e 2 3\n" + "\n".join(rows) + "\n")
+    with pytest.raises(CloudFileError, match=r"could not convert string '1.0e'"):
+        load_cloud(tmp_path / "bad.xyz")
+
+
+def test_a_pts_count_is_checked_with_a_header_row_too(tmp_path, cloud):
+    (tmp_path / "c.pts").write_text(f"{len(cloud) + 10}\nx y z\n" + _rows(cloud.points, " "))
+    with pytest.raises(CloudFileError, match=rf"truncated: the first line claims {len(cloud) + 10} points but the "
+                                             rf"file holds {len(cloud)}"):
+        load_cloud(tmp_path / "c.pts")
+    (tmp_path / "h.pts").write_text("10\nfoo bar baz\n1 2 3\n")
+    with pytest.raises(CloudFileError, match=r"line 2 is not numbers"):
+        load_cloud(tmp_path / "h.pts")
 
 
 @pytest.mark.parametrize(("header", "match"), [
@@ -217,6 +237,9 @@ def test_a_header_row_that_does_not_fit_is_refused(tmp_path, cloud, header, matc
     (tmp_path / "c.csv").write_text(header + "\n" + _rows(cloud.points, ","))
     with pytest.raises(CloudFileError, match=match):
         load_cloud(tmp_path / "c.csv")
+    (tmp_path / "only.csv").write_text(header + "\n# and no rows\n")
+    with pytest.raises(CloudFileError, match=r"header row|names column"):
+        load_cloud(tmp_path / "only.csv")
 
 
 @pytest.mark.parametrize("suffix", [".xyz", ".xyzn", ".xyzrgb", ".pts"])

@@ -65,7 +65,7 @@ def _alone(position: list[float], **scene):  # type: ignore[no-untyped-def]
 @pytest.mark.parametrize(("z", "what", "depth_mm"), [
     (0.5 + 0.03 - 0.02, "the table", 20.0),  # its bottom 2 cm into the table top: MuJoCo lifts it out
     (0.47, "the table", 40.0),  # across the whole 4 cm slab: MuJoCo pushed it down through, onto the floor
-    (0.02, "the floor", 10.0),
+    (0.01, "the floor", 20.0),
 ])
 def test_an_object_inside_the_table_or_the_floor_is_refused(cache, z, what, depth_mm):
     with pytest.raises(SceneError, match=rf"^placed: objects placed inside each other or the scene: 'crate' and "
@@ -84,3 +84,33 @@ def test_an_object_sunk_within_the_support_slack_is_accepted(cache):
     sunk = 0.5 + 0.03 - 0.5 * SUPPORT_DEPTH
     built = build_scene(_alone([0.0, 0.0, sunk]), cache_dir=cache, progress=False, workers=1)
     assert [o.id for o in built.objects] == ["crate"]
+
+
+def test_the_scenes_parts_are_told_from_objects_by_body_not_by_name(cache):
+    # An object may be called 'table': the crate 5 mm into the table top is within the support slack, and the
+    # object named 'table' is no part of the scene's table.
+    other = {"id": "table", "primitive": {"type": "box", "size": [0.05, 0.05, 0.05]}, "density": 500,
+             "position": [0.3, 0.0]}
+    scene = parse_scene({"name": "placed", "table": TABLE,
+                         "objects": [{**CRATE, "position": [0.0, 0.0, 0.5 + 0.03 - 0.005]}, other]})
+    built = build_scene(scene, cache_dir=cache, progress=False, workers=1)
+    assert sorted(o.id for o in built.objects) == ["crate", "table"]
+
+
+def test_scans_placed_by_their_frame_are_held_to_the_support_slack():
+    # Two boxes 5 mm into each other: objects overlap, but two scans as noisy as their sensor may touch so.
+    import mujoco
+
+    from scenes.placement import overlaps
+
+    spec = mujoco.MjSpec()
+    for name, x in (("a", 0.0), ("b", 0.095)):
+        body = spec.worldbody.add_body(name=name, pos=[x, 0.0, 1.0])
+        body.add_freejoint()
+        body.add_geom(type=mujoco.mjtGeom.mjGEOM_BOX, size=[0.05, 0.05, 0.05])
+    model = spec.compile()
+    data = mujoco.MjData(model)
+    mujoco.mj_forward(model, data)
+    found = overlaps(model, data, {"a", "b"})
+    assert [(o.first, o.second, round(1000 * o.depth, 1)) for o in found] == [("a", "b", 5.0)]
+    assert overlaps(model, data, {"a", "b"}, scanned={"b"}) == []
