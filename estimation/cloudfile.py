@@ -771,8 +771,8 @@ def _read_text(path: Path, max_points: int) -> _Columns:
         lines = lines[named.line + 1:]
         if not any(line.split("#", 1)[0].strip() for line in lines):
             raise CloudFileError(f"{path}: a header row and no rows of numbers after it")
-    first = next((line for line in lines if line.strip() and not line.lstrip().startswith("#")), "")
-    delimiter = "," if "," in first else None
+    first = _first_content(lines)
+    delimiter = "," if first is not None and "," in lines[first] else None
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # loadtxt warns (to stderr) on a file of comments only; make it an error
         try:
@@ -820,11 +820,9 @@ class _HeaderRow:
     found: dict[str, tuple[int, int, int] | None]
 
     def columns(self, table: np.ndarray) -> _Columns:
+        """The named columns of ``table`` (colours as written: ``make_cloud`` rescales 0-255)."""
         picked = {kind: None if at is None else table[:, list(at)] for kind, at in self.found.items()}
-        colors = picked["colors"]
-        if colors is not None and colors.size and colors.max() > 1.0:  # 0-255, as spreadsheets and PLY write them
-            colors = colors / 255.0
-        return _Columns(picked["points"], picked["normals"], colors)  # type: ignore[arg-type]
+        return _Columns(picked["points"], picked["normals"], picked["colors"])  # type: ignore[arg-type]
 
 
 def _header_row(path: Path, lines: list[str], first_line: int = 1) -> _HeaderRow | None:
@@ -836,7 +834,7 @@ def _header_row(path: Path, lines: list[str], first_line: int = 1) -> _HeaderRow
     Raises:
         CloudFileError: a header row without x, y and z, or naming one of them twice.
     """
-    index = next((i for i, line in enumerate(lines) if line.strip() and not line.lstrip().startswith("#")), None)
+    index = _first_content(lines)
     if index is None:
         return None
     line = lines[index]
@@ -862,6 +860,11 @@ def _header_row(path: Path, lines: list[str], first_line: int = 1) -> _HeaderRow
         log.info("%s: columns left out (not x y z, nx ny nz or r g b): %s", path,
                  ", ".join(repr(t) for i, t in enumerate(tokens) if i not in used))
     return _HeaderRow(index, len(tokens), found)
+
+
+def _first_content(lines: list[str]) -> int | None:
+    """The index of the first line that is neither blank nor a ``#`` comment (None: there is none)."""
+    return next((i for i, line in enumerate(lines) if line.strip() and not line.lstrip().startswith("#")), None)
 
 
 def _is_number(token: str) -> bool:
