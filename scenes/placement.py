@@ -29,15 +29,14 @@ OVERLAP_DEPTH = 0.002
 #: (``scenes.cameras``' Kinect model, ~5 mm at 1.5 m), so twice that is lifted out, not refused.
 SUPPORT_DEPTH = 0.01
 
-#: The scene's own geometry as messages name it: world geoms by their ``twin.model`` names, and the end effector.
+#: The scene's world geoms as messages name them, by their ``twin.model`` names.
 _FIXED = {"table": "the table", "floor": "the floor"}
-_END_EFFECTOR = "the end effector"
 
 
 @dataclass(frozen=True)
 class Overlap:
     """An object and what its collision shapes interpenetrate: another object (``second`` its id) or the
-    scene's own geometry (``fixed``: ``second`` is "the table", "the floor" or "the end effector");
+    scene's own geometry (``fixed``: ``second`` is "the table", "the floor" or "the end effector (...)");
     ``depth`` metres at the deepest contact."""
 
     first: str
@@ -66,17 +65,17 @@ def overlaps(model: mujoco.MjModel, data: mujoco.MjData, names: set[str], *, dep
         # The scene's own parts by body id (world geoms: the table and the floor; the end effector's body),
         # never by name: an object may be called 'table'.
         ends = [_part(model, g, ee) for g in pair]
-        objects = [name for name, fixed in ends if not fixed and name in names]
+        objects = [name for name, kind in ends if kind == "object" and name in names]
         if len(objects) == 2 and objects[0] != objects[1]:
             first, second = sorted(objects)
             key = (first, second, False)
             limit = support_depth if scanned & {first, second} else depth
         elif len(objects) == 1:
-            other = next(((name, fixed) for name, fixed in ends if fixed), None)
+            other = next(((name, kind) for name, kind in ends if kind != "object"), None)
             if other is None:
                 continue
             key = (objects[0], other[0], True)
-            limit = depth if other[0] == _END_EFFECTOR and objects[0] not in scanned else support_depth
+            limit = depth if other[1] == "effector" and objects[0] not in scanned else support_depth
         else:
             continue
         if -dist > limit:
@@ -106,13 +105,15 @@ def check_placement(scene: str, model: mujoco.MjModel, names: set[str], data: mu
         raise SceneError(f"{scene}: {describe(found)}")
 
 
-def _part(model: mujoco.MjModel, geom: int, ee: int) -> tuple[str, bool]:
-    """(name, is the scene's own part) of a contact's geom: a world geom by its own name ("the table", "the
-    floor"), the end effector's, any other by its body's name (an object)."""
+def _part(model: mujoco.MjModel, geom: int, ee: int) -> tuple[str, str]:
+    """(name, kind) of a contact's geom: a world geom ("support": "the table", "the floor"), the end effector
+    ("effector", with where it starts: a scene without ``[end_effector]`` has the default one), or an object
+    ("object", its body's name)."""
     body = int(model.geom_bodyid[geom])
     if body == 0:
         name = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_GEOM, geom) or "world"
-        return _FIXED.get(name, f"the scene's {name!r}"), True
+        return _FIXED.get(name, f"the scene's {name!r}"), "support"
     if body == ee:
-        return _END_EFFECTOR, True
-    return mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_BODY, body) or "", False
+        x, y, z = (float(v) for v in model.body_pos[ee])
+        return f"the end effector (starting at {x:.3f}, {y:.3f}, {z:.3f} m)", "effector"
+    return mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_BODY, body) or "", "object"

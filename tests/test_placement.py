@@ -75,8 +75,17 @@ def test_an_object_inside_the_table_or_the_floor_is_refused(cache, z, what, dept
 
 def test_an_object_round_the_end_effector_is_refused_by_the_remote(cache):
     scene = _alone([-0.3, 0.0], end_effector={"radius": 0.02, "position": [-0.3, 0.0, 0.52]})
-    with pytest.raises(SceneError, match=r"'crate' and the end effector by "):
+    with pytest.raises(SceneError, match=r"'crate' and the end effector \(starting at -0\.300, 0\.000, 0\.520 m\) by "):
         Headless(scene, cache_dir=cache)
+
+
+def test_the_default_end_effector_is_named_with_where_it_starts(cache):
+    # A scene without [end_effector] still has one: the message says where, since the file never placed it.
+    from twin.model import EndEffectorSpec
+
+    x, y, z = EndEffectorSpec().position
+    with pytest.raises(SceneError, match=rf"'crate' and the end effector \(starting at {x:.3f}, {y:.3f}, {z:.3f} m\)"):
+        build_scene(_alone([x, y, z]), cache_dir=cache, progress=False, workers=1)
 
 
 def test_an_object_sunk_within_the_support_slack_is_accepted(cache):
