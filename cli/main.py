@@ -616,7 +616,20 @@ def _load_twin(args: argparse.Namespace):  # type: ignore[no-untyped-def]
             spec = mujoco.MjSpec.from_file(str(xml))
         except ValueError as exc:
             raise TwinError(f"{xml}: MuJoCo cannot load it ({exc})") from exc
-        return Twin(spec), None
+        from scenes.placement import check_placement
+
+        twin = Twin(spec)
+        # The folder may have been edited since 'twin build' checked it: the objects are the free bodies
+        # twin.model names '<id>/free'.
+        model = twin.model
+        objects = {model.body(int(model.jnt_bodyid[j])).name for j in range(model.njnt)
+                   if model.joint(j).name.endswith("/free")}
+        try:
+            check_placement(str(path), model, objects, twin.data)
+        except Exception:
+            twin.close()
+            raise
+        return twin, None
     from scenes.build import build_scene
     from scenes.scenefile import load_scene
 

@@ -5,8 +5,8 @@ it settle), but objects placed inside each other, inside the table or the floor,
 effector are no scene at all: MuJoCo pushes them apart in the first steps, and the scene silently became
 another one (a can placed in a crate came to rest on top of it; a box placed 3 cm into the table fell
 through it to the floor). :func:`check_placement` reads a model's contacts at the file's poses before
-anything steps, and refuses the scene; ``twin build``, ``twin run`` of a scene file and the remote all call it
-(a folder ``twin build`` wrote was checked when it was built).
+anything steps, and refuses the scene; ``twin build``, ``twin run`` (of a scene file, or of a folder ``twin build``
+wrote, which may have been edited since) and the remote all call it.
 """
 
 from __future__ import annotations

@@ -123,3 +123,27 @@ def test_scans_placed_by_their_frame_are_held_to_the_support_slack():
     found = overlaps(model, data, {"a", "b"})
     assert [(o.first, o.second, round(1000 * o.depth, 1)) for o in found] == [("a", "b", 5.0)]
     assert overlaps(model, data, {"a", "b"}, scanned={"b"}) == []
+
+
+def test_a_built_folder_edited_into_an_overlap_is_refused_by_run(tmp_path, capsys, monkeypatch, cache):
+    import re
+
+    monkeypatch.setenv("TWIN_CACHE_DIR", str(cache))
+    scene = tmp_path / "one.toml"
+    scene.write_text('name = "one"\n[table]\nsize = [1.0, 0.6, 0.04]\nheight = 0.5\n'
+                     '[[objects]]\nid = "crate"\nprimitive = { type = "box", size = [0.12, 0.08, 0.06] }\n'
+                     'material = "wood_pine"\nposition = [0.0, 0.0]\n')
+    out = tmp_path / "built"
+    assert main(["build", str(scene), "--out", str(out)]) == 0
+    assert main(["run", str(out), "--duration", "0.01", "--no-realtime"]) == 0
+    xml = out / "scene.xml"
+    # The crate's body moved 3 cm down, into the table top, by hand.
+    text = xml.read_text()
+    edited = re.sub(r'(<body name="crate" pos="[^ ]+ [^ ]+ )([^"]+)"', lambda m: f'{m[1]}{float(m[2]) - 0.03}"', text)
+    assert edited != text
+    xml.write_text(edited)
+    capsys.readouterr()
+    assert main(["run", str(out), "--duration", "0.01", "--no-realtime"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert re.match(r"twin run: error: .*built: objects placed inside each other or the scene: 'crate' and the table "
+                    r"by \d+\.\d mm", err[-1]), err[-1]
