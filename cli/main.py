@@ -327,6 +327,21 @@ def _parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _estimate_progress(points: int):  # type: ignore[no-untyped-def]
+    """What ``twin estimate`` shows while it works: a line per stage on stderr for clouds larger than one pass
+    takes (``tolerances.POINT_BUDGET`` points), which take seconds; nothing for smaller ones."""
+    from estimation.tolerances import POINT_BUDGET
+
+    if points <= POINT_BUDGET:
+        return None
+    start = time.perf_counter()
+
+    def show(line: str) -> None:
+        print(f"twin estimate: {time.perf_counter() - start:5.1f} s  {line}", file=sys.stderr, flush=True)
+
+    return show
+
+
 def _cmd_estimate(args: argparse.Namespace) -> int:
     import numpy as np
 
@@ -347,6 +362,7 @@ def _cmd_estimate(args: argparse.Namespace) -> int:
         views = [v for v, _ in loaded]
         read = time.perf_counter() - t0
         single = len(views) == 1 and views[0].origin is None and support is None
+        progress = _estimate_progress(sum(len(v.points) for v in views))
         if args.method != "auto" or single:
             if len(views) > 1 or support is not None:
                 raise TwinError(f"several views and --support-plane need --method auto, not {args.method}")
@@ -355,11 +371,12 @@ def _cmd_estimate(args: argparse.Namespace) -> int:
             origin = views[0].origin
             result = estimate(cloud, density, method=args.method, material=name, read_seconds=read,
                               viewpoint=origin if origin is not None and origin.ndim == 1 else None,
-                              keep_strays=args.keep_strays)
+                              keep_strays=args.keep_strays, progress=progress)
             cov = assess(result, cloud.points, 0.0)[0] if result.method == "auto" else None
             bounds, warnings, plane = result.volume_bounds_m3, result.warnings, None
         else:
-            fused = estimate_views(views, density, support=support, material=name, keep_strays=args.keep_strays)
+            fused = estimate_views(views, density, support=support, material=name, keep_strays=args.keep_strays,
+                                   progress=progress)
             result, cov, bounds, warnings, plane = (fused.estimate, fused.coverage, fused.volume_bounds_m3,
                                                     fused.warnings, fused.plane)
         if args.mesh_out is not None:

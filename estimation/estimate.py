@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import logging
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
@@ -116,6 +117,7 @@ def estimate(
     resolution: int = tol.GRID_RESOLUTION,
     read_seconds: float = 0.0,
     keep_strays: bool = False,
+    progress: Callable[[str], None] | None = None,
 ) -> PhysicalEstimate:
     """Estimate one object's geometry and mass properties from its surface cloud.
 
@@ -132,6 +134,8 @@ def estimate(
         read_seconds: time spent reading the file, carried into ``timings``.
         keep_strays: keep the points ``estimation.strays`` finds apart from the object (by default they are
             dropped, with a warning saying how many).
+        progress: called with a line saying what 'auto' does next (a pass and its points), for callers that
+            show progress on large clouds.
 
     Raises:
         CloudError: too few points, a flat or line-like cloud, a viewpoint beyond
@@ -178,7 +182,8 @@ def estimate(
                        warnings, stages, time.perf_counter())
 
     if method == "auto":
-        return _estimate_auto(cloud, box, local, spacing, density, material, viewpoint, warnings, stages)
+        return _estimate_auto(cloud, box, local, spacing, density, material, viewpoint, warnings, stages,
+                              progress or _quiet)
     return _estimate_from_surface(cloud, box, density, method, material, viewpoint, resolution, warnings, stages)
 
 
@@ -192,6 +197,7 @@ def _estimate_auto(
     viewpoint: np.ndarray | None,
     warnings: list[str],
     stages: dict[str, float],
+    progress: Callable[[str], None],
 ) -> PhysicalEstimate:
     """'auto': narrow band at the point spacing, flood-filled sign, dual contouring on the points' planes.
 
@@ -210,8 +216,10 @@ def _estimate_auto(
 
     # The principal frame: the grid, and so the result, does not depend on the cloud's rotation.
     t0 = time.perf_counter()
+    progress(f"measuring the noise of {len(local):,} points")
     noise = surface_noise(local)  # before thinning: see ``spacing.NOISE_SUBSET``
     stages["downsample"] = time.perf_counter() - t0
+    progress(f"reconstructing from up to {min(len(local), tol.POINT_BUDGET):,} points")
     run = _auto_pass(cloud, box, local, spacing, noise, tol.POINT_BUDGET, density, viewpoint, stages)
     doubt = (run.hole + run.thin) / run.props.volume
     if run.points_used < len(local) and doubt > tol.REFINE_DOUBT:
@@ -220,6 +228,8 @@ def _estimate_auto(
         if budget > run.points_used:
             log.info("refining: volume doubt %.2f %% at %d points, again with about %d", 100 * doubt,
                      run.points_used, budget)
+            progress(f"refining with up to {min(len(local), budget):,} points (the first pass left "
+                     f"{100 * doubt:.2g} % of the volume in doubt)")
             run = _auto_pass(cloud, box, local, spacing, noise, budget, density, viewpoint, stages)
 
     t0 = time.perf_counter()
@@ -409,6 +419,10 @@ def _auto_pass(cloud: PointCloud, box: OrientedBox, local: np.ndarray, spacing: 
     lap("mass_properties", t0)
     return _AutoPass(points=points, normals=normals, h=h, surface=surface, props=props, closing=occ.closing,
                      hole=hole, thin=thin, encloses=occ.encloses, sealed=sealed, note=note)
+
+
+def _quiet(_: str) -> None:
+    """No progress shown."""
 
 
 def _spread_neighbours(points: np.ndarray, k: int, wanted: float) -> np.ndarray:

@@ -16,6 +16,7 @@ points" is horizontal), as in MuJoCo's world.
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -271,7 +272,8 @@ def _within_extent(points: np.ndarray, plane: Plane, inliers: np.ndarray, margin
 
 
 def estimate_views(views: list[View], density: float, *, support: Plane | str | None = None,
-                   material: str | None = None, seed: int = 0, keep_strays: bool = False) -> ViewsEstimate:
+                   material: str | None = None, seed: int = 0, keep_strays: bool = False,
+                   progress: Callable[[str], None] | None = None) -> ViewsEstimate:
     """Fuse ``views`` of one object, close its base on the support plane, estimate, and say how sure.
 
     Args:
@@ -281,7 +283,7 @@ def estimate_views(views: list[View], density: float, *, support: Plane | str | 
             the horizontal plane through the lowest point) or None (no plane: nothing is cut or closed).
         material: recorded with the estimate.
         seed: RANSAC's randomness (``"auto"``).
-        keep_strays: see :func:`estimation.estimate.estimate`.
+        keep_strays, progress: see :func:`estimation.estimate.estimate`.
 
     Raises:
         CloudError: a view without origin or with one beyond ``tolerances.MAX_COORDINATE_M``, a view with no
@@ -366,7 +368,7 @@ def estimate_views(views: list[View], density: float, *, support: Plane | str | 
     # Observed normals are refitted (NaN here): with the base and skirt as neighbours, those near the base turn.
     alln = np.where(closed.completed[:, None], closed.normals, np.nan)
     cloud = fused_cloud(closed.points, closed.origins, completed=closed.completed, completed_normals=alln)
-    result = estimate(cloud, density, material=material, keep_strays=keep_strays)
+    result = estimate(cloud, density, material=material, keep_strays=keep_strays, progress=progress)
     share, bounds = assess(result, points, noise)
     warnings.extend(result.warnings)
     if len(completion.points):

@@ -279,3 +279,24 @@ def test_unknown_public_name():
 
     with pytest.raises(AttributeError, match="module 'twin' has no attribute 'Twinn'"):
         twin.Twinn  # noqa: B018
+
+
+def test_a_large_cloud_shows_its_stages_on_stderr_and_a_small_one_nothing(tmp_path, capsys):
+    from estimation.tolerances import POINT_BUDGET
+
+    box = trimesh.creation.box(extents=[0.1, 0.06, 0.04])
+    rng = np.random.default_rng(2)
+    for name, n in (("small", POINT_BUDGET // 3), ("large", 2 * POINT_BUDGET)):
+        np.save(tmp_path / f"{name}.npy", trimesh.sample.sample_surface(box, n, seed=rng)[0])
+    assert main(["estimate", str(tmp_path / "small.npy"), "--json"]) == 0
+    assert capsys.readouterr().err == ""
+    assert main(["estimate", str(tmp_path / "large.npy"), "--json"]) == 0
+    out, err = capsys.readouterr()
+    assert json.loads(out)["volume_m3"] > 0  # stdout stays one JSON object
+    lines = err.splitlines()
+    assert lines[0].endswith(f"measuring the noise of {2 * POINT_BUDGET:,} points"), lines
+    assert any(f"reconstructing from up to {POINT_BUDGET:,} points" in line for line in lines), lines
+    # The same lines from the API, for any caller that shows progress.
+    seen: list[str] = []
+    estimate(make_cloud(np.load(tmp_path / "large.npy")), 1000.0, progress=seen.append)
+    assert [line.split(" ")[0] for line in seen[:2]] == ["measuring", "reconstructing"]
