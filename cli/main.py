@@ -779,6 +779,45 @@ def _record_option(p: argparse.ArgumentParser) -> None:
                         "where this process has it) to an MCAP file; replay it with 'twin replay'")
 
 
+class _ReplayProgress:
+    """``twin replay``'s progress on stderr, from its first report on (a recording refused before that leaves its
+    one error line alone): a bar on a terminal, removed when done; elsewhere a line at the build and at each
+    tenth of the simulated time."""
+
+    def __init__(self) -> None:
+        self._bar = None
+        self._task = None
+        self._next = 0.0
+        self._live = sys.stderr.isatty()
+
+    def __enter__(self) -> _ReplayProgress:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        if self._bar is not None:
+            self._bar.stop()
+
+    def __call__(self, stage: str, done: float, total: float) -> None:
+        if not self._live:
+            if stage == "building":
+                print("twin replay: building the scene", file=sys.stderr, flush=True)
+            elif done >= self._next or done >= total:
+                print(f"twin replay: {done:.0f} / {total:.0f} s simulated", file=sys.stderr, flush=True)
+                self._next = done + total / 10
+            return
+        if self._bar is None:
+            from rich.console import Console
+            from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+
+            self._bar = Progress(TextColumn("{task.description}"), BarColumn(), TextColumn("{task.fields[done]}"),
+                                 TimeElapsedColumn(), console=Console(stderr=True), transient=True)
+            self._bar.start()
+            self._task = self._bar.add_task("building the scene", total=None, done="")
+        if stage != "building":
+            self._bar.update(self._task, description="replaying", completed=done, total=total,
+                             done=f"{done:.0f} / {total:.0f} s simulated")
+
+
 def _cmd_replay(args: argparse.Namespace) -> int:
     from cli.record import check_replay_inputs, check_replay_out, network_from_options, print_summary, replay
 
@@ -789,8 +828,9 @@ def _cmd_replay(args: argparse.Namespace) -> int:
         raise TwinError(f"--seed must be >= 0, got {args.seed}")
     network = network_from_options(delay_ms=args.delay_ms, jitter_ms=args.jitter_ms, loss_pct=args.loss_pct,
                                    seed=args.seed or 0)
-    result = replay(args.recording, script=args.script, scene=args.scene, network=network, seed=args.seed,
-                    duration=args.replay_duration, out=args.out, cache_dir=args.cache_dir)
+    with _ReplayProgress() as progress:
+        result = replay(args.recording, script=args.script, scene=args.scene, network=network, seed=args.seed,
+                        duration=args.replay_duration, out=args.out, cache_dir=args.cache_dir, progress=progress)
     if result.summary["damage"]:
         print(f"twin replay: warning: {result.summary['damage']}", file=sys.stderr)
     if args.json:

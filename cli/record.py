@@ -13,6 +13,7 @@ from __future__ import annotations
 import json
 import logging
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -141,7 +142,8 @@ class ReplayResult:
 
 def replay(path: str | Path, *, script: Path | None = None, scene: Path | None = None,
            network: Network | None = None, seed: int | None = None, duration: float | None = None,
-           out: Path | None = None, cache_dir: Path | None = None) -> ReplayResult:
+           out: Path | None = None, cache_dir: Path | None = None,
+           progress: Callable[[str, float, float], None] | None = None) -> ReplayResult:
     """Re-run a recorded session headless on the simulated clock.
 
     Args:
@@ -153,6 +155,8 @@ def replay(path: str | Path, *, script: Path | None = None, scene: Path | None =
         duration: twin seconds to run (default: as long as the recorded session).
         out: a folder for ``summary.json`` and ``replay.mcap`` (the replay recorded).
         cache_dir: the CoACD cache.
+        progress: called as ``progress(stage, done, total)``: ``("building", 0, 0)`` before the scene is built,
+            then ``("replaying", simulated seconds done, seconds to run)`` every simulated second and at the end.
 
     Returns:
         The summary and the final poses.
@@ -188,6 +192,8 @@ def replay(path: str | Path, *, script: Path | None = None, scene: Path | None =
         claim_output_folder(out, marker=REPLAY_MARKER, command="twin replay")
         record = out / "replay.mcap"
     wall0 = time.perf_counter()
+    if progress is not None:
+        progress("building", 0.0, 0.0)
     with Headless(spec, network=network, cache_dir=cache_dir, record=record,
                   record_metadata={"command": "replay", "replayed": str(recording.path)}) as session:
         built = time.perf_counter() - wall0
@@ -196,8 +202,12 @@ def replay(path: str | Path, *, script: Path | None = None, scene: Path | None =
         checks = np.unique(np.concatenate([t for t, _, _ in truth.values()] or [np.zeros(0)]))
         k = 0
         run0 = time.perf_counter()
-        for _ in range(round(duration / session.dt)):
+        ticks = round(duration / session.dt)
+        report_every = max(1, round(1.0 / session.dt))
+        for tick in range(ticks):
             session.tick(trajectory)
+            if progress is not None and ((tick + 1) % report_every == 0 or tick + 1 == ticks):
+                progress("replaying", (tick + 1) * session.dt, ticks * session.dt)
             t = session.remote.twin.time
             while k < len(checks) and checks[k] < t - _SAME_TIME:
                 k += 1  # a sample time this replay stepped past (another scene, another step)
