@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from scenes.placement import check_placement
+from scenes.placement import check_placement, describe, overlaps
 from scenes.scenefile import ObjectSpec, SceneError, SceneSpec
 from scenes.sensing import Sensor, SurfaceSensor, Track
 from scenes.sources import prepare_objects, reference_estimate, source_mesh
@@ -158,7 +158,9 @@ class Remote:
 
         The true mesh's mass properties, CoACD and the compile run in the background while the loop
         steps (a 200k-point object took over a second, long enough for twins to mark the link stale);
-        :meth:`step` swaps the new model in and publishes the cloud.
+        :meth:`step` swaps the new model in and publishes the cloud. An object that would overlap another, the
+        table or the end effector where they are then (:mod:`scenes.placement`) is taken out again unpublished,
+        and the Future raises :class:`SceneError` naming what it overlaps.
         """
         top = self.scene.table.height if self.scene.table else None
         prepared: list[TwinObject] = []
@@ -173,6 +175,13 @@ class Remote:
             prepared.append(obj)
 
         def then() -> None:
+            # Where the scene is now, not where its file put it: another object may have come to rest there.
+            found = [o for o in overlaps(self.twin.model, self.twin.data, set(self._objects) | {spec.id})
+                     if spec.id in (o.first, o.second)]
+            if found:
+                self._refuse(spec.id)
+                done.set_exception(SceneError(f"{self.scene.name}: {spec.id!r} added at run time: {describe(found)}"))
+                return
             self._remember(spec, prepared[0])
             self.publish_cloud(spec.id)
             done.set_result(spec.id)
@@ -290,6 +299,16 @@ class Remote:
                 self._replies.pop(self.keys.object(object_id, kind), None)
         self.link.put(self.keys.object(object_id, "gone"), Gone(v=VERSION, stamp_ns=self.clock.stamp_ns(),
                                                                object_id=object_id, epoch=self.epoch, seq=self._next()))
+
+    def _refuse(self, object_id: str) -> None:
+        """Take an object just swapped in back out: out of every collision at once (it would push its neighbours
+        apart before the edit that removes it compiles), then out of the model. Nothing of it was published."""
+        model = self.twin.model
+        body = model.body(object_id).id
+        geoms = np.flatnonzero(model.geom_bodyid == body)
+        model.geom_contype[geoms] = 0
+        model.geom_conaffinity[geoms] = 0
+        self.twin.edit_async(lambda spec: remove_object(spec, object_id))
 
     def _remember(self, spec: ObjectSpec, obj: TwinObject) -> None:
         mesh = source_mesh(spec)

@@ -147,3 +147,35 @@ def test_a_built_folder_edited_into_an_overlap_is_refused_by_run(tmp_path, capsy
     err = capsys.readouterr().err.strip().splitlines()
     assert re.match(r"twin run: error: .*built: objects placed inside each other or the scene: 'crate' and the table "
                     r"by \d+\.\d mm", err[-1]), err[-1]
+
+
+def test_an_object_added_at_run_time_inside_another_is_refused_and_nothing_is_pushed(cache):
+    import numpy as np
+
+    from scenes.scenefile import ObjectSpec
+
+    with Headless(_scene([0.2, 0.1]), cache_dir=cache) as session:
+        session.run(0.05)
+        remote = session.remote
+        before = remote.twin.pose("crate")[0].copy()
+        ball = ObjectSpec(id="ball", source="primitive", value={"type": "sphere", "size": [0.03]}, material="rubber",
+                          position=(0.0, 0.0, 0.53), points=3000)  # at the crate's centre
+        added = _ticked(session, remote.add(ball))
+        with pytest.raises(SceneError, match=r"^placed: 'ball' added at run time: objects placed inside each other or "
+                                             r"the scene: 'ball' and 'crate' by "):
+            added.result(timeout=0)
+        session.run(0.5)
+        assert not remote.twin.has("ball") and "ball" not in session.local.objects
+        assert np.linalg.norm(remote.twin.pose("crate")[0] - before) < 1e-3  # the crate was not pushed
+        # Beside the crate it is taken.
+        beside = ObjectSpec(**{**ball.__dict__, "position": (-0.2, -0.15)})
+        assert _ticked(session, remote.add(beside)).result(timeout=0) == "ball"
+
+
+def _ticked(session, future):  # type: ignore[no-untyped-def]
+    """``future`` once the headless session has stepped until it is done (the remote adds objects in its step)."""
+    for _ in range(20_000):
+        if future.done():
+            return future
+        session.tick()
+    raise AssertionError("the remote did not finish adding the object in 20 s of simulated time")
