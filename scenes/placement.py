@@ -3,8 +3,8 @@
 A scene file places objects and does not promise they rest there (a stack may topple, and the remote lets
 it settle), but objects placed inside each other, inside the table or the floor, or round the operator's end
 effector are no scene at all: MuJoCo pushes them apart in the first steps, and the scene silently became
-another one (a can placed in a crate came to rest on top of it; a box placed 3 cm into the table fell
-through it to the floor). :func:`check_placement` reads a model's contacts at the file's poses before
+another one (a can placed in a crate came to rest on top of it; a 5 cm box whose top was placed 2.5 cm
+below the table top, 15 mm into the 4 cm slab, fell through it to the floor). :func:`check_placement` reads a model's contacts at the file's poses before
 anything steps, and refuses the scene; ``twin build``, ``twin run`` (of a scene file, or of a folder ``twin build``
 wrote, which may have been edited since) and the remote all call it.
 """
