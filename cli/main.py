@@ -636,13 +636,8 @@ def _load_twin(args: argparse.Namespace):  # type: ignore[no-untyped-def]
         from scenes.placement import check_placement
 
         twin = Twin(spec)
-        # The folder may have been edited since 'twin build' checked it: the objects are the free bodies
-        # twin.model names '<id>/free'.
-        model = twin.model
-        objects = {model.body(int(model.jnt_bodyid[j])).name for j in range(model.njnt)
-                   if model.joint(j).name.endswith("/free")}
-        try:
-            check_placement(str(path), model, objects, twin.data)
+        try:  # the folder may have been edited since 'twin build' checked it
+            check_placement(str(path), twin.model, set(twin.object_ids()), twin.data)
         except Exception:
             twin.close()
             raise

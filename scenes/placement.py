@@ -93,16 +93,20 @@ def describe(found: list[Overlap]) -> str:
 
 
 def check_placement(scene: str, model: mujoco.MjModel, names: set[str], data: mujoco.MjData | None = None, *,
-                    scanned: frozenset[str] | set[str] = frozenset()) -> None:
+                    scanned: frozenset[str] | set[str] = frozenset(), added: str | None = None) -> None:
     """Raise :class:`SceneError` (one line, naming the scene) if the objects ``names`` overlap at the model's
     initial poses (:func:`overlaps`; ``scanned``: the objects that are clouds placed by their own frame);
-    ``data``: that state already forwarded (else a fresh one is made)."""
+    ``data``: that state already forwarded (else a fresh one is made). ``added``: an object just added to a
+    running scene; only what it overlaps counts."""
     if data is None:
         data = mujoco.MjData(model)
         mujoco.mj_forward(model, data)
     found = overlaps(model, data, names, scanned=scanned)
+    if added is not None:
+        found = [o for o in found if added in (o.first, o.second)]
     if found:
-        raise SceneError(f"{scene}: {describe(found)}")
+        what = "" if added is None else f"{added!r} added at run time: "
+        raise SceneError(f"{scene}: {what}{describe(found)}")
 
 
 def _part(model: mujoco.MjModel, geom: int, ee: int) -> tuple[str, str]:

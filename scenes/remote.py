@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from scenes.placement import check_placement, describe, overlaps
+from scenes.placement import check_placement
 from scenes.scenefile import ObjectSpec, SceneError, SceneSpec
 from scenes.sensing import Sensor, SurfaceSensor, Track
 from scenes.sources import prepare_objects, reference_estimate, source_mesh
@@ -176,11 +176,12 @@ class Remote:
 
         def then() -> None:
             # Where the scene is now, not where its file put it: another object may have come to rest there.
-            found = [o for o in overlaps(self.twin.model, self.twin.data, set(self._objects) | {spec.id})
-                     if spec.id in (o.first, o.second)]
-            if found:
+            try:
+                check_placement(self.scene.name, self.twin.model, set(self._objects) | {spec.id}, self.twin.data,
+                                added=spec.id)
+            except SceneError as exc:
                 self._refuse(spec.id)
-                done.set_exception(SceneError(f"{self.scene.name}: {spec.id!r} added at run time: {describe(found)}"))
+                done.set_exception(exc)
                 return
             self._remember(spec, prepared[0])
             self.publish_cloud(spec.id)
