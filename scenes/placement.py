@@ -6,7 +6,8 @@ effector are no scene at all: MuJoCo pushes them apart in the first steps, and t
 another one (a can placed in a crate came to rest on top of it; a 5 cm box whose top was placed 2.5 cm
 below the table top, 15 mm into the 4 cm slab, fell through it to the floor). :func:`check_placement` reads a model's contacts at the file's poses before
 anything steps, and refuses the scene; ``twin build``, ``twin run`` (of a scene file, or of a folder ``twin build``
-wrote, which may have been edited since) and the remote all call it.
+wrote, which may have been edited since) and the remote (at start, and for each object added or moved at run
+time) all call it.
 """
 
 from __future__ import annotations
@@ -93,11 +94,12 @@ def describe(found: list[Overlap]) -> str:
 
 
 def check_placement(scene: str, model: mujoco.MjModel, names: set[str], data: mujoco.MjData | None = None, *,
-                    scanned: frozenset[str] | set[str] = frozenset(), added: str | None = None) -> None:
+                    scanned: frozenset[str] | set[str] = frozenset(), added: str | None = None,
+                    moved: bool = False) -> None:
     """Raise :class:`SceneError` (one line, naming the scene) if the objects ``names`` overlap at the model's
     initial poses (:func:`overlaps`; ``scanned``: the objects that are clouds placed by their own frame);
     ``data``: that state already forwarded (else a fresh one is made). ``added``: an object just added to a
-    running scene; only what it overlaps counts."""
+    running scene (``moved``: or just moved in it); only what it overlaps counts."""
     if data is None:
         data = mujoco.MjData(model)
         mujoco.mj_forward(model, data)
@@ -105,7 +107,7 @@ def check_placement(scene: str, model: mujoco.MjModel, names: set[str], data: mu
     if added is not None:
         found = [o for o in found if added in (o.first, o.second)]
     if found:
-        what = "" if added is None else f"{added!r} added at run time: "
+        what = "" if added is None else f"{added!r} {'moved' if moved else 'added'} at run time: "
         raise SceneError(f"{scene}: {what}{describe(found)}")
 
 

@@ -194,13 +194,34 @@ class Remote:
         """An object vanishes: twins are told at the next step; the ground truth drops it soon after."""
         self._actions.put(lambda: self._remove(object_id))
 
-    def move(self, object_id: str, position: np.ndarray, quat: np.ndarray) -> None:
-        """Something outside the twin's view moves an object (world frame, quaternion w x y z), at rest."""
+    def move(self, object_id: str, position: np.ndarray, quat: np.ndarray) -> Future:
+        """Something outside the twin's view moves an object (world frame, quaternion w x y z), at rest.
+
+        Returns a Future that resolves to the id once the object is there (at the next step). A pose where it
+        would be inside another object, the table or the end effector (:mod:`scenes.placement`) is no move
+        MuJoCo could follow (it pushes the pair apart at once): the object stays where it was and the Future
+        raises :class:`SceneError` naming what it would overlap.
+        """
+        done: Future = Future()
+
         def teleport() -> None:
+            if not self.twin.has(object_id):
+                done.set_exception(SceneError(f"{self.scene.name}: cannot move {object_id!r}: no such object"))
+                return
+            before = self.twin.pose(object_id)
             self.twin.set_pose(object_id, np.asarray(position, float), np.asarray(quat, float))
+            try:
+                check_placement(self.scene.name, self.twin.model, set(self._objects), self.twin.data,
+                                added=object_id, moved=True)
+            except SceneError as exc:
+                self.twin.set_pose(object_id, *before)
+                done.set_exception(exc)
+                return
             self.twin.set_velocity(object_id, np.zeros(3), np.zeros(3))
+            done.set_result(object_id)
 
         self._actions.put(teleport)
+        return done
 
     def cloud_points(self) -> dict[str, int]:
         """Points per object cloud this remote sends."""

@@ -179,3 +179,30 @@ def _ticked(session, future):  # type: ignore[no-untyped-def]
             return future
         session.tick()
     raise AssertionError("the remote did not finish adding the object in 20 s of simulated time")
+
+
+def test_a_move_into_another_object_is_refused_and_leaves_both_where_they_were(cache):
+    import numpy as np
+
+    with Headless(_scene([0.2, 0.1]), cache_dir=cache) as session:
+        session.run(0.2)
+        remote = session.remote
+        crate, can = remote.twin.pose("crate"), remote.twin.pose("can")
+        into = _ticked(session, remote.move("crate", can[0], crate[1]))  # the crate's centre at the can's
+        with pytest.raises(SceneError, match=r"^placed: 'crate' moved at run time: objects placed inside each other "
+                                             r"or the scene: 'can' and 'crate' by "):
+            into.result(timeout=0)
+        session.run(0.3)
+        assert np.linalg.norm(remote.twin.pose("crate")[0] - crate[0]) < 1e-3
+        assert np.linalg.norm(remote.twin.pose("can")[0] - can[0]) < 1e-3  # nothing was pushed apart
+        assert np.linalg.norm(session.local.twin.pose("crate")[0] - crate[0]) < 5e-3
+        # Nor into the table; beside it, 10 cm along x, the move is made.
+        down = crate[0] - np.array([0.0, 0.0, 0.03])
+        with pytest.raises(SceneError, match=r"'crate' and the table by "):
+            _ticked(session, remote.move("crate", down, crate[1])).result(timeout=0)
+        aside = crate[0] + np.array([-0.1, 0.0, 0.0])
+        assert _ticked(session, remote.move("crate", aside, crate[1])).result(timeout=0) == "crate"
+        with pytest.raises(SceneError, match=r"cannot move 'mug': no such object"):
+            _ticked(session, remote.move("mug", aside, crate[1])).result(timeout=0)
+        session.run(0.3)
+        assert np.linalg.norm(remote.twin.pose("crate")[0][:2] - aside[:2]) < 2e-3
