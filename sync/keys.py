@@ -146,13 +146,23 @@ _MATCH_MEMO = 65_536
 
 @lru_cache(maxsize=_MATCH_MEMO)
 def _intersects(a: tuple[str, ...], b: tuple[str, ...]) -> bool:
-    if not a or not b:
-        rest = a or b
-        return all(c == "**" for c in rest)
-    if a[0] == "**":
-        return _intersects(a[1:], b) or _intersects(a, b[1:])
-    if b[0] == "**":
-        return _intersects(a, b[1:]) or _intersects(a[1:], b)
-    if a[0] == b[0] or a[0] == "*" or b[0] == "*":
-        return _intersects(a[1:], b[1:])
-    return False
+    # Bottom-up over suffixes, not recursion: a forged key of a few thousand chunks would pass Python's
+    # recursion limit. ``rest[j]``: whether a[i:] and b[j:] intersect, for the current i.
+    la, lb = len(a), len(b)
+    rest = [False] * (lb + 1)
+    rest[lb] = True
+    for j in range(lb - 1, -1, -1):
+        rest[j] = rest[j + 1] and b[j] == "**"
+    for i in range(la - 1, -1, -1):
+        below = rest  # a[i + 1:] against every b[j:]
+        rest = [False] * (lb + 1)
+        rest[lb] = a[i] == "**" and below[lb]
+        for j in range(lb - 1, -1, -1):
+            x, y = a[i], b[j]
+            if x == "**":
+                rest[j] = below[j] or rest[j + 1]
+            elif y == "**":
+                rest[j] = rest[j + 1] or below[j]
+            else:
+                rest[j] = (x == y or x == "*" or y == "*") and below[j + 1]
+    return rest[0]

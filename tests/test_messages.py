@@ -352,3 +352,11 @@ def test_the_link_takes_each_message_only_on_its_own_key_and_counts_the_rest_as_
 ])
 def test_key_expressions_intersect_as_zenoh_matches_them(a, b, expected):
     assert intersects(a, b) is expected and intersects(b, a) is expected
+
+
+def test_a_key_of_thousands_of_chunks_is_matched_without_recursion():
+    # Matched as one chunk list against another, recursively, a 5,000-chunk key passed Python's recursion limit.
+    deep = "twin/s/" + "/".join(["x"] * 5000)
+    assert intersects("twin/s/**", deep + "/pose") is True
+    assert intersects("twin/**/pose", deep + "/cloud") is False
+    assert intersects(deep + "/**", "twin/*/" + "/".join(["*"] * 4999) + "/x/y") is True
