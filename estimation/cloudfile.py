@@ -726,7 +726,13 @@ def _read_numpy(path: Path, max_points: int) -> _Columns:
         table = np.load(path, mmap_mode="r", allow_pickle=False)
         return _Columns(*_split_columns(np.array(table)))
     with zipfile.ZipFile(path) as archive:
-        members = {Path(name).stem: name for name in archive.namelist() if name.endswith(".npy")}
+        names = [name for name in archive.namelist() if name.endswith(".npy")]
+        if len(set(names)) != len(names):
+            raise CloudFileError(f"{path}: an .npz with two members of one name (which one is read is up to the "
+                                 f"zip reader)")
+        # Keyed as np.load keys them (the name without '.npy', folders kept), so the member checked here is
+        # the one read below: by stem, 'a/points.npy' stood for 'points' and a forged 'points.npy' went unchecked.
+        members = {name.removesuffix(".npy"): name for name in names}
         if "points" not in members:
             raise CloudFileError(f"{path}: an .npz cloud needs a 'points' array (has {sorted(members)})")
         for key in ("points", "normals", "colors", "sensor_origins"):
@@ -741,7 +747,7 @@ def _check_npz_member(path: Path, archive: zipfile.ZipFile, name: str, max_point
     """Refuse a member whose header claims more rows than allowed or more bytes than it unpacks to."""
     with archive.open(name) as fh:
         shape, dtype = _read_npy_header(fh, f"{path}: member {name!r}")
-    key = Path(name).stem
+    key = name.removesuffix(".npy")
     check_real(path, dtype, f"array {key!r}")
     if key == "points" and (len(shape) != 2 or shape[1] != 3):
         raise CloudFileError(f"{path}: array {key!r} must be (n, 3), got shape {shape}")
@@ -749,7 +755,7 @@ def _check_npz_member(path: Path, archive: zipfile.ZipFile, name: str, max_point
         _check_max(path, shape[0], max_points)
     nbytes = int(np.prod(shape, dtype=object)) * dtype.itemsize
     if nbytes > archive.getinfo(name).file_size:
-        raise CloudFileError(f"{path}: truncated: array {Path(name).stem!r} claims shape {shape}, more than its data")
+        raise CloudFileError(f"{path}: truncated: array {key!r} claims shape {shape}, more than its data")
 
 
 def _read_text(path: Path, max_points: int) -> _Columns:
@@ -766,6 +772,8 @@ def _read_text(path: Path, max_points: int) -> _Columns:
     if not text.strip():
         raise CloudFileError(f"{path}: holds no numbers, only whitespace")
     lines = text.decode("latin-1").splitlines()
+    if len(lines) > max_points + 1:  # '\r' (old Mac) ends lines too, which the count of '\n' above missed
+        raise CloudFileError(f"{path}: more than max_points={max_points} lines (pass a larger max_points if real)")
     named = _header_row(path, lines, first_line=1 if claimed is None else 2)
     if named is not None:
         lines = lines[named.line + 1:]

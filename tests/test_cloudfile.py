@@ -619,3 +619,42 @@ def test_a_mesh_file_with_few_vertices_says_it_is_a_mesh(tmp_path):
     dense = trimesh.creation.icosphere(4, 0.05)  # a mesh with enough vertices is read as its vertices
     dense.export(tmp_path / "sphere.ply")
     assert len(load_cloud(tmp_path / "sphere.ply")) == len(dense.vertices)
+
+
+def _npy_bytes(rows: int, claimed: int | None = None) -> bytes:
+    import io
+
+    buffer = io.BytesIO()
+    np.save(buffer, np.zeros((rows, 3)))
+    data = buffer.getvalue()
+    if claimed is None:
+        return data
+    end = data.index(b"\n") + 1
+    return data[:end].replace(f"({rows}, 3)".encode(), f"({claimed}, 3)".encode()) + data[end:]
+
+
+def test_npz_members_are_checked_under_the_names_np_load_reads(tmp_path):
+    # By stem, 'a/points.npy' stood for 'points': its honest header was checked, np.load read the forged
+    # 'points.npy' and asked for 894 GiB.
+    forged = tmp_path / "forged.npz"
+    with zipfile.ZipFile(forged, "w") as archive:
+        archive.writestr("points.npy", _npy_bytes(500, claimed=40_000_000_000))
+        archive.writestr("a/points.npy", _npy_bytes(500))
+    with pytest.raises(CloudFileError, match=r"forged\.npz: the header claims 40000000000 points"):
+        load_cloud(forged)
+    twice = tmp_path / "twice.npz"
+    with zipfile.ZipFile(twice, "w") as archive, pytest.warns(UserWarning, match="Duplicate name"):
+        archive.writestr("points.npy", _npy_bytes(500))
+        archive.writestr("points.npy", _npy_bytes(500, claimed=40_000_000_000))
+    with pytest.raises(CloudFileError, match=r"twice\.npz: an \.npz with two members of one name"):
+        load_cloud(twice)
+
+
+@pytest.mark.parametrize("newline", ["\n", "\r\n", "\r"])
+def test_a_text_cloud_longer_than_max_points_is_refused_whatever_ends_its_lines(tmp_path, newline):
+    # Old Mac line ends: the count of '\n' saw one line, and splitlines() read all 500.
+    path = tmp_path / "c.xyz"
+    path.write_bytes(newline.join(f"{i} 0.5 0.25" for i in range(500)).encode())
+    with pytest.raises(CloudFileError, match=r"c\.xyz: more than max_points=10 lines"):
+        load_cloud(path, max_points=10)
+    assert len(load_cloud(path, max_points=500).points) == 500
