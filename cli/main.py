@@ -18,6 +18,7 @@ from pathlib import Path
 
 from cli.outputs import check_not_input, check_output_file, check_record_file
 from estimation.errors import TwinError
+from estimation.materials import MAX_DENSITY, MIN_DENSITY
 
 log = logging.getLogger("twin")
 
@@ -56,6 +57,11 @@ def main(argv: list[str] | None = None) -> int:
             code = handler(args)
         except TwinError as exc:
             print(f"twin {args.command}: error: {one_line(str(exc))}", file=sys.stderr)
+            return EXIT_BAD_INPUT
+        except MemoryError:
+            # numpy raises it as it allocates: the input is larger than this machine holds; one line, not a trace.
+            print(f"twin {args.command}: error: out of memory: the input is too large for this machine's memory",
+                  file=sys.stderr)
             return EXIT_BAD_INPUT
         except KeyboardInterrupt:
             return 130
@@ -99,7 +105,7 @@ _NUMBERS: dict[str, tuple[str, float, bool, float]] = {
     "deadband_deg": ("--deadband-deg", 0.0, True, math.inf),
     "rerun_rate": ("--rerun-rate", 0.0, False, math.inf),
     "threshold": ("--threshold", 0.0, False, 1.0),  # CoACD's range (it aborts the process past 1)
-    "density": ("--density", 0.0, False, math.inf),
+    "density": ("--density", MIN_DENSITY, True, MAX_DENSITY),  # what scene files and the wire take
     "force_rate": ("--force-rate", 0.0, True, MAX_RATE_HZ),
     "delay_ms": ("--delay", 0.0, True, math.inf),
     "jitter_ms": ("--jitter", 0.0, True, math.inf),

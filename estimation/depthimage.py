@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from estimation import tolerances as tol
-from estimation.cloudfile import MAX_POINTS, REAL_KINDS, check_input_file, npy_header
+from estimation.cloudfile import REAL_KINDS, check_input_file, npy_header
 from estimation.contracts import unit_quaternion
 from estimation.errors import CloudError, CloudFileError
 from estimation.fusion import Intrinsics, depth_to_points
@@ -39,9 +39,10 @@ FLOAT_DEPTH_SCALE = 1.0
 #: metre, 1000 for millimetres): 10 m per unit fits no depth sensor.
 MAX_DEPTH_SCALE = 10.0
 
-#: Most pixels a depth image may have: a 4K depth frame is 8.3 M; as many as ``cloudfile.MAX_POINTS``, since
-#: every pixel may become a point (a 16-bit PNG header claiming 20000x20000 would be 400 M).
-MAX_DEPTH_PIXELS = MAX_POINTS
+#: Most pixels a depth image may have: 4096 x 4096, twice a 4K frame's 8.3 M (no depth camera we know of comes
+#: near it). Every pixel may become a point, and a point costs some 100 bytes on its way to an estimate: at the
+#: 50 M of ``cloudfile.MAX_POINTS`` an 84 kB PNG of one constant depth, 6000 x 6000, took 3.4 GB.
+MAX_DEPTH_PIXELS = 4096 * 4096
 
 #: Smallest depth scale, metres per unit: a micrometre, finer than any sensor stores depth (RealSense's
 #: finest depth unit is 1e-5 m); far below it every depth collapses under ``tolerances.MIN_EXTENT_M``.

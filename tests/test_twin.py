@@ -297,6 +297,8 @@ def test_cli_viewer_without_display(small_scene, monkeypatch, capsys):
         (["local", "--duration", "0"], r"--duration must be > 0, got 0"),
         (["local", "--stale-after", "inf"], r"--stale-after must be a finite number, got inf"),
         (["estimate", str(SMALL), "--density", "nan"], r"--density must be a finite number, got nan"),
+        (["estimate", str(SMALL), "--density", "1e-300"], r"--density must be >= 0.1 and <= 100000, got 1e-300"),
+        (["estimate", str(SMALL), "--density", "1e300"], r"--density must be >= 0.1 and <= 100000, got 1e\+300"),
         (["estimate", str(SMALL), "--viewpoint", "0", "nan", "0"], r"--viewpoint must be three finite numbers"),
         (["run", str(SMALL), "--rerun-rate", "0"], r"--rerun-rate must be > 0, got 0"),
         (["run", str(SMALL), "--rerun", "save", "/proc/twin.rrd"], r"--rerun save: cannot write in /proc"),
@@ -309,6 +311,19 @@ def test_cli_refuses_bad_numbers_and_paths_with_one_line(argv, message, capsys):
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and err.startswith(f"twin {argv[0]}: error: ")
     assert re.search(message, err), err
+
+
+def test_running_out_of_memory_is_one_line_and_exit_2(capsys, monkeypatch):
+    # numpy raises MemoryError as it allocates (an 84 kB PNG once asked for 3.4 GB): a line, not a trace.
+    import estimation
+
+    def too_big(*_args, **_kwargs):  # type: ignore[no-untyped-def]
+        raise MemoryError("Unable to allocate 894. GiB for an array with shape (40000000000, 3)")
+
+    monkeypatch.setattr(estimation, "load_cloud", too_big)
+    assert main(["estimate", str(SMALL)]) == 2
+    err = capsys.readouterr().err
+    assert err == "twin estimate: error: out of memory: the input is too large for this machine's memory\n"
 
 
 def test_cli_errors_and_warnings_of_a_failed_command_are_one_line(tmp_path, capsys):
