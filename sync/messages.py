@@ -312,7 +312,11 @@ def unpack_points(msg: Cloud) -> np.ndarray:
     raw = _inflate(msg, msg.data, 3 * width * msg.count, "points")
     planes = np.frombuffer(raw, np.uint8).reshape(3, width, msg.count).transpose(0, 2, 1)
     q = np.ascontiguousarray(planes).view(np.uint16 if width == 2 else np.uint32).reshape(3, msg.count).T
-    return q.astype(np.float64) * msg.quantum + np.asarray(msg.origin)
+    points = q.astype(np.float64) * msg.quantum + np.asarray(msg.origin)
+    # The header bounds the origin, not what 32-bit offsets reach from it (up to 4e9 m at a quantum near 1).
+    if points.size and float(np.abs(points).max()) > MAX_COORDINATE:
+        raise MessageError("out-of-range", f"cloud {msg.object_id!r}: points beyond {MAX_COORDINATE:g} m of the origin")
+    return points
 
 
 def _inflate(msg: Cloud, payload: bytes, size: int, what: str) -> bytes:

@@ -63,6 +63,19 @@ def test_cloud_codec_round_trip_and_ratio():
     assert len(encode(msg)) < points.size * 4 / 2  # better than half of float32 even for random points
 
 
+def test_a_cloud_whose_offsets_reach_past_the_coordinate_bound_is_refused():
+    # The header's origin is in range; a quantum of 0.9 m stretches 32-bit offsets to 3.9e9 m.
+    points = np.array([[0.0, 0.0, 0.0], [0.2, 0.0, 0.0], [0.0, 0.2, 0.0], [0.0, 0.0, 0.2]])
+    msg = cloud_message("o", points, stamp_ns=0, epoch=0, seq=1, material=None, density=1000.0,
+                        frame_position=np.zeros(3), frame_quat=IDENTITY)
+    stretched = decode(encode(replace(msg, quantum=0.9)))  # the header alone is fine
+    with pytest.raises(MessageError, match=r"cloud 'o': points beyond 1000 m of the origin") as caught:
+        unpack_points(stretched)
+    assert caught.value.reason == "out-of-range"
+    back = unpack_points(decode(encode(msg)))  # reordered on the wire
+    assert np.abs(np.sort(back, axis=0) - np.sort(points, axis=0)).max() <= msg.quantum
+
+
 def test_normals_travel_with_their_points_and_a_cloud_without_has_none():
     rng = np.random.default_rng(3)
     directions = rng.normal(size=(20_000, 3))
