@@ -18,7 +18,7 @@ from estimation import estimate, from_mesh
 from scenes.paper_objects import paper_object
 from scenes.sampling import sample_surface
 from twin.model import EndEffectorSpec, TableSpec, add_object, new_spec
-from twin.objects import PRIMITIVE_MIN_FILL, fit_primitive, object_at_estimate
+from twin.objects import MIN_CAPSULE_RADIUS, PRIMITIVE_MIN_FILL, fit_primitive, object_at_estimate
 
 
 def _mesh(m: trimesh.Trimesh) -> tuple[np.ndarray, np.ndarray]:
@@ -27,7 +27,7 @@ def _mesh(m: trimesh.Trimesh) -> tuple[np.ndarray, np.ndarray]:
 
 @pytest.mark.parametrize(("mesh", "kind", "size"), [
     (trimesh.creation.box(extents=(0.3, 0.1, 0.05)), "box", (0.15, 0.05, 0.025)),
-    (trimesh.creation.capsule(height=0.12, radius=0.01, count=[32, 32]), "capsule", (0.01, 0.06)),
+    (trimesh.creation.capsule(height=0.12, radius=0.025, count=[32, 32]), "capsule", (0.025, 0.06)),
     (trimesh.creation.icosphere(subdivisions=3, radius=0.05), "sphere", (0.05,)),
 ])
 def test_exact_primitive_meshes_are_recognised_with_their_size(mesh, kind, size):
@@ -187,3 +187,29 @@ def test_specks_of_noise_are_left_out_of_the_visual_mesh_and_parts_are_not():
     v1, f1 = np.asarray(body.vertices), np.asarray(body.faces)
     out = without_specks(v1, f1)
     assert out[0] is v1 and out[1] is f1
+
+
+def test_a_thin_rod_keeps_its_hulls_and_does_not_sink_through_the_table(tmp_path):
+    # As a MuJoCo capsule, a 7 mm rod toppling where it was placed went through the 4 cm table top.
+    rod = trimesh.creation.capsule(height=0.146, radius=0.007, count=[32, 32])
+    assert fit_primitive(_mesh(rod)) is None or fit_primitive(_mesh(rod)).kind != "capsule"
+    assert 0.007 < MIN_CAPSULE_RADIUS
+    obj = object_at_estimate("rod", from_mesh(rod.vertices, rod.faces, 700.0), 0.5, cache_dir=tmp_path)
+    model, data = _build(obj)
+    assert "rod/primitive" not in _geoms(model, "rod")
+    table = model.geom("table").id
+    top = float(model.geom_pos[table][2] + model.geom_size[table][2])
+    rng = np.random.default_rng(0)
+    adr = model.jnt_qposadr[model.body_jntadr[model.body("rod").id]]
+    for _ in range(4):  # tilted at random, dropped 10 cm (its lowest point), 1.5 s to land and settle
+        mujoco.mj_resetData(model, data)
+        quat = rng.normal(size=4)
+        data.qpos[adr:adr + 3] = (0.0, 0.0, top + 0.3)
+        data.qpos[adr + 3:adr + 7] = quat / np.linalg.norm(quat)
+        mujoco.mj_forward(model, data)
+        body = model.body("rod").id
+        points = np.concatenate([v for v, _ in obj.hulls]) @ data.xmat[body].reshape(3, 3).T + data.xpos[body]
+        data.qpos[adr + 2] += top + 0.1 - points[:, 2].min()
+        for _ in range(1500):
+            mujoco.mj_step(model, data)
+        assert data.xpos[body][2] > top, "the rod went into the table"
