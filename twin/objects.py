@@ -47,7 +47,7 @@ PRIMITIVE_KINDS = ("box", "capsule", "sphere")
 #: radius: a 7 mm rod (a random tabletop's, toppling where it was placed) went through the 4 cm table top.
 #: Dropped onto that table in 12 orientations from 0, 1, 3, 10 and 30 cm, capsules 8 cm long sank through it
 #: all 12 times at 5 mm radius from any height, at 10 mm in 6 of 12 from 10 cm, at 15 mm in 4 of 12 from
-#: 30 cm, at 20 mm never; convex-mesh capsules of 5-10 mm never did (``tests/test_primitives.py``).
+#: 30 cm, at 20 mm never; convex-mesh capsules of 5-30 mm never did (``bench/capsule_drop.py``).
 MIN_CAPSULE_RADIUS = 0.02
 
 #: Fraction of the surface's vertices a fitted capsule may leave outside on each side. Dual contouring
