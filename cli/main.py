@@ -635,13 +635,21 @@ def _load_twin(args: argparse.Namespace):  # type: ignore[no-untyped-def]
         xml = path / "scene.xml"
         if not xml.is_file():
             raise TwinError(f"{path}: no scene.xml (build it with 'twin build')")
+        from cli.modelsize import check_model_size
+
+        check_model_size(xml)  # MuJoCo expands <replicate> while it parses: a nested pair never came back
         try:
             spec = mujoco.MjSpec.from_file(str(xml))
         except ValueError as exc:
             raise TwinError(f"{xml}: MuJoCo cannot load it ({exc})") from exc
+        try:  # here, not in Twin: a mesh file gone or a negative size since 'twin build' is the folder's fault
+            model = spec.compile()
+        except ValueError as exc:
+            first = str(exc).strip().splitlines()[0].removeprefix("Error: ") if str(exc).strip() else "no reason given"
+            raise TwinError(f"{path}: MuJoCo cannot compile its scene.xml ({first})") from exc
         from scenes.placement import check_placement
 
-        twin = Twin(spec)
+        twin = Twin(spec, model)
         try:  # the folder may have been edited since 'twin build' checked it
             check_placement(str(path), twin.model, set(twin.object_ids()), twin.data)
         except Exception:

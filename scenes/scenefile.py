@@ -73,9 +73,10 @@ MAX_OBJECTS = 1000
 #: (a 0.5 mm box is "inertia must have positive eigenvalues"; a 1e-300 m sphere was a LinAlgError, a
 #: 1e-300 m table a MuJoCo error); 100 m is past any table (a 1e10 m sphere failed writing its STL).
 SIZE_RANGE_M = (1e-3, 100.0)
-#: Mesh formats a ``mesh`` source may have: the ones trimesh reads as a mesh. Anything else (/etc/passwd)
-#: is refused by name here instead of failing inside trimesh.
-MESH_SUFFIXES = (".stl", ".obj", ".ply", ".off", ".glb", ".gltf", ".3mf", ".dae")
+#: Mesh formats a ``mesh`` source may have: the ones trimesh reads as a mesh with this project's dependencies.
+#: Anything else (/etc/passwd) is refused by name here instead of failing inside trimesh. Not .3mf or .dae:
+#: trimesh reads them only with lxml (and pycollada), which the project does not install, so every one failed.
+MESH_SUFFIXES = (".stl", ".obj", ".ply", ".off", ".glb", ".gltf")
 
 # -- the document's shape ----------------------------------------------------------------------------------
 # Struct defaults are the loader's defaults; UNSET marks a key whose absence means something (no table,

@@ -9,7 +9,6 @@ measuring the twin against, never for the twin itself.
 from __future__ import annotations
 
 import logging
-import struct
 import zlib
 from dataclasses import replace
 from pathlib import Path
@@ -45,21 +44,7 @@ def source_mesh(spec: ObjectSpec) -> trimesh.Trimesh | None:
     elif spec.source == "primitive":
         mesh = _primitive(spec.value)  # type: ignore[arg-type]
     else:
-        try:
-            # Unprocessed first: processing drops the faces of NaN vertices without a word (a box built at 45 %).
-            mesh = trimesh.load_mesh(spec.value, force="mesh", process=False)
-        # What trimesh raises on a file that is not what its suffix says: NotImplementedError (a format it
-        # has no loader for), IndexError (an .stl holding text), KeyError and struct errors (damaged
-        # binaries), besides OSError and ValueError.
-        except (OSError, ValueError, NotImplementedError, IndexError, KeyError, struct.error, EOFError) as exc:
-            reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-            raise SceneError(f"object {spec.id!r}: cannot read mesh {spec.value} ({reason})") from exc
-        if len(getattr(mesh, "faces", ())) == 0:
-            raise SceneError(f"object {spec.id!r}: mesh {spec.value} holds no triangles")
-        bad = int((~np.isfinite(mesh.vertices).all(axis=1)).sum())
-        if bad:
-            raise SceneError(f"object {spec.id!r}: mesh {spec.value} has {bad} vertices with NaN or inf coordinates")
-        mesh.process()  # what load_mesh does by default: merge duplicate vertices (an STL's), drop degenerate faces
+        mesh = _load_mesh(spec)
         mesh.apply_scale(unit_scale(spec.units))
         if not mesh.is_watertight:
             log.warning("object %r: mesh %s is not watertight", spec.id, spec.value)
@@ -71,6 +56,59 @@ def source_mesh(spec: ObjectSpec) -> trimesh.Trimesh | None:
         transform[:3, :3] = Rotation.from_euler("ZXY", spec.rotation_deg, degrees=True).as_matrix()
         mesh.apply_transform(transform)
     return mesh
+
+
+def _load_mesh(spec: ObjectSpec) -> trimesh.Trimesh:
+    """A mesh object's file as trimesh processes it by default, in the file's units.
+
+    Raises:
+        SceneError: the file cannot be read, holds no triangles, has non-finite vertices or faces that index
+            past its vertices (with the object's id and the file).
+    """
+    # A third-party loader raises almost anything on a damaged file: IndexError (an .stl holding text),
+    # AssertionError (a glTF byteStride of 0), KeyError, struct.error, EOFError, NotImplementedError (no loader
+    # for the format), besides OSError and ValueError. Any of them means the same: the file cannot be read.
+    try:
+        # Unprocessed first: processing drops the faces of NaN vertices without a word (a box built at 45 %),
+        # and indexes vertices by faces that nothing has checked yet.
+        mesh = trimesh.load_mesh(spec.value, force="mesh", process=False)
+    except Exception as exc:
+        raise _unreadable(spec, exc) from exc
+    _check_mesh(mesh, f"object {spec.id!r}: mesh {spec.value}")
+    try:
+        mesh.process()  # what load_mesh does by default: merge duplicate vertices (an STL's), drop degenerate faces
+    except Exception as exc:
+        raise _unreadable(spec, exc) from exc
+    return mesh
+
+
+def _unreadable(spec: ObjectSpec, exc: Exception) -> SceneError:
+    reason = next((line.strip() for line in str(exc).splitlines() if line.strip()), type(exc).__name__)
+    return SceneError(f"object {spec.id!r}: cannot read mesh {spec.value} ({reason})")
+
+
+def _check_mesh(mesh: object, where: str) -> None:
+    """Refuse what trimesh loads without a word but cannot be processed or measured.
+
+    A face index past the vertices is an IndexError deep in processing; a negative one wraps around in numpy's
+    indexing and builds bogus triangles; a NaN vertex poisons every estimate.
+
+    Raises:
+        SceneError: no triangles, non-integer or out-of-range face indices, or non-finite vertices; the message
+            starts with ``where``.
+    """
+    faces = np.asarray(getattr(mesh, "faces", ()))
+    if len(faces) == 0:
+        raise SceneError(f"{where} holds no triangles")
+    vertices = np.asarray(mesh.vertices)  # type: ignore[attr-defined]
+    if faces.ndim != 2 or faces.shape[1] != 3 or not np.issubdtype(faces.dtype, np.integer):
+        raise SceneError(f"{where} has faces that are not triangles of vertex indices ({faces.dtype}, {faces.shape})")
+    outside = int(((faces < 0) | (faces >= len(vertices))).any(axis=1).sum())
+    if outside:
+        raise SceneError(f"{where} has {outside} face(s) with vertex indices outside 0..{len(vertices) - 1}")
+    bad = int((~np.isfinite(vertices).all(axis=1)).sum())
+    if bad:
+        raise SceneError(f"{where} has {bad} vertices with NaN or inf coordinates")
 
 
 def estimate_object(spec: ObjectSpec) -> tuple[PhysicalEstimate, float]:
