@@ -42,8 +42,9 @@ CONDITIONS = {
 }
 
 
-def run_scene(name: str, cameras: int, noise_name: str = "KINECT_V1", camera: dict | None = None,
+def run_scene(name: str | Path, cameras: int, noise_name: str = "KINECT_V1", camera: dict | None = None,
               normals: bool = True) -> dict:
+    """One scene (a name in scenes/data, or a scene file's path) scanned by ``cameras`` cameras: see the module."""
     from estimation import estimate, make_cloud
     from estimation.errors import TwinError
     from estimation.spacing import surface_noise
@@ -58,7 +59,7 @@ def run_scene(name: str, cameras: int, noise_name: str = "KINECT_V1", camera: di
     from sync.messages import as_received
     from twin.poses import angle_deg
 
-    scene = load_scene(ROOT / "scenes" / "data" / f"{name}.toml")
+    scene = load_scene(name if isinstance(name, Path) else ROOT / "scenes" / "data" / f"{name}.toml")
     clock = SimClock()
     remote = Remote(scene, InProcessBus(clock, {}).transport("remote"), clock=clock, publish=False)
     sensor = CameraSensor.for_scene(scene, cameras=cameras, seed=1, noise=getattr(cams, noise_name), **(camera or {}))
