@@ -402,6 +402,9 @@ def _read_ply_binary(
                 f"{path}: cannot skip PLY element {before.name!r} (list properties) before the vertex element"
             )
         offset += before.count * dtype.itemsize
+        if offset > size:  # checked here: past the file, the offset is no position a read can take
+            raise CloudFileError(f"{path}: truncated: PLY element {before.name!r} ({before.count} rows) before the "
+                                 f"vertices claims more bytes than the file's {size}")
     vertex = elements[index]
     dtype = vertex.dtype(order)
     if dtype is None:

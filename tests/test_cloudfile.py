@@ -658,3 +658,15 @@ def test_a_text_cloud_longer_than_max_points_is_refused_whatever_ends_its_lines(
     with pytest.raises(CloudFileError, match=r"c\.xyz: more than max_points=10 lines"):
         load_cloud(path, max_points=10)
     assert len(load_cloud(path, max_points=500).points) == 500
+
+
+def test_a_binary_ply_element_before_the_vertices_that_claims_more_than_the_file_is_one_error(tmp_path, caplog):
+    # Skipped by its claimed size, it put the vertices past any offset a read can take ("Python int too large
+    # to convert to C long"), after a warning: two lines.
+    path = tmp_path / "c.ply"
+    path.write_bytes(b"ply\nformat binary_little_endian 1.0\nelement foo 99999999999999999999\nproperty double a\n"
+                     b"element vertex 0\nproperty float x\nproperty float y\nproperty float z\nend_header\n")
+    with pytest.raises(CloudFileError, match=r"c\.ply: truncated: PLY element 'foo' \(99999999999999999999 rows\) "
+                                             r"before the vertices claims more bytes than the file's"):
+        load_cloud(path)
+    assert not caplog.records
