@@ -62,6 +62,11 @@ def add_parser(sub) -> None:  # type: ignore[no-untyped-def]
     p.set_defaults(handler=run)
 
 
+#: Worker processes one sweep may start (each a Python with MuJoCo, ~200 MB): 100,000 were accepted. A sweep
+#: larger than a machine goes to a Dask cluster (--dask), whose own workers this does not count.
+MAX_WORKERS = 256
+
+
 def _floats(text: str, flag: str) -> tuple[float, ...]:
     parts = [x.strip() for x in text.split(",")]
     if not any(parts):
@@ -75,6 +80,9 @@ def _floats(text: str, flag: str) -> tuple[float, ...]:
     for v in values:
         if not math.isfinite(v):
             raise TwinError(f"{flag}: {v} is not a finite number")
+    twice = next((v for i, v in enumerate(values) if v in values[:i]), None)
+    if twice is not None:  # '0,10,10': a typo, and each repeat would run every condition again
+        raise TwinError(f"{flag}: {twice:g} is given twice in {text!r}")
     return values
 
 
@@ -105,8 +113,8 @@ def parse(args: argparse.Namespace):  # type: ignore[no-untyped-def]
         raise TwinError(f"--mass-scale: a mass scale must be from {low:g} to {high:g}, got {bad:g}")
     if args.seeds < 1:
         raise TwinError(f"--seeds must be at least 1, got {args.seeds}")
-    if args.workers < 0:
-        raise TwinError(f"--workers must be >= 0, got {args.workers}")
+    if not 0 <= args.workers <= MAX_WORKERS:
+        raise TwinError(f"--workers must be from 0 to {MAX_WORKERS}, got {args.workers}")
     if args.dask is not None and args.dask != "local" and "://" not in args.dask:
         raise TwinError(f"--dask: expected 'local' or a scheduler address like tcp://HOST:8786, got {args.dask!r}")
     if args.tasks is None:
