@@ -39,6 +39,7 @@ def check_model_size(path: Path) -> None:
     limit = MAX_OBJECTS * MODEL_ELEMENTS_PER_OBJECT
     seen: set[Path] = set()
     models: dict[str, int] = {}  # <model> asset name -> its elements
+    folders: dict[str, str] = {}  # <compiler> meshdir, texturedir, assetdir
     left = MAX_MODEL_XML_BYTES
 
     def elements(file: Path) -> int:
@@ -75,6 +76,10 @@ def check_model_size(path: Path) -> None:
                         models[child.get("name", "")] = inner
                 elif child.tag == "attach":
                     inner = min(times * max(models.get(child.get("model", ""), 0), 1), limit + 1)
+                elif child.tag == "compiler":
+                    folders.update({k: child.get(k, "") for k in ("meshdir", "texturedir", "assetdir") if child.get(k)})
+                elif child.get("file"):  # a mesh, texture, height field or skin: MuJoCo reads a FIFO for ever too
+                    _regular(path, child.get("file", ""), folders)
                 total = min(total + inner, limit + 1)
                 stack.append((child, inner if child.tag == "replicate" else times))
         return total
@@ -91,3 +96,15 @@ def _replicate_count(text: str | None) -> int:
         return max(int(text or "1"), 0)
     except ValueError:
         return 1
+
+
+def _regular(model: Path, name: str, folders: dict[str, str]) -> None:
+    """Refuse an asset file that exists but is not a regular file, wherever MuJoCo may look for it (beside the
+    model, or in its compiler's asset folders)."""
+    for folder in ("", *folders.values()):
+        candidate = model.parent / folder / name
+        try:
+            if candidate.exists() and not candidate.is_file():
+                raise TwinError(f"{model}: it reads {candidate}, which is not a regular file")
+        except OSError:
+            continue
