@@ -137,7 +137,12 @@ def make_cloud(
     col = None
     if colors is not None:
         c = np.asarray(colors, dtype=np.float64)
-        if c.shape == (len(good), 3):
+        # Colours only colour the views (rerun): ones that cannot be colours are left out, said, not fatal.
+        if c.shape != (len(good), 3):
+            log.warning("colors: expected one (r, g, b) per point, (%d, 3), got shape %s; left out", len(good), c.shape)
+        elif not (np.isfinite(c).all() and c.min(initial=0.0) >= 0.0 and c.max(initial=0.0) <= 255.0):
+            log.warning("colors: values outside 0..255 (or NaN); left out")
+        else:
             c = c[good] if dropped else c.copy() if copy and np.may_share_memory(c, colors) else c
             col = c / 255.0 if c.max(initial=0.0) > 1.0 else c
     origins = None if sensor_origins is None else _origins(sensor_origins, good, dropped, float(scale))

@@ -255,3 +255,20 @@ def test_text_wrong_columns(tmp_path):
     np.savetxt(tmp_path / "c.txt", np.zeros((10, 4)))
     with pytest.raises(CloudFileError, match="3, 6 or 9 columns"):
         load_cloud(tmp_path / "c.txt")
+
+
+@pytest.mark.parametrize(("colors", "said"), [
+    (np.ones((500, 2)), r"colors: expected one \(r, g, b\) per point, \(500, 3\), got shape \(500, 2\); left out"),
+    (np.full((500, 3), 1e38), r"colors: values outside 0\.\.255 \(or NaN\); left out"),
+    (np.full((500, 3), np.nan), r"colors: values outside 0\.\.255 \(or NaN\); left out"),
+])
+def test_colours_that_cannot_be_colours_are_left_out_and_said(colors, said, caplog):
+    # They passed silently: a wrong shape dropped without a word, 1e38 kept as 3.9e35 "in [0, 1]".
+    import re
+
+    points = np.random.default_rng(0).normal(size=(500, 3)) * 0.05
+    with caplog.at_level(logging.WARNING):
+        cloud = make_cloud(points, colors=colors)
+    assert cloud.colors is None
+    assert any(re.search(said, r.getMessage()) for r in caplog.records), caplog.text
+    assert make_cloud(points, colors=np.full((500, 3), 128)).colors.max() == pytest.approx(128 / 255)
