@@ -5,7 +5,6 @@ from __future__ import annotations
 import base64
 import json
 import os
-import time
 
 import numpy as np
 import pytest
@@ -122,9 +121,8 @@ def _folder(tmp_path, xml: str):
 
 
 def _run_fails(folder, capsys) -> str:
-    start = time.perf_counter()
+    # What was refused here hung or took gigabytes before: a regression hangs the suite, it does not pass.
     assert main(["run", str(folder), "--duration", "0.01", "--no-realtime"]) == 2
-    assert time.perf_counter() - start < 10
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and err.startswith("twin run: error: "), err
     return err
