@@ -181,7 +181,6 @@ def test_a_synchronised_session_logs_both_sides_divergence_and_events(tmp_path):
                 time_in_session = local.twin.time - t0
             finally:
                 close_local(local)
-        time.sleep(0.1)
     twin = Recording(twin_rrd)
     ids = [o["id"] for o in SCENE["objects"]]
     # The full layout (twin local and twin demo): every panel has something in it.
