@@ -72,11 +72,15 @@ def _load_mesh(spec: ObjectSpec) -> trimesh.Trimesh:
         # Unprocessed first: processing drops the faces of NaN vertices without a word (a box built at 45 %),
         # and indexes vertices by faces that nothing has checked yet.
         mesh = trimesh.load_mesh(spec.value, force="mesh", process=False)
+    except MemoryError:
+        raise  # not the file's fault alone: the CLI says the machine ran out of memory
     except Exception as exc:
         raise _unreadable(spec, exc) from exc
     _check_mesh(mesh, f"object {spec.id!r}: mesh {spec.value}")
     try:
         mesh.process()  # what load_mesh does by default: merge duplicate vertices (an STL's), drop degenerate faces
+    except MemoryError:
+        raise
     except Exception as exc:
         raise _unreadable(spec, exc) from exc
     return mesh

@@ -92,6 +92,19 @@ def test_whatever_the_loader_raises_is_one_line_naming_the_file(tmp_path, capsys
     assert "cannot read mesh" in err and "box.gltf" in err, err
 
 
+def test_running_out_of_memory_while_loading_is_said_so_not_blamed_on_the_file(tmp_path, capsys, monkeypatch):
+    # The machine's limit, not the file's damage: the CLI's out-of-memory line, not "cannot read mesh".
+    def exhausted(*args, **kwargs):  # type: ignore[no-untyped-def]
+        raise MemoryError
+
+    monkeypatch.setattr(trimesh, "load_mesh", exhausted)
+    scene = _scene(tmp_path, "ok.ply", _ply(BOX.faces))
+    assert main(["build", str(scene), "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err.splitlines()[-1]
+    assert "out of memory" in err and "cannot read mesh" not in err, err
+    assert not (tmp_path / "out").exists()
+
+
 def test_a_sound_gltf_and_ply_still_read(tmp_path):
     for name, text in (("ok.gltf", _gltf(BOX.faces)), ("ok.ply", _ply(BOX.faces))):
         _scene(tmp_path, name, text)
