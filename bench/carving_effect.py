@@ -1,5 +1,5 @@
 """What carving does to camera-built volumes: the random tabletops of bench/camera_tables.py, each object's
-fused segment closed with and without carving (``estimation.completion.close_on_plane`` with the scan's
+fused segment closed with and without carving (``CameraSensor._fuse``, which closes it with the scan's
 depth views, or with none: mirror image and base only), estimated ('auto') through the wire's codec.
 
     .venv/bin/python bench/carving_effect.py [--scenes 4] [--cameras 1 3] | tee bench/results/carving_effect.txt
@@ -24,10 +24,7 @@ from camera_tables import CAMERA, write_scene  # noqa: E402
 
 def main() -> int:
     from estimation import estimate, make_cloud
-    from estimation.completion import close_on_plane
     from estimation.errors import TwinError
-    from estimation.fusion import oriented_normals
-    from estimation.spacing import surface_noise
     from scenes import cameras as cams
     from scenes.remote import Remote
     from scenes.scenefile import load_scene
@@ -57,15 +54,10 @@ def main() -> int:
                     at = sensor._associate(remote, scan, spec.id)
                     if at is None:
                         continue
-                    seg = scan.segments[at]
-                    others = [s.points for s in scan.segments if s is not seg]
                     truth = reference_estimate(spec)[0].volume
                     out = []
-                    for views in (None, scan.views or None):
-                        closed = close_on_plane(seg.points, seg.origins, oriented_normals(seg.points, seg.origins),
-                                                scan.plane, cell=scan.cell / 3, cut=scan.cut,
-                                                noise=surface_noise(seg.points), views=views,
-                                                others=np.concatenate(others) if others else None)
+                    for carve in (False, True):
+                        closed = sensor._fuse(scan, scan.segments[at], carve=carve)
                         try:
                             volume = estimate(make_cloud(*as_received(closed.points, closed.normals)), 1000.0).volume
                             out.append(100 * (volume / truth - 1))

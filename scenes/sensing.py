@@ -597,8 +597,9 @@ class CameraSensor:
         self._seen_at[object_id] = time
         return self._velocity.get(object_id, (np.zeros(3), np.zeros(3)))
 
-    def _fuse(self, scan, seg) -> Observation:  # type: ignore[no-untyped-def]
-        """The segment's views as one cloud: normals towards each point's camera, the base closed."""
+    def _fuse(self, scan, seg, *, carve: bool = True) -> Observation:  # type: ignore[no-untyped-def]
+        """The segment's views as one cloud: normals towards each point's camera, the base closed (without
+        ``carve``, by the mirror image and the base alone: bench/carving_effect.py compares the two)."""
         from estimation.completion import close_on_plane
         from estimation.fusion import oriented_normals
         from estimation.spacing import surface_noise
@@ -608,7 +609,7 @@ class CameraSensor:
         # The segment holds its lowest band too (below the clustering cut, see Scan.cut); completion starts at
         # the cut as before (the skirt, the carving grid's cell), and the mirror test reads the band.
         closed = close_on_plane(pts, origins, oriented_normals(pts, origins), scan.plane, cell=scan.cell / 3,
-                                cut=scan.cut, noise=surface_noise(pts), views=scan.views or None,
+                                cut=scan.cut, noise=surface_noise(pts), views=(scan.views or None) if carve else None,
                                 others=np.concatenate(others) if others else None)
         centre = closed.points.mean(axis=0)
         return Observation(closed.points, closed.origins, centre, np.array([1.0, 0.0, 0.0, 0.0]), closed.normals,
