@@ -132,8 +132,8 @@ class Hold:
         return {i for i, t in zip(a.ids, a.touched, strict=True) if now - t < self.settings.after}
 
     def forget(self, object_id: str) -> None:
-        self._targets.pop(object_id, None)
-        self._rebuild_with(None)
+        if self._targets.pop(object_id, None) is not None:  # a flood of Gones for unknown ids costs nothing here
+            self._rebuild_with(None)
 
     def apply(self, twin) -> list[str]:  # type: ignore[no-untyped-def]
         """Release what the operator disturbs, pin what strays, hold what is pinned. Returns the newly pinned.

@@ -11,8 +11,12 @@ leaves alone is held at the remote's pose (:mod:`twin.hold`).
 
 Ordering: each ordered message carries the remote's ``(epoch, seq)``. Newer beats older per object; a
 restarted remote (larger epoch) is followed at once. A heartbeat states the remote's counter now, so
-a mark past it (a forged or corrupted sequence number) is pulled back to it at the next heartbeat: it
-cannot silence the real remote for longer than a heartbeat period. A device driver's targets have no
+a mark past two heartbeats in a row (a forged or corrupted sequence number) is pulled back to the second:
+it cannot silence the real remote for longer than two heartbeat periods. One past a single heartbeat is
+left alone: an honest message sent after that heartbeat can overtake it on a reordering link. Only a
+heartbeat newer than the last one taken counts (a late or replayed one would reopen the window for older
+messages); that mark expires as a device's does, so a forged heartbeat cannot disable this for longer
+than :data:`sync.ordering.MARK_EXPIRY`. A device driver's targets have no
 heartbeat: each device's mark expires :data:`sync.ordering.MARK_EXPIRY` seconds after the last target taken
 from it, so a forged one cannot freeze the device for longer (:mod:`sync.ordering`).
 
@@ -297,6 +301,9 @@ class Local:
         if info.table_size is not None:
             rlog.table(info.table_size, info.table_height)
         self._dropped_seen = 0
+        self._heartbeats = Marks()  # the remote's newest heartbeat taken ("remote"), expiring (module docstring)
+        # (which marks, object id) -> a mark found past the last heartbeat taken; pulled back if past the next too
+        self._beyond: dict[tuple[int, str], tuple[int, int]] = {}
         self.inbox: queue.SimpleQueue = queue.SimpleQueue()
         self.stale = False
         self._jobs: dict[str, tuple[Future, Cloud, float]] = {}
@@ -435,13 +442,19 @@ class Local:
             except queue.Empty:
                 break
         newest: dict[str, Pose] = {}
+        beat: Heartbeat | None = None  # a heartbeat costs a pass over every mark: only the newest of a batch
         for _, _, msg in batch:
             if isinstance(msg, Pose):
                 known = newest.get(msg.object_id)
                 if known is None or (msg.epoch, msg.seq) > (known.epoch, known.seq):
                     newest[msg.object_id] = msg
+            elif isinstance(msg, Heartbeat) and (beat is None or (msg.epoch, msg.seq) > (beat.epoch, beat.seq)):
+                beat = msg
         for item in batch:
             msg = item[2]
+            if isinstance(msg, Heartbeat) and msg is not beat:
+                self.report.out_of_order += 1
+                continue
             if isinstance(msg, Pose) and newest[msg.object_id] is not msg:
                 mark = self._pose_mark.get(msg.object_id)
                 if mark is not None and (msg.epoch, msg.seq) <= mark:
@@ -501,15 +514,27 @@ class Local:
         marks[msg.object_id] = (msg.epoch, msg.seq)
         return True
 
-    def _on_heartbeat(self, msg: Heartbeat) -> None:
-        """Pull back every mark past the remote's own counter: no honest message is newer than it."""
+    def _on_heartbeat(self, msg: Heartbeat, received: float) -> None:
+        """Pull back every mark past this heartbeat's counter that was past the last one's too (no honest message
+        is: the one past a single heartbeat was sent after it and overtook it). Not newer than the last heartbeat
+        taken (late, replayed): counted out of order, nothing else. ``received``: clock seconds."""
+        if not self._heartbeats.newer("remote", msg.epoch, msg.seq, received):
+            self.report.out_of_order += 1
+            return
+        self._heartbeats.take("remote", msg.epoch, msg.seq, received)
         now = (msg.epoch, msg.seq)
-        for marks in (self._pose_mark, self._clouds, self._gone):
+        beyond: dict[tuple[int, str], tuple[int, int]] = {}
+        for which, marks in enumerate((self._pose_mark, self._clouds, self._gone)):
             for object_id, mark in marks.items():
-                if mark > now:  # one line per forged message at most: rate-limited like every drop
-                    self.dropped_log.warning("forged-seq", "object %r: a message claimed sequence %s beyond the remote's "
-                                             "%s; ignoring the claim", object_id, mark, now)
+                if mark <= now:
+                    continue
+                if self._beyond.get((which, object_id)) == mark:  # rate-limited like every drop
+                    self.dropped_log.warning("forged-seq", "object %r: a message claimed sequence %s beyond the "
+                                             "remote's %s; ignoring the claim", object_id, mark, now)
                     marks[object_id] = now
+                else:
+                    beyond[(which, object_id)] = mark
+        self._beyond = beyond
 
     def _operator_target(self, trajectory) -> np.ndarray | None:  # type: ignore[no-untyped-def]
         if not self.twin.has_end_effector:
@@ -576,6 +601,18 @@ class Local:
                                  msg.object_id, p.tolist())
         return False
 
+    def _fits_scene(self, obj: TwinObject) -> bool:
+        """Whether every vertex of ``obj``'s reconstruction, where it is placed, lies in the scene's box
+        (:func:`_scene_box`); one that does not is counted in ``out_of_scene`` and logged (rate-limited)."""
+        vertices = obj.visual[0] @ rotation(obj.quat).T + obj.position
+        low, high = self.scene_box
+        if len(vertices) and np.all(vertices >= low) and np.all(vertices <= high):
+            return True
+        self.report.out_of_scene += 1
+        self.dropped_log.warning("out-of-scene", "dropped the cloud of %r: its object (%s m across) reaches outside "
+                                 "the scene", obj.id, np.ptp(vertices, axis=0).round(3).tolist() if len(vertices) else [])
+        return False
+
     def _handle_safely(self, received: float, key: str, msg) -> None:  # type: ignore[no-untyped-def]
         """:meth:`_handle`, with an exception dropping the message (counted as ``"handler-error"``, logged with
         its traceback, rate-limited) instead of ending the loop: decoding checks every value it knows of, and
@@ -593,7 +630,7 @@ class Local:
         if isinstance(msg, OperatorTarget):  # the link passes one on its key only (sync.keys.carried_by)
             self._on_device_target(msg, received)
         elif isinstance(msg, Heartbeat):
-            self._on_heartbeat(msg)
+            self._on_heartbeat(msg, received)
         elif isinstance(msg, Pose):
             if not self._in_scene(msg, msg.position) or not self._newer(self._pose_mark, msg):
                 return
@@ -709,8 +746,14 @@ class Local:
                 continue
             except Exception as exc:  # a cloud the estimator rejects: the twin goes on without it
                 self.report.estimation_errors += 1
-                log.warning("object %r: could not estimate its cloud: %s", object_id, exc)
+                self._clouds.pop(object_id, None)  # its slot is free (MAX_OBJECTS), and a later cloud is tried
+                self.dropped_log.warning("estimation-failed", "object %r: could not estimate its cloud: %s", object_id, exc)
                 self.rlog.event(self.twin.time, f"{object_id}: could not estimate its cloud: {exc}", "ERROR")
+                continue
+            if not self._fits_scene(obj):
+                # The message's origin and frame were in the scene; its points need not be (a 400 m cloud
+                # would be a 1e11 kg body). Its slot is free again.
+                self._clouds.pop(object_id, None)
                 continue
 
             def edit(spec, obj=obj) -> None:  # type: ignore[no-untyped-def]
