@@ -117,8 +117,8 @@ def recorded_network(recording: Recording) -> Network | None:
             if c is not None and c.get("burst") is not None:
                 c = {**c, "burst": GilbertElliott(**c["burst"])}
             sides[side] = None if c is None else Conditions(**c)
-        return Network(**sides, seed=int(doc.get("seed", 0)))
-    except (ValueError, TypeError, AttributeError, OverflowError) as exc:
+        return Network(**sides, seed=doc.get("seed", 0))
+    except (ValueError, TypeError, AttributeError, OverflowError, RecursionError) as exc:
         raise RecordingError(f"{recording.path}: unreadable network metadata ({exc})") from None
 
 
@@ -184,7 +184,8 @@ def replay(path: str | Path, *, script: Path | None = None, scene: Path | None =
     if duration > MAX_REPLAY_SECONDS:
         raise RecordingError(f"--duration {duration:g} s is more than a replay runs (at most {MAX_REPLAY_SECONDS:g} s)")
     if not duration > 0:
-        raise RecordingError(f"{recording.path}: nothing to replay (the recorded session lasted {duration:g} s)")
+        damage = f"; {recording.damage.removeprefix(f'{recording.path}: ')}" if recording.damage else ""
+        raise RecordingError(f"{recording.path}: nothing to replay (the recorded session lasted {duration:g} s){damage}")
     truth = recording.truth()
     record = None
     if out is not None:

@@ -68,10 +68,9 @@ class ConditionsError(TwinError, ValueError):
 
 def _number(name: str, value: float, *, low: float = 0.0, high: float = math.inf, open_low: bool = False) -> float:
     """``value`` as a float, checked finite and in [low, high] (or (low, high]); else one line naming it."""
-    try:
-        x = float(value)
-    except (TypeError, ValueError):
-        raise ConditionsError(f"{name} must be a number, got {value!r}") from None
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):  # "0.05" from a file stays text, not 0.05
+        raise ConditionsError(f"{name} must be a number, got {value!r}")
+    x = float(value)
     below = x <= low if open_low else x < low
     if not math.isfinite(x) or below or x > high:
         bounds = f"{'(' if open_low else '['}{low:g}, {high:g}]"
@@ -149,6 +148,10 @@ class Conditions:
             raise ConditionsError(f"jitter {jitter:g} s is more than {self.distribution} jitter allows with a "
                                   f"{delay:g} s delay (at most {limit:g} s)")
         _number("loss", self.loss, high=1.0)
+        if not isinstance(self.reorder, bool):
+            raise ConditionsError(f"reorder must be true or false, got {self.reorder!r}")
+        if self.burst is not None and not isinstance(self.burst, GilbertElliott):
+            raise ConditionsError(f"burst must be a Gilbert-Elliott model, got {self.burst!r}")
         if self.burst is not None and self.loss > 0:
             raise ConditionsError("loss and burst both given: choose independent or bursty loss")
         if self.rate_bps is not None:

@@ -87,6 +87,11 @@ MAX_RECORD_BYTES = 128 * 2**20
 #: The most a recording may hold in all, decompressed, bytes: an hour's live session is a few hundred MB.
 MAX_RECORDING_BYTES = 1 * 2**30
 
+#: The most records a recording may hold: an hour's headless session (a 1 s push recorded 3,807: three a 1 kHz
+#: tick, poses, truth and forces), 13.7 M, with room. Each costs ~280 bytes of Python once read whatever its
+#: size, so the byte limit alone let a 12.5 KB file of empty messages hold 4 M records in 1.1 GB, and ~34 M.
+MAX_RECORDS = 16_000_000
+
 #: The longest replay, twin seconds: the live commands' default session (an hour). A replay also runs no
 #: longer than its recording holds (:meth:`Recording.span_s` plus :data:`RECORDED_TIME_SLACK_S`).
 MAX_REPLAY_SECONDS = 3600.0
@@ -465,7 +470,7 @@ class Recording:
     def _object(self, r: Record) -> dict:
         try:
             doc = json.loads(r.data)
-        except (ValueError, UnicodeDecodeError):
+        except (ValueError, UnicodeDecodeError, RecursionError):  # nested past Python's stack: not a record of ours
             raise RecordingError(f"{self.path}: a {r.topic} record is not JSON") from None
         if not isinstance(doc, dict):
             raise RecordingError(f"{self.path}: a {r.topic} record is not a JSON object")
@@ -552,6 +557,8 @@ def read_recording(path: str | Path) -> Recording:
                     topic = topics.get(rec.channel_id)
                     if topic is None:
                         raise McapError(f"message on unknown channel {rec.channel_id}")
+                    if len(records) >= MAX_RECORDS:
+                        raise RecordingError(f"{path}: holds more than {MAX_RECORDS:,} records, the limit")
                     records.append(Record(topic, rec.log_time, rec.publish_time, rec.data))
         except RecordingError:
             raise

@@ -303,6 +303,13 @@ def _rewrite(src: Path, dst: Path, *, topic: str | None = None, data: bytes = b"
     ({"session": {"scene_toml": 'name="x"\n[[objects]]\nid="a"\nprimitive={type="box",size=[0.05,0.05,0.05]}\n'
                                 'position=[1' + "0" * 400 + ',0]\n'}}, "not a valid scene"),
     ({"session": {"network": json.dumps({"uplink": {"rate_bps": 1e-300}, "downlink": None, "seed": 0})}}, "rate_bps"),
+    ({"topic": TARGET_TOPIC, "data": b"[" * 100_000 + b"]" * 100_000}, "/operator/target record is not JSON"),
+    ({"topic": TRUTH_TOPIC, "data": b"[" * 100_000 + b"]" * 100_000}, "/truth/transforms record is not JSON"),
+    ({"session": {"network": "[" * 100_000 + "]" * 100_000}}, "unreadable network metadata"),
+    # A number written as text would have reached the link model's arithmetic mid-replay.
+    ({"session": {"network": json.dumps({"uplink": None, "downlink": {"delay": "0.05"}, "seed": 0})}}, "delay must be a number"),
+    ({"session": {"network": json.dumps({"uplink": None, "downlink": {"reorder": "yes"}, "seed": 0})}}, "reorder must be"),
+    ({"session": {"network": json.dumps({"uplink": None, "downlink": None, "seed": 1.5})}}, "seed must be an integer"),
 ])
 def test_malformed_records_are_one_line_errors_naming_the_record_and_field(recorded, tmp_path, capsys, change, words):
     path, _, _ = recorded
@@ -358,3 +365,25 @@ def test_a_decompression_bomb_is_refused_naming_the_limit(recorded, tmp_path, ca
     assert main(["replay", str(bomb)]) == 2
     err = capsys.readouterr().err
     assert f"more than the {MAX_RECORD_BYTES >> 20} MiB limit" in err and err.count("\n") == 1, err
+
+
+def test_a_recording_of_more_records_than_the_limit_is_refused(recorded, tmp_path, monkeypatch, capsys):
+    import sync.recording
+
+    path, _, _ = recorded
+    held = len(read_recording(path).records)
+    monkeypatch.setattr(sync.recording, "MAX_RECORDS", held - 1)  # empty records cost memory too
+    assert main(["replay", str(path), "--duration", "0.1"]) == 2
+    err = capsys.readouterr().err
+    assert f"more than {held - 1:,} records, the limit" in err and err.count("\n") == 1
+
+
+def test_a_damaged_recording_with_nothing_left_to_replay_says_it_is_damaged(recorded, tmp_path, capsys):
+    path, _, _ = recorded
+    torn = tmp_path / "torn.mcap"
+    torn.write_bytes(path.read_bytes()[:2000])  # the session metadata and little else
+    rec = read_recording(torn)
+    assert rec.damage is not None
+    assert main(["replay", str(torn)]) == 2
+    err = capsys.readouterr().err
+    assert "nothing to replay" in err and "damaged after" in err and err.count("\n") == 1, err
