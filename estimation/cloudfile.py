@@ -741,9 +741,15 @@ def _read_numpy(path: Path, max_points: int) -> _Columns:
         for key in ("points", "normals", "colors", "sensor_origins"):
             if key in members:
                 _check_npz_member(path, archive, members[key], max_points)
-    with np.load(path, allow_pickle=False) as data:
-        get = lambda k: data[k] if k in data else None  # noqa: E731
-        return _Columns(data["points"], get("normals"), get("colors"), get("sensor_origins"))
+        # Read from the members checked above, not through np.load's keys: a member named plain 'points' is
+        # what np.load returns for 'points' first, and it went unchecked (a 2.4 MB file took 4.8 GB).
+        def get(key: str) -> np.ndarray | None:
+            if key not in members:
+                return None
+            with archive.open(members[key]) as fh:
+                return np.lib.format.read_array(fh, allow_pickle=False)
+
+        return _Columns(get("points"), get("normals"), get("colors"), get("sensor_origins"))  # type: ignore[arg-type]
 
 
 def _check_npz_member(path: Path, archive: zipfile.ZipFile, name: str, max_points: int) -> None:
@@ -761,12 +767,24 @@ def _check_npz_member(path: Path, archive: zipfile.ZipFile, name: str, max_point
         raise CloudFileError(f"{path}: truncated: array {key!r} claims shape {shape}, more than its data")
 
 
+#: Longest line a text cloud may have, bytes: a row of nine numbers written at full precision is under 250.
+MAX_TEXT_LINE = 4096
+
+
 def _read_text(path: Path, max_points: int) -> _Columns:
     suffix = path.suffix.lower()
     # A spreadsheet's CSV starts with a UTF-8 byte-order mark: "could not convert string 'ï»¿0.1'".
     text = path.read_bytes().removeprefix(codecs.BOM_UTF8)
     if text.count(b"\n") > max_points + 1:
         raise CloudFileError(f"{path}: more than max_points={max_points} lines (pass a larger max_points if real)")
+    raw = np.frombuffer(text, np.uint8)
+    ends = np.flatnonzero((raw == 10) | (raw == 13))  # '\n' and '\r' end lines
+    longest = int(np.diff(np.concatenate([[-1], ends, [len(text)]])).max()) - 1
+    if longest > MAX_TEXT_LINE:
+        # The reader keeps every line as a Python string, several times over: one 256 MB line of NUL bytes
+        # took 3 GB before it was found not to be numbers.
+        raise CloudFileError(f"{path}: a line of {longest:,} bytes, more than a row of numbers holds "
+                             f"(at most {MAX_TEXT_LINE:,}): not a text point cloud")
     claimed = None
     if suffix == ".pts":
         first, _, rest = text.partition(b"\n")

@@ -120,12 +120,15 @@ def _read_png(path: Path) -> np.ndarray:
     # to our own cap before PIL opens it: PIL warns past 89 M pixels and raises its own error past 179 M.
     with path.open("rb") as fh:
         head = fh.read(24)
-    if head[:8] == b"\x89PNG\r\n\x1a\n" and head[12:16] == b"IHDR":
-        _check_pixels(path, int.from_bytes(head[16:20], "big"), int.from_bytes(head[20:24], "big"))
+    if head[:8] != b"\x89PNG\r\n\x1a\n" or head[12:16] != b"IHDR":
+        # PIL would open a TIFF or BMP under a .png name too, past the size check (a 192 KB TIFF of 8000 x 8000
+        # pixels took 6.8 GB).
+        raise CloudFileError(f"{path}: not a PNG (no PNG signature and header)")
+    _check_pixels(path, int.from_bytes(head[16:20], "big"), int.from_bytes(head[20:24], "big"))
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", Image.DecompressionBombWarning)  # under our cap: wanted
-            with Image.open(path) as image:
+            with Image.open(path, formats=["PNG"]) as image:
                 mode = image.mode
                 raw = np.asarray(image)
     except (OSError, UnidentifiedImageError, Image.DecompressionBombError) as exc:

@@ -648,6 +648,28 @@ def test_npz_members_are_checked_under_the_names_np_load_reads(tmp_path):
         archive.writestr("points.npy", _npy_bytes(500, claimed=40_000_000_000))
     with pytest.raises(CloudFileError, match=r"twice\.npz: an \.npz with two members of one name"):
         load_cloud(twice)
+    # np.load returns a member named plain 'points' before 'points.npy': the checked member must be the one read
+    # (a 2.4 MB file with (1e8, 3) zeros there took 4.8 GB).
+    plain = tmp_path / "plain.npz"
+    ball = np.random.default_rng(0).normal(size=(500, 3))
+    ball /= np.linalg.norm(ball, axis=1, keepdims=True)
+    with zipfile.ZipFile(plain, "w") as archive:
+        buffer = __import__("io").BytesIO()
+        np.save(buffer, ball)
+        archive.writestr("points.npy", buffer.getvalue())
+        archive.writestr("points", _npy_bytes(500, claimed=40_000_000_000))
+    assert np.array_equal(load_cloud(plain).points, ball)
+
+
+def test_a_text_line_longer_than_any_row_of_numbers_is_refused_before_parsing(tmp_path):
+    one_line = tmp_path / "line.xyz"
+    one_line.write_text("1 " * 300_000 + "\n")  # a 60 MB line like it took 2.6 GB to parse
+    with pytest.raises(CloudFileError, match=r"line\.xyz: a line of 600,000 bytes, more than a row of numbers"):
+        load_cloud(one_line)
+    zeros = tmp_path / "zeros.xyz"
+    zeros.write_bytes(bytes(100_000))
+    with pytest.raises(CloudFileError, match=r"a line of 100,000 bytes"):
+        load_cloud(zeros)
 
 
 @pytest.mark.parametrize("newline", ["\n", "\r\n", "\r"])

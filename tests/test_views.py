@@ -292,6 +292,8 @@ def test_a_view_with_no_points_is_refused(capsys, tmp_path, pcds):
     ("huge.npy", lambda p: _npy_claiming(p, (8000, 8000), sparse=True), r"8000x8000 depth image is more than the 16,777,216"),
     # A 16-bit PNG header claiming 20000 x 20000 was PIL's DecompressionBombError; refused before decoding.
     ("bomb.png", lambda p: _png_header(p, 20000, 20000), r"20000x20000 depth image is more than the 16,777,216"),
+    # A TIFF named .png: PIL opened it past the PNG header's size check (8000 x 8000 in 192 KB took 6.8 GB).
+    ("tiff.png", lambda p: _tiff(p), r"not a PNG \(no PNG signature"),
 ])
 def test_bad_depth_frames_are_one_line_errors(capsys, tmp_path, name, write, message):
     import re
@@ -334,6 +336,12 @@ def _npy_claiming(path, shape, *, sparse=False):  # type: ignore[no-untyped-def]
             fh.truncate(fh.tell() + 8 * int(np.prod(shape)))
         else:
             fh.write(bytes(1024))
+
+
+def _tiff(path):  # type: ignore[no-untyped-def]
+    from PIL import Image
+
+    Image.fromarray(np.full((30, 40), 700, np.uint16)).save(path, format="TIFF")
 
 
 def _png_header(path, width, height):  # type: ignore[no-untyped-def]
