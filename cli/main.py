@@ -34,7 +34,14 @@ def main(argv: list[str] | None = None) -> int:
     stream = logging.StreamHandler(sys.stderr)
     formatter = logging.Formatter if args.verbose else _OneLineFormatter  # -v keeps tracebacks whole
     stream.setFormatter(formatter("%(levelname)s %(name)s: %(message)s"))
-    logging.basicConfig(level=logging.DEBUG if args.verbose else logging.WARNING, handlers=[stream])
+    held_log = None
+    if args.command in HELD_LOG_COMMANDS and not args.verbose:
+        from logging.handlers import MemoryHandler
+
+        # As warnings are below: a failed estimate's stderr is its one error line, not a log warning first.
+        held_log = MemoryHandler(MAX_HELD_WARNINGS, flushLevel=logging.CRITICAL + 1, target=stream, flushOnClose=False)
+    logging.basicConfig(level=logging.DEBUG if args.verbose else logging.WARNING,
+                        handlers=[held_log or stream])
     handler: Callable[[argparse.Namespace], int] = args.handler
     # Warnings (numpy's overflow RuntimeWarnings, say) are held: a failed command's stderr is its one error
     # line; a command that succeeds shows them afterwards, one line each. Only the first few are kept, so a
@@ -56,15 +63,19 @@ def main(argv: list[str] | None = None) -> int:
             check_args(args)  # before any work: a bad number should not cost a build
             code = handler(args)
         except TwinError as exc:
+            _drop_held(held_log)
             print(f"twin {args.command}: error: {one_line(str(exc))}", file=sys.stderr)
             return EXIT_BAD_INPUT
         except MemoryError:
+            _drop_held(held_log)
             # numpy raises it as it allocates: the input is larger than this machine holds; one line, not a trace.
             print(f"twin {args.command}: error: out of memory: the input is too large for this machine's memory",
                   file=sys.stderr)
             return EXIT_BAD_INPUT
         except KeyboardInterrupt:
             return 130
+    if held_log is not None:
+        held_log.flush()
     for category, message in held:
         log.warning("%s: %s", category.__name__, one_line(message))
     if more:
@@ -74,6 +85,17 @@ def main(argv: list[str] | None = None) -> int:
 
 #: Warnings kept and shown after a command that succeeded; the rest are counted.
 MAX_HELD_WARNINGS = 20
+
+#: Commands whose log records are held until they succeed (dropped if they fail, so the error is the one line):
+#: the short ones scripts call. Live commands log as they go (past MAX_HELD_WARNINGS records these do too).
+HELD_LOG_COMMANDS = frozenset({"estimate"})
+
+
+def _drop_held(held_log) -> None:  # type: ignore[no-untyped-def]
+    """Forget the log records ``held_log`` (a MemoryHandler, or None) holds: the command failed."""
+    if held_log is not None:
+        with held_log.lock:
+            held_log.buffer.clear()
 
 
 def one_line(text: str) -> str:
@@ -568,11 +590,13 @@ def _coacd_settings(args: argparse.Namespace):  # type: ignore[no-untyped-def]
 
 
 def _cmd_build(args: argparse.Namespace) -> int:
+    from cli.outputs import check_creatable
     from scenes.build import build_scene, check_output, write_scene
     from scenes.scenefile import load_scene
 
     scene = load_scene(args.scene)
     keep = (args.scene, *(Path(str(o.value)) for o in scene.objects if o.source in ("mesh", "cloud")))
+    check_creatable(args.out)
     check_output(args.out, keep=keep)  # before the work: a refused folder should not cost a build
     from rich.console import Console
 
@@ -638,15 +662,16 @@ def _load_twin(args: argparse.Namespace):  # type: ignore[no-untyped-def]
         from cli.modelsize import check_model_size
 
         check_model_size(xml)  # MuJoCo expands <replicate> while it parses: a nested pair never came back
-        try:
+        try:  # RuntimeError: what MuJoCo's binding raises for a C++ exception (a builtin mesh far too fine)
             spec = mujoco.MjSpec.from_file(str(xml))
-        except ValueError as exc:
+        except (ValueError, RuntimeError) as exc:
             raise TwinError(f"{xml}: MuJoCo cannot load it ({exc})") from exc
         try:  # here, not in Twin: a mesh file gone or a negative size since 'twin build' is the folder's fault
             model = spec.compile()
-        except ValueError as exc:
+        except (ValueError, RuntimeError) as exc:
             first = str(exc).strip().splitlines()[0].removeprefix("Error: ") if str(exc).strip() else "no reason given"
             raise TwinError(f"{path}: MuJoCo cannot compile its scene.xml ({first})") from exc
+        _check_compiled(xml, model)
         from scenes.placement import check_placement
 
         twin = Twin(spec, model)
@@ -661,6 +686,26 @@ def _load_twin(args: argparse.Namespace):  # type: ignore[no-untyped-def]
 
     built = build_scene(load_scene(path), coacd=_coacd_settings(args), cache_dir=args.cache_dir)
     return Twin(built.spec, built.model), built
+
+
+#: Physics timesteps ``twin run`` takes from a built folder, seconds: 'twin build' writes 1 ms; a 1 ns step
+#: asked for a million steps per loop iteration, and 0 or NaN divided by zero.
+TIMESTEP_RANGE_S = (1e-5, 0.1)
+
+
+def _check_compiled(xml: Path, model) -> None:  # type: ignore[no-untyped-def]
+    """Refuse an edited folder's model whose timestep is outside TIMESTEP_RANGE_S or whose bodies start at
+    non-finite places (a NaN position ran, logging a non-finite state every step)."""
+    import numpy as np
+
+    low, high = TIMESTEP_RANGE_S
+    step = float(model.opt.timestep)
+    if not low <= step <= high:  # NaN fails too
+        raise TwinError(f"{xml}: timestep {step:g} s is outside [{low:g}, {high:g}] s")
+    for name, values in (("body position", model.body_pos), ("body orientation", model.body_quat),
+                         ("initial joint position", model.qpos0)):
+        if not np.isfinite(values).all():
+            raise TwinError(f"{xml}: a {name} is not finite")
 
 
 def _trajectory(args: argparse.Namespace, twin):  # type: ignore[no-untyped-def]

@@ -80,6 +80,7 @@ def check_model_size(path: Path) -> None:
                     folders.update({k: child.get(k, "") for k in ("meshdir", "texturedir", "assetdir") if child.get(k)})
                 elif child.get("file"):  # a mesh, texture, height field or skin: MuJoCo reads a FIFO for ever too
                     _regular(path, child.get("file", ""), folders)
+                _check_allocation(file, child)
                 total = min(total + inner, limit + 1)
                 stack.append((child, inner if child.tag == "replicate" else times))
         return total
@@ -88,6 +89,33 @@ def check_model_size(path: Path) -> None:
         raise TwinError(f"{path}: the model expands to more than {limit:,} XML elements (<replicate> counts "
                         f"multiplied out); {MAX_OBJECTS} objects of {(MODEL_ELEMENTS_PER_OBJECT - 6) // 2} hulls "
                         "each are the most 'twin run' takes")
+
+
+#: Largest count an element may ask MuJoCo to allocate for by itself (height field samples, flex vertices,
+#: keyframes or user values times what each holds): a built scene has none of these; 4096 x 4096 samples is
+#: a detailed terrain. An edited folder's <size nkey="100000000"/> compiled for minutes, a 30000 x 30000
+#: height field took 7 GB.
+MAX_ELEMENT_ALLOCATION = 4096 * 4096
+
+#: The attributes counted, per element: their values multiplied.
+_ALLOCATING = {"hfield": (("nrow", "ncol"),), "flexcomp": (("count",),),
+               "size": (("nkey",), ("nuser_body",), ("nuser_jnt",), ("nuser_geom",), ("nuser_site",),
+                        ("nuser_cam",), ("nuser_tendon",), ("nuser_actuator",), ("nuser_sensor",))}
+
+
+def _check_allocation(file: Path, element) -> None:  # type: ignore[no-untyped-def]
+    """Refuse an element whose counts (:data:`_ALLOCATING`) multiply past MAX_ELEMENT_ALLOCATION."""
+    for names in _ALLOCATING.get(element.tag, ()):
+        product = 1
+        for name in names:
+            for word in (element.get(name) or "").split():
+                try:
+                    product *= max(int(float(word)), 1)
+                except (ValueError, OverflowError):
+                    continue  # MuJoCo names what it cannot read
+        if product > MAX_ELEMENT_ALLOCATION:
+            raise TwinError(f"{file}: <{element.tag} {' '.join(names)}> asks for {product:,} entries, more than "
+                            f"the {MAX_ELEMENT_ALLOCATION:,} 'twin run' takes")
 
 
 def _replicate_count(text: str | None) -> int:

@@ -59,6 +59,30 @@ def check_output_file(path: Path, inputs: Iterable[Path | None], flag: str, *, s
         raise TwinError(f"{flag} {path}: exists and is not a regular file; refusing to replace it")
 
 
+def check_creatable(out: Path, flag: str = "--out") -> None:
+    """Refuse a folder that cannot be made: its nearest existing ancestor is not a folder this user may write
+    into (a file on the way, /proc), so that the command fails before its work, in one line.
+
+    Raises:
+        TwinError: naming the flag, the folder and the ancestor in the way.
+    """
+    import os
+
+    out = Path(out)
+    try:
+        if out.is_dir():
+            return
+        ancestor = out.parent
+        while not ancestor.exists() and ancestor != ancestor.parent:
+            ancestor = ancestor.parent
+        if not ancestor.is_dir():
+            raise TwinError(f"{flag} {out}: cannot be made: {ancestor} is not a folder")
+        if not os.access(ancestor, os.W_OK | os.X_OK):
+            raise TwinError(f"{flag} {out}: cannot be made: {ancestor} is not writable")
+    except OSError as exc:  # a name too long, a permission denied on the way
+        raise TwinError(f"{flag} {out}: cannot be made ({exc.strerror or exc})") from None
+
+
 def check_output_folder(out: Path, *, marker: str, flag: str = "--out", writes: Iterable[str] = (),
                         inputs: Iterable[Path | None] = ()) -> None:
     """Refuse an output folder this command must not write into: it exists and is not a folder, or holds
@@ -69,6 +93,7 @@ def check_output_folder(out: Path, *, marker: str, flag: str = "--out", writes: 
         TwinError: naming the folder and why.
     """
     out = Path(out)
+    check_creatable(out, flag)
     if out.exists() and (not out.is_dir() or (any(out.iterdir()) and not (out / marker).is_file())):
         raise TwinError(f"{flag} {out}: exists and is not empty (and not a folder this command wrote); "
                         "choose a new folder")
@@ -79,8 +104,11 @@ def check_output_folder(out: Path, *, marker: str, flag: str = "--out", writes: 
 
 def claim_output_folder(out: Path, *, marker: str, command: str) -> None:
     """Create ``out`` (checked by :func:`check_output_folder`) and mark it as ``command``'s."""
-    out.mkdir(parents=True, exist_ok=True)
-    (out / marker).write_text(f"written by {command}\n")
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        (out / marker).write_text(f"written by {command}\n")
+    except OSError as exc:  # the file system changed since check_output_folder, or refuses anyway
+        raise TwinError(f"{out}: cannot write the output folder ({exc.strerror or exc})") from None
 
 
 def check_record_file(path: Path, inputs: Iterable[Path | None], flag: str = "--record") -> None:

@@ -285,8 +285,11 @@ def write_scene(spec, out: Path, *, keep: tuple[Path, ...] = (), built: BuiltSce
 
     out = Path(out)
     check_output(out, keep=keep)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    staging = Path(tempfile.mkdtemp(prefix=".twin-build-", dir=out.parent))
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        staging = Path(tempfile.mkdtemp(prefix=".twin-build-", dir=out.parent))
+    except OSError as exc:  # a file where a folder should be, a read-only place
+        raise BuildError(f"cannot write --out {out}: {exc.strerror or exc}") from None
     try:
         (staging / "assets").mkdir()
         copy = spec.copy()

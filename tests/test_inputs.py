@@ -272,3 +272,27 @@ def test_colours_that_cannot_be_colours_are_left_out_and_said(colors, said, capl
     assert cloud.colors is None
     assert any(re.search(said, r.getMessage()) for r in caplog.records), caplog.text
     assert make_cloud(points, colors=np.full((500, 3), 128)).colors.max() == pytest.approx(128 / 255)
+
+
+def test_a_failed_estimate_prints_only_its_error_line_though_it_logged_warnings_first(tmp_path):
+    import subprocess
+    import sys
+
+    # Little-endian floats under a big-endian header: some decode as NaN (dropped: a log warning), the rest as
+    # ~1e38 m (the error). The warning went to stderr before the error line.
+    points = np.random.default_rng(0).normal(size=(2000, 3)).astype("<f4")
+    header = (b"ply\nformat binary_big_endian 1.0\nelement vertex 2000\nproperty float x\nproperty float y\n"
+              b"property float z\nend_header\n")
+    bad = tmp_path / "endian.ply"
+    bad.write_bytes(header + points.tobytes())
+    run = subprocess.run([sys.executable, "-m", "cli.main", "estimate", str(bad)], capture_output=True, text=True)
+    assert run.returncode == 2 and run.stderr.count("\n") == 1, run.stderr
+    assert run.stderr.startswith("twin estimate: error: coordinates reach"), run.stderr
+    # A cloud that succeeds with a log warning still shows it.
+    good = tmp_path / "ball.xyz"
+    ball = np.random.default_rng(1).normal(size=(3000, 3))
+    ball /= np.linalg.norm(ball, axis=1, keepdims=True) * 10
+    rows = [" ".join(f"{v:.6f}" for v in p) for p in ball] + ["nan 0 0"]
+    good.write_text("\n".join(rows) + "\n")
+    run = subprocess.run([sys.executable, "-m", "cli.main", "estimate", str(good)], capture_output=True, text=True)
+    assert run.returncode == 0 and "dropped 1 of 3001 points" in run.stderr, run.stderr

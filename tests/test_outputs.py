@@ -300,3 +300,13 @@ def test_a_large_cloud_shows_its_stages_on_stderr_and_a_small_one_nothing(tmp_pa
     seen: list[str] = []
     estimate(make_cloud(np.load(tmp_path / "large.npy")), 1000.0, progress=seen.append)
     assert [line.split(" ")[0] for line in seen[:2]] == ["measuring", "reconstructing"]
+
+
+@pytest.mark.parametrize("command", [["build", str(SMALL)], ["experiment", str(SMALL), "--delays", "0"]])
+def test_an_out_folder_that_cannot_be_made_is_one_line_before_the_work(tmp_path, capsys, command):
+    blocker = tmp_path / "a_file"
+    blocker.write_text("mine\n")
+    assert main([*command, "--out", str(blocker / "sub")]) == 2
+    err = capsys.readouterr().err
+    assert f"{blocker} is not a folder" in err and err.count("\n") == 1 and "Traceback" not in err, err
+    assert blocker.read_text() == "mine\n"

@@ -155,6 +155,31 @@ def test_a_folder_that_does_not_compile_is_one_line(tmp_path, capsys, body, mess
     assert f"{folder}: MuJoCo cannot compile its scene.xml (" in err and message in err, err
 
 
+@pytest.mark.parametrize(
+    ("body", "message"),
+    [
+        # 0 and NaN divided by zero in the paced loop; 1 ns asked for a million steps per iteration (a hang).
+        ('<option timestep="0"/>', "timestep 0 s is outside"),
+        ('<option timestep="nan"/>', "timestep nan s is outside"),
+        ('<option timestep="1e-9"/>', "timestep 1e-09 s is outside"),
+        ('<option timestep="-0.001"/>', "timestep -0.001 s is outside"),
+        ('<worldbody><body pos="nan 0 0.5"><freejoint/><geom type="sphere" size="0.1"/></body></worldbody>',
+         "a body position is not finite"),
+        # MuJoCo's C++ exception reached the user as a traceback.
+        ('<asset><mesh name="s" builtin="supersphere" params="100000 1 1"/></asset>', "MuJoCo cannot"),
+        # Minutes in compile, or gigabytes, before: refused from the XML.
+        ('<size nkey="100000000"/>', "<size nkey> asks for 100,000,000 entries"),
+        ('<asset><hfield name="h" nrow="30000" ncol="30000" size="1 1 1 1"/></asset>', "<hfield nrow ncol> asks for"),
+        ('<worldbody><flexcomp type="grid" count="300 300 300" spacing=".01 .01 .01" dim="3" name="f"/></worldbody>',
+         "<flexcomp count> asks for 27,000,000"),
+    ],
+)
+def test_an_edited_folders_impossible_settings_are_one_line(tmp_path, capsys, monkeypatch, body, message):
+    monkeypatch.chdir(tmp_path)  # MuJoCo writes its warnings about NaN to MUJOCO_LOG.TXT in the working folder
+    err = _run_fails(_folder(tmp_path, f"<mujoco>{body}</mujoco>"), capsys)
+    assert message in err, err
+
+
 def test_nested_replicates_are_refused_before_mujoco_expands_them(tmp_path, capsys):
     # 10^6 geoms: MuJoCo held 1.6 GB and had not finished parsing in 30 s.
     geom = '<geom type="sphere" size="0.01"/>'

@@ -41,6 +41,8 @@ def test_one_waypoint_is_held_for_ever(tmp_path):
     ("0,1,2,3\n2,1,2,3\n1,1,2,3\n", r"path.csv:3: t = 1 s does not increase"),
     ("t,x,y,z\n", r"path.csv: no waypoints"),
     ("", r"path.csv: no waypoints"),
+    # A stray quote opens one field that runs past csv's 131,072-character limit: a traceback before.
+    ('t,x,y,z\n"0,0,0,0.6\n' + "0.001,0.000,0.000,0.600\n" * 8_000, r"path.csv:\d+: not CSV \(field larger than field limit"),
 ])
 def test_bad_files_are_one_line_errors_naming_file_and_line(tmp_path, text, match):
     with pytest.raises(TrajectoryError, match=match) as err:

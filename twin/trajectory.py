@@ -85,7 +85,12 @@ def load_trajectory(path: str | Path) -> Trajectory:
     except (OSError, UnicodeDecodeError) as exc:
         raise TrajectoryError(f"{path}: cannot read trajectory ({exc.__class__.__name__}: {exc})") from None
     rows: list[tuple[float, ...]] = []
-    for number, row in enumerate(csv.reader(text.splitlines()), start=1):
+    reader = csv.reader(text.splitlines())
+    try:
+        numbered = list(enumerate(reader, start=1))
+    except csv.Error as exc:  # a stray quote makes one field of the rest of the file, past csv's field limit
+        raise TrajectoryError(f"{path}:{reader.line_num}: not CSV ({exc})") from None
+    for number, row in numbered:
         cells = [c.strip() for c in row]
         if not cells or cells == [""] or cells[0].startswith("#"):
             continue
