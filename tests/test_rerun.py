@@ -139,6 +139,11 @@ def test_a_bad_rerun_option_is_exit_2_and_writes_nothing(box_cloud, tmp_path, mo
     err = capsys.readouterr().err
     assert "should end in .rrd" in err and "expects 'spawn'" in err and "needs a display" in err
     assert list(tmp_path.iterdir()) == []
+    mine = tmp_path / "notes.rrd"  # a user's file that merely ends in .rrd is not replaced
+    mine.write_text("my notes\n")
+    assert main(["estimate", str(box_cloud), "--density", "500", "--rerun", "save", str(mine)]) == 2
+    assert "exists and is not a rerun recording" in capsys.readouterr().err
+    assert mine.read_text() == "my notes\n"
 
 
 def test_run_logs_objects_once_and_poses_at_the_rerun_rate(tmp_path, capsys):

@@ -93,6 +93,20 @@ class RerunTarget:
     rate_hz: float = DEFAULT_RATE_HZ
 
 
+#: How a rerun recording file starts (its stream header: "RRF" and a format version digit).
+RRD_MAGIC = b"RRF"
+
+
+def _is_rrd(path: Path) -> bool:
+    """Whether ``path`` starts as a rerun recording does (an empty file counts: nothing of a user's is lost)."""
+    try:
+        with path.open("rb") as f:
+            head = f.read(len(RRD_MAGIC))
+    except OSError:
+        return False
+    return head in (b"", RRD_MAGIC)
+
+
 def parse_target(words: list[str], rate_hz: float = DEFAULT_RATE_HZ) -> RerunTarget:
     """``['spawn']``, ``['save', 'FILE.rrd']`` or ``['connect']`` / ``['connect', 'HOST:PORT' or URL]``.
 
@@ -110,6 +124,8 @@ def parse_target(words: list[str], rate_hz: float = DEFAULT_RATE_HZ) -> RerunTar
             raise TwinError(f"--rerun save: {path} should end in .rrd")
         if not path.parent.resolve().is_dir():
             raise TwinError(f"--rerun save: directory {path.parent} does not exist")
+        if path.exists() and (not path.is_file() or not _is_rrd(path)):
+            raise TwinError(f"--rerun save: {path} exists and is not a rerun recording; refusing to replace it")
         return RerunTarget("save", str(path), rate_hz)
     if mode == "connect" and len(rest) <= 1:
         address = rest[0] if rest else DEFAULT_CONNECT
