@@ -778,7 +778,9 @@ def _read_text(path: Path, max_points: int) -> _Columns:
     if text.count(b"\n") > max_points + 1:
         raise CloudFileError(f"{path}: more than max_points={max_points} lines (pass a larger max_points if real)")
     raw = np.frombuffer(text, np.uint8)
-    ends = np.flatnonzero((raw == 10) | (raw == 13))  # '\n' and '\r' end lines
+    ends = np.flatnonzero(raw == 10)  # one byte-sized mask at a time: the file may be large
+    if b"\r" in text:  # '\r' ends lines too (old Mac files)
+        ends = np.union1d(ends, np.flatnonzero(raw == 13))
     longest = int(np.diff(np.concatenate([[-1], ends, [len(text)]])).max()) - 1
     if longest > MAX_TEXT_LINE:
         # The reader keeps every line as a Python string, several times over: one 256 MB line of NUL bytes
