@@ -582,3 +582,21 @@ def test_a_cloud_whose_points_reach_far_outside_the_scene_is_dropped(cache):
         assert session.local.report.out_of_scene == 1
         for object_id, position in before.items():
             assert np.linalg.norm(session.local.twin.pose(object_id)[0] - position) < 0.002, object_id
+
+
+def test_a_flood_the_loop_cannot_keep_up_with_is_dropped_and_counted_not_queued_without_limit(cache, monkeypatch):
+    import twin.runtime
+
+    with Headless(load_scene(SMALL), cache_dir=cache) as session:
+        session.run(0.2)
+        monkeypatch.setattr(twin.runtime, "MAX_INBOX", 100)
+        local, keys = session.local, Keys("small")
+        pos, quat = session.remote.twin.pose("crate")
+        for seq in range(10**6, 10**6 + 150):  # queued as the transport's thread would, faster than one step
+            local._enqueue(keys.object("crate", "pose"), Pose(
+                v=VERSION, stamp_ns=0, object_id="crate", epoch=session.remote.epoch, seq=seq, sim_time=0.0,
+                position=tuple(pos.tolist()), quat=tuple(quat.tolist()), linvel=(0.0,) * 3, angvel=(0.0,) * 3))
+        assert local.inbox.qsize() == 100
+        assert local.link.counters.dropped_by_reason["inbox-full"] == 50
+        session.run(0.05)  # the loop drains what was kept and runs on
+        assert local.inbox.qsize() == 0

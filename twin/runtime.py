@@ -221,6 +221,12 @@ MAX_ORPHAN_POSES = 1024
 #: a cloud of a new id is dropped and counted (``"too-many-objects"``); one of an object the twin has is taken.
 MAX_OBJECTS = 1000
 
+#: Messages the transport's threads may queue for the loop at once. The loop drains them every step; a flood
+#: faster than it handles them (49,000 heartbeats a second once stood the loop still for 25 s) must not grow
+#: memory without limit: past this many, a message arriving is dropped and counted (``"inbox-full"``). An
+#: honest remote sends a few hundred a second.
+MAX_INBOX = 65_536
+
 #: Ids the twin remembers the removal of (the ``(epoch, seq)`` of their :class:`Gone`), so that an older cloud or
 #: pose of them does not bring the object back: the late-join reply, taken before the removal, can arrive after
 #: the live Gone, and the remote sends no second Gone. Past this many, the oldest removal is forgotten.
@@ -502,7 +508,11 @@ class Local:
     # -- messages ------------------------------------------------------------------------------------
 
     def _enqueue(self, key: str, msg) -> None:  # type: ignore[no-untyped-def]
-        self.inbox.put((self.clock.now(), key, msg))  # transport thread: queue only, never touch the twin
+        if self.inbox.qsize() >= MAX_INBOX:  # transport thread: queue only, never touch the twin
+            self.link.dropped("inbox-full", "dropped a %s on %s: %d messages wait for the loop already",
+                              type(msg).__name__, key, MAX_INBOX)
+            return
+        self.inbox.put((self.clock.now(), key, msg))
 
     def _newer(self, marks: dict[str, tuple[int, int]], msg) -> bool:  # type: ignore[no-untyped-def]
         """Take ``msg`` if it is newer than the mark for its object (and move the mark), else count it."""
