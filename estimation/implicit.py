@@ -107,7 +107,8 @@ def _air_pockets(points: np.ndarray, normals: np.ndarray, band: Band) -> None:
     its surface and stays.
     """
     from scipy import ndimage
-    from scipy.spatial import cKDTree
+
+    from estimation.spacing import query_tree
 
     occ = band.occ
     inside = occ.inside
@@ -119,7 +120,7 @@ def _air_pockets(points: np.ndarray, normals: np.ndarray, band: Band) -> None:
     if not len(nodes):
         return
     position = band.coarse.position(nodes)
-    _, nearest = cKDTree(points).query(position, workers=-1)
+    _, nearest = query_tree(points).query(position, workers=-1)  # few queries: the cheap tree (half the build)
     side = np.sign(np.einsum("ij,ij->i", position - points[nearest], normals[nearest]))
     votes = np.bincount(labels[nodes[:, 0], nodes[:, 1], nodes[:, 2]], weights=side, minlength=count + 1)
     air = np.flatnonzero(votes[1:] > 0) + 1

@@ -66,7 +66,7 @@ def point_spacing(points: np.ndarray, tree=None) -> float:  # type: ignore[no-un
         step = -(-len(points) // SPACING_SUBSET)  # ceil: the subset holds at most SPACING_SUBSET points
         subset = points[::step]
         return point_spacing(subset) * float(np.sqrt(len(subset) / len(points)))
-    tree = _sample_tree(points) if tree is None else tree
+    tree = query_tree(points) if tree is None else tree
     k = min(SPACING_NEIGHBOURS, len(points) - 1)
     sample = points[:: max(1, len(points) // SAMPLE)]
     dist = tree.query(sample, k=k + 1, workers=-1)[0]
@@ -100,7 +100,7 @@ def surface_noise(points: np.ndarray, tree=None) -> float:  # type: ignore[no-un
     # First a small patch (a few spacings): it reads noise low, but cannot reach the other face of a
     # wall a few spacings thick, which a wide patch would read as noise. Only when noise already
     # shows there is the patch widened to measure it properly.
-    tree = _sample_tree(points)
+    tree = query_tree(points)
     k = min(NOISE_FIRST_NEIGHBOURS, len(points))
     dist, nbr = nearest(tree, sample, k)
     patches = points[nbr]
@@ -130,7 +130,7 @@ def surface_noise(points: np.ndarray, tree=None) -> float:  # type: ignore[no-un
     # face of a wall a few spacings thick is in it too, and read as noise (sigma 0.5 mm on that ball: 1.56).
     reference, k = points, min(NOISE_NEIGHBOURS, len(points))
     for _ in range(NOISE_ITERATIONS):
-        tree = _sample_tree(reference)
+        tree = query_tree(reference)
         dist, nbr = nearest(tree, sample, k)
         sigma = _sheet_sigma(reference[nbr], centre, normal, sigma)
         radius = float(np.median(dist[:, -1]))
@@ -180,8 +180,9 @@ def _sheet_sigma(patches: np.ndarray, centre: np.ndarray, normal: np.ndarray, si
     return sigma
 
 
-def _sample_tree(points: np.ndarray):  # type: ignore[no-untyped-def]
-    """A ``cKDTree`` for the few thousand queries of a statistic: built unbalanced and without shrinking
+def query_tree(points: np.ndarray):  # type: ignore[no-untyped-def]
+    """A ``cKDTree`` for a few thousand queries (a statistic's sample, the flood fill's border nodes in
+    ``implicit._air_pockets``): built unbalanced and without shrinking
     its nodes, ~2x faster to build on 100k points, which is most of the cost when only SAMPLE points
     are looked up (a tree for queries from every point is worth balancing)."""
     from scipy.spatial import cKDTree
