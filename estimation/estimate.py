@@ -16,6 +16,7 @@ import logging
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from functools import partial
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -319,6 +320,7 @@ def _auto_pass(cloud: PointCloud, box: OrientedBox, local: np.ndarray, spacing: 
     from estimation.curvature import bulge_volumes, corrected
     from estimation.dualcontour import contour
     from estimation.grid import grid_around, occupancy
+    from estimation.hollows import open_hollows
     from estimation.implicit import band_field
     from estimation.neighbours import nearest
     from estimation.normals import (
@@ -356,11 +358,16 @@ def _auto_pass(cloud: PointCloud, box: OrientedBox, local: np.ndarray, spacing: 
     if normals is not None:
         normals = box.to_local(normals, direction=True)
     h = max(tol.FINE_CELL_SPACINGS * spacing, tol.FINE_CELL_NOISE * noise)
-    ratio = max(2, int(np.ceil(float(box.extents.max()) / (h * tol.COARSE_RESOLUTION))))
+    ratio = _coarse_ratio(box.extents, h)
     coarse = grid_around(points, ratio * h)
     t0 = lap("downsample", t0)
 
-    occ = occupancy(points, coarse)
+    tree = cKDTree(points) if normals is None else None
+    # Without given normals, nothing else tells a sealed hollow's air from the inside (``estimation.hollows``);
+    # a single view's rays leave through what it did not see.
+    air = None if tree is None or viewpoint is not None else partial(open_hollows, points, coarse, tree=tree,
+                                                                      spacing=spacing, noise=noise)
+    occ = occupancy(points, coarse, air)
     tilt = None  # given normals: exact
     note = None
     if normals is not None:
@@ -375,7 +382,6 @@ def _auto_pass(cloud: PointCloud, box: OrientedBox, local: np.ndarray, spacing: 
         # at THIN_WALL_NEIGHBOURS); a spread fit (``_spread_neighbours``) searches its own, so this one
         # fetches only what the orientation reads.
         spread = wanted > k and len(points) > tol.POINT_BUDGET
-        tree = cKDTree(points)
         fetch = THIN_WALL_NEIGHBOURS if spread else max(k, THIN_WALL_NEIGHBOURS)
         reach, neighbours = nearest(tree, points, min(fetch, len(points)))
         if (reach[:, 1] == 0).any():
@@ -419,6 +425,23 @@ def _auto_pass(cloud: PointCloud, box: OrientedBox, local: np.ndarray, spacing: 
     lap("mass_properties", t0)
     return _AutoPass(points=points, normals=normals, h=h, surface=surface, props=props, closing=occ.closing,
                      hole=hole, thin=thin, encloses=occ.encloses, sealed=sealed, note=note)
+
+
+def _coarse_ratio(extents: np.ndarray, h: float) -> int:
+    """Fine cells (``h`` metres) per coarse cell around a box of ``extents`` (metres).
+
+    ``tol.COARSE_RESOLUTION`` cells along the longest side, or as many finer cells as the same number of
+    nodes holds on an elongated or flat box (``tol.COARSE_RESOLUTION ** 3`` with the padding), down to
+    ``tol.COARSE_REFINE`` times finer: a box longer than that is far points, not an object, and the band
+    check after refuses it as before.
+    """
+    from estimation.grid import PAD_CELLS
+
+    longest = max(2, int(np.ceil(float(extents.max()) / (h * tol.COARSE_RESOLUTION))))
+    ratio = max(2, -(-longest // tol.COARSE_REFINE))
+    while ratio < longest and np.prod(np.ceil(extents / (ratio * h)) + 2 * PAD_CELLS + 1) > float(tol.COARSE_RESOLUTION) ** 3:
+        ratio += 1
+    return ratio
 
 
 def _quiet(_: str) -> None:

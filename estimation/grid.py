@@ -7,6 +7,7 @@ closed, so everything reachable from the grid border without crossing it is outs
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -93,7 +94,7 @@ class Occupancy:
         return ~self.shell & ~self.outside
 
 
-def occupancy(points: np.ndarray, grid: Grid) -> Occupancy:
+def occupancy(points: np.ndarray, grid: Grid, air: Callable[[Occupancy], Occupancy] | None = None) -> Occupancy:
     """Flood-fill the outside of the voxel shell of ``points`` ((n, 3) metres).
 
     The shell is the occupied nodes dilated by a closing radius. Holes in the cloud wider than the
@@ -102,6 +103,10 @@ def occupancy(points: np.ndarray, grid: Grid) -> Occupancy:
     that encloses something (``ENCLOSED_SHARE``) and after which growing it encloses no more than that.
     A solid thinner than the shell never encloses anything: it keeps radius 1 and the band decides every
     sign.
+
+    ``air``, where given, takes what a shell encloses and returns it with the space that is not the
+    object's moved outside (``estimation.hollows``): a shell that encloses only air (a bottle's mouth
+    sealed) encloses nothing.
     """
     occupied = np.zeros(grid.shape, dtype=bool)
     idx = grid.index_of(points)
@@ -118,14 +123,31 @@ def occupancy(points: np.ndarray, grid: Grid) -> Occupancy:
             before, after = results[-2], results[-1]
             jump = int((~after.outside).sum()) - int((~before.outside).sum())
             if before.inside.sum() > ENCLOSED_SHARE * surface_nodes and jump <= LEAK_JUMP_LAYERS * surface_nodes:
-                return before
+                return _without_air(before, air, results[0], surface_nodes)
     # Nothing closed for good: a thin-walled object (or a very open one). Crumbs enclosed by a wide
     # shell are not the object's inside; keep the thinnest shell and let the band decide.
     enclosing = [r for r in results if r.inside.sum() > ENCLOSED_SHARE * surface_nodes]
     if not enclosing:
         return replace(results[0], encloses=False)
-    widest = enclosing[-1]
+    widest = _without_air(enclosing[-1], air, results[0], surface_nodes)
+    if not widest.encloses:
+        return widest
     return replace(widest, unsettled=int((~widest.outside & (distance2 > _ball_radius2(1))).sum()))
+
+
+def _without_air(chosen: Occupancy, air: Callable[[Occupancy], Occupancy] | None, thinnest: Occupancy,
+                 surface_nodes: int) -> Occupancy:
+    """``chosen`` with its air moved outside; the thinnest shell, enclosing nothing, when only crumbs are left."""
+    if air is None:
+        return chosen
+    opened = air(chosen)
+    if opened.inside.sum() > ENCLOSED_SHARE * surface_nodes:
+        return opened
+    # The thinnest shell's free space, outside wherever it meets the opened outside (the air behind a
+    # sealed opening, or a closed shell's hollow).
+    labels, _ = ndimage.label(~thinnest.shell)
+    reached = np.unique(labels[opened.outside & ~thinnest.shell])
+    return replace(thinnest, outside=np.isin(labels, reached[reached > 0]), encloses=False)
 
 
 def _outside(shell: np.ndarray) -> np.ndarray:
