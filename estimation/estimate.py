@@ -218,7 +218,9 @@ def _estimate_auto(
     # The principal frame: the grid, and so the result, does not depend on the cloud's rotation.
     t0 = time.perf_counter()
     progress(f"measuring the noise of {len(local):,} points")
-    noise = surface_noise(local)  # before thinning: see ``spacing.NOISE_SUBSET``
+    # Before thinning: see ``spacing.NOISE_SUBSET``. Where the flood fill will orient the normals, a wall's other
+    # face must not be read as noise (``own_sheet``).
+    noise = surface_noise(local, own_sheet=cloud.normals is None and viewpoint is None)
     stages["downsample"] = time.perf_counter() - t0
     progress(f"reconstructing from up to {min(len(local), tol.POINT_BUDGET):,} points")
     run = _auto_pass(cloud, box, local, spacing, noise, tol.POINT_BUDGET, density, viewpoint, stages)
@@ -358,7 +360,7 @@ def _auto_pass(cloud: PointCloud, box: OrientedBox, local: np.ndarray, spacing: 
     if normals is not None:
         normals = box.to_local(normals, direction=True)
     h = max(tol.FINE_CELL_SPACINGS * spacing, tol.FINE_CELL_NOISE * noise)
-    ratio = _coarse_ratio(box.extents, h)
+    ratio = _coarse_ratio(box.extents, h, refine=normals is None and viewpoint is None)
     coarse = grid_around(points, ratio * h)
     t0 = lap("downsample", t0)
 
@@ -427,17 +429,21 @@ def _auto_pass(cloud: PointCloud, box: OrientedBox, local: np.ndarray, spacing: 
                      hole=hole, thin=thin, encloses=occ.encloses, sealed=sealed, note=note)
 
 
-def _coarse_ratio(extents: np.ndarray, h: float) -> int:
+def _coarse_ratio(extents: np.ndarray, h: float, *, refine: bool) -> int:
     """Fine cells (``h`` metres) per coarse cell around a box of ``extents`` (metres).
 
-    ``tol.COARSE_RESOLUTION`` cells along the longest side, or as many finer cells as the same number of
-    nodes holds on an elongated or flat box (``tol.COARSE_RESOLUTION ** 3`` with the padding), down to
-    ``tol.COARSE_REFINE`` times finer: a box longer than that is far points, not an object, and the band
-    check after refuses it as before.
+    ``tol.COARSE_RESOLUTION`` cells along the longest side. Where the flood fill orients the normals
+    (``refine``: none given, no viewpoint), an elongated or flat box gets as many finer cells as the same
+    number of nodes holds (``tol.COARSE_RESOLUTION ** 3`` with the padding), down to ``tol.COARSE_REFINE``
+    times finer: a box longer than that is far points, not an object, and the band check after refuses it
+    as before. With normals it only closes holes, and finer cells close smaller ones (the camera tables'
+    partial views: pooled medians 1.8 / 3.1 / 5.5 -> 2.2 / 4.0 / 6.2 % at three, two and one cameras).
     """
     from estimation.grid import PAD_CELLS
 
     longest = max(2, int(np.ceil(float(extents.max()) / (h * tol.COARSE_RESOLUTION))))
+    if not refine:
+        return longest
     ratio = max(2, -(-longest // tol.COARSE_REFINE))
     while ratio < longest and np.prod(np.ceil(extents / (ratio * h)) + 2 * PAD_CELLS + 1) > float(tol.COARSE_RESOLUTION) ** 3:
         ratio += 1

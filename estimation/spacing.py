@@ -40,8 +40,8 @@ NOISE_FIRST_NEIGHBOURS = 24
 #: Nearest points of the first patch that place the sample's own face: closer than a wall two spacings thick.
 NOISE_OWN_NEIGHBOURS = 8
 
-#: The first sheet cut starts from the own face's spread divided by this (``surface_noise``): the passes
-#: converge from a third of the truth (``SHEET_ITERATIONS``).
+#: The first sheet cut from those points' plane starts from their spread divided by this (``_first_sheet``):
+#: the passes converge from a third of the truth (``SHEET_ITERATIONS``).
 NOISE_START_BELOW = 3.0
 
 #: Noise the small patch reads below this fraction of the spacing is left as read: it is too small
@@ -88,7 +88,7 @@ def point_spacing(points: np.ndarray, tree=None) -> float:  # type: ignore[no-un
     return float(np.sqrt(np.pi / k) * np.median(dist[:, -1]))
 
 
-def surface_noise(points: np.ndarray, tree=None) -> float:  # type: ignore[no-untyped-def]
+def surface_noise(points: np.ndarray, tree=None, *, own_sheet: bool = False) -> float:  # type: ignore[no-untyped-def]
     """Standard deviation (metres) of the points about their local tangent planes: sensor noise.
 
     The median over a sample of the plane-fit residual of each point's neighbours (the smallest
@@ -100,6 +100,11 @@ def surface_noise(points: np.ndarray, tree=None) -> float:  # type: ignore[no-un
     Args:
         points: (n, 3) float64, metres, as dense as they come (see ``NOISE_SUBSET``). tree: unused
             (kept for symmetry with ``point_spacing``).
+        own_sheet: also start from each sample's own face (below), for clouds whose normals the flood fill
+            will orient: there a wall read as noise hides the wall from it (the pipe above came out solid,
+            +180 %). Sensed clouds keep the plain reading: the camera tables' sparse fused views lost with the
+            lower one (pooled medians at 3, 2 and 1 cameras 1.8, 3.1, 5.5 -> 2.2, 4.0, 6.2 %), where the
+            wider reading smooths.
     """
     if len(points) > NOISE_SUBSET:
         points = points[:: -(-len(points) // NOISE_SUBSET)]
@@ -113,29 +118,28 @@ def surface_noise(points: np.ndarray, tree=None) -> float:  # type: ignore[no-un
     patches = points[nbr]
     centre = patches.mean(axis=1)
     local = patches - centre[:, None, :]
-    values = np.linalg.eigvalsh(np.einsum("nki,nkj->nij", local, local))
+    values, vectors = np.linalg.eigh(np.einsum("nki,nkj->nij", local, local))
     radius = float(np.median(dist[:, -1]))
     spacing = float(np.sqrt(np.pi / k)) * radius
     plain = float(np.sqrt(np.median(np.maximum(values[:, 0], 0.0)) / max(k - 3, 1)))
     if plain < NOISE_VISIBLE_SPACINGS * spacing:
         return plain  # too little noise to matter, even with a wall's other face in some patches
-    # The sheet through each sample: the plane of its nearest few points (its own face, even on a wall two
-    # spacings thick), moved to the patch's median offset, and a first sigma from the offsets' median
-    # absolute deviation. A plane fitted to the whole patch is tilted by the other face of a wall a few
+    # The sheet through each sample: the small patch's plane, moved to its median offset, with a first sigma
+    # from the offsets' median absolute deviation. That plane is tilted by the other face of a wall a few
     # spacings thick (a 3 mm pipe wall at 1.4 mm spacing: a tenth of the fits more than 60 degrees off), and
-    # the gap was read as noise: 1.5 mm on a clean cloud, and the pipe came out solid, +180 %.
-    own = patches[:, :NOISE_OWN_NEIGHBOURS]
-    centre = own.mean(axis=1)
-    spread_own = own - centre[:, None, :]
-    normal = np.linalg.eigh(np.einsum("nki,nkj->nij", spread_own, spread_own))[1][:, :, 0]
-    offset = np.einsum("nki,ni->nk", patches - centre[:, None, :], normal)
-    middle = np.median(offset, axis=1)
-    centre = centre + normal * middle[:, None]
-    spread = float(np.median(np.median(np.abs(offset - middle[:, None]), axis=1))) * MAD_TO_SIGMA
-    # The sheet cut then starts below that: a few points' plane is tilted by the noise, its spread overstates
-    # sigma, and a band that starts wide takes in the other face and never lets go (the pipe at sigma 0.5 mm
-    # read 1.57 mm). From below, the passes converge up to the sheet's own sigma (``SHEET_ITERATIONS``).
-    sigma = _sheet_sigma(patches, centre, normal, spread / NOISE_START_BELOW)
+    # the gap is read as noise (1.5 mm on a clean pipe). With ``own_sheet`` the plane of the sample's nearest
+    # few points is tried too, which keeps to its own face there; the smaller reading wins (from either, one
+    # sheet reads its own sigma), and the wide patches below are cut about its refitted planes: the few
+    # points' first plane follows noise that is most of a spacing (a closed 3 mm box at sigma 0.5 mm, 0.8 mm
+    # spacing: 1.56 mm read about it).
+    readings = [_first_sheet(patches, centre, vectors[:, :, 0], 1.0, refit=own_sheet)]
+    if own_sheet:
+        own = patches[:, :NOISE_OWN_NEIGHBOURS]
+        own_centre = own.mean(axis=1)
+        own_spread = own - own_centre[:, None, :]
+        own_normal = np.linalg.eigh(np.einsum("nki,nkj->nij", own_spread, own_spread))[1][:, :, 0]
+        readings.append(_first_sheet(patches, own_centre, own_normal, NOISE_START_BELOW, refit=True))
+    sigma, centre, normal = min(readings, key=lambda reading: reading[0])
     if sigma < NOISE_VISIBLE_SPACINGS * spacing or radius >= NOISE_PATCH_SIGMAS * sigma:
         # Too little noise to matter, or the small patch already spans the slab: widening it would only
         # reach the other face of a thin wall (a 3 mm hollow ball at sigma 0.1 mm read 1.5 mm, and came
@@ -157,6 +161,21 @@ def surface_noise(points: np.ndarray, tree=None) -> float:  # type: ignore[no-un
     return sigma
 
 
+def _first_sheet(patches: np.ndarray, centre: np.ndarray, normal: np.ndarray, below: float, *,
+                 refit: bool) -> tuple[float, np.ndarray, np.ndarray]:
+    """(sigma metres, centre (n, 3), normal (n, 3)) of (n, k, 3) patches about first planes through ``centre``
+    along ``normal``: each moved to its patch's median offset, the sheet cut started from the offsets' median
+    absolute deviation divided by ``below`` (a plane tilted by the noise overstates it, and a band that starts
+    wide takes in a wall's other face and never lets go; from below, the passes converge up to the sheet's own
+    sigma, ``SHEET_ITERATIONS``). The planes returned are the cut's last fits with ``refit``, else the first."""
+    offset = np.einsum("nki,ni->nk", patches - centre[:, None, :], normal)
+    middle = np.median(offset, axis=1)
+    centre = centre + normal * middle[:, None]
+    spread = float(np.median(np.median(np.abs(offset - middle[:, None]), axis=1))) * MAD_TO_SIGMA
+    sigma, fitted_centre, fitted_normal = _sheet(patches, centre, normal, spread / below)
+    return (sigma, fitted_centre, fitted_normal) if refit else (sigma, centre, normal)
+
+
 #: A wide patch keeps the points within this many noise sigmas of the sample's own sheet (a Gaussian keeps
 #: all but 0.05 %; a wall's other face six sigmas away keeps the tail of its own noise beyond 2.5 sigma).
 SHEET_SIGMAS = 3.5
@@ -173,10 +192,17 @@ SHEET_SETTLED = 0.005
 
 
 def _sheet_sigma(patches: np.ndarray, centre: np.ndarray, normal: np.ndarray, sigma: float) -> float:
+    """Noise sigma (metres) of (n, k, 3) patches about their sheets (``_sheet``)."""
+    return _sheet(patches, centre, normal, sigma)[0]
+
+
+def _sheet(patches: np.ndarray, centre: np.ndarray, normal: np.ndarray,
+           sigma: float) -> tuple[float, np.ndarray, np.ndarray]:
     """Noise sigma (metres) of (n, k, 3) patches, each cut to the points within ``SHEET_SIGMAS`` sigma of its
     sheet, the plane through ``centre`` (n, 3) along ``normal`` (n, 3) at first and its own fit after; the
     band follows the estimate, starting from ``sigma``. A Gaussian cut at c sigma keeps
-    ``1 - 2 c phi(c) / (2 Phi(c) - 1)`` of its variance; the estimate is divided by that."""
+    ``1 - 2 c phi(c) / (2 Phi(c) - 1)`` of its variance; the estimate is divided by that. Also the sheets'
+    last planes (centre, normal), kept as given where a band held too few points to fit one."""
     c = SHEET_SIGMAS
     kept_variance = 1 - 2 * c * np.exp(-c * c / 2) / np.sqrt(2 * np.pi) / math.erf(c / np.sqrt(2))
     for _ in range(SHEET_ITERATIONS):
@@ -189,10 +215,11 @@ def _sheet_sigma(patches: np.ndarray, centre: np.ndarray, normal: np.ndarray, si
         values, vectors = np.linalg.eigh(np.einsum("nki,nkj->nij", local, local))
         smallest = np.maximum(values[:, 0], 0.0) / np.maximum(count - 3, 1)
         last, sigma = sigma, float(np.sqrt(np.median(smallest[count > 3]) / kept_variance)) if (count > 3).any() else sigma
-        centre, normal = mean, vectors[:, :, 0]
+        fitted = (count > 3)[:, None]
+        centre, normal = np.where(fitted, mean, centre), np.where(fitted, vectors[:, :, 0], normal)
         if abs(sigma - last) <= SHEET_SETTLED * sigma:
             break
-    return sigma
+    return sigma, centre, normal
 
 
 def query_tree(points: np.ndarray):  # type: ignore[no-untyped-def]
