@@ -436,8 +436,7 @@ def _coarse_ratio(extents: np.ndarray, h: float, *, refine: bool) -> int:
     (``refine``: none given, no viewpoint), an elongated or flat box gets as many finer cells as the same
     number of nodes holds (``tol.COARSE_RESOLUTION ** 3`` with the padding), down to ``tol.COARSE_REFINE``
     times finer: a box longer than that is far points, not an object, and the band check after refuses it
-    as before. With normals it only closes holes, and finer cells close smaller ones (the camera tables'
-    partial views: pooled medians 1.8 / 3.1 / 5.5 -> 2.2 / 4.0 / 6.2 % at three, two and one cameras).
+    as before. With normals it only closes holes, and finer cells would close smaller ones (a partial view's).
     """
     from estimation.grid import PAD_CELLS
 

@@ -103,7 +103,7 @@ def surface_noise(points: np.ndarray, tree=None, *, own_sheet: bool = False) -> 
         own_sheet: also start from each sample's own face (below), for clouds whose normals the flood fill
             will orient: there a wall read as noise hides the wall from it (the pipe above came out solid,
             +180 %). Sensed clouds keep the plain reading: the camera tables' sparse fused views lost with the
-            lower one (pooled medians at 3, 2 and 1 cameras 1.8, 3.1, 5.5 -> 2.2, 4.0, 6.2 %), where the
+            lower one (pooled medians at 3, 2 and 1 cameras 2.0, 3.1, 5.5 -> 2.2, 4.0, 6.2 %), where the
             wider reading smooths.
     """
     if len(points) > NOISE_SUBSET:
