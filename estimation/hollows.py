@@ -73,25 +73,27 @@ def open_hollows(points: np.ndarray, grid: Grid, occ: Occupancy, *, tree, spacin
     labels, count = ndimage.label(inside)
     if count == 0:
         return occ
-    tests = [(1, NEAR_SPACINGS * spacing + NEAR_SIGMAS * noise)]
+    reaches = [(1, NEAR_SPACINGS * spacing + NEAR_SIGMAS * noise)]
     if NEAR_SIGMAS * noise > NEAR_SPACINGS * spacing:
         sample = points[:: max(1, len(points) // DENSE_SAMPLE)]
         typical = float(np.median(tree.query(sample, k=DENSE_NEIGHBOURS + 1)[0][:, -1]))
-        tests.append((DENSE_NEIGHBOURS, DENSE_REACH * typical))
+        if typical > 0:  # not most points repeated (a quantised sensor): no reach to step by
+            reaches.append((DENSE_NEIGHBOURS, DENSE_REACH * typical))
     directions = _fibonacci_sphere(RAY_DIRECTIONS)
     depth = ndimage.distance_transform_edt(inside)
     rng = np.random.default_rng(0)
     air = np.zeros(count + 1, dtype=bool)
     sizes = np.bincount(labels.ravel(), minlength=count + 1)
     length = float(np.linalg.norm(np.asarray(grid.shape) * grid.cell))
+    tests = [(k, near, np.arange(1, int(np.ceil(length / (STEP_NEARS * near))) + 1) * STEP_NEARS * near)
+             for k, near in reaches]
     # Each component's nodes, from one sort of the labels (not one pass over the grid per component).
     order = np.argsort(labels, axis=None, kind="stable")
     starts = np.searchsorted(labels.ravel()[order], np.arange(count + 2))
     for component in np.flatnonzero(sizes[1:] >= MIN_COMPONENT_NODES) + 1:
         nodes = np.column_stack(np.unravel_index(order[starts[component]:starts[component + 1]], labels.shape))
         origins = grid.position(_origins(nodes, depth[tuple(nodes.T)], rng))
-        for k, near in tests:
-            steps = np.arange(1, int(np.ceil(length / (STEP_NEARS * near))) + 1) * STEP_NEARS * near
+        for k, near, steps in tests:
             layers = np.concatenate([_layers(o, directions, steps, grid, occ, tree, k, near) for o in origins])
             crossed = layers > 0
             even = float((layers[crossed] % 2 == 0).mean()) if crossed.any() else 0.0
