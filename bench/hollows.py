@@ -23,17 +23,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # this checkout's 
 
 from estimation import estimate, make_cloud
 from scenes.sampling import sample_surface
+from scenes.shapes import bottle, closed_box, hollow_ball, open_pipe
 
 RESULTS = Path(__file__).parent / "results" / "hollows.txt"
 CONDITIONS = {"given normals": (True, 0.0), "no normals": (False, 0.0), "noise 0.5 mm, no normals": (False, 0.0005)}
-BOTTLE = np.array([(0, 0), (35, 0), (35, 160), (13, 200), (13, 220), (10, 220), (10, 200), (32, 160), (32, 3), (0, 3)],
-                  float) * 1e-3
-
-
-def _difference(outer: trimesh.Trimesh, *cut: trimesh.Trimesh) -> trimesh.Trimesh:
-    return trimesh.boolean.difference([outer, *cut], engine="manifold")
-
-
 def _shelf() -> trimesh.Trimesh:
     width, height, depth, board = 0.6, 0.8, 0.25, 0.018
     parts = [trimesh.creation.box((board, depth, height)).apply_translation((x, 0, height / 2))
@@ -48,10 +41,10 @@ def objects() -> dict[str, trimesh.Trimesh]:
     """The bench's objects by name, in their own frames (metres)."""
     solid_outline = np.array([(0, 0), (35, 0), (35, 160), (13, 200), (13, 220), (0, 220)], float) * 1e-3
     return {
-        "bottle, mouth sealed": trimesh.creation.revolve(BOTTLE, sections=64),
-        "closed box, 3 mm": _difference(trimesh.creation.box((0.1, 0.07, 0.05)), trimesh.creation.box((0.094, 0.064, 0.044))),
-        "closed ball, 2 mm": _difference(trimesh.creation.icosphere(4, 0.04), trimesh.creation.icosphere(4, 0.038)),
-        "open pipe 600 mm, 3 mm": trimesh.creation.annulus(r_min=0.027, r_max=0.03, height=0.6, sections=64),
+        "bottle, mouth sealed": bottle(),
+        "closed box, 3 mm": closed_box(0.003),
+        "closed ball, 2 mm": hollow_ball(0.04, 0.002),
+        "open pipe 600 mm, 3 mm": open_pipe(),
         "bookshelf": _shelf(),
         "solid bottle (control)": trimesh.creation.revolve(solid_outline, sections=64),
     }

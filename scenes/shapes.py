@@ -329,6 +329,37 @@ def _place(mesh: trimesh.Trimesh, rng: np.random.Generator, what: str) -> None:
     mesh.apply_transform(pose)
 
 
+# ---- hollow objects whose air the flood fill encloses (bench/hollows.py, tests/test_thin_walls.py) ---------
+
+def hollow_ball(radius: float, wall: float, hole: float = 0.0) -> trimesh.Trimesh:
+    """A ball ``wall`` thick (metres) with a round opening of radius ``hole`` at its top (closed when 0)."""
+    outer = trimesh.creation.icosphere(subdivisions=4, radius=radius)
+    inner = trimesh.creation.icosphere(subdivisions=4, radius=radius - wall)
+    if not hole:
+        return _diff(outer, inner)
+    bore = trimesh.creation.cylinder(radius=hole, height=radius)
+    bore.apply_translation((0.0, 0.0, radius))
+    return _diff(outer, inner, bore)
+
+
+def closed_box(wall: float) -> trimesh.Trimesh:
+    """A 100 x 70 x 50 mm box, ``wall`` thick (metres), closed all round."""
+    return _diff(trimesh.creation.box(extents=(0.1, 0.07, 0.05)),
+                 trimesh.creation.box(extents=(0.1 - 2 * wall, 0.07 - 2 * wall, 0.05 - 2 * wall)))
+
+
+def bottle() -> trimesh.Trimesh:
+    """220 mm tall, 3 mm walls, a 20 mm mouth on a 70 mm body."""
+    profile = np.array([(0, 0), (35, 0), (35, 160), (13, 200), (13, 220), (10, 220), (10, 200), (32, 160), (32, 3),
+                        (0, 3)], float) * 1e-3
+    return trimesh.creation.revolve(profile, sections=64)
+
+
+def open_pipe() -> trimesh.Trimesh:
+    """600 mm long, 60 mm across, 3 mm walls, open at both ends."""
+    return trimesh.creation.annulus(r_min=0.027, r_max=0.03, height=0.6, sections=64)
+
+
 # ---- parts near the noise limit: 3-5 mm wires, fins, teeth and slots, not in ``make_shapes`` ---------------
 
 def coil(wire: float, radius: float, turns: float, pitch: float, sections: int = 24) -> trimesh.Trimesh:

@@ -10,25 +10,7 @@ import trimesh
 from estimation import estimate, make_cloud
 from estimation.spacing import surface_noise
 from scenes.sampling import sample_surface
-from scenes.shapes import coil
-
-
-def _hollow_ball(radius: float, wall: float, hole: float) -> trimesh.Trimesh:
-    """A ball ``wall`` thick (metres) with a round opening of radius ``hole`` at its top (closed when 0)."""
-    outer = trimesh.creation.icosphere(subdivisions=4, radius=radius)
-    inner = trimesh.creation.icosphere(subdivisions=4, radius=radius - wall)
-    if not hole:
-        return trimesh.boolean.difference([outer, inner], engine="manifold")
-    bore = trimesh.creation.cylinder(radius=hole, height=radius)
-    bore.apply_translation((0.0, 0.0, radius))
-    return trimesh.boolean.difference([outer, inner, bore], engine="manifold")
-
-
-def _bottle() -> trimesh.Trimesh:
-    """220 mm tall, 3 mm walls, a 20 mm mouth on a 70 mm body."""
-    profile = np.array([(0, 0), (35, 0), (35, 160), (13, 200), (13, 220), (10, 220), (10, 200), (32, 160), (32, 3),
-                        (0, 3)], float) * 1e-3
-    return trimesh.creation.revolve(profile, sections=64)
+from scenes.shapes import bottle, closed_box, coil, hollow_ball, open_pipe
 
 
 @pytest.mark.parametrize("sigma", [0.0001, 0.0005, 0.001])
@@ -42,14 +24,14 @@ def test_noise_of_a_solid_is_read(sigma):
 def test_a_walls_other_face_is_not_read_as_noise(sigma):
     # A 3 mm wall, about three point spacings: the patches that measure the noise reach the other face.
     # Before they were cut down to their own face this read 1.5 mm at both sigmas.
-    cloud = sample_surface(_hollow_ball(0.06, 0.003, 0.012), 100_000, seed=1, noise_sigma=sigma, with_normals=False)
+    cloud = sample_surface(hollow_ball(0.06, 0.003, 0.012), 100_000, seed=1, noise_sigma=sigma, with_normals=False)
     assert surface_noise(cloud.points) == pytest.approx(sigma, rel=0.15)
 
 
 def test_a_thin_walled_ball_with_a_little_noise_is_not_filled_solid():
     # With the wall read as 1.5 mm of noise the cell was the wall's thickness and the ball came out solid:
     # +558 %, no warning.
-    mesh = _hollow_ball(0.06, 0.003, 0.012)
+    mesh = hollow_ball(0.06, 0.003, 0.012)
     cloud = sample_surface(mesh, 100_000, seed=1, noise_sigma=0.0001, with_normals=False)
     result = estimate(make_cloud(cloud.points), 1000.0)
     assert result.volume == pytest.approx(mesh.volume, rel=0.01)
@@ -61,7 +43,7 @@ def test_a_hollow_ball_whose_wall_is_six_sigmas_thick_is_not_filled():
     # Sigma 0.5 mm on a 3 mm wall, no normals: the faces' noisy shells touch, no inside between them is found,
     # and only the widest closing shell encloses anything, by sealing the ball's mouth. That was taken as the
     # inside (+560 %, said in a warning); the points' density between the faces shows it is air (hollows.py).
-    mesh = _hollow_ball(0.06, 0.003, 0.012)
+    mesh = hollow_ball(0.06, 0.003, 0.012)
     cloud = sample_surface(mesh, 100_000, seed=1, noise_sigma=0.0005, with_normals=False)
     result = estimate(make_cloud(cloud.points), 1000.0)
     assert result.volume == pytest.approx(mesh.volume, rel=0.02)
@@ -117,24 +99,19 @@ def test_a_dense_noisy_wire_ring_fits_its_normals_wider_than_the_noise(seed):
 def test_a_bottle_whose_mouth_the_closing_shell_seals_is_not_filled_with_given_normals():
     # 3 mm walls, a 20 mm mouth on a 70 mm body: the flood fill's closing shell seals the mouth, and the body's
     # air was taken as inside (+250 %). The inner wall's normals say the air is outside.
-    bottle = _bottle()
-    cloud = sample_surface(bottle, 100_000, seed=1, with_normals=True)
+    mesh = bottle()
+    cloud = sample_surface(mesh, 100_000, seed=1, with_normals=True)
     result = estimate(make_cloud(cloud.points, cloud.normals), 1000.0)
-    assert result.volume == pytest.approx(bottle.volume, rel=0.01)
+    assert result.volume == pytest.approx(mesh.volume, rel=0.01)
     low, high = result.volume_bounds_m3
-    assert low <= bottle.volume <= high
-
-
-def _pipe() -> trimesh.Trimesh:
-    """600 mm long, 60 mm across, 3 mm walls, open at both ends."""
-    return trimesh.creation.annulus(r_min=0.027, r_max=0.03, height=0.6, sections=64)
+    assert low <= mesh.volume <= high
 
 
 @pytest.mark.parametrize("sigma", [0.0, 0.0005])
 def test_a_long_pipes_wall_is_not_read_as_noise(sigma):
     # 100k points, 1.4 mm apart on a 3 mm wall: the first noise patch reached the other face and its plane,
     # tilted by it, read the gap as noise: 1.5 mm clean, 1.57 mm at sigma 0.5 mm.
-    cloud = sample_surface(_pipe(), 100_000, seed=1, noise_sigma=sigma, with_normals=False)
+    cloud = sample_surface(open_pipe(), 100_000, seed=1, noise_sigma=sigma, with_normals=False)
     if sigma:
         assert surface_noise(cloud.points, own_sheet=True) == pytest.approx(sigma, rel=0.2)
     else:
@@ -144,24 +121,18 @@ def test_a_long_pipes_wall_is_not_read_as_noise(sigma):
 def test_a_long_open_pipe_without_normals_is_not_filled():
     # The noise read as 1.5 mm set 3 mm cells, and the coarse grid's 128 cells along 600 mm were 5.5 mm:
     # neither saw into the wall, and the pipe came out solid (+180 %).
-    mesh = _pipe()
+    mesh = open_pipe()
     cloud = sample_surface(mesh, 100_000, seed=1, with_normals=False)
     result = estimate(make_cloud(cloud.points), 1000.0)
     assert result.volume == pytest.approx(mesh.volume, rel=0.01)
-
-
-def _closed_box(wall: float) -> trimesh.Trimesh:
-    outer = trimesh.creation.box(extents=(0.1, 0.07, 0.05))
-    inner = trimesh.creation.box(extents=(0.1 - 2 * wall, 0.07 - 2 * wall, 0.05 - 2 * wall))
-    return trimesh.boolean.difference([outer, inner], engine="manifold")
 
 
 @pytest.mark.parametrize("shape", ["closed box", "closed ball", "bottle"])
 def test_air_that_the_flood_fill_encloses_is_not_filled_without_normals(shape):
     # A closed box or ball with 2-3 mm walls, and a bottle whose mouth the closing shell seals: the shell
     # encloses the air, and without normals nothing said it was not the inside: +264 %, +553 %, +385 %.
-    mesh = {"closed box": lambda: _closed_box(0.003), "closed ball": lambda: _hollow_ball(0.04, 0.002, 0.0),
-            "bottle": _bottle}[shape]()
+    mesh = {"closed box": lambda: closed_box(0.003), "closed ball": lambda: hollow_ball(0.04, 0.002, 0.0),
+            "bottle": bottle}[shape]()
     cloud = sample_surface(mesh, 100_000, seed=1, with_normals=False)
     result = estimate(make_cloud(cloud.points), 1000.0)
     assert result.volume == pytest.approx(mesh.volume, rel=0.01)
@@ -172,7 +143,7 @@ def test_air_that_the_flood_fill_encloses_is_not_filled_without_normals(shape):
 def test_a_closed_boxs_noise_is_read_where_it_is_most_of_a_spacing():
     # 3 mm walls at sigma 0.5 mm, 0.8 mm apart: the plane of a sample's nearest few points follows the noise;
     # started from it alone, the sheet cut read 1.56 mm (the walls' gap).
-    cloud = sample_surface(_closed_box(0.003), 100_000, seed=1, noise_sigma=0.0005, with_normals=False)
+    cloud = sample_surface(closed_box(0.003), 100_000, seed=1, noise_sigma=0.0005, with_normals=False)
     assert surface_noise(cloud.points, own_sheet=True) == pytest.approx(0.0005, rel=0.1)
     assert surface_noise(cloud.points) == pytest.approx(0.0005, rel=0.1)
 
@@ -180,7 +151,7 @@ def test_a_closed_boxs_noise_is_read_where_it_is_most_of_a_spacing():
 def test_a_closed_box_with_walls_six_sigmas_thick_is_not_filled():
     # Sigma 0.5 mm on 3 mm walls: the nearest-point test's reach (2.5 sigma) merges the two faces, and the box
     # came out filled (+269 %); the points' density between the faces tells them apart.
-    mesh = _closed_box(0.003)
+    mesh = closed_box(0.003)
     cloud = sample_surface(mesh, 100_000, seed=0, noise_sigma=0.0005, with_normals=False)
     result = estimate(make_cloud(cloud.points), 1000.0)
     assert result.volume == pytest.approx(mesh.volume, rel=0.02)
