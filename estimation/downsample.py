@@ -12,6 +12,19 @@ from estimation.obb import column_bounds
 DENSE_LIMIT = 16_000_000
 
 
+def _linear(key: np.ndarray, dims: np.ndarray) -> tuple[np.ndarray, float]:
+    """Each row of ``key`` ((n, 3) int64 voxel indices, each below ``dims``) as one int64 in row-major order,
+    and the grid's cell count (a float: it may pass int64's range).
+
+    A grid past that range (copies of points 1e-12 m apart, over 10 cm: 1e33 cells) would wrap the keys and
+    merge unrelated voxels; there the occupied voxels are numbered instead, in the same order.
+    """
+    cells = float(np.prod(dims.astype(np.float64)))
+    if cells < 2.0**62:
+        return (key[:, 0] * dims[1] + key[:, 1]) * dims[2] + key[:, 2], cells
+    return np.unique(key, axis=0, return_inverse=True)[1].reshape(-1), cells
+
+
 def voxel_downsample(
     points: np.ndarray, voxel: float, normals: np.ndarray | None = None
 ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
@@ -29,10 +42,10 @@ def voxel_downsample(
     key = np.floor(points / voxel).astype(np.int64)
     key -= key.min(axis=0)
     dims = key.max(axis=0) + 1
-    linear = (key[:, 0] * dims[1] + key[:, 1]) * dims[2] + key[:, 2]
-    if np.prod(dims) <= DENSE_LIMIT:
+    linear, cells = _linear(key, dims)
+    if cells <= DENSE_LIMIT:
         # Counting into the full voxel grid is O(n); np.unique would sort.
-        dense = np.bincount(linear, minlength=int(np.prod(dims)))
+        dense = np.bincount(linear, minlength=int(cells))
         occupied = np.flatnonzero(dense)
         slot = np.zeros(len(dense), dtype=np.int64)
         slot[occupied] = np.arange(len(occupied))
@@ -70,10 +83,10 @@ def voxel_subsample(points: np.ndarray, voxel: float) -> np.ndarray:
     # Measured from the lowest point the coordinates are >= 0, so truncation is the floor.
     key = ((points - low) * (1.0 / voxel)).astype(np.int64)
     dims = ((high - low) * (1.0 / voxel)).astype(np.int64) + 1
-    linear = (key[:, 0] * dims[1] + key[:, 1]) * dims[2] + key[:, 2]
-    if np.prod(dims) <= DENSE_LIMIT:
+    linear, cells = _linear(key, dims)
+    if cells <= DENSE_LIMIT:
         # Scatter every point's index into its voxel; one of them survives per voxel.
-        chosen = np.full(int(np.prod(dims)), -1, dtype=np.int64)
+        chosen = np.full(int(cells), -1, dtype=np.int64)
         chosen[linear] = np.arange(len(points))
         kept = chosen[chosen >= 0]
         kept.sort()

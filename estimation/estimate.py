@@ -406,9 +406,16 @@ def _auto_pass(cloud: PointCloud, box: OrientedBox, local: np.ndarray, spacing: 
         from estimation.cloud import far_points
 
         far = far_points(local)
+        # Points spread evenly over a surface of this size would lie about extent / sqrt(n) apart; far closer
+        # neighbours than that are points in tight clusters (copies of one scan, each point repeated with
+        # a little jitter), not a finer surface.
+        even = float(box.extents.max()) / np.sqrt(len(points))
+        hint = (f"; {far}: remove them" if far else
+                f" (the points come in clusters {even / spacing:.3g} times tighter than {len(points):,} points spread "
+                f"over the object would be: copies of one scan? merge them)" if spacing < even / tol.CLUSTERED_SPACING
+                else " (several objects, or --method obb?)")
         raise CloudError(f"the points span {float(box.extents.max()):.3g} m at a {h:.3g} m spacing: {nodes:.3g} grid "
-                         f"nodes, more than the {tol.MAX_BAND_NODES:.3g} an estimate holds"
-                         + (f"; {far}: remove them" if far else " (several objects, or --method obb?)"))
+                         f"nodes, more than the {tol.MAX_BAND_NODES:.3g} an estimate holds{hint}")
     band = narrow_band(coarse, occ, ratio)
     values, measured = band_field(points, normals, band)
     surface = contour(points, normals, band, values, measured, noise=noise, tilt=tilt)
@@ -443,10 +450,20 @@ def _coarse_ratio(extents: np.ndarray, h: float, *, refine: bool) -> int:
     longest = max(2, int(np.ceil(float(extents.max()) / (h * tol.COARSE_RESOLUTION))))
     if not refine:
         return longest
-    ratio = max(2, -(-longest // tol.COARSE_REFINE))
-    while ratio < longest and np.prod(np.ceil(extents / (ratio * h)) + 2 * PAD_CELLS + 1) > float(tol.COARSE_RESOLUTION) ** 3:
-        ratio += 1
-    return ratio
+
+    def too_many(ratio: int) -> bool:
+        return bool(np.prod(np.ceil(extents / (ratio * h)) + 2 * PAD_CELLS + 1) > float(tol.COARSE_RESOLUTION) ** 3)
+
+    # The least ratio from the start whose grid holds the nodes (fewer nodes as the ratio grows), found by
+    # bisection: counting up one at a time ran for hours on a cloud of copies 1e-12 m apart (a spacing that
+    # made ``longest`` 7e8).
+    low, high = max(2, -(-longest // tol.COARSE_REFINE)), longest
+    if low >= high or not too_many(low):
+        return low
+    while high - low > 1:  # too_many(low), not too_many(high) (or high is ``longest``)
+        middle = (low + high) // 2
+        low, high = (middle, high) if too_many(middle) else (low, middle)
+    return high
 
 
 def _quiet(_: str) -> None:

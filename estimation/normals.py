@@ -150,10 +150,15 @@ def _refit_own_sheet(points: np.ndarray, neighbours: np.ndarray, normals: np.nda
         level = np.median(offset, axis=1, keepdims=True)
         weight = (np.abs(offset - level) <= OWN_SHEET_SIGMAS * noise).astype(float)[:, None, :]
         count = weight.sum(axis=2)[:, 0]
-        patch -= (weight @ patch) / count[:, None, None]
+        # A patch split evenly between two layers (coordinates cut to whole millimetres, copies of a scan)
+        # has its median between them and may keep fewer points than a plane needs: its first fit stands
+        # (fitting none made NaNs, and eigh raised on them).
+        fits = count >= 3
+        patch -= (weight @ patch) / np.maximum(count, 1.0)[:, None, None]
         lam, vec = np.linalg.eigh((patch.transpose(0, 2, 1) * weight) @ patch)
-        normals[block] = vec[:, :, 0]
-        tilt[block] = np.maximum(lam[:, 0], 0.0) / (count * np.maximum(lam[:, 1], np.finfo(float).tiny))
+        rows = np.arange(start, min(start + NORMAL_BLOCK, len(points)))[fits]
+        normals[rows] = vec[fits, :, 0]
+        tilt[rows] = np.maximum(lam[fits, 0], 0.0) / (count[fits] * np.maximum(lam[fits, 1], np.finfo(float).tiny))
 
 
 def probe_sides(points: np.ndarray, normals: np.ndarray, grid: Grid, occ: Occupancy) -> tuple[np.ndarray, np.ndarray]:

@@ -38,6 +38,12 @@ OUTLIER_REACH = 10.0
 #: 200k points (a thin torus 1.3 M); a 10 cm sphere with one stray point 1 km off asked for 4e11 (3.2 TiB).
 MAX_BAND_NODES = 30_000_000
 
+#: When the band is refused, its message blames clustered points (copies of one scan, points repeated with
+#: a little jitter) if their spacing is this many times below extent / sqrt(n), the spacing of n points
+#: spread over a surface of that extent. A sphere's spacing is about 1.8 times that, a 1 m wire 1 mm thick
+#: 0.06 times; 20 copies of a 10 cm ball 1e-6 m apart, 0.003 times (the message named several objects).
+CLUSTERED_SPACING = 100.0
+
 #: Grid cells along the object's longest OBB side for the 'obb' downsampling and the 'surface'
 #: method's grid. 'auto' takes its fine cell from the point spacing instead (``FINE_CELL_SPACINGS``).
 GRID_RESOLUTION = 128

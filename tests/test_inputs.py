@@ -135,6 +135,58 @@ def test_repeated_positions_are_estimated(tmp_path, method):
     assert estimate(load_cloud(rounded), 1000.0, method=method).volume > 0
 
 
+@pytest.mark.parametrize(("copies", "jitter"), [(20, 1e-12), (20, 1e-6), (20, 1e-9)])
+def test_copies_of_a_scan_a_hair_apart_are_refused_and_said(copies, jitter):
+    # Each point written 20 times, a hair apart: past the distinct-points check, with a spacing of the jitter.
+    # It overflowed the voxel grid's int64 cell count (1e-12: "negative dimensions"), or split patches
+    # evenly between copies and eigh raised on the NaNs (1e-6, 1e-9); the refusal named several objects.
+    rng = np.random.default_rng(5)
+    points = np.repeat(_sphere(2000), copies, axis=0)
+    with pytest.raises(CloudError, match=r"the points come in clusters \S+ times tighter than .* copies of one scan\? "
+                                         r"merge them\)$"):
+        estimate(make_cloud(points + rng.normal(0.0, jitter, points.shape)), 1000.0)
+
+
+def test_a_few_copies_one_picometre_apart_are_refused_at_once():
+    # 150 points, 20 copies each, 1e-12 m apart: the coarse grid's ratio was counted up one at a time from 2
+    # towards 7e8 (hours). Bisected, the refusal is immediate.
+    rng = np.random.default_rng(6)
+    points = np.repeat(_sphere(150), 20, axis=0)
+    with pytest.raises(CloudError, match="times tighter"):
+        estimate(make_cloud(points + rng.normal(0.0, 1e-12, points.shape)), 1000.0)
+
+
+def test_the_coarse_ratio_is_the_least_whose_grid_holds_the_nodes():
+    # Bisection instead of counting up: the same ratio as counting, over boxes from flat to long.
+    import importlib
+
+    from estimation import tolerances as tol
+    from estimation.grid import PAD_CELLS
+
+    coarse_ratio = importlib.import_module("estimation.estimate")._coarse_ratio
+
+    def counted(extents, h):  # the loop it replaced
+        longest = max(2, int(np.ceil(float(extents.max()) / (h * tol.COARSE_RESOLUTION))))
+        ratio = max(2, -(-longest // tol.COARSE_REFINE))
+        while ratio < longest and np.prod(np.ceil(extents / (ratio * h)) + 2 * PAD_CELLS + 1) > tol.COARSE_RESOLUTION**3:
+            ratio += 1
+        return ratio
+
+    rng = np.random.default_rng(7)
+    for _ in range(2000):
+        extents, h = np.exp(rng.uniform(np.log(1e-3), np.log(2.0), 3)), float(np.exp(rng.uniform(np.log(1e-5), np.log(1e-2))))
+        assert coarse_ratio(extents, h, refine=True) == counted(extents, h)
+
+
+def test_a_cloud_in_layers_fits_its_normals_without_nans():
+    # x and y in metres, z cut to whole units: neighbourhoods split evenly between two layers kept no point
+    # of their own sheet (a median between them), and the refit's eigh raised on NaNs.
+    v = np.random.default_rng(0).normal(size=(2000, 3))
+    points = 0.05 * v / np.linalg.norm(v, axis=1, keepdims=True)
+    points[:, 2] = np.trunc(points[:, 2] * 1000)
+    assert estimate(make_cloud(points), 1000.0).volume > 0
+
+
 @pytest.mark.parametrize("method", ["auto", "obb"])
 @pytest.mark.parametrize(("scale", "match"), [(1e50, r"reach \S+e\+49 m .* beyond the 10000 m"),
                                               (1e6, "beyond the 10000 m"),
