@@ -15,6 +15,8 @@ cameras).
 from __future__ import annotations
 
 import logging
+import struct
+import zlib
 from pathlib import Path
 
 import numpy as np
@@ -131,7 +133,10 @@ def _read_png(path: Path) -> np.ndarray:
             with Image.open(path, formats=["PNG"]) as image:
                 mode = image.mode
                 raw = np.asarray(image)
-    except (OSError, UnidentifiedImageError, Image.DecompressionBombError) as exc:
+    except (OSError, UnidentifiedImageError, Image.DecompressionBombError,
+            # PIL's PNG reader raises these too on corrupt chunks (a truncated pHYs, a broken CRC, a text
+            # chunk past its cap), not only OSError.
+            ValueError, SyntaxError, EOFError, struct.error, zlib.error) as exc:
         raise CloudFileError(f"{path}: not a readable PNG ({exc})") from None
     if mode in ("L", "P", "1") or raw.dtype == np.uint8:
         raise CloudFileError(f"{path}: an 8-bit PNG cannot hold depth; expected a 16-bit single-channel PNG "

@@ -294,6 +294,11 @@ def test_a_view_with_no_points_is_refused(capsys, tmp_path, pcds):
     ("bomb.png", lambda p: _png_header(p, 20000, 20000), r"20000x20000 depth image is more than the 16,777,216"),
     # A TIFF named .png: PIL opened it past the PNG header's size check (8000 x 8000 in 192 KB took 6.8 GB).
     ("tiff.png", lambda p: _tiff(p), r"not a PNG \(no PNG signature"),
+    # Corrupt chunks PIL answers with ValueError or SyntaxError, not OSError: they ended in tracebacks.
+    ("phys.png", lambda p: _png_with_chunk(p, b"pHYs", b"\0"), r"not a readable PNG \(Truncated pHYs chunk\)"),
+    ("ztxt.png", lambda p: _png_with_chunk(p, b"zTXt", b"k\0\0" + __import__("zlib").compress(bytes(5_000_000))),
+     r"not a readable PNG \(Decompressed data too large"),
+    ("idat.png", lambda p: _png_short_idat(p), r"not a readable PNG \(broken PNG file"),
 ])
 def test_bad_depth_frames_are_one_line_errors(capsys, tmp_path, name, write, message):
     import re
@@ -357,6 +362,27 @@ def _png(path, array):  # type: ignore[no-untyped-def]
     from PIL import Image
 
     Image.fromarray(array).save(path)
+
+
+def _png_with_chunk(path, kind, data):  # type: ignore[no-untyped-def]
+    """A valid 16-bit depth PNG with one more chunk (``kind``, ``data``) right after the IHDR."""
+    import struct
+    import zlib
+
+    _png(path, np.full((30, 40), 800, np.uint16))
+    raw = path.read_bytes()
+    chunk = struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
+    path.write_bytes(raw[:33] + chunk + raw[33:])  # the signature (8) and IHDR (25) first
+
+
+def _png_short_idat(path):  # type: ignore[no-untyped-def]
+    """A valid 16-bit depth PNG whose image data chunk claims 14 bytes fewer than it holds: the reader takes
+    the rest for the next chunk's header."""
+    _png(path, np.full((30, 40), 800, np.uint16))
+    raw = bytearray(path.read_bytes())
+    at = raw.index(b"IDAT") - 4
+    raw[at:at + 4] = (int.from_bytes(raw[at:at + 4], "big") - 14).to_bytes(4, "big")
+    path.write_bytes(bytes(raw))
 
 
 @pytest.mark.parametrize(("quat", "norm"), [("0 0 0 0", "0"), ("5 5 5 5", "10")])
