@@ -52,7 +52,9 @@ class SceneError(TwinError, ValueError):
 
 
 SOURCES = ("paper", "mesh", "cloud", "primitive")
-_ID_PATTERN = r"^[A-Za-z0-9_-]{1,64}$"
+# ``$(?!\n)``: Python's ``$`` also matches before a final newline, and "obj1\n" made a body and a Zenoh key of its
+# own; in the JSON Schema's (ECMA) dialect ``$`` is the end already and the lookahead is a no-op.
+_ID_PATTERN = r"^[A-Za-z0-9_-]{1,64}$(?!\n)"
 _ID = re.compile(_ID_PATTERN)
 #: Fewer points than this cannot be estimated: the estimator's own floor.
 MIN_POINTS = tol.MIN_POINTS

@@ -30,12 +30,12 @@ from functools import lru_cache
 PREFIX = "twin"
 #: Longest id (scene, object, device), characters; other names on the wire (materials) are held to it too.
 MAX_ID_LENGTH = 64
-_CHUNK = re.compile(rf"^[A-Za-z0-9_-]{{1,{MAX_ID_LENGTH}}}$")
+_CHUNK = re.compile(rf"[A-Za-z0-9_-]{{1,{MAX_ID_LENGTH}}}")
 
 
 def valid_id(name: str) -> bool:
     """Whether ``name`` may be a scene or object id: 1-64 of ``[A-Za-z0-9_-]`` (a safe key chunk)."""
-    return isinstance(name, str) and _CHUNK.match(name) is not None
+    return isinstance(name, str) and _CHUNK.fullmatch(name) is not None  # not match with $: "a\n" passed
 OBJECT_KINDS = ("cloud", "pose", "gone")
 
 

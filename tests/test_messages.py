@@ -137,6 +137,7 @@ def test_a_pose_whose_seen_flag_is_not_a_bool_is_rejected():
     ({"object_id": "../../etc"}, "bad-id"),
     ({"object_id": "a" * 65}, "bad-id"),
     ({"object_id": ""}, "bad-id"),
+    ({"object_id": "obj1\n"}, "bad-id"),  # a regex's $ matches before a final newline: it passed
     ({"seq": -1}, "bad-seq"),
     ({"epoch": -5}, "bad-seq"),
     ({"v": VERSION + 1}, "version"),

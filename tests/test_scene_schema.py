@@ -66,6 +66,8 @@ def test_every_example_on_the_page_passes_the_schema_and_loads(index, tmp_path):
         {"name": "x", "table": {"height": 0}},
         {"name": "x", "workspace": {"min": [0, 0, 0]}},
         {"name": "x", "objects": [{"id": "bad id", "paper": "mug"}]},
+        {"name": "x", "objects": [{"id": "mug\n", "paper": "mug"}]},  # made a body of its own, "mug\n"
+        {"name": "x\n"},
         {"name": "x", "objects": [{"id": "a", "paper": "teapot"}]},
         {"name": "x", "objects": [{"id": "a", "paper": "mug", "units": "km"}]},
         {"name": "x", "objects": [{"id": "a", "paper": "mug", "points": 5}]},
