@@ -771,22 +771,42 @@ def _check_npz_member(path: Path, archive: zipfile.ZipFile, name: str, max_point
 MAX_TEXT_LINE = 4096
 
 
-def _read_text(path: Path, max_points: int) -> _Columns:
-    suffix = path.suffix.lower()
-    # A spreadsheet's CSV starts with a UTF-8 byte-order mark: "could not convert string 'ï»¿0.1'".
-    text = path.read_bytes().removeprefix(codecs.BOM_UTF8)
-    if text.count(b"\n") > max_points + 1:
-        raise CloudFileError(f"{path}: more than max_points={max_points} lines (pass a larger max_points if real)")
-    raw = np.frombuffer(text, np.uint8)
-    ends = np.flatnonzero(raw == 10)  # one byte-sized mask at a time: the file may be large
-    if b"\r" in text:  # '\r' ends lines too (old Mac files)
-        ends = np.union1d(ends, np.flatnonzero(raw == 13))
-    longest = int(np.diff(np.concatenate([[-1], ends, [len(text)]])).max()) - 1
+#: Bytes of a text file scanned at a time for its line lengths, before it is read whole.
+TEXT_SCAN_BLOCK = 1 << 24
+
+
+def _scan_text(path: Path, max_points: int) -> None:
+    """Refuse a text file with a line longer than ``MAX_TEXT_LINE`` or far more than ``max_points`` lines, read
+    in blocks: read whole first, a sparse 1 GB file of NUL bytes took 2.1 GB before its first line was found
+    too long, and one larger than the memory would have been killed rather than refused."""
+    longest, run, lines = 0, 0, 0
+    with path.open("rb") as fh:
+        while block := fh.read(TEXT_SCAN_BLOCK):
+            raw = np.frombuffer(block, np.uint8)
+            ends = np.flatnonzero((raw == 10) | (raw == 13))  # '\r' ends lines too (old Mac files)
+            if not len(ends):
+                run += len(raw)
+                continue
+            longest = max(longest, run + int(ends[0]), int(np.diff(ends).max(initial=1)) - 1)
+            run = len(raw) - int(ends[-1]) - 1
+            lines += len(ends)
+            if lines > 2 * (max_points + 1):  # '\r\n' counts twice here; the exact count follows the read
+                raise CloudFileError(f"{path}: more than max_points={max_points} lines (pass a larger max_points if real)")
+    longest = max(longest, run)
     if longest > MAX_TEXT_LINE:
         # The reader keeps every line as a Python string, several times over: one 256 MB line of NUL bytes
         # took 3 GB before it was found not to be numbers.
         raise CloudFileError(f"{path}: a line of {longest:,} bytes, more than a row of numbers holds "
                              f"(at most {MAX_TEXT_LINE:,}): not a text point cloud")
+
+
+def _read_text(path: Path, max_points: int) -> _Columns:
+    suffix = path.suffix.lower()
+    _scan_text(path, max_points)
+    # A spreadsheet's CSV starts with a UTF-8 byte-order mark: "could not convert string 'ï»¿0.1'".
+    text = path.read_bytes().removeprefix(codecs.BOM_UTF8)
+    if text.count(b"\n") > max_points + 1:
+        raise CloudFileError(f"{path}: more than max_points={max_points} lines (pass a larger max_points if real)")
     claimed = None
     if suffix == ".pts":
         first, _, rest = text.partition(b"\n")

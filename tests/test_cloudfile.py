@@ -672,6 +672,23 @@ def test_a_text_line_longer_than_any_row_of_numbers_is_refused_before_parsing(tm
         load_cloud(zeros)
 
 
+def test_a_huge_text_file_is_refused_in_bounded_memory(tmp_path):
+    # A sparse 1 GB .xyz of NUL bytes was read whole (2.1 GB) before its one line was found too long; one
+    # larger than the memory would have been killed instead of refused. Scanned in blocks, the process stays
+    # far under the file's size (measured in a child process: the high-water mark is per process).
+    big = tmp_path / "big.xyz"
+    with big.open("wb") as fh:
+        fh.truncate(1 << 30)
+    code = ("import resource, sys\n"
+            "from estimation import CloudFileError, load_cloud\n"
+            "try:\n    load_cloud(sys.argv[1])\nexcept CloudFileError as exc:\n    print(exc)\n"
+            "print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)\n")
+    out = subprocess.run([sys.executable, "-c", code, str(big)], capture_output=True, text=True, check=True,
+                         cwd=Path(__file__).resolve().parents[1]).stdout.splitlines()
+    assert "a line of 1,073,741,824 bytes, more than a row of numbers holds" in out[0]
+    assert int(out[1]) < 400_000  # KiB: well under the 1 GiB file
+
+
 @pytest.mark.parametrize("newline", ["\n", "\r\n", "\r"])
 def test_a_text_cloud_longer_than_max_points_is_refused_whatever_ends_its_lines(tmp_path, newline):
     # Old Mac line ends: the count of '\n' saw one line, and splitlines() read all 500.
