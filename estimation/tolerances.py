@@ -92,6 +92,10 @@ REFINE_POINTS = 120_000
 #: is widened by sqrt(1.5) to keep POINT_BUDGET, not 1.5 x POINT_BUDGET, points.
 VOXELS_PER_AREA = 1.5
 
+#: Most points the views of one object keep when fused (``views.estimate_views``), thinned one per voxel: the
+#: estimate's own speed target is a 1M-point cloud, and it thins to ``REFINE_POINTS`` at most anyway.
+VIEW_POINTS = 1_000_000
+
 #: 'auto': coarse cells along the longest side for the flood fill that decides inside and outside away
 #: from the points (and closes holes); an elongated or flat object gets as many finer cells as the same
 #: number of nodes (this cubed) holds. A 600 mm pipe with 3 mm walls got 128 cells of 5.5 mm along its
