@@ -348,3 +348,23 @@ def test_a_failed_estimate_prints_only_its_error_line_though_it_logged_warnings_
     good.write_text("\n".join(rows) + "\n")
     run = subprocess.run([sys.executable, "-m", "cli.main", "estimate", str(good)], capture_output=True, text=True)
     assert run.returncode == 0 and "dropped 1 of 3001 points" in run.stderr, run.stderr
+
+
+@pytest.mark.parametrize(("argv", "message"), [
+    (["estimate", "c.ply", "--units", "km"], r"argument --units: invalid choice: 'km'"),
+    (["estimate", "c.ply", "--density", "abc"], r"argument --density: invalid float value: 'abc'"),
+    (["estimate", "c.ply", "--material", "pla", "--density", "5"], r"not allowed with argument --material"),
+    (["estimate"], r"the following arguments are required: VIEW"),
+    (["teleport"], r"argument command: invalid choice: 'teleport'"),
+])
+def test_usage_errors_are_one_line(capsys, argv, message):
+    # argparse printed the whole usage (eight lines for estimate) before its error line.
+    import re
+
+    from cli.main import main
+
+    with pytest.raises(SystemExit) as stop:
+        main(argv)
+    assert stop.value.code == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and re.search(message, err) and err.rstrip().endswith("--help)"), err
