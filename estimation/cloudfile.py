@@ -230,10 +230,11 @@ def _header_lines(head: bytes, is_last: Callable[[str], bool]) -> tuple[list[str
 
 
 def _count(path: Path, text: str, what: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise CloudFileError(f"{path}: {what} count {text[:40]!r} is not an integer") from None
+    # Decimal digits only: Python's int() also takes "2_000", "+2000" and other scripts' digits, which no PLY or
+    # PCD writer produces and other readers refuse.
+    if not (text.isascii() and text.removeprefix("-").isdigit()):
+        raise CloudFileError(f"{path}: {what} count {text[:40]!r} is not an integer")
+    value = int(text)
     if value < 0:
         raise CloudFileError(f"{path}: {what} count is negative ({value})")
     return value

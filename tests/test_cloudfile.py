@@ -356,6 +356,9 @@ PLY_HEAD = "ply\nformat binary_little_endian 1.0\nelement vertex 1\n"
         ("ply\nformat binary_middle_endian 1.0\nend_header\n", r"unknown PLY format 'binary_middle_endian'"),
         ("ply\nformat ascii 1.0\nelement vertex -3\n" + XYZ_FLOAT + "end_header\n", r"count is negative \(-3\)"),
         ("ply\nformat ascii 1.0\nelement vertex many\nend_header\n", r"count 'many' is not an integer"),
+        # int() reads these; no writer does, and other readers refuse them
+        ("ply\nformat ascii 1.0\nelement vertex 2_000\nend_header\n", r"count '2_000' is not an integer"),
+        ("ply\nformat ascii 1.0\nelement vertex +2\nend_header\n", r"count '\+2' is not an integer"),
         (PLY_HEAD + XYZ_FLOAT + "property float x\nend_header\n", r"has property 'x' twice"),
         (PLY_HEAD + "property list uchar float x\nproperty float y\nproperty float z\nend_header\n", r"no x property"),
         (PLY_HEAD + XYZ_FLOAT + "property list uchar int idx\nend_header\n" + "\0" * 20, r"list properties \['idx'\]; not supported"),
