@@ -27,7 +27,17 @@ from scenes.sources import prepare_objects, reference_estimate, source_mesh
 from sync.clock import REAL_CLOCK, Clock
 from sync.keys import Keys
 from sync.link import Link
-from sync.messages import MAX_INT64, VERSION, Gone, Heartbeat, OperatorCommand, Pose, SceneInfo, cloud_message
+from sync.messages import (
+    MAX_ANGLE_SIGMA,
+    MAX_INT64,
+    VERSION,
+    Gone,
+    Heartbeat,
+    OperatorCommand,
+    Pose,
+    SceneInfo,
+    cloud_message,
+)
 from sync.ordering import Marks
 from sync.ratelimit import RateLimitedLog, TokenBucket
 from sync.recording import Recorder
@@ -417,7 +427,8 @@ class Remote:
         msg = Pose(v=VERSION, stamp_ns=self.clock.stamp_ns(), object_id=object_id, epoch=self.epoch, seq=self._next(),
                    sim_time=self.twin.time - age, position=_floats(pos), quat=_floats(quat), linvel=_floats(seen.linvel),
                    angvel=_floats(seen.angvel), answers_ns=max(0, answers - round(age * 1e9)) if answers else 0,
-                   position_sigma=float(seen.position_sigma), angle_sigma=float(seen.angle_sigma), seen=seen.seen)
+                   position_sigma=float(seen.position_sigma), angle_sigma=min(float(seen.angle_sigma), MAX_ANGLE_SIGMA),
+                   seen=seen.seen)
         key = self._pose_keys.get(object_id)
         if key is None:
             key = self._pose_keys[object_id] = self.keys.object(object_id, "pose")

@@ -50,6 +50,21 @@ MAX_SPEED, MAX_ANGULAR_SPEED = 100.0, 1000.0
 #: under mjMINVAL); a table is metres across, 100 m is a hall; the end effector is a fingertip or a tool.
 MIN_SIZE, MAX_SCENE_SIZE, MAX_EE_RADIUS = 1e-3, 100.0, 1.0
 
+#: A rotation's standard deviation past half a turn says only that the orientation is unknown: senders clamp
+#: ``Pose.angle_sigma`` to it (ICP on a nearly symmetric shape can report more), receivers refuse more.
+MAX_ANGLE_SIGMA = math.pi
+
+#: Largest force magnitude, newtons, an ``OperatorForce`` may carry: a haptic device renders tens of newtons,
+#: and a device driver must never be handed 1e308 N. The twin saturates what it sends at this (its recording
+#: keeps the force as simulated).
+MAX_FORCE = 1e4
+
+#: Largest simulated time, seconds, a message may carry (30 years); none is negative.
+MAX_SIM_TIME = 1e9
+
+#: Most objects a heartbeat may count.
+MAX_OBJECTS = 1_000_000
+
 #: Largest stamp, epoch or sequence number a message may carry, and the smallest is 0: what an int64 holds.
 #: msgpack carries integers up to 2**64 - 1, but the twin keeps stamps in numpy int64 arrays
 #: (:mod:`twin.history`): a pose answering to 2**64 - 1 raised OverflowError out of the twin's loop.
@@ -388,6 +403,9 @@ def _check(msg: Message) -> None:
         _unit(msg, msg.quat)
         if msg.position_sigma < 0 or msg.angle_sigma < 0 or msg.position_sigma > MAX_COORDINATE:
             raise MessageError("out-of-range", f"pose {msg.object_id!r}: sigma outside [0, {MAX_COORDINATE:g}]")
+        if msg.angle_sigma > MAX_ANGLE_SIGMA:
+            raise MessageError("out-of-range", f"pose {msg.object_id!r}: angle sigma over {MAX_ANGLE_SIGMA:.4g} rad")
+        _sim_time(msg)
         if math.hypot(*msg.linvel) > MAX_SPEED or math.hypot(*msg.angvel) > MAX_ANGULAR_SPEED:
             raise MessageError("out-of-range", f"pose {msg.object_id!r}: faster than {MAX_SPEED:g} m/s or "
                                                f"{MAX_ANGULAR_SPEED:g} rad/s")
@@ -401,10 +419,16 @@ def _check(msg: Message) -> None:
     elif isinstance(msg, OperatorForce):
         _finite(msg, msg.force, msg.position, (msg.sim_time,))
         _coordinates(msg, msg.position)
+        _sim_time(msg)
+        if math.hypot(*msg.force) > MAX_FORCE:
+            raise MessageError("out-of-range", f"force: over {MAX_FORCE:g} N")
     elif isinstance(msg, Heartbeat):
         _finite(msg, (msg.sim_time,))
+        _sim_time(msg)
         if msg.objects < 0:
             raise MessageError("bad-size", "heartbeat: negative object count")
+        if msg.objects > MAX_OBJECTS:
+            raise MessageError("bad-size", f"heartbeat: more than {MAX_OBJECTS:,} objects")
     elif isinstance(msg, SceneInfo):
         _finite(msg, msg.table_size or (), (msg.table_height, msg.ee_radius), msg.ee_position)
         _coordinates(msg, msg.ee_position, msg.table_size or (), (msg.table_height,))
@@ -419,6 +443,13 @@ def _check(msg: Message) -> None:
             _coordinates(msg, low, high)
             if not all(a < b for a, b in zip(low, high, strict=True)):
                 raise MessageError("bad-size", "scene: workspace min is not below max on every axis")
+
+
+def _sim_time(msg: Pose | OperatorForce | Heartbeat) -> None:
+    """Raise unless the (finite) ``sim_time`` lies in [0, :data:`MAX_SIM_TIME`]."""
+    if not 0.0 <= msg.sim_time <= MAX_SIM_TIME:
+        raise MessageError("out-of-range", f"{type(msg).__name__.lower()}: sim_time {msg.sim_time:.4g} s outside "
+                                           f"[0, {MAX_SIM_TIME:g}]")
 
 
 def _check_scene_sizes(msg: SceneInfo) -> None:

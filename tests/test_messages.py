@@ -166,8 +166,14 @@ def test_decode_rejects_other_impossible_messages():
     op = OperatorCommand(v=VERSION, stamp_ns=0, epoch=0, seq=1, position=(0.0, float("nan"), 0.0))
     info = SceneInfo(v=VERSION, stamp_ns=0, name="s", table_size=(1.0, -1.0, 0.1), table_height=0.5,
                      table_material="wood_oak", ee_radius=0.02, ee_position=(0.0, 0.0, 1.0))
+    force = OperatorForce(v=VERSION, stamp_ns=0, epoch=0, seq=1, sim_time=0.0, force=(1e308, 0.0, 0.0),
+                          position=(0.0, 0.0, 1.0))
+    # Found fuzzing: any finite force, time or count passed; a device driver must not be handed 1e308 N.
     for msg, reason in [(beat, "bad-size"), (op, "non-finite"), (info, "bad-size"),
-                        (replace(info, name="a/b", table_size=(1.0, 1.0, 0.1)), "bad-id")]:
+                        (replace(info, name="a/b", table_size=(1.0, 1.0, 0.1)), "bad-id"),
+                        (force, "out-of-range"), (replace(force, force=(0.0, 0.0, -2e4)), "out-of-range"),
+                        (replace(force, force=(0.0, 0.0, 9e3), sim_time=-0.5), "out-of-range"),
+                        (replace(beat, objects=2**64 - 1), "bad-size"), (replace(beat, objects=1, sim_time=1e300), "out-of-range")]:
         with pytest.raises(MessageError) as err:
             decode(encode(msg))
         assert err.value.reason == reason
@@ -374,3 +380,17 @@ def test_a_key_of_thousands_of_chunks_is_matched_without_recursion():
     assert intersects("twin/s/**", deep + "/pose") is True
     assert intersects("twin/**/pose", deep + "/cloud") is False
     assert intersects(deep + "/**", "twin/*/" + "/".join(["*"] * 4999) + "/x/y") is True
+
+
+def test_the_twin_saturates_the_force_it_sends_at_what_receivers_accept():
+    # A contact spike past MAX_FORCE would be dropped by every receiver; sent saturated, its direction kept.
+    from sync.messages import MAX_FORCE
+    from twin.runtime import _saturated
+
+    spike = np.array([3.0, 4.0, 0.0]) * MAX_FORCE
+    sent = _saturated(spike)
+    assert np.linalg.norm(sent) == pytest.approx(MAX_FORCE)
+    assert sent / np.linalg.norm(sent) == pytest.approx([0.6, 0.8, 0.0])
+    assert decode(encode(OperatorForce(v=VERSION, stamp_ns=0, epoch=0, seq=1, sim_time=0.0,
+                                       force=tuple(float(f) for f in sent), position=(0.0, 0.0, 1.0)))).seq == 1
+    assert np.array_equal(_saturated(np.array([1.0, -2.0, 3.0])), [1.0, -2.0, 3.0])

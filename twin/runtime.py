@@ -45,6 +45,7 @@ from sync.clock import REAL_CLOCK, Clock
 from sync.keys import Keys, any_scene_info
 from sync.link import Link
 from sync.messages import (
+    MAX_FORCE,
     VERSION,
     Cloud,
     Gone,
@@ -575,7 +576,7 @@ class Local:
             self.report.forces_sent += 1
             self.link.put(self.keys.operator_force, OperatorForce(
                 v=VERSION, stamp_ns=self.clock.stamp_ns(), epoch=self._epoch, seq=self._force_seq, sim_time=t,
-                force=_float3(force), position=_float3(self.twin.data.mocap_pos[0])))
+                force=_float3(_saturated(force)), position=_float3(self.twin.data.mocap_pos[0])))
 
     def _on_device_target(self, msg: OperatorTarget, received: float) -> None:
         """Take a device driver's target if it is newer than the last of its device (or that device's mark has
@@ -1090,6 +1091,13 @@ def _remove_if_there(spec, object_id: str) -> None:  # type: ignore[no-untyped-d
 def _float3(v: np.ndarray) -> tuple[float, float, float]:
     x, y, z = (float(a) for a in v)
     return x, y, z
+
+
+def _saturated(force: np.ndarray) -> np.ndarray:
+    """``force`` (3,) newtons scaled down to :data:`sync.messages.MAX_FORCE` where it is larger (a contact spike;
+    receivers refuse more), direction kept."""
+    size = float(np.linalg.norm(force))
+    return force * (MAX_FORCE / size) if size > MAX_FORCE else force
 
 
 def _empty_spec(info: SceneInfo):  # type: ignore[no-untyped-def]
