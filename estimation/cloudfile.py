@@ -232,7 +232,7 @@ def _header_lines(head: bytes, is_last: Callable[[str], bool]) -> tuple[list[str
 def _count(path: Path, text: str, what: str) -> int:
     # Decimal digits only: Python's int() also takes "2_000", "+2000" and other scripts' digits, which no PLY or
     # PCD writer produces and other readers refuse.
-    if not (text.isascii() and text.removeprefix("-").isdigit()):
+    if not (text.isascii() and text.removeprefix("-").isdigit() and len(text) <= 20):  # 20: any int64
         raise CloudFileError(f"{path}: {what} count {text[:40]!r} is not an integer")
     value = int(text)
     if value < 0:
