@@ -196,6 +196,28 @@ def test_views_past_the_point_cap_are_thinned_first(monkeypatch):
     assert thinned.estimate.volume == pytest.approx(full.estimate.volume, rel=0.002)
 
 
+def test_one_sided_views_leave_the_volume_unbounded_above():
+    """A ball seen by one camera and nothing else: its back may reach anywhere behind what was seen. The
+    interval stopped at 40 % of the true volume (and said the volume lay in it); now its top is unknown."""
+    from estimation.views import View, estimate_views
+
+    rng = np.random.default_rng(4)
+    centre, camera, radius = np.array([0.0, 0.0, 0.5]), np.zeros(3), 0.05
+    d = rng.normal(size=(20_000, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    points = centre + radius * d
+    seen = np.einsum("ij,ij->i", d, camera - points) > 0  # the half facing the camera
+    result = estimate_views([View(points[seen], camera)], 1000.0)
+    low, high = result.volume_bounds_m3
+    assert high == float("inf") and low <= 4 / 3 * np.pi * radius**3
+    assert any("all from one side: nothing bounds what lies behind it" in w for w in result.warnings)
+    # Seen from both sides, the interval is finite again.
+    other = np.array([0.0, 0.0, 1.0])
+    back = np.einsum("ij,ij->i", d, other - points) > 0
+    both = estimate_views([View(points[seen], camera), View(points[back], other)], 1000.0)
+    assert np.isfinite(both.volume_bounds_m3[1])
+
+
 def _box_on_table(size, at, *, floor=False):  # type: ignore[no-untyped-def]
     """Each camera's whole frame (points, world frame; its centre) of a box of ``size`` (m) standing at ``at``
     (x, y) on the table, ray cast at sigma 1 mm; the floor too when ``floor``."""
