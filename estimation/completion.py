@@ -314,11 +314,7 @@ def half_turn_axis(points: np.ndarray, origins: np.ndarray, plane: Plane, views:
         # the least share sat 1-3 mm short of the middle on the clutter's boxes and cans.
         tips = pts + silhouette_reach(pts, org, np.asarray(normals, dtype=np.float64)[above], views, up)[:, 0]
         test = np.concatenate([pts, tips[np.isfinite(tips).all(axis=1)]])
-    rays = pts - org
-    rays -= (rays @ up)[:, None] * up
-    lengths = np.linalg.norm(rays, axis=1)
-    ok = lengths > 0
-    mean = (rays[ok] / lengths[ok, None]).mean(axis=0) if ok.any() else np.zeros(3)
+    mean = mean_view_direction(pts, org, up)
     if float(np.linalg.norm(mean)) < ONE_SIDED:
         return None
     along = mean / np.linalg.norm(mean)  # horizontal, away from the cameras
@@ -344,6 +340,18 @@ def half_turn_axis(points: np.ndarray, origins: np.ndarray, plane: Plane, views:
         if curve > 0:
             shift += 0.5 * cell * (left - right) / curve
     return centre + shift * along
+
+
+def mean_view_direction(points: np.ndarray, origins: np.ndarray, up: np.ndarray | None = None) -> np.ndarray:
+    """(3,) the mean of the unit directions from each point's sensor to it ((n, 3) each, metres), with ``up``
+    (unit) their horizontal parts: length 1 when every view looks one way, ``ONE_SIDED`` and more from one side,
+    0 when no direction is left."""
+    rays = points - origins
+    if up is not None:
+        rays -= (rays @ up)[:, None] * up
+    lengths = np.linalg.norm(rays, axis=1)
+    ok = lengths > 0
+    return (rays[ok] / lengths[ok, None]).mean(axis=0) if ok.any() else np.zeros(3)
 
 
 def half_turn(vectors: np.ndarray, axis: np.ndarray | None, up: np.ndarray) -> np.ndarray:

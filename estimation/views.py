@@ -24,7 +24,7 @@ import numpy as np
 from estimation import tolerances as tol
 from estimation.carving import DepthView
 from estimation.cloud import check_count_and_range, check_sensor_origin
-from estimation.completion import close_on_plane, coverage, honest_bounds
+from estimation.completion import ONE_SIDED, close_on_plane, coverage, honest_bounds, mean_view_direction
 from estimation.contracts import as_points
 from estimation.errors import CloudError
 from estimation.estimate import PhysicalEstimate, estimate
@@ -405,18 +405,11 @@ def estimate_views(views: list[View], density: float, *, support: Plane | str | 
 #: Coverage below this earns a warning that the answer rests on completion.
 COVERAGE_WARNING = 0.9
 
-#: Views are from one side when the mean of the unit directions from each point's sensor to it is at least this
-#: long (1: all along one direction; one camera's 60 degree view of an object ~0.97, two cameras 90 degrees apart
-#: ~0.71): the same measure and bound as ``completion.ONE_SIDED``, in three dimensions.
-ONE_SIDED = 0.9
-
-
 def _one_sided(points: np.ndarray, origins: np.ndarray) -> bool:
-    """Whether every view of ``points`` ((n, 3), their sensors ``origins`` (n, 3), metres) looks from one side."""
-    rays = points - origins
-    lengths = np.linalg.norm(rays, axis=1)
-    ok = lengths > 0
-    return bool(ok.any()) and float(np.linalg.norm((rays[ok] / lengths[ok, None]).mean(axis=0))) >= ONE_SIDED
+    """Whether every view of ``points`` ((n, 3), their sensors ``origins`` (n, 3), metres) looks from one side:
+    ``completion.ONE_SIDED`` in three dimensions (one camera's 60 degree view of an object ~0.97, two cameras 90
+    degrees apart ~0.71)."""
+    return float(np.linalg.norm(mean_view_direction(points, origins))) >= ONE_SIDED
 
 
 def assess(result: PhysicalEstimate, observed: np.ndarray, noise: float) -> tuple[float, tuple[float, float]]:

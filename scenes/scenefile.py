@@ -38,6 +38,7 @@ from msgspec import UNSET, Meta, Struct, UnsetType
 from estimation import tolerances as tol
 from estimation.errors import TwinError
 from estimation.materials import MAX_DENSITY, MIN_DENSITY
+from sync.keys import ID_PATTERN
 from sync.messages import MAX_COORDINATE
 from twin.model import DEFAULT_PHYSICS, EndEffectorSpec, PhysicsSettings, TableSpec, new_spec
 
@@ -52,9 +53,7 @@ class SceneError(TwinError, ValueError):
 
 
 SOURCES = ("paper", "mesh", "cloud", "primitive")
-# ``$(?!\n)``: Python's ``$`` also matches before a final newline, and "obj1\n" made a body and a Zenoh key of its
-# own; in the JSON Schema's (ECMA) dialect ``$`` is the end already and the lookahead is a no-op.
-_ID_PATTERN = r"^[A-Za-z0-9_-]{1,64}$(?!\n)"
+_ID_PATTERN = ID_PATTERN  # the wire's rule for ids (sync.keys): an object's id is a key chunk
 _ID = re.compile(_ID_PATTERN)
 #: Fewer points than this cannot be estimated: the estimator's own floor.
 MIN_POINTS = tol.MIN_POINTS
