@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from estimation import tolerances as tol
 from estimation.obb import column_bounds
 
 #: Largest voxel grid (cells) counted densely; beyond it we sort instead (memory ~16 bytes a cell).
@@ -92,3 +93,21 @@ def voxel_subsample(points: np.ndarray, voxel: float) -> np.ndarray:
         kept.sort()
         return kept
     return np.unique(linear, return_index=True)[1]
+
+
+def thin_to_budget(points: np.ndarray, spacing: float, noise: float, budget: int, *, seed: int = 0) -> np.ndarray:
+    """Ascending indices of about ``budget`` of ``points`` ((n, 3) metres, ``spacing`` and ``noise`` metres
+    their spacing and sigma), all of them when there are no more.
+
+    One measured point per voxel of the budget's spacing keeps about ``budget`` points, evenly (centroids would
+    sit inside curved surfaces; see :func:`voxel_subsample`). Where the noisy shell is thicker than half a
+    voxel, one point per voxel would keep the sparse tails as often as the dense middle, widening the noise
+    and, on a convex surface (more voxels outside than in), moving it outward (a 15 mm sphere at sigma 0.5 mm:
+    +1.0 % against +0.1 % unthinned): there a random share (seeded by ``seed``) keeps the noise as it was.
+    """
+    if len(points) <= budget:
+        return np.arange(len(points))
+    voxel = spacing * np.sqrt(tol.VOXELS_PER_AREA * len(points) / budget)
+    if noise > voxel / 2:
+        return np.sort(np.random.default_rng(seed).choice(len(points), budget, replace=False))
+    return voxel_subsample(points, voxel)

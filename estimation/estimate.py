@@ -29,7 +29,7 @@ from estimation.cloud import (
     check_sensor_origin,
     distinct_rows,
 )
-from estimation.downsample import voxel_downsample, voxel_subsample
+from estimation.downsample import thin_to_budget, voxel_downsample
 from estimation.errors import CloudError
 from estimation.inertia import MassProperties, mass_properties, triangle_areas
 from estimation.materials import check_density
@@ -343,17 +343,7 @@ def _auto_pass(cloud: PointCloud, box: OrientedBox, local: np.ndarray, spacing: 
     t0 = time.perf_counter()
     points, normals = local, cloud.normals
     if len(points) > budget:
-        voxel = spacing * np.sqrt(tol.VOXELS_PER_AREA * len(points) / budget)
-        if noise > voxel / 2:
-            # The noisy shell is thicker than a voxel: one point per voxel would keep the sparse tails
-            # as often as the dense middle, widening the noise and, on a convex surface (more voxels
-            # outside than in), moving it outward (a 15 mm sphere at sigma 0.5 mm: +1.0 % against
-            # +0.1 % unthinned). A random subset keeps the noise as it was.
-            keep = np.sort(np.random.default_rng(0).choice(len(points), budget, replace=False))
-        else:
-            # One measured point per voxel of the budget's spacing keeps about ``budget`` points, evenly
-            # (centroids would sit inside curved surfaces; see ``voxel_subsample``).
-            keep = voxel_subsample(points, voxel)
+        keep = thin_to_budget(points, spacing, noise, budget)
         points = points[keep]
         normals = None if normals is None else normals[keep]
         spacing = point_spacing(points)

@@ -308,16 +308,10 @@ def estimate_views(views: list[View], density: float, *, support: Plane | str | 
     noise = surface_noise(points)
     if len(points) > tol.VIEW_POINTS:
         # Every step below fits normals to, or searches, every point: a 4096 x 4096 frame of one depth took
-        # minutes (35 s and 6.5 GB at 2048 x 2048). Thinned as the estimate thins to its budget: one measured
-        # point per voxel, or where the noise is thicker than half a voxel a random share, which keeps the
-        # noise as it was (one point per voxel keeps the tails as often as the middle).
-        voxel = spacing * np.sqrt(tol.VOXELS_PER_AREA * len(points) / tol.VIEW_POINTS)
-        if noise > voxel / 2:
-            keep = np.sort(np.random.default_rng(seed).choice(len(points), tol.VIEW_POINTS, replace=False))
-        else:
-            from estimation.downsample import voxel_subsample
+        # minutes (35 s and 6.5 GB at 2048 x 2048). Thinned as the estimate thins to its budget.
+        from estimation.downsample import thin_to_budget
 
-            keep = voxel_subsample(points, voxel)
+        keep = thin_to_budget(points, spacing, noise, tol.VIEW_POINTS, seed=seed)
         log.info("views: %d points thinned to %d", len(points), len(keep))
         points, origins = points[keep], origins[keep]
         spacing = point_spacing(points)
