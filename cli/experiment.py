@@ -14,7 +14,7 @@ import logging
 import math
 from pathlib import Path
 
-from cli.outputs import check_output_folder, claim_output_folder
+from cli.outputs import check_output_folder, claim_output_folder, replace_file
 from estimation.errors import TwinError
 
 log = logging.getLogger(__name__)
@@ -185,9 +185,10 @@ def run(args: argparse.Namespace) -> int:
 
         rows, traces = run_experiment(scene, sweep, workers=args.workers, executor=executor, recorded=recorded,
                                       progress=progress)
-    write_csv(rows, out / "results.csv")
+    replace_file(out / "results.csv", lambda tmp: write_csv(rows, tmp))
     plots = write_plots(rows, traces, out)
-    (out / "report.md").write_text(report(rows, args, plots))
+    text = report(rows, args, plots)
+    replace_file(out / "report.md", lambda tmp: tmp.write_text(text))
     print(f"{len(rows)} rows -> {out / 'results.csv'}; plots: {', '.join(p.name for p in plots)}; "
           f"report: {out / 'report.md'}")
     return 0
@@ -284,7 +285,7 @@ def write_plots(rows, traces, out: Path) -> list[Path]:  # type: ignore[no-untyp
 
 def _save(fig, path: Path) -> Path:  # type: ignore[no-untyped-def]
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    replace_file(path, lambda tmp: fig.savefig(tmp, dpi=110, format="png"))
     import matplotlib.pyplot as plt
 
     plt.close(fig)

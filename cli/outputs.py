@@ -10,7 +10,7 @@ folder whole.
 from __future__ import annotations
 
 import os
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from pathlib import Path
 
 from estimation.errors import TwinError
@@ -25,7 +25,7 @@ def same_file(a: Path, b: Path) -> bool:
         if a.exists() and b.exists():
             return os.path.samefile(a, b)
         return a.resolve() == b.resolve()
-    except OSError:
+    except (OSError, RuntimeError):  # RuntimeError: a loop of links, on Python 3.11
         return False
 
 
@@ -106,9 +106,29 @@ def claim_output_folder(out: Path, *, marker: str, command: str) -> None:
     """Create ``out`` (checked by :func:`check_output_folder`) and mark it as ``command``'s."""
     try:
         out.mkdir(parents=True, exist_ok=True)
-        (out / marker).write_text(f"written by {command}\n")
+        replace_file(out / marker, lambda tmp: tmp.write_text(f"written by {command}\n"))
     except OSError as exc:  # the file system changed since check_output_folder, or refuses anyway
         raise TwinError(f"{out}: cannot write the output folder ({exc.strerror or exc})") from None
+
+
+def replace_file(path: Path, write: Callable[[Path], object]) -> None:
+    """Write ``path`` by ``write(temporary path)`` beside it, then move it into place.
+
+    What stood at ``path`` is replaced, not written through: a symbolic link planted in an output folder
+    (``summary.json`` -> a user's file elsewhere) had that file overwritten by the next run. A failed
+    ``write`` leaves ``path`` as it was and no temporary file behind.
+    """
+    import tempfile
+
+    fd, name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=path.suffix, dir=path.parent)
+    os.close(fd)
+    tmp = Path(name)
+    try:
+        write(tmp)
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
 
 
 def check_record_file(path: Path, inputs: Iterable[Path | None], flag: str = "--record") -> None:

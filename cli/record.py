@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from cli.outputs import check_output_folder, claim_output_folder
+from cli.outputs import check_output_folder, claim_output_folder, replace_file
 from estimation.errors import TwinError
 from sync.clock import Clock
 from sync.netem import Conditions, GilbertElliott, Network
@@ -223,7 +223,8 @@ def replay(path: str | Path, *, script: Path | None = None, scene: Path | None =
     if out is not None:
         from cli.main import to_json
 
-        (out / "summary.json").write_text(to_json(summary) + "\n")
+        text = to_json(summary) + "\n"
+        replace_file(out / "summary.json", lambda tmp: tmp.write_text(text))
     return ReplayResult(summary, twin, remote)
 
 

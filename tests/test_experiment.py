@@ -90,8 +90,19 @@ def test_the_cli_writes_every_column_and_the_same_rows_with_workers(rows, cache,
     for name in ("force_vs_delay.png", "force_vs_mass.png", "divergence.png", "bytes_per_s.png", "report.md"):
         assert (out / name).stat().st_size > 0, name
     assert "Findings" in (out / "report.md").read_text()
-    # Its own folder may be written again; another one may not.
+    # Its own folder may be written again; another one may not. Links planted in it are replaced, not written
+    # through (results.csv -> a user's file elsewhere had that file overwritten).
+    victims = {}
+    from cli.experiment import MARKER
+
+    for name in ("results.csv", "report.md", "divergence.png", MARKER):
+        victim = victims[name] = tmp_path / f"victim{name}"
+        victim.write_text("mine\n")
+        (out / name).unlink()
+        (out / name).symlink_to(victim)
     assert main([*ARGS, "--delays", "0", "--mass-scale", "1", "--workers", "0", "--out", str(out)]) == 0
+    assert all(v.read_text() == "mine\n" for v in victims.values())
+    assert not any(p.is_symlink() for p in out.iterdir())
 
 
 @pytest.mark.parametrize(("extra", "message"), [

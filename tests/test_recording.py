@@ -117,6 +117,14 @@ def test_a_replay_with_another_trajectory_or_network_differs(recorded, cache, tm
     assert summary["network"]["downlink"]["delay_ms"] == 30.0 and summary["network"]["seed"] == 3
     assert summary["twin_vs_remote_mm"]["max"] > 0
     assert read_recording(out / "replay.mcap").metadata["command"] == "replay"
+    # A link planted in the folder it wrote is replaced, not written through: it overwrote the user's file.
+    victim = tmp_path / "victim.txt"
+    victim.write_text("mine\n")
+    (out / "summary.json").unlink()
+    (out / "summary.json").symlink_to(victim)
+    assert main(["replay", str(path), "--out", str(out), "--cache-dir", str(cache)]) == 0
+    assert victim.read_text() == "mine\n" and not (out / "summary.json").is_symlink()
+    assert json.loads((out / "summary.json").read_text())["twin_vs_remote_mm"]["max"] > 0
 
 
 def test_a_torn_tail_is_reported_and_the_intact_part_replays(recorded, cache, tmp_path, capsys):
