@@ -53,7 +53,7 @@ def check_model_size(path: Path) -> None:
             seen.add(file)
             with file.open("rb") as f:
                 text = f.read(left + 1)
-        except OSError:
+        except (OSError, RuntimeError):  # RuntimeError: a loop of links (Python 3.11's resolve); MuJoCo says why
             return 0
         left -= len(text)
         if left < 0:

@@ -350,7 +350,7 @@ def _object(o: ObjectDoc, index: int, base: Path, doc: dict) -> ObjectSpec:
         try:
             value = (base / file).resolve()
             found = value.is_file()  # type: ignore[attr-defined]
-        except (OSError, ValueError) as exc:  # a NUL byte, a loop of links
+        except (OSError, ValueError, RuntimeError) as exc:  # a NUL byte; a loop of links (RuntimeError on 3.11)
             raise SceneError(f"{where}: {source} path {file!r} is not usable ({exc})") from None
         if not found:
             what = ("is a directory" if value.is_dir() else "is not a regular file" if value.exists()  # type: ignore[attr-defined]

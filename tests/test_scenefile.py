@@ -153,6 +153,16 @@ def test_a_mesh_path_that_is_a_folder_or_missing_says_which(tmp_path):
             parse_scene({"name": "x", "objects": [{"id": "a", "mesh": name}]}, base=tmp_path)
 
 
+def test_a_mesh_or_cloud_path_in_a_loop_of_links_is_a_scene_error(tmp_path):
+    # Path.resolve raises RuntimeError on a loop (Python 3.11), not OSError: a traceback from build, run,
+    # experiment and replay (the last also from a recording's stored scene).
+    (tmp_path / "loop.stl").symlink_to(tmp_path / "loop.stl")
+    (tmp_path / "loop.ply").symlink_to(tmp_path / "loop.ply")
+    for source, name in (("mesh", "loop.stl"), ("cloud", "loop.ply")):
+        with pytest.raises(SceneError, match=rf"^object 'a': {source} path '{name}' is not usable \(.*loop"):
+            parse_scene({"name": "x", "objects": [{"id": "a", source: name}]}, base=tmp_path)
+
+
 def test_a_mesh_with_nan_vertices_is_a_scene_error(tmp_path):
     import numpy as np
     import trimesh
