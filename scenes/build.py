@@ -237,7 +237,7 @@ def check_output(out: Path, *, keep: tuple[Path, ...] = ()) -> None:
     """Refuse an output folder a build must not replace.
 
     A build replaces ``out`` whole, so ``out`` must be new, empty, or written by an earlier build (it holds
-    :data:`MARKER`); and never the current folder, one of its parents, or a folder holding any of ``keep``
+    :data:`MARKER`) and nothing since (every file is one the marker lists); and never the current folder, one of its parents, or a folder holding any of ``keep``
     (the scene file and its sources).
 
     Raises:
@@ -266,6 +266,31 @@ def _check_output(out: Path, keep: tuple[Path, ...]) -> None:
             raise BuildError(f"{out}: exists and is not a folder")
         if any(out.iterdir()) and not (out / MARKER).is_file():
             raise BuildError(f"{out}: not empty and not written by 'twin build'; give --out a new or empty folder")
+        if (out / MARKER).is_file():
+            ours = _built_files(out)
+            for path in sorted(out.rglob("*")):
+                name = path.relative_to(out).as_posix()
+                if (path.is_file() or path.is_symlink()) and name not in ours:
+                    # A build replaces the folder whole: what the user put in it since would go with it.
+                    raise BuildError(f"{out}: holds {name}, which no build wrote; move it out or give --out a new "
+                                     f"folder")
+
+
+#: The line of :data:`MARKER` after which the files the build wrote are listed, one per line.
+_FILES_HEADER = "files:"
+
+
+def _built_files(out: Path) -> set[str]:
+    """The files (relative, POSIX) the build that wrote ``out`` listed in its marker, the marker included.
+
+    A marker from before the list (builds before 2026-12-04) names none: what such a build wrote is known by
+    its layout instead (scene.xml, estimates.json, assets/, objects/).
+    """
+    lines = (out / MARKER).read_text(errors="replace").splitlines()
+    if _FILES_HEADER in lines:
+        return {MARKER, *lines[lines.index(_FILES_HEADER) + 1:]}
+    return {MARKER, "scene.xml", ESTIMATES, *(p.relative_to(out).as_posix() for folder in ("assets", OBJECTS)
+                                              for p in (out / folder).rglob("*") if (out / folder).is_dir())}
 
 
 def write_scene(spec, out: Path, *, keep: tuple[Path, ...] = (), built: BuiltScene | None = None) -> Path:  # type: ignore[no-untyped-def]
@@ -310,7 +335,9 @@ def write_scene(spec, out: Path, *, keep: tuple[Path, ...] = (), built: BuiltSce
                 (staging / OBJECTS / f"{obj.id}.xml").write_text(object_xml(obj, staging / OBJECTS))
             record = estimates_record(built)
             (staging / ESTIMATES).write_text(json.dumps(record, indent=1, allow_nan=False) + "\n")
-        (staging / MARKER).write_text("written by 'twin build'; the next build into this folder replaces it\n")
+        written = sorted(p.relative_to(staging).as_posix() for p in staging.rglob("*") if p.is_file())
+        (staging / MARKER).write_text("written by 'twin build'; the next build into this folder replaces it, unless it "
+                                      "holds files not listed here\n" + "\n".join([_FILES_HEADER, *written]) + "\n")
         import mujoco
 
         mujoco.MjModel.from_xml_path(str(staging / "scene.xml"))  # what we write must load

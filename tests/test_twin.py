@@ -207,6 +207,15 @@ def test_cli_build_and_run(small_scene, tmp_path, capsys):
     assert (out / "scene.xml").is_file()
     assert main(["build", str(small_scene), "--out", str(out)]) == 0  # its own earlier output is replaced
     capsys.readouterr()
+    # ... but not a file put in it since: it went with the folder, silently.
+    (out / "assets" / "mynotes.txt").write_text("mine")
+    assert main(["build", str(small_scene), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "holds assets/mynotes.txt, which no build wrote" in err, err
+    assert (out / "assets" / "mynotes.txt").read_text() == "mine" and (out / "scene.xml").is_file()
+    (out / "assets" / "mynotes.txt").unlink()
+    assert main(["build", str(small_scene), "--out", str(out)]) == 0
+    capsys.readouterr()
     assert main(["run", str(out), "--duration", "0.2", "--no-realtime", "--json"]) == 0
     record = json.loads(capsys.readouterr().out, parse_constant=_no_constants)  # strict JSON: no NaN
     assert record["steps"] == 200 and record["objects"] == 2 and record["step_p99_ms"] > 0
