@@ -99,10 +99,16 @@ def _drop_held(held_log) -> None:  # type: ignore[no-untyped-def]
             held_log.buffer.clear()
 
 
+#: Longest error line printed, characters: a message quoting a bad value whole (a 12-million-element position in
+#: a scene file) was a 60 MB line; its head names the problem.
+MAX_ERROR_CHARS = 2000
+
+
 def one_line(text: str) -> str:
     """``text`` on one line: its non-empty lines joined with '; ' (MuJoCo's compile errors add
-    "\nElement name ...")."""
-    return "; ".join(line.strip() for line in text.splitlines() if line.strip())
+    "\nElement name ..."), cut to :data:`MAX_ERROR_CHARS`."""
+    line = "; ".join(part.strip() for part in text[: 4 * MAX_ERROR_CHARS].splitlines() if part.strip())
+    return line if len(line) <= MAX_ERROR_CHARS and len(text) <= 4 * MAX_ERROR_CHARS else line[:MAX_ERROR_CHARS] + " [...]"
 
 
 class _OneLineFormatter(logging.Formatter):

@@ -368,3 +368,14 @@ def test_usage_errors_are_one_line(capsys, argv, message):
     assert stop.value.code == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and re.search(message, err) and err.rstrip().endswith("--help)"), err
+
+
+def test_an_error_quoting_a_huge_value_is_cut_to_a_readable_line(tmp_path, capsys):
+    # A scene whose position holds 200,000 numbers: the error quoted them all (60 MB for 12 million).
+    from cli.main import MAX_ERROR_CHARS, main
+
+    scene = tmp_path / "big.toml"
+    scene.write_text('name = "big"\n[[objects]]\nid = "a"\npaper = "mug"\nposition = [' + ", ".join(["0.5"] * 200_000) + "]\n")
+    assert main(["build", str(scene), "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("twin build: error: ") and len(err) <= MAX_ERROR_CHARS + 40, err[:300]
