@@ -17,7 +17,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import NoReturn
 
-from cli.outputs import check_not_input, check_output_file, check_record_file
+from cli.outputs import check_not_input, check_output_file, check_record_file, replace_file
 from estimation.errors import TwinError
 from estimation.materials import MAX_DENSITY, MIN_DENSITY
 
@@ -107,8 +107,8 @@ MAX_ERROR_CHARS = 2000
 def one_line(text: str) -> str:
     """``text`` on one line: its non-empty lines joined with '; ' (MuJoCo's compile errors add
     "\nElement name ..."), cut to :data:`MAX_ERROR_CHARS`."""
-    line = "; ".join(part.strip() for part in text[: 4 * MAX_ERROR_CHARS].splitlines() if part.strip())
-    return line if len(line) <= MAX_ERROR_CHARS and len(text) <= 4 * MAX_ERROR_CHARS else line[:MAX_ERROR_CHARS] + " [...]"
+    line = "; ".join(part.strip() for part in text.splitlines() if part.strip())
+    return line if len(line) <= MAX_ERROR_CHARS else line[:MAX_ERROR_CHARS] + " [...]"
 
 
 class _OneLineFormatter(logging.Formatter):
@@ -566,26 +566,13 @@ def _print_estimate(record: dict) -> None:
 
 def _write_mesh(vertices, faces, path: Path) -> None:  # type: ignore[no-untyped-def]
     """Write the mesh next to ``path`` and move it there: a failed export leaves an existing file whole."""
-    import os
-    import tempfile
-
     import trimesh
 
-    tmp = None
+    mesh = trimesh.Trimesh(vertices, faces, process=False)
     try:
-        fd, tmp = tempfile.mkstemp(prefix=".twin-mesh-", suffix=path.suffix, dir=path.parent)
-        os.close(fd)
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)  # what a plain open() would have made, not mkstemp's 0600
-        trimesh.Trimesh(vertices, faces, process=False).export(tmp, file_type=path.suffix.lstrip(".").lower())
-        os.replace(tmp, path)
-        tmp = None
+        replace_file(path, lambda tmp: mesh.export(tmp, file_type=path.suffix.lstrip(".").lower()))
     except (OSError, ValueError) as exc:
         raise TwinError(f"{path}: cannot write mesh ({exc})") from exc
-    finally:
-        if tmp is not None:
-            Path(tmp).unlink(missing_ok=True)
 
 
 def _coacd_options(p: argparse.ArgumentParser) -> None:

@@ -116,7 +116,8 @@ def replace_file(path: Path, write: Callable[[Path], object]) -> None:
 
     What stood at ``path`` is replaced, not written through: a symbolic link planted in an output folder
     (``summary.json`` -> a user's file elsewhere) had that file overwritten by the next run. A failed
-    ``write`` leaves ``path`` as it was and no temporary file behind.
+    ``write`` leaves ``path`` as it was and no temporary file behind. The file gets the permissions a plain
+    ``open()`` would have given it, not ``mkstemp``'s 0600.
     """
     import tempfile
 
@@ -124,6 +125,9 @@ def replace_file(path: Path, write: Callable[[Path], object]) -> None:
     os.close(fd)
     tmp = Path(name)
     try:
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)
         write(tmp)
         os.replace(tmp, path)
     except BaseException:

@@ -237,8 +237,8 @@ def check_output(out: Path, *, keep: tuple[Path, ...] = ()) -> None:
     """Refuse an output folder a build must not replace.
 
     A build replaces ``out`` whole, so ``out`` must be new, empty, or written by an earlier build (it holds
-    :data:`MARKER`) and nothing since (every file is one the marker lists); and never the current folder, one of its parents, or a folder holding any of ``keep``
-    (the scene file and its sources).
+    :data:`MARKER`) and nothing since (every file is one the marker lists); and never the current folder, one
+    of its parents, or a folder holding any of ``keep`` (the scene file and its sources).
 
     Raises:
         BuildError: naming the folder and why (a symbolic link is refused: replacing it would follow it to
@@ -290,7 +290,7 @@ def _built_files(out: Path) -> set[str]:
     if _FILES_HEADER in lines:
         return {MARKER, *lines[lines.index(_FILES_HEADER) + 1:]}
     return {MARKER, "scene.xml", ESTIMATES, *(p.relative_to(out).as_posix() for folder in ("assets", OBJECTS)
-                                              for p in (out / folder).rglob("*") if (out / folder).is_dir())}
+                                              for p in (out / folder).rglob("*"))}
 
 
 def write_scene(spec, out: Path, *, keep: tuple[Path, ...] = (), built: BuiltScene | None = None) -> Path:  # type: ignore[no-untyped-def]

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -124,6 +125,9 @@ def test_a_replay_with_another_trajectory_or_network_differs(recorded, cache, tm
     (out / "summary.json").symlink_to(victim)
     assert main(["replay", str(path), "--out", str(out), "--cache-dir", str(cache)]) == 0
     assert victim.read_text() == "mine\n" and not (out / "summary.json").is_symlink()
+    umask = os.umask(0)
+    os.umask(umask)
+    assert (out / "summary.json").stat().st_mode & 0o777 == 0o666 & ~umask  # as open() makes it, not 0600
     assert json.loads((out / "summary.json").read_text())["twin_vs_remote_mm"]["max"] > 0
 
 
