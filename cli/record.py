@@ -20,7 +20,6 @@ from pathlib import Path
 import numpy as np
 
 from cli.outputs import check_output_folder, claim_output_folder, replace_file
-from estimation.errors import TwinError
 from sync.clock import Clock
 from sync.netem import Conditions, GilbertElliott, Network
 from sync.recording import (
@@ -29,6 +28,7 @@ from sync.recording import (
     Recording,
     RecordingError,
     RecordingTransport,
+    check_recording_file,
     read_recording,
 )
 from sync.transport import Transport
@@ -314,9 +314,8 @@ def print_summary(summary: dict) -> None:
 
 
 def check_replay_inputs(path: Path) -> None:
-    """Refuse a missing file before any work (the full read happens in :func:`replay`)."""
-    if not path.is_file():
-        raise TwinError(f"{path}: no such recording")
+    """Refuse a missing file, a folder or a device before any work (the full read happens in :func:`replay`)."""
+    check_recording_file(path)
 
 
 def check_replay_out(out: Path, recording: Path, script: Path | None = None, scene: Path | None = None) -> None:

@@ -500,12 +500,17 @@ class Recording:
 def read_recording(path: str | Path) -> Recording:
     """Read a recording as far as it is intact.
 
+    A chunk whose compressed data or CRC is damaged, but whose framing is whole, is skipped and the read
+    goes on: one flipped byte costs that chunk's messages (:data:`CHUNK_BYTES` of records, counted from
+    the message index that follows it), not the rest of the session. Damage to the framing itself ends
+    the read there (a torn or corrupt tail).
+
     Args:
         path: an ``.mcap`` file written by :class:`Recorder`.
 
     Returns:
-        The recording; ``damage`` says what ended the read early (a torn or corrupt tail: the records
-        before it are kept and ``counts`` says how many of each topic).
+        The recording; ``damage`` says what was skipped or ended the read early (the records kept are in
+        ``records`` and ``counts`` says how many of each topic).
 
     Raises:
         RecordingError: no such file, not an MCAP file, no ``tactile_twin.session`` metadata before the
@@ -514,30 +519,45 @@ def read_recording(path: str | Path) -> Recording:
             (:meth:`Recording.end_time`).
     """
     from mcap.exceptions import McapError, RecordLengthLimitExceeded
-    from mcap.records import Channel, Chunk, Message, Metadata
+    from mcap.records import Channel, Chunk, Message, MessageIndex, Metadata
     from mcap.stream_reader import StreamReader
 
     path = Path(path)
-    if not path.is_file():
-        raise RecordingError(f"{path}: no such recording")
+    check_recording_file(path)
     metadata: dict[str, str] | None = None
     end: dict[str, str] | None = None
     topics: dict[int, str] = {}
-    records: list[Record] = []
+    held: list[tuple[int, int, int, bytes]] = []  # channel id, log time, publish time, data: in file order
+    skipped: list[_Skipped] = []
     damage: str | None = None
-    with open(path, "rb") as f:
+    try:
+        f = open(path, "rb")
+    except OSError as exc:
+        raise RecordingError(f"{path}: cannot read the recording ({exc.strerror or exc})") from None
+    with f:
         reader = StreamReader(f, validate_crcs=True, emit_chunks=True, record_size_limit=MAX_RECORD_BYTES)
         total = 0  # bytes held, decompressed
 
         def unchunked():  # type: ignore[no-untyped-def]
             nonlocal total
+            in_skipped = False  # the message indexes after a skipped chunk count what it held
             for rec in reader.records:
                 if isinstance(rec, Chunk):
-                    data = _inflate(path, rec)
+                    try:
+                        data = _inflate(path, rec)
+                    except McapError as exc:
+                        skipped.append(_Skipped(str(exc), rec.message_start_time, rec.message_end_time))
+                        in_skipped = True
+                        continue
+                    in_skipped = False
                     total += len(data)
                     _check_total(path, total)
                     yield from _chunk_records(data)
+                elif isinstance(rec, MessageIndex):
+                    if in_skipped:
+                        skipped[-1].messages += len(rec.records)
                 else:
+                    in_skipped = False
                     if isinstance(rec, Message):
                         total += len(rec.data)
                         _check_total(path, total)
@@ -554,12 +574,13 @@ def read_recording(path: str | Path) -> Recording:
                 elif isinstance(rec, Channel):
                     topics[rec.id] = rec.topic
                 elif isinstance(rec, Message):
-                    topic = topics.get(rec.channel_id)
-                    if topic is None:
+                    # A channel is declared in the chunk of its first message; after a skipped chunk it may be
+                    # known only from the summary at the end of the file, so it is looked up then.
+                    if rec.channel_id not in topics and not skipped:
                         raise McapError(f"message on unknown channel {rec.channel_id}")
-                    if len(records) >= MAX_RECORDS:
+                    if len(held) >= MAX_RECORDS:
                         raise RecordingError(f"{path}: holds more than {MAX_RECORDS:,} records, the limit")
-                    records.append(Record(topic, rec.log_time, rec.publish_time, rec.data))
+                    held.append((rec.channel_id, rec.log_time, rec.publish_time, rec.data))
         except RecordingError:
             raise
         except RecordLengthLimitExceeded as exc:
@@ -569,12 +590,52 @@ def read_recording(path: str | Path) -> Recording:
             what = type(exc).__name__ + (f": {exc}" if str(exc) else "")
             if metadata is None:
                 raise RecordingError(f"{path}: not a readable tactile-twin recording ({what})") from None
-            damage = f"{path}: the recording is damaged after {len(records)} messages ({what}); using those"
+            damage = f"the recording is damaged after {len(held)} messages ({what}); using those"
     if metadata is None:
         raise RecordingError(f"{path}: no tactile_twin.session metadata: not a tactile-twin recording")
+    records = [Record(topics[c], log, pub, data) for c, log, pub, data in held if c in topics]
+    notes = [_skipped_note(skipped, len(held) - len(records))] if skipped else []
+    if damage is not None:
+        notes.append(damage)
+    damage = f"{path}: " + "; ".join(notes) if notes else None
     recording = Recording(path, metadata, records, end, damage, Counter(r.topic for r in records))
     recording.end_time()  # checked here, whatever the caller reads (targets and truth: when they are read)
     return recording
+
+
+@dataclass
+class _Skipped:
+    """A chunk :func:`read_recording` could not read: why, its messages' time span (ns) and how many."""
+
+    reason: str
+    start_ns: int
+    end_ns: int
+    messages: int = 0
+
+
+def _skipped_note(skipped: list[_Skipped], orphans: int) -> str:
+    """One clause for the damage line: how many chunks were skipped, what they held, the first reason."""
+    lost = sum(s.messages for s in skipped)
+    span = f"{min(s.start_ns for s in skipped) * 1e-9:.3f}-{max(s.end_ns for s in skipped) * 1e-9:.3f} s"
+    more = f", and {orphans} later messages on channels they declared" if orphans else ""
+    return (f"{len(skipped)} damaged chunk{'s' if len(skipped) > 1 else ''} skipped ({lost} messages logged at "
+            f"{span}{more}; {skipped[0].reason})")
+
+
+def check_recording_file(path: Path) -> None:
+    """Raise a :class:`RecordingError` naming what ``path`` is when it is not a regular file to read."""
+    import stat
+
+    try:
+        mode = path.stat().st_mode
+    except FileNotFoundError:
+        raise RecordingError(f"{path}: no such recording") from None
+    except OSError as exc:  # a loop of links, a name too long, a folder we may not enter
+        raise RecordingError(f"{path}: cannot read the recording ({exc.strerror or exc})") from None
+    if stat.S_ISDIR(mode):
+        raise RecordingError(f"{path}: is a folder, not a recording")
+    if not stat.S_ISREG(mode):  # a FIFO would block the read, /dev/zero never end it
+        raise RecordingError(f"{path}: is not a regular file (a device, pipe or socket), not a recording")
 
 
 def _check_total(path: Path, total: int) -> None:

@@ -399,3 +399,54 @@ def test_a_damaged_recording_with_nothing_left_to_replay_says_it_is_damaged(reco
     assert main(["replay", str(torn)]) == 2
     err = capsys.readouterr().err
     assert "nothing to replay" in err and "damaged after" in err and err.count("\n") == 1, err
+
+
+def _chunk_offsets(data: bytes) -> list[tuple[int, int]]:
+    """(start, length) of each top-level Chunk record of an MCAP file, walking its records' framing."""
+    from mcap.opcode import Opcode
+
+    out, at = [], 8  # past the magic
+    while at + 9 <= len(data):
+        opcode, length = data[at], int.from_bytes(data[at + 1 : at + 9], "little")
+        if opcode == Opcode.CHUNK:
+            out.append((at, length))
+        if opcode == Opcode.FOOTER:
+            break
+        at += 9 + length
+    return out
+
+
+def test_a_damaged_chunk_mid_file_is_skipped_and_the_rest_replays(recorded, cache, tmp_path, capsys):
+    path, _, _ = recorded
+    whole = read_recording(path)
+    data = bytearray(path.read_bytes())
+    chunks = _chunk_offsets(bytes(data))
+    assert len(chunks) >= 5, len(chunks)
+    start, length = chunks[len(chunks) // 2]
+    data[start + 9 + length - 100] ^= 0xFF  # one byte inside the chunk's compressed records
+    damaged = tmp_path / "flipped.mcap"
+    damaged.write_bytes(bytes(data))
+    rec = read_recording(damaged)
+    # Only that chunk's messages are lost: those after it, the end record included, are still read.
+    assert rec.damage is not None and "1 damaged chunk skipped" in rec.damage and "\n" not in rec.damage
+    assert rec.end is not None and rec.records[-1] == whole.records[-1]
+    lost = len(whole.records) - len(rec.records)
+    assert 0 < lost < len(whole.records) / 4 and f"({lost} messages logged at" in rec.damage, rec.damage
+    kept = {(r.topic, r.log_time, r.data) for r in rec.records}
+    assert kept < {(r.topic, r.log_time, r.data) for r in whole.records}
+    assert main(["replay", str(damaged), "--json", "--cache-dir", str(cache)]) == 0
+    captured = capsys.readouterr()
+    assert captured.err.count("damaged chunk skipped") == 1 and "warning" in captured.err
+    assert json.loads(captured.out)["duration_s"] == pytest.approx(SECONDS, abs=0.01)
+
+
+def test_a_folder_a_pipe_or_a_device_is_named_not_read(tmp_path, capsys):
+    fifo = tmp_path / "pipe.mcap"
+    os.mkfifo(fifo)
+    for bad, words in [(tmp_path, "is a folder, not a recording"), (fifo, "is not a regular file"),
+                       (Path("/dev/zero"), "is not a regular file")]:
+        with pytest.raises(RecordingError, match=words):
+            read_recording(bad)  # a FIFO blocked the read; /dev/zero was called "no such recording"
+        assert main(["replay", str(bad)]) == 2
+        err = capsys.readouterr().err
+        assert words in err and err.count("\n") == 1, err
