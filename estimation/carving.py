@@ -82,6 +82,28 @@ REACH_SAMPLES = 1_000_000
 SUBSAMPLE = 2
 
 
+#: A view given as points (:func:`depth_of_points`): its pixel pitch is the points' angular spacing, the
+#: distance to the 8th nearest over sqrt(2) (a camera's grid comes back at its own pitch; scattered points
+#: at about 1.3 a pixel) ...
+POINT_IMAGE_NEIGHBOURS = 8
+
+#: ... the image reaches this share of the points' extent beyond them on every side ...
+POINT_IMAGE_MARGIN = 0.25
+
+#: ... and has at most this many pixels a side (coarser pixels past it; 32 MB of depth) ...
+POINT_IMAGE_MAX_PIXELS = 2048
+
+#: ... points measured for the spacing ...
+POINT_IMAGE_SAMPLE = 200_000
+
+#: ... every point must lie within this angle of the image's axis (a pinhole's field of view) ...
+POINT_IMAGE_MAX_ANGLE_DEG = 80.0
+
+#: ... and a cloud with more distinct sensor origins than this is not pictured (an origin per point is a
+#: normal's direction, not a camera).
+POINT_IMAGE_MAX_ORIGINS = 16
+
+
 @dataclass(frozen=True)
 class DepthView:
     """One depth image with its camera: what carving needs of a frame.
@@ -128,6 +150,103 @@ class Carving:
     def index_of(self, points: np.ndarray) -> np.ndarray:
         """Voxel indices (n, 3) int64 of world ``points`` (n, 3), metres; outside the grid as they fall."""
         return np.floor((np.asarray(points) - self.origin) @ self.axes.T / self.cell).astype(np.int64)
+
+
+def depth_of_points(points: np.ndarray, origins: np.ndarray, plane: Plane) -> list[DepthView] | None:
+    """The depth images a view's points imply, for a view that came as points with sensor origins only (a PCD
+    with a VIEWPOINT, a cloud with an origin per point), so that it carves as depth frames do.
+
+    A point says what its pixel says: the space on its ray in front of it is empty. Each distinct origin
+    (at most ``POINT_IMAGE_MAX_ORIGINS``) gets a pinhole camera there, looking at its points' mean direction,
+    its roll set by ``up`` (a rigid motion of points, origins and plane gives the same image), its pixel
+    pitch the points' own angular spacing (the area ``POINT_IMAGE_NEIGHBOURS`` of them cover, per point: a
+    camera's grid comes back at about its pitch). A pixel holds its nearest point. An empty pixel next to a
+    filled one takes the nearest of its neighbours, as a real frame's edge pixels do in
+    :func:`carving_views` (a depth sensor's flying pixels are dropped from its points, and left out each
+    silhouette casts a wedge nobody carves: two views of an L-bracket came out +20 % instead of +6 %).
+
+    The points are taken as cut from a frame of the scene: the rest of an empty background (what joins the
+    image's border) is the support plane, cut away or beyond the cut; a ray there carves down to it. A real
+    frame sees the table around the object, and without it the voxels above the footprint's rim stayed
+    solid to the object's full height (the bracket with its table cut away by hand: +79 %, against +6 %
+    from its frames). The price: a neighbour that hid part of the object and was cut away with the table
+    is carved through. Holes enclosed by points (dropouts) stay without return: unknown, never carved.
+    ``sigma`` is 0: the caller sets the views' noise.
+
+    Args:
+        points: (n, 3) float64 metres, world frame: every point of the view (the table and other objects
+            carve too).
+        origins: (3,) or (n, 3) metres: the sensor centre, or each point's.
+        plane: the support plane (its normal fixes the images' roll; the background reaches it).
+
+    Returns:
+        The views, or None when the points cannot be pictured: more distinct origins than
+        ``POINT_IMAGE_MAX_ORIGINS``, fewer than ``POINT_IMAGE_NEIGHBOURS`` + 1 points from one of them, or a
+        point further than ``POINT_IMAGE_MAX_ANGLE_DEG`` from its image's axis (or behind its sensor).
+    """
+    pts = np.asarray(points, dtype=np.float64)
+    org = np.broadcast_to(np.asarray(origins, dtype=np.float64), pts.shape)
+    centres, which = np.unique(org, axis=0, return_inverse=True)
+    if len(centres) > POINT_IMAGE_MAX_ORIGINS:
+        return None
+    out = []
+    for k, centre in enumerate(centres):
+        view = _depth_of(pts[which.ravel() == k], centre, plane)
+        if view is None:
+            return None
+        out.append(view)
+    return out
+
+
+def _depth_of(points: np.ndarray, origin: np.ndarray, plane: Plane) -> DepthView | None:
+    """One origin's image for :func:`depth_of_points`."""
+    from scipy import ndimage
+    from scipy.spatial import cKDTree
+
+    rel = points - origin
+    if len(rel) <= POINT_IMAGE_NEIGHBOURS:
+        return None
+    ranges = np.linalg.norm(rel, axis=1)
+    axis = (rel / np.maximum(ranges, np.finfo(float).tiny)[:, None]).mean(axis=0)
+    if np.linalg.norm(axis) < 1e-9:
+        return None
+    z = axis / np.linalg.norm(axis)
+    x = np.cross(z, plane.normal)  # OpenCV axes: x right, y down, z forward
+    if np.linalg.norm(x) < 1e-6:  # looking straight down the plane's normal: any roll will do
+        x = np.cross(z, np.eye(3)[np.argmin(np.abs(z))])
+    x /= np.linalg.norm(x)
+    rotation = np.stack([x, np.cross(z, x), z], axis=1)
+    cam = rel @ rotation
+    if np.any(cam[:, 2] <= np.cos(np.radians(POINT_IMAGE_MAX_ANGLE_DEG)) * ranges):
+        return None
+    uv = cam[:, :2] / cam[:, 2:3]
+    sample = uv[:: max(1, len(uv) // POINT_IMAGE_SAMPLE)]  # the spacing of a million points is known well enough
+    reach = cKDTree(sample).query(sample, k=POINT_IMAGE_NEIGHBOURS + 1)[0][:, -1]
+    pitch = float(np.median(reach)) / np.sqrt(2.0)  # a square grid's 8th nearest lies at sqrt(2) pitches
+    low, high = uv.min(axis=0), uv.max(axis=0)
+    # Room round the points: a voxel above the footprint's rim must fall inside the image to be carved.
+    low, high = low - POINT_IMAGE_MARGIN * (high - low), high + POINT_IMAGE_MARGIN * (high - low)
+    pitch = max(pitch, float((high - low).max()) / POINT_IMAGE_MAX_PIXELS, np.finfo(float).eps)
+    f = 1.0 / pitch
+    width, height = (np.ceil((high - low) * f).astype(np.int64) + 1).tolist()
+    cx, cy = -low[0] * f, -low[1] * f
+    col = np.clip(np.floor(uv[:, 0] * f + cx).astype(np.int64), 0, width - 1)
+    row = np.clip(np.floor(uv[:, 1] * f + cy).astype(np.int64), 0, height - 1)
+    depth = np.full((height, width), np.inf)
+    np.minimum.at(depth, (row, col), cam[:, 2])
+    empty = ~np.isfinite(depth)
+    depth[empty] = ndimage.minimum_filter(depth, size=3, mode="constant", cval=np.inf)[empty]
+    labels, _ = ndimage.label(~np.isfinite(depth))
+    rim = np.unique(np.concatenate([labels[0], labels[-1], labels[:, 0], labels[:, -1]]))
+    background = np.isin(labels, rim[rim > 0])
+    intrinsics = Intrinsics(f, f, cx, cy, width, height)
+    rays = intrinsics.rays()[background.ravel()]  # camera frame, z = 1: t is the depth
+    along = rays @ (rotation.T @ plane.normal)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = -(origin @ plane.normal + plane.offset) / along
+    depth[background] = np.where(t > 0, t, np.nan)
+    depth[~np.isfinite(depth)] = np.nan
+    return DepthView(depth, 0.0, intrinsics, rotation, origin)
 
 
 def carving_views(views: Sequence[DepthView], plane: Plane | None, plane_margin: float) -> list[DepthView]:

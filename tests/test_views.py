@@ -451,3 +451,96 @@ def test_a_pcd_viewpoint_with_a_non_unit_quaternion_is_refused(capsys, tmp_path,
     err = capsys.readouterr().err
     assert f"z.pcd: VIEWPOINT's quaternion qw qx qy qz must have norm 1 (within 0.001), got {norm}\n" in err
     assert err.count("\n") == 1
+
+
+def _solid_on_table(kind: str):  # type: ignore[no-untyped-def]
+    """A real MuJoCo model of one solid standing on the table (a 6 x 4 x 5 cm box, a 3 cm ball or a 6.6 x 12 cm
+    can) and its true volume, m^3."""
+    import mujoco
+
+    spec = mujoco.MjSpec()
+    spec.worldbody.add_geom(type=mujoco.mjtGeom.mjGEOM_BOX, size=[0.4, 0.3, 0.02], pos=[0, 0, TOP - 0.02])
+    geom, size, volume = {"box": (mujoco.mjtGeom.mjGEOM_BOX, [0.03, 0.02, 0.025], 0.06 * 0.04 * 0.05),
+                          "ball": (mujoco.mjtGeom.mjGEOM_SPHERE, [0.03, 0, 0], 4 / 3 * np.pi * 0.03**3),
+                          "can": (mujoco.mjtGeom.mjGEOM_CYLINDER, [0.033, 0.06, 0], np.pi * 0.033**2 * 0.12)}[kind]
+    height = size[2] if kind == "box" else size[0] if kind == "ball" else size[1]
+    spec.worldbody.add_geom(type=geom, size=size, pos=[0.0, 0.0, TOP + height])
+    model = spec.compile()
+    data = mujoco.MjData(model)
+    mujoco.mj_forward(model, data)
+    return model, data, volume
+
+
+@pytest.mark.parametrize("kind", ["box", "ball", "can"])
+def test_views_given_as_points_carve_as_their_depth_frames(kind):
+    """A view that comes as points and its sensor origin (a PCD with a VIEWPOINT) carves the space its points'
+    rays passed through, as its depth frame would: one or two cameras, the table cropped close or cut away.
+    Without it the unseen far side was closed by a thin shell: one camera gave a box -58 %, a can -81 %,
+    two cameras a box -57 %. Within the issue's targets (1 camera: 15 % at worst, 2: 10 %) with room to spare:
+    at 1 camera the frames' own carving is 5-9 % off on the ball and the can."""
+    from scenes.cameras import SIGMA_1MM, render
+
+    from estimation.views import View, estimate_views, plane_from_abcd
+
+    model, data, volume = _solid_on_table(kind)
+    rng = np.random.default_rng(1)
+    frames = [render(model, data, cam, noise=SIGMA_1MM, rng=rng) for cam in _cameras()]
+    table = plane_from_abcd([0.0, 0.0, 1.0, -TOP])
+    for count, within in ((1, 0.12), (2, 0.05)):
+        for crop, support, cut_table in [(0.3, "auto", False), (0.08, table, False), (0.3, table, True)]:
+            views = []
+            for frame in frames[:count]:
+                points, _ = frame.points()
+                keep = (np.abs(points[:, 0]) < crop) & (np.abs(points[:, 1]) < crop)
+                if cut_table:
+                    keep &= points[:, 2] > TOP + 0.004
+                views.append(View(points[keep], np.asarray(frame.camera.position, float)))
+            result = estimate_views(views, 1000.0, support=support)
+            case = f"{kind}, {count} camera(s), crop {crop} m, table {'cut' if cut_table else 'kept'}"
+            assert result.estimate.volume == pytest.approx(volume, rel=within), case
+            low, high = result.volume_bounds_m3
+            assert low <= volume <= high, case
+
+
+def test_a_frame_pictured_from_its_points_says_what_the_frame_says():
+    """`carving.depth_of_points` on a depth frame's own points (edge pixels dropped, as `points()` gives them):
+    its pixel is the frame's, it proves free 95 % of what the frame does round a can (97.5-98 % over three
+    noise draws), and under 1 % of the can itself (0.3-0.5 %: the frame's dropouts, filled)."""
+    from scenes.cameras import SIGMA_1MM, render
+
+    from estimation.carving import carving_views, depth_of_points, free_space
+    from estimation.views import plane_from_abcd
+
+    model, data, _ = _solid_on_table("can")
+    frame = render(model, data, _cameras()[0], noise=SIGMA_1MM, rng=np.random.default_rng(2))
+    points, _ = frame.points()
+    table = plane_from_abcd([0.0, 0.0, 1.0, -TOP])
+    probes = np.random.default_rng(3).uniform([-0.1, -0.1, TOP + 0.001], [0.1, 0.1, TOP + 0.15], (50_000, 3))
+    inside = (np.hypot(probes[:, 0], probes[:, 1]) < 0.033) & (probes[:, 2] < TOP + 0.12)
+    real = free_space(probes, carving_views([frame.view()], table, 0.003), slack=0.001)
+    for crop in (0.3, 0.08):
+        near = (np.abs(points[:, 0]) < crop) & (np.abs(points[:, 1]) < crop)
+        (pictured,) = depth_of_points(points[near], np.asarray(frame.camera.position, float), table)
+        assert pictured.intrinsics.fx == pytest.approx(frame.view().intrinsics.fx, rel=0.05)
+        free = free_space(probes, carving_views([pictured], table, 0.003), slack=0.001)
+        assert (free & real).sum() >= 0.95 * real.sum()
+        assert free[inside].mean() < 0.01
+    # A cloud whose every point has its own origin is no camera's: nothing is pictured.
+    cloud = points[:500]
+    assert depth_of_points(cloud, cloud + [0.0, 0.0, 0.5], table) is None
+
+
+def test_one_pcd_of_a_box_estimates_its_volume_from_the_cli(capsys, tmp_path):
+    """The issue's contract end to end: one camera's cloud of a box on the table, as a PCD whose VIEWPOINT is
+    the camera, `twin estimate FILE --support-plane auto`. It was -58 % (the far side a thin shell)."""
+    from scenes.cameras import SIGMA_1MM, render
+
+    model, data, volume = _solid_on_table("box")
+    frame = render(model, data, _cameras()[0], noise=SIGMA_1MM, rng=np.random.default_rng(4))
+    points, _ = frame.points()
+    near = (np.abs(points[:, 0]) < 0.2) & (np.abs(points[:, 1]) < 0.2)
+    save_cloud(make_cloud(points[near], sensor_origins=np.asarray(frame.camera.position, float)), tmp_path / "v.pcd")
+    record = _run(capsys, [str(tmp_path / "v.pcd"), "--support-plane", "auto"])
+    assert record["volume_m3"] == pytest.approx(volume, rel=0.08)
+    low, high = record["volume_bounds_m3"]
+    assert low <= volume and (high is None or volume <= high)
