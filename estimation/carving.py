@@ -44,6 +44,10 @@ FREE_CELLS = 0.5
 #: by more than this many of its noise sigmas.
 PLANE_SIGMAS = 2.0
 
+#: A shadow whose principal spread is under this many times its second is round (:func:`plane_frame`): a disc
+#: of noisy points is within 1.02, a 6 x 4 cm box's top seen at a slant 1.3 and more.
+ROUND_SHADOW = 1.1
+
 #: Voxels along the object's longest extent: the carved solid's resolution. Relative to the object so that
 #: a 2 cm die and a 30 cm box cost the same (~1e5 voxels in the footprint); the carved surface is only
 #: used where nothing was observed, so its cell bounds the error of unseen faces, not of seen ones.
@@ -340,8 +344,42 @@ def _pixels(pts: np.ndarray, view: DepthView) -> tuple[np.ndarray, np.ndarray, n
     return ok, x, y, z
 
 
+def plane_frame(points: np.ndarray, plane: Plane, toward: np.ndarray | None = None
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Axes that move with the object standing on ``plane``: (centre (3,), axes (3, 3) rows e1, e2, up, local
+    (n, 3)): e1 the principal direction of the points' shadow on the plane, up the plane's normal; local
+    holds each point's coordinates along e1 and e2 from the shadow's centre (metres) and its height above the
+    plane. A grid or a size measured in world axes would change with every rotation of the scene.
+
+    A round shadow (its two spreads within ``ROUND_SHADOW``) has no principal direction a rotation keeps; e1
+    is then ``toward``'s part in the plane (the cameras' mean view direction), where it has one. Otherwise
+    e1 points ``toward``'s way, or to the shadow's longer tail: the direction's sign is the SVD's choice,
+    and a flipped grid cuts the object elsewhere (a can seen by one camera moved 1.4 % under rotations).
+    """
+    up = np.asarray(plane.normal, dtype=np.float64)
+    flat = points - np.outer(points @ up, up)
+    centre = flat.mean(axis=0)
+    _, spread, vt = np.linalg.svd(flat - centre, full_matrices=False)
+    axis = vt[0]
+    level = None if toward is None else np.asarray(toward, dtype=np.float64) - (np.asarray(toward) @ up) * up
+    if level is not None and np.linalg.norm(level) > 1e-3:
+        if spread[0] < ROUND_SHADOW * spread[1]:
+            axis = level
+        elif axis @ level < 0:
+            axis = -axis  # the SVD's sign is arbitrary: flipped, the grid's cells fall elsewhere on the object
+    elif np.sum(((flat - centre) @ axis) ** 3) < 0:
+        axis = -axis
+    e1 = axis - (axis @ up) * up
+    e1 /= np.linalg.norm(e1)
+    axes = np.stack([e1, np.cross(up, e1), up])
+    local = (points - centre) @ axes.T
+    local[:, 2] = plane.height(points)
+    return centre, axes, local
+
+
 def carve(points: np.ndarray, views: Sequence[DepthView], plane: Plane, *, others: np.ndarray | None = None,
-          cell: float | None = None, origins: np.ndarray | None = None, normals: np.ndarray | None = None) -> Carving:
+          cell: float | None = None, origins: np.ndarray | None = None, normals: np.ndarray | None = None,
+          toward: np.ndarray | None = None) -> Carving:
     """The solid around one object's observed ``points`` that no view saw through.
 
     It stands on the object's footprint: the points' shadow on the plane, gaps closed, and grown by how far
@@ -359,6 +397,8 @@ def carve(points: np.ndarray, views: Sequence[DepthView], plane: Plane, *, other
         others: (m, 3) observed points of other objects: a voxel nearer to one of them than to ``points``
             is theirs (unseen space between two objects is split between them; distances on the grid).
         cell: voxel size, metres; None: the longest extent over ``CELLS_PER_EXTENT``.
+        toward: (3,) the cameras' mean view direction: the grid's axis where the shadow is round
+            (:func:`plane_frame`).
     """
     from scipy import ndimage
 
@@ -366,16 +406,8 @@ def carve(points: np.ndarray, views: Sequence[DepthView], plane: Plane, *, other
 
     pts = as_points(points, "points")
     up = np.asarray(plane.normal, dtype=np.float64)
-    # In-plane axes from the shadow's principal direction, so the grid moves with the object (a grid fixed to
-    # the world's axes gives another voxelisation, and another volume, per rotation).
-    flat = pts - np.outer(pts @ up, up)
-    centre = flat.mean(axis=0)
-    axis = np.linalg.svd(flat - centre, full_matrices=False)[2][0]
-    e1 = axis - (axis @ up) * up
-    e1 /= np.linalg.norm(e1)
-    axes = np.stack([e1, np.cross(up, e1), up])
-    local = (pts - centre) @ axes.T
-    local[:, 2] = plane.height(pts)
+    centre, axes, local = plane_frame(pts, plane, toward)
+    e1 = axes[0]
     extent = float(np.ptp(local, axis=0).max())
     if cell is None:
         cell = max(extent / CELLS_PER_EXTENT, 1e-4)

@@ -433,12 +433,20 @@ def _complete(points: np.ndarray, normals: np.ndarray, origins: np.ndarray, plan
         return Completion(pts, nrm, bottom.base_area if len(base[0]) else 0.0, mirrored=len(mirrored[0]))
     # Voxels fine enough to put two layers in the band the plane removal cut from the walls (the carved wall
     # there meets the base), within the cost bound of ``carving.MAX_CELLS_PER_EXTENT``.
-    from estimation.carving import CELLS_PER_EXTENT, MAX_CELLS_PER_EXTENT, SUBSAMPLE, carve, carved_surface
+    from estimation.carving import (
+        CELLS_PER_EXTENT,
+        MAX_CELLS_PER_EXTENT,
+        SUBSAMPLE,
+        carve,
+        carved_surface,
+        plane_frame,
+    )
 
-    extent = float(np.ptp(points, axis=0).max())
+    toward = mean_view_direction(points, origins, plane.normal)
+    extent = float(np.ptp(plane_frame(points, plane, toward)[2], axis=0).max())  # in world axes: not invariant
     voxel = min(extent / CELLS_PER_EXTENT, max(0.5 * cut, extent / MAX_CELLS_PER_EXTENT))
     unknown = np.full_like(turned[0], np.nan)
-    carving = carve(np.concatenate([points, turned[0]]), views, plane, others=others, cell=voxel,
+    carving = carve(np.concatenate([points, turned[0]]), views, plane, others=others, cell=voxel, toward=toward,
                     origins=np.concatenate([origins, unknown]), normals=np.concatenate([normals, unknown]))
     surface, surface_n = carved_surface(carving)
     have = np.concatenate(have_p)

@@ -208,19 +208,25 @@ PARALLEL_DEGREES = 15.0
 EXTENT_MARGIN_THRESHOLDS = 2.0
 
 
-def _largest_above(points: np.ndarray, h: np.ndarray, cut: float) -> tuple[np.ndarray, np.ndarray]:
-    """(object, others): (n,) bool masks of the largest connected cluster more than ``cut`` above the plane
-    (heights ``h``, metres) and of the other clusters.
+def _largest_above(points: np.ndarray, origins: np.ndarray, plane: Plane, cut: float
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """(object, others): (n,) bool masks of the largest connected cluster more than ``cut`` (metres) above
+    ``plane`` and of the other clusters; ``origins`` (n, 3) are the points' sensors.
 
     Raises:
         CloudError: fewer than 3 points above the cut, or no cluster among them.
     """
-    keep = np.flatnonzero(h > cut)
+    from estimation.carving import plane_frame
+
+    keep = np.flatnonzero(plane.height(points) > cut)
     if len(keep) < 3:
         raise CloudError(f"only {len(keep)} points lie above the support plane")
     # What the cut leaves of the plane (its noise tail, edge pixels) is scattered over the whole table;
-    # the object is the largest connected cluster above it.
-    labels = cluster(points[keep], cell=CLUSTER_SPACINGS * median_spacing(points[keep]))
+    # the object is the largest connected cluster above it. Its voxels are laid in axes that move with the
+    # scene: on the world's, a rotation of the same views let other stray points join the object.
+    above = points[keep]
+    local = plane_frame(above, plane, mean_view_direction(above, origins[keep], plane.normal))[2]
+    labels = cluster(local, cell=CLUSTER_SPACINGS * median_spacing(above))
     if (labels == 0).sum() < 3:
         raise CloudError("no object above the support plane (only scattered points)")
     obj, others = np.zeros(len(points), dtype=bool), np.zeros(len(points), dtype=bool)
@@ -340,7 +346,7 @@ def estimate_views(views: list[View], density: float, *, support: Plane | str | 
         if below > MAX_BELOW_GIVEN:
             raise CloudError(f"support plane: {100 * below:.0f} % of the points lie more than {1000 * cut:.2g} mm "
                              f"below it (its normal must point up into the object's side)")
-        obj, others = _largest_above(points, h, cut)
+        obj, others = _largest_above(points, origins, plane, cut)
         if found:
             # Whole frames of a tabletop hold the floor too, a plane with everything above it: the "object"
             # above the floor is then the table with the object standing on it. Its own support is the table.
@@ -352,7 +358,7 @@ def estimate_views(views: list[View], density: float, *, support: Plane | str | 
                 plane = higher
                 h = plane.height(points)
                 cut = plane.clearance(threshold)
-                obj, others = _largest_above(points, h, cut)
+                obj, others = _largest_above(points, origins, plane, cut)
                 warnings.append(f"what stood on the first plane found was itself mostly a plane with something "
                                 f"standing on it (a table on the floor?): took that plane (z = {-plane.offset:.4g} "
                                 f"m where level) as the support")

@@ -544,3 +544,27 @@ def test_one_pcd_of_a_box_estimates_its_volume_from_the_cli(capsys, tmp_path):
     assert record["volume_m3"] == pytest.approx(volume, rel=0.08)
     low, high = record["volume_bounds_m3"]
     assert low <= volume and (high is None or volume <= high)
+
+
+@pytest.mark.parametrize("kind", ["can", "ball"])
+def test_one_camera_of_a_round_object_keeps_its_volume_under_rigid_motion(kind):
+    """Within 0.2 % (the issue asks 0.5 %), plane found in the data. The can moved 1.2 % and the ball 1.0 %:
+    the segment's voxels lay on the world's axes (another stray point joined the object per rotation), and the
+    carving grid's axis took the SVD's arbitrary sign and its size from the world-axis extent."""
+    from scipy.spatial.transform import Rotation
+
+    from scenes.cameras import SIGMA_1MM, render
+
+    from estimation.views import View, estimate_views
+
+    model, data, _ = _solid_on_table(kind)
+    frame = render(model, data, _cameras()[0], noise=SIGMA_1MM, rng=np.random.default_rng(1))
+    points, _ = frame.points()
+    points = points[(np.abs(points[:, 0]) < 0.2) & (np.abs(points[:, 1]) < 0.2)]
+    origin = np.asarray(frame.camera.position, float)
+    base = estimate_views([View(points, origin)], 1000.0, support="auto").estimate.volume
+    rng = np.random.default_rng(7)
+    for _ in range(3):
+        rot, shift = Rotation.random(random_state=rng).as_matrix(), rng.uniform(-2, 2, 3)
+        moved = estimate_views([View(points @ rot.T + shift, rot @ origin + shift)], 1000.0, support="auto")
+        assert moved.estimate.volume == pytest.approx(base, rel=0.002)
