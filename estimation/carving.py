@@ -97,7 +97,7 @@ POINT_IMAGE_MARGIN = 0.25
 #: ... and has at most this many pixels a side (coarser pixels past it; 32 MB of depth) ...
 POINT_IMAGE_MAX_PIXELS = 2048
 
-#: ... points measured for the spacing ...
+#: ... points whose neighbours are measured for the spacing ...
 POINT_IMAGE_SAMPLE = 200_000
 
 #: ... every point must lie within this angle of the image's axis (a pinhole's field of view) ...
@@ -224,8 +224,10 @@ def _depth_of(points: np.ndarray, origin: np.ndarray, plane: Plane) -> DepthView
     if np.any(cam[:, 2] <= np.cos(np.radians(POINT_IMAGE_MAX_ANGLE_DEG)) * ranges):
         return None
     uv = cam[:, :2] / cam[:, 2:3]
-    sample = uv[:: max(1, len(uv) // POINT_IMAGE_SAMPLE)]  # the spacing of a million points is known well enough
-    reach = cKDTree(sample).query(sample, k=POINT_IMAGE_NEIGHBOURS + 1)[0][:, -1]
+    # Measured at a sample of the points, among all of them (a strided subset's own neighbours are further
+    # apart: whole 1280 x 720 frames were pictured at twice the camera's pitch, and a die came out +24 %).
+    sample = uv[:: max(1, len(uv) // POINT_IMAGE_SAMPLE)]
+    reach = cKDTree(uv).query(sample, k=POINT_IMAGE_NEIGHBOURS + 1, workers=-1)[0][:, -1]
     pitch = float(np.median(reach)) / np.sqrt(2.0)  # a square grid's 8th nearest lies at sqrt(2) pitches
     low, high = uv.min(axis=0), uv.max(axis=0)
     # Room round the points: a voxel above the footprint's rim must fall inside the image to be carved.

@@ -502,7 +502,7 @@ def test_views_given_as_points_carve_as_their_depth_frames(kind):
             assert low <= volume <= high, case
 
 
-def test_a_frame_pictured_from_its_points_says_what_the_frame_says():
+def test_a_frame_pictured_from_its_points_says_what_the_frame_says(monkeypatch):
     """`carving.depth_of_points` on a depth frame's own points (edge pixels dropped, as `points()` gives them):
     its pixel is the frame's, it proves free 95 % of what the frame does round a can (97.5-98 % over three
     noise draws), and under 1 % of the can itself (0.3-0.5 %: the frame's dropouts, filled)."""
@@ -525,6 +525,13 @@ def test_a_frame_pictured_from_its_points_says_what_the_frame_says():
         free = free_space(probes, carving_views([pictured], table, 0.003), slack=0.001)
         assert (free & real).sum() >= 0.95 * real.sum()
         assert free[inside].mean() < 0.01
+    # The spacing measured at a sample of a big frame's points is still the frame's pixel: measured among the
+    # sample itself, a whole 1280 x 720 frame was pictured at twice the camera's pitch.
+    import estimation.carving
+
+    monkeypatch.setattr(estimation.carving, "POINT_IMAGE_SAMPLE", len(points) // 10)
+    (sampled,) = depth_of_points(points, np.asarray(frame.camera.position, float), table)
+    assert sampled.intrinsics.fx == pytest.approx(frame.view().intrinsics.fx, rel=0.05)
     # A cloud whose every point has its own origin is no camera's: nothing is pictured.
     cloud = points[:500]
     assert depth_of_points(cloud, cloud + [0.0, 0.0, 0.5], table) is None
