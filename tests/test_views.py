@@ -478,9 +478,8 @@ def test_views_given_as_points_carve_as_their_depth_frames(kind):
     Without it the unseen far side was closed by a thin shell: one camera gave a box -58 %, a can -81 %,
     two cameras a box -57 %. Within the issue's targets (1 camera: 15 % at worst, 2: 10 %) with room to spare:
     at 1 camera the frames' own carving is 5-9 % off on the ball and the can."""
-    from scenes.cameras import SIGMA_1MM, render
-
     from estimation.views import View, estimate_views, plane_from_abcd
+    from scenes.cameras import SIGMA_1MM, render
 
     model, data, volume = _solid_on_table(kind)
     rng = np.random.default_rng(1)
@@ -506,10 +505,9 @@ def test_a_frame_pictured_from_its_points_says_what_the_frame_says(monkeypatch):
     """`carving.depth_of_points` on a depth frame's own points (edge pixels dropped, as `points()` gives them):
     its pixel is the frame's, it proves free 95 % of what the frame does round a can (97.5-98 % over three
     noise draws), and under 1 % of the can itself (0.3-0.5 %: the frame's dropouts, filled)."""
-    from scenes.cameras import SIGMA_1MM, render
-
     from estimation.carving import carving_views, depth_of_points, free_space
     from estimation.views import plane_from_abcd
+    from scenes.cameras import SIGMA_1MM, render
 
     model, data, _ = _solid_on_table("can")
     frame = render(model, data, _cameras()[0], noise=SIGMA_1MM, rng=np.random.default_rng(2))
@@ -534,7 +532,7 @@ def test_a_frame_pictured_from_its_points_says_what_the_frame_says(monkeypatch):
     assert sampled.intrinsics.fx == pytest.approx(frame.view().intrinsics.fx, rel=0.05)
     # A cloud whose every point has its own origin is no camera's: nothing is pictured.
     cloud = points[:500]
-    assert depth_of_points(cloud, cloud + [0.0, 0.0, 0.5], table) is None
+    assert depth_of_points(cloud, cloud + np.array([0.0, 0.0, 0.5]), table) is None
 
 
 def test_one_pcd_of_a_box_estimates_its_volume_from_the_cli(capsys, tmp_path):
@@ -560,9 +558,8 @@ def test_one_camera_of_a_round_object_keeps_its_volume_under_rigid_motion(kind):
     carving grid's axis took the SVD's arbitrary sign and its size from the world-axis extent."""
     from scipy.spatial.transform import Rotation
 
-    from scenes.cameras import SIGMA_1MM, render
-
     from estimation.views import View, estimate_views
+    from scenes.cameras import SIGMA_1MM, render
 
     model, data, _ = _solid_on_table(kind)
     frame = render(model, data, _cameras()[0], noise=SIGMA_1MM, rng=np.random.default_rng(1))
