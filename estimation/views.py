@@ -235,6 +235,23 @@ def _largest_above(points: np.ndarray, origins: np.ndarray, plane: Plane, cut: f
     return obj, others
 
 
+def _gap_below(points: np.ndarray, plane: Plane) -> str | None:
+    """A warning when the object's points ((n, 3) metres) all stand further above ``plane`` than the object is
+    wide: no object seen rests on such a plane (a plane in another frame or other units, a floor given for
+    a table), and closing the base on it makes a tower of what nobody saw. Nearer than that, a plane below
+    an object seen only from above cannot be told from one it rests on; nothing is said."""
+    from estimation.carving import plane_frame
+
+    local = plane_frame(points, plane)[2]
+    lowest = float(np.percentile(local[:, 2], 1))
+    width = float(np.ptp(local[:, :2], axis=0).max())
+    if lowest <= width:
+        return None
+    return (f"the object's lowest points lie {1000 * lowest:.0f} mm above the support plane, more than the object "
+            f"is wide ({1000 * width:.0f} mm): it does not rest on that plane, and closing it down to the plane "
+            f"adds what no camera saw (is the plane in the views' frame and units?)")
+
+
 def _standing_support(points: np.ndarray, plane: Plane, *, threshold: float, toward: np.ndarray,
                       rng: np.random.Generator) -> Plane | None:
     """The plane that ``points`` (what stands on ``plane``, metres) are mostly made of, if it is a support
@@ -367,6 +384,8 @@ def estimate_views(views: list[View], density: float, *, support: Plane | str | 
                             f"(another object in the views?)")
         others = points[others]
         points, origins = points[obj], origins[obj]
+        if (gap := _gap_below(points, plane)) is not None:
+            warnings.append(gap)
         normals = oriented_normals(points, origins)
         from estimation.carving import carving_views, depth_of_points
 
