@@ -156,8 +156,7 @@ class Carving:
         return np.floor((np.asarray(points) - self.origin) @ self.axes.T / self.cell).astype(np.int64)
 
 
-def depth_of_points(points: np.ndarray, origins: np.ndarray, plane: Plane, *, background: bool = True
-                    ) -> list[DepthView] | None:
+def depth_of_points(points: np.ndarray, origins: np.ndarray, plane: Plane) -> list[DepthView] | None:
     """The depth images a view's points imply, for a view that came as points with sensor origins only (a PCD
     with a VIEWPOINT, a cloud with an origin per point), so that it carves as depth frames do.
 
@@ -182,9 +181,7 @@ def depth_of_points(points: np.ndarray, origins: np.ndarray, plane: Plane, *, ba
         points: (n, 3) float64 metres, world frame: every point of the view (the table and other objects
             carve too).
         origins: (3,) or (n, 3) metres: the sensor centre, or each point's.
-        plane: the support plane (its normal fixes the images' roll).
-        background: whether the empty background reaches ``plane`` (False: it stays unknown, for a plane
-            that was only guessed).
+        plane: the support plane (its normal fixes the images' roll; the background reaches it).
 
     Returns:
         The views, or None when the points cannot be pictured: more distinct origins than
@@ -201,14 +198,14 @@ def depth_of_points(points: np.ndarray, origins: np.ndarray, plane: Plane, *, ba
         return None
     out = []
     for k, centre in enumerate(centres):
-        view = _depth_of(pts[which.ravel() == k], centre, plane, background)
+        view = _depth_of(pts[which.ravel() == k], centre, plane)
         if view is None:
             return None
         out.append(view)
     return out
 
 
-def _depth_of(points: np.ndarray, origin: np.ndarray, plane: Plane, background: bool) -> DepthView | None:
+def _depth_of(points: np.ndarray, origin: np.ndarray, plane: Plane) -> DepthView | None:
     """One origin's image for :func:`depth_of_points`."""
     from scipy import ndimage
     from scipy.spatial import cKDTree
@@ -249,15 +246,14 @@ def _depth_of(points: np.ndarray, origin: np.ndarray, plane: Plane, background: 
     empty = ~np.isfinite(depth)
     depth[empty] = ndimage.minimum_filter(depth, size=3, mode="constant", cval=np.inf)[empty]
     intrinsics = Intrinsics(f, f, cx, cy, width, height)
-    if background:
-        labels, _ = ndimage.label(~np.isfinite(depth))
-        rim = np.unique(np.concatenate([labels[0], labels[-1], labels[:, 0], labels[:, -1]]))
-        empty = np.isin(labels, rim[rim > 0])
-        rays = intrinsics.rays()[empty.ravel()]  # camera frame, z = 1: t is the depth
-        along = rays @ (rotation.T @ plane.normal)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t = -(origin @ plane.normal + plane.offset) / along
-        depth[empty] = np.where(t > 0, t, np.nan)
+    labels, _ = ndimage.label(~np.isfinite(depth))
+    rim = np.unique(np.concatenate([labels[0], labels[-1], labels[:, 0], labels[:, -1]]))
+    background = np.isin(labels, rim[rim > 0])
+    rays = intrinsics.rays()[background.ravel()]  # camera frame, z = 1: t is the depth
+    along = rays @ (rotation.T @ plane.normal)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = -(origin @ plane.normal + plane.offset) / along
+    depth[background] = np.where(t > 0, t, np.nan)
     depth[~np.isfinite(depth)] = np.nan
     return DepthView(depth, 0.0, intrinsics, rotation, origin)
 

@@ -342,7 +342,6 @@ def estimate_views(views: list[View], density: float, *, support: Plane | str | 
     warnings: list[str] = []
     plane: Plane | None
     found = False  # the plane was found in the data (not given, not the fallback through the lowest point)
-    given = not isinstance(support, str)
     if isinstance(support, str):
         if support != "auto":
             raise CloudError(f"support plane: expected 'auto' or A B C D, got {support!r}")
@@ -394,11 +393,7 @@ def estimate_views(views: list[View], density: float, *, support: Plane | str | 
         # box seen by one or two cameras was closed by a thin shell (-30 to -80 %).
         depths: list[DepthView] | None = []
         for v in views:
-            # The background is the plane only where the plane is known: a guess through the lowest point
-            # (no plane in the data) lay on a table's side face below its top, and carving down to it made a
-            # box near the table's edge +83 % (cropped, bench/views.py).
-            pictured = [v.depth] if v.depth is not None else depth_of_points(v.points, v.origin, plane,  # type: ignore[arg-type]
-                                                                             background=given or found)
+            pictured = [v.depth] if v.depth is not None else depth_of_points(v.points, v.origin, plane)  # type: ignore[arg-type]
             depths = None if pictured is None or depths is None else depths + pictured
         carving = None
         if depths is not None:
