@@ -100,6 +100,9 @@ POINT_IMAGE_MAX_PIXELS = 2048
 #: ... points whose neighbours are measured for the spacing ...
 POINT_IMAGE_SAMPLE = 20_000
 
+#: ... the most points of one origin pictured (a 1920 x 1080 frame whole) ...
+POINT_IMAGE_MAX_POINTS = 2_100_000
+
 #: ... every point must lie within this angle of the image's axis (a pinhole's field of view) ...
 POINT_IMAGE_MAX_ANGLE_DEG = 80.0
 
@@ -162,9 +165,11 @@ def depth_of_points(points: np.ndarray, origins: np.ndarray, plane: Plane) -> li
 
     A point says what its pixel says: the space on its ray in front of it is empty. Each distinct origin
     (at most ``POINT_IMAGE_MAX_ORIGINS``) gets a pinhole camera there, looking at its points' mean direction,
-    its roll set by ``up`` (a rigid motion of points, origins and plane gives the same image), its pixel
-    pitch the points' own angular spacing (the area ``POINT_IMAGE_NEIGHBOURS`` of them cover, per point: a
-    camera's grid comes back at about its pitch). A pixel holds its nearest point. An empty pixel next to a
+    its roll set by the plane's normal (a rigid motion of points, origins and plane gives the same image),
+    its pixel pitch the points' own angular spacing (``POINT_IMAGE_NEIGHBOURS``: a camera's grid comes back
+    at its pitch). A pixel holds its nearest point. More than ``POINT_IMAGE_MAX_POINTS`` points from one
+    origin are pictured from a seeded random share of them, at the pitch that share has (a 4096 x 4096
+    frame's k-d tree would take seconds and gigabytes). An empty pixel next to a
     filled one takes the nearest of its neighbours, as a real frame's edge pixels do in
     :func:`carving_views` (a depth sensor's flying pixels are dropped from its points, and left out each
     silhouette casts a wedge nobody carves: two views of an L-bracket came out +20 % instead of +6 %).
@@ -210,6 +215,8 @@ def _depth_of(points: np.ndarray, origin: np.ndarray, plane: Plane) -> DepthView
     from scipy import ndimage
     from scipy.spatial import cKDTree
 
+    if len(points) > POINT_IMAGE_MAX_POINTS:
+        points = points[np.random.default_rng(0).choice(len(points), POINT_IMAGE_MAX_POINTS, replace=False)]
     rel = points - origin
     if len(rel) <= POINT_IMAGE_NEIGHBOURS:
         return None

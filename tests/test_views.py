@@ -530,6 +530,10 @@ def test_a_frame_pictured_from_its_points_says_what_the_frame_says(monkeypatch):
     monkeypatch.setattr(estimation.carving, "POINT_IMAGE_SAMPLE", len(points) // 10)
     (sampled,) = depth_of_points(points, np.asarray(frame.camera.position, float), table)
     assert sampled.intrinsics.fx == pytest.approx(frame.view().intrinsics.fx, rel=0.05)
+    # Past the point cap, a random quarter is pictured at the pitch a quarter has: about twice the frame's.
+    monkeypatch.setattr(estimation.carving, "POINT_IMAGE_MAX_POINTS", len(points) // 4)
+    (quarter,) = depth_of_points(points, np.asarray(frame.camera.position, float), table)
+    assert 0.3 < quarter.intrinsics.fx / frame.view().intrinsics.fx < 0.6
     # Cut close, the background is the table: the plane's depth on each ray.
     cut = points[np.hypot(points[:, 0], points[:, 1]) < 0.05]
     (known,) = depth_of_points(cut, np.asarray(frame.camera.position, float), table)
