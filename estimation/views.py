@@ -391,14 +391,12 @@ def estimate_views(views: list[View], density: float, *, support: Plane | str | 
 
         # A view that came as points carves as the depth image they imply: without it the far side of a
         # box seen by one or two cameras was closed by a thin shell (-30 to -80 %).
-        depths: list[DepthView] | None = []
-        for v in views:
-            pictured = [v.depth] if v.depth is not None else depth_of_points(v.points, v.origin, plane)  # type: ignore[arg-type]
-            depths = None if pictured is None or depths is None else depths + pictured
+        pictures = [[v.depth] if v.depth is not None else depth_of_points(v.points, v.origin, plane)  # type: ignore[arg-type]
+                    for v in views]
         carving = None
-        if depths is not None:
+        if all(p is not None for p in pictures):
             # A file does not say its sensor's noise: the fused points' own, for every pixel.
-            carving = carving_views([replace(d, sigma=noise) for d in depths], plane, cut)
+            carving = carving_views([replace(d, sigma=noise) for p in pictures for d in p], plane, cut)  # type: ignore[union-attr]
         closed = close_on_plane(points, origins, normals, plane, cell=point_spacing(points), cut=cut, noise=noise,
                                 views=carving, others=others)
     else:
