@@ -89,6 +89,10 @@ Positive = Annotated[float, Meta(gt=0)]
 Density = Annotated[float, Meta(ge=MIN_DENSITY, le=MAX_DENSITY)]
 Size = Annotated[float, Meta(ge=SIZE_RANGE_M[0], le=SIZE_RANGE_M[1])]
 Vec3 = tuple[float, float, float]
+
+#: A turn, degrees: within a full turn either way (1e300 degrees was accepted, an angle whose remainder
+#: after whole turns no float holds).
+Angle = Annotated[float, Meta(ge=-360.0, le=360.0)]
 #: A position in the world, m: within the wire's bound on coordinates (a 1e300 m start built, and its
 #: poses could never be sent).
 Coordinate = Annotated[float, Meta(ge=-MAX_COORDINATE, le=MAX_COORDINATE)]
@@ -172,8 +176,9 @@ class ObjectDoc(Struct, forbid_unknown_fields=True):
     position: Annotated[tuple[Coordinate, ...], Meta(
         min_length=2, max_length=3,
         description="world frame, m: [x, y] rests on the table, [x, y, z] exactly there (see docs/scenes.md)")] = (0.0, 0.0)
-    rotation_deg: Annotated[Vec3, Meta(
-        description="degrees about Z, then local X, then local Y; not for clouds")] = (0.0, 0.0, 0.0)
+    rotation_deg: Annotated[tuple[Angle, Angle, Angle], Meta(
+        description="degrees about Z, then local X, then local Y, each within [-360, 360]; not for clouds")] = (
+        0.0, 0.0, 0.0)
     quat: Annotated[tuple[float, float, float, float], Meta(
         description="cloud only: orientation of the cloud's frame in the world, w x y z")] | UnsetType = UNSET
     rotation: Annotated[tuple[Vec3, Vec3, Vec3], Meta(
@@ -473,6 +478,8 @@ def _translate(message: str, doc: dict) -> str:
         if isinstance(value, int | float) and value <= 0:
             return f"{where}: must be positive, got {_number(value)}"
         return f"{where}: must be {MIN_DENSITY:g} to {MAX_DENSITY:g} kg/m^3, got {_number(value)}"
+    if last == "rotation_deg" and expected.startswith(("Expected `float` >=", "Expected `float` <=")):
+        return f"{where}: must be within a turn, -360 to 360 degrees, got {_number(value)}"
     if expected.startswith((f"Expected `float` >= {-MAX_COORDINATE}", f"Expected `float` <= {MAX_COORDINATE}")):
         return f"{where}: must be within {MAX_COORDINATE:g} m of the origin, got {_number(value)}"
     if expected.startswith("Expected `float` >"):

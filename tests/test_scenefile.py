@@ -74,6 +74,11 @@ def _top(**top: object) -> dict:
         (_scene(position=[10**400, 0]), r"^object 'mug' position\[0\]: must be finite, got 100000000000\.\.\. \(401 digits\)$"),
         # Positions within the wire's 1 km: a 1e300 m start built, and its poses could never be sent.
         (_scene(position=[1e300, 0]), r"^object 'mug' position\[0\]: must be within 1000 m of the origin, got 1e\+300$"),
+        # Turns within one turn either way: 1e300 degrees was accepted, an angle no float holds modulo 360.
+        (_scene(rotation_deg=[1e300, 0, 0]),
+         r"^object 'mug' rotation_deg\[0\]: must be within a turn, -360 to 360 degrees, got 1e\+300$"),
+        (_scene(rotation_deg=[0, -400, 0]),
+         r"^object 'mug' rotation_deg\[1\]: must be within a turn, -360 to 360 degrees, got -400.0$"),
         (_top(end_effector={"position": [0, 0, -5000]}),
          r"^end_effector.position\[2\]: must be within 1000 m of the origin, got -5000.0$"),
         (_top(workspace={"min": [-1e9, 0, 0], "max": [1, 1, 1]}),
