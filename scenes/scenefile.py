@@ -339,6 +339,8 @@ def parse_scene(doc: dict, *, base: Path = Path("."), path: Path | None = None) 
     dupes = {i for i, n in counts.items() if n > 1}
     if dupes:
         raise SceneError(f"scene: duplicate object id(s) {sorted(dupes)}")
+    if workspace is not None:
+        _check_inside(objects, workspace)
     return SceneSpec(name=scene.name, objects=objects, table=table, end_effector=ee, path=path, workspace=workspace)
 
 
@@ -495,6 +497,18 @@ def _translate(message: str, doc: dict) -> str:
         got = f"{len(value)}" if isinstance(value, list | tuple) else _kind(value)
         return f"{where}: expected {shape}, got {got}"
     return f"{where}: {what[:1].lower()}{what[1:]}"  # anything else, in msgspec's own words
+
+
+def _check_inside(objects: tuple[ObjectSpec, ...], workspace: tuple[Vec3, Vec3]) -> None:
+    """Raise a :class:`SceneError` for the first object placed outside the declared ``workspace`` (on x and y,
+    and z when given): the twin drops every pose and cloud outside it, so such an object was built, sensed and
+    never shown (a fuzz finding)."""
+    low, high = workspace
+    for o in objects:
+        axes = range(len(o.position))
+        if not all(low[k] <= o.position[k] <= high[k] for k in axes):
+            raise SceneError(f"object {o.id!r}: position {list(o.position)} lies outside the workspace (min "
+                             f"{list(low)}, max {list(high)}); the twin would drop its poses")
 
 
 def _lookup(doc: object, tokens: list[str | int]) -> tuple[bool, object]:
