@@ -373,7 +373,10 @@ def plane_frame(points: np.ndarray, plane: Plane, toward: np.ndarray | None = No
     centre = flat.mean(axis=0)
     _, spread, vt = np.linalg.svd(flat - centre, full_matrices=False)
     axis = vt[0]
-    level = None if toward is None else np.asarray(toward, dtype=np.float64) - (np.asarray(toward) @ up) * up
+    level = None
+    if toward is not None:
+        toward = np.asarray(toward, dtype=np.float64)
+        level = toward - (toward @ up) * up
     if level is not None and np.linalg.norm(level) > 1e-3:
         if spread[0] < ROUND_SHADOW * spread[1]:
             axis = level
