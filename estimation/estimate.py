@@ -43,6 +43,11 @@ log = logging.getLogger(__name__)
 
 METHODS = ("auto", "obb", "hull", "surface")
 
+#: The noise set the cell when the cell is within this factor of ``tol.FINE_CELL_NOISE`` noise sigmas (the cell is
+#: the larger of that and the spacing's): then each face is a layer several points deep, and the shape of its
+#: spread can be read (``_merged_sheets``).
+NOISE_SET_CELL = 1.01
+
 
 @dataclass(frozen=True)
 class Timings:
@@ -268,6 +273,8 @@ def _estimate_auto(
             warnings.append(f"the cloud is open ({100 * unmeasured:.0f} % of the surface not measured, in holes "
                             f"wider than the flood fill closes): the volume may be anything up to the points' "
                             f"convex hull, {bounds[0]:.4g}..{bounds[1]:.4g} m^3")
+    if noise > 0 and h <= tol.FINE_CELL_NOISE * noise * NOISE_SET_CELL:
+        bounds = _merged_sheets(run, surface, bounds, warnings)
     if run.thin > tol.VOLUME_DOUBT_FRACTION * props.volume:
         warnings.append(f"parts thinner than the point spacing ({1000 * h:.2g} mm cells hold both faces of a "
                         f"wall in {surface.opposed_cells} places): the volume is only known to "
@@ -282,6 +289,29 @@ def _estimate_auto(
         normals=box.to_cloud(run.normals, direction=True).astype(np.float32),
         volume_bounds_m3=bounds,
     )
+
+
+def _merged_sheets(run: _AutoPass, surface: DualSurface, bounds: tuple[float, float],
+                   warnings: list[str]) -> tuple[float, float]:
+    """``bounds`` widened, and a warning, where the points lie in two sheets about the surface (``estimation.sheets``):
+    the faces of a wall thinner than the noise, merged. A hollow ball merged into a solid one holds a shell the
+    wall thick under its surface; a plate merged into a slab, half the slab's surface times the plate. The
+    separation measured falls short of the wall by up to a tenth (a 1.8 mm plate read 1.6 mm). A shell a quarter
+    of the separation thick under the whole surface lies below both: the volume may be as little as that."""
+    from estimation.sheets import spread_about
+
+    found = spread_about(run.points, surface.vertices, surface.normals)
+    log.debug("sheets: kurtosis %.2f, spread %.3g m, separation %.3g m", found.kurtosis, found.spread,
+              found.separation)
+    if not found.two_sheets:
+        return bounds
+    shell = _area(surface) * found.separation / 4
+    low = min(bounds[0], shell)
+    warnings.append(f"the points lie in two sheets about {1000 * found.separation:.2g} mm apart across the surface "
+                    f"(their spread's kurtosis {found.kurtosis:.2f}, one noisy face gives 3): a wall thinner than "
+                    f"the noise may have been filled (a hollow object?), or views are out of register; the volume "
+                    f"is only known to {low:.4g}..{bounds[1]:.4g} m^3")
+    return (low, bounds[1])
 
 
 @dataclass(frozen=True)
