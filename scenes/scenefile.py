@@ -79,6 +79,10 @@ SIZE_RANGE_M = (1e-3, 100.0)
 #: trimesh reads them only with lxml (and pycollada), which the project does not install, so every one failed.
 MESH_SUFFIXES = (".stl", ".obj", ".ply", ".off", ".glb", ".gltf")
 
+#: A mesh file larger than this is refused before it is read: 256 MiB is a binary STL of 5M triangles, and the
+#: twin samples an object's mesh for its cloud (``ObjectDoc.points``), so it gains nothing from a finer one.
+MAX_MESH_BYTES = 256 * 2**20
+
 # -- the document's shape ----------------------------------------------------------------------------------
 # Struct defaults are the loader's defaults; UNSET marks a key whose absence means something (no table,
 # no source of that kind). TOML has no null, so no field takes None.
@@ -167,8 +171,8 @@ class ObjectDoc(Struct, forbid_unknown_fields=True):
 
     id: Annotated[str, Meta(pattern=_ID_PATTERN, description="unique in the scene")]
     paper: Annotated[Text, Meta(description="one of the paper's objects")] | UnsetType = UNSET
-    mesh: Annotated[Text, Meta(description="mesh file, relative to the scene file, in `units`")] | UnsetType = UNSET
-    cloud: Annotated[Text, Meta(description="point-cloud file, relative to the scene file, in `units`")] | UnsetType = UNSET
+    mesh: Annotated[Text, Meta(description="mesh file beside or below the scene file (no `..`, not absolute), in `units`")] | UnsetType = UNSET
+    cloud: Annotated[Text, Meta(description="point-cloud file beside or below the scene file (no `..`, not absolute), in `units`")] | UnsetType = UNSET
     primitive: PrimitiveDoc | UnsetType = UNSET
     units: Annotated[Literal["m", "cm", "mm"], Meta(description="units of a mesh or cloud file")] = "m"
     material: Annotated[Text, Meta(description="material name or alias: density and friction")] | UnsetType = UNSET
@@ -354,6 +358,7 @@ def _object(o: ObjectDoc, index: int, base: Path, doc: dict) -> ObjectSpec:
     value: object = getattr(o, source)
     if source in ("mesh", "cloud"):
         file = str(value)
+        _check_beside(file, f"{where}: {source} path")
         try:
             value = (base / file).resolve()
             found = value.is_file()  # type: ignore[attr-defined]
@@ -363,9 +368,8 @@ def _object(o: ObjectDoc, index: int, base: Path, doc: dict) -> ObjectSpec:
             what = ("is a directory" if value.is_dir() else "is not a regular file" if value.exists()  # type: ignore[attr-defined]
                     else "does not exist")
             raise SceneError(f"{where}: {source} file {value} {what}")
-        if source == "mesh" and value.suffix.lower() not in MESH_SUFFIXES:  # type: ignore[attr-defined]
-            raise SceneError(f"{where}: mesh file {value} is not a mesh format we read; use one of "
-                             f"{', '.join(MESH_SUFFIXES)}")
+        if source == "mesh":
+            _check_mesh_file(value, where)  # type: ignore[arg-type]
     elif source == "primitive":
         value = {"type": o.primitive.__struct_config__.tag, "size": o.primitive.size}  # type: ignore[union-attr]
     else:
@@ -379,6 +383,34 @@ def _object(o: ObjectDoc, index: int, base: Path, doc: dict) -> ObjectSpec:
         units=o.units, position=o.position, rotation_deg=o.rotation_deg, points=o.points,
         frame_rotation=frame_rotation, viewpoints=() if o.viewpoints is UNSET else tuple(o.viewpoints),
     )
+
+
+def _check_beside(file: str, what: str) -> None:
+    """Refuse a path that is absolute or climbs out of its folder (``..``).
+
+    A scene file is data people hand around. One that named ``/home/you/design.stl`` or ``../../design.stl``
+    would have the remote sample that file and publish its points to whoever subscribes. A link put in the
+    scene's folder is followed: putting it there was the folder owner's choice.
+    """
+    path = Path(file)
+    if path.is_absolute() or path.drive or ".." in path.parts:
+        raise SceneError(f"{what} {file!r} leads outside the scene file's folder: a scene names only files beside "
+                         f"or below it (copy or link the file there)")
+
+
+def _check_mesh_file(path: Path, where: str) -> None:
+    """Refuse a mesh file we do not read and one too large to be one object's.
+
+    A glTF's buffers and images outside its own folder are refused by trimesh's loader (its ``FilePathResolver``
+    as of trimesh 5.2; ``tests/test_scenefile.py`` holds it to that).
+    """
+    if path.suffix.lower() not in MESH_SUFFIXES:
+        raise SceneError(f"{where}: mesh file {path} is not a mesh format we read; use one of "
+                         f"{', '.join(MESH_SUFFIXES)}")
+    size = path.stat().st_size
+    if size > MAX_MESH_BYTES:
+        raise SceneError(f"{where}: mesh file {path} is {size / 2**20:,.0f} MiB, more than the "
+                         f"{MAX_MESH_BYTES / 2**20:,.0f} MiB one object's mesh may take (simplify it first)")
 
 
 def _frame_rotation(o: ObjectDoc, source: str, where: str) -> tuple[Vec3, Vec3, Vec3] | None:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import re
 from pathlib import Path
 
 import pytest
@@ -166,6 +167,64 @@ def test_a_mesh_or_cloud_path_in_a_loop_of_links_is_a_scene_error(tmp_path):
     for source, name in (("mesh", "loop.stl"), ("cloud", "loop.ply")):
         with pytest.raises(SceneError, match=rf"^object 'a': {source} path '{name}' is not usable \(.*loop"):
             parse_scene({"name": "x", "objects": [{"id": "a", source: name}]}, base=tmp_path)
+
+
+@pytest.mark.parametrize("source", ["mesh", "cloud"])
+@pytest.mark.parametrize("where", ["absolute", "up", "up-inside"])
+def test_a_path_out_of_the_scene_files_folder_is_refused(tmp_path, source, where):
+    # A scene file handed around that names /home/you/design.stl or ../design.stl would have the remote sample that
+    # file and publish its points. Before, both loaded.
+    import trimesh
+
+    scene_dir = tmp_path / "scene"
+    (scene_dir / "sub").mkdir(parents=True)
+    name = "box.stl" if source == "mesh" else "box.ply"
+    outside = tmp_path / name
+    box = trimesh.creation.box(extents=[0.05] * 3)
+    if source == "mesh":
+        box.export(outside)
+    else:
+        trimesh.PointCloud(box.sample(500, seed=0)).export(outside)
+    file = {"absolute": str(outside), "up": f"../{name}", "up-inside": f"sub/../../{name}"}[where]
+    with pytest.raises(SceneError, match=rf"^object 'a': {source} path '{re.escape(file)}' leads outside the scene "
+                                         r"file's folder: .*\(copy or link the file there\)$"):
+        parse_scene({"name": "x", "objects": [{"id": "a", source: file}]}, base=scene_dir)
+    (scene_dir / "sub" / name).symlink_to(outside)  # the folder's owner linked it: followed
+    spec = parse_scene({"name": "x", "objects": [{"id": "a", source: f"sub/{name}"}]}, base=scene_dir).objects[0]
+    assert spec.value == outside.resolve()
+
+
+def test_a_mesh_file_too_large_for_one_object_is_refused_before_it_is_read(tmp_path, monkeypatch):
+    import trimesh
+
+    import scenes.scenefile as scenefile
+
+    trimesh.creation.box(extents=[0.05] * 3).export(tmp_path / "box.stl")
+    monkeypatch.setattr(scenefile, "MAX_MESH_BYTES", (tmp_path / "box.stl").stat().st_size - 1)
+    with pytest.raises(SceneError, match=r"^object 'a': mesh file .*box\.stl is 0 MiB, more than the 0 MiB one "
+                                         r"object's mesh may take \(simplify it first\)$"):
+        parse_scene({"name": "x", "objects": [{"id": "a", "mesh": "box.stl"}]}, base=tmp_path)
+
+
+def test_a_gltf_whose_buffer_lies_outside_its_folder_is_not_read(tmp_path):
+    # The glTF's own paths are trimesh's to resolve; its loader keeps them in the file's folder (trimesh 5.2).
+    import json
+
+    import trimesh
+
+    from scenes.sources import source_mesh
+
+    scene_dir = tmp_path / "scene"
+    scene_dir.mkdir()
+    trimesh.creation.box(extents=[0.05] * 3).export(scene_dir / "box.gltf")
+    doc = json.loads((scene_dir / "box.gltf").read_text())
+    for buffer in doc["buffers"]:
+        (scene_dir / buffer["uri"]).rename(tmp_path / buffer["uri"])
+        buffer["uri"] = f"../{buffer['uri']}"
+    (scene_dir / "box.gltf").write_text(json.dumps(doc))
+    spec = parse_scene({"name": "x", "objects": [{"id": "a", "mesh": "box.gltf"}]}, base=scene_dir).objects[0]
+    with pytest.raises(SceneError, match=r"^object 'a': cannot read mesh .*box\.gltf \(.*escapes"):
+        source_mesh(spec)
 
 
 def test_a_mesh_with_nan_vertices_is_a_scene_error(tmp_path):
