@@ -18,6 +18,7 @@ import trimesh
 from scipy.spatial import cKDTree
 
 from estimation import PhysicalEstimate, PointCloud, estimate, from_mesh, load_cloud
+from estimation import tolerances as tol
 from estimation.cloud import is_single_origin
 from estimation.errors import TwinError
 from estimation.fusion import oriented_normals
@@ -133,14 +134,39 @@ def estimate_object(spec: ObjectSpec) -> tuple[PhysicalEstimate, float]:
         if mesh is None:
             cloud, viewpoint = scene_cloud(spec)
         else:
+            if spec.source == "mesh":
+                _check_size(spec, mesh.extents)
             # Seeded by the id, so the same scene builds the same twin.
             cloud = sample_surface(mesh, spec.points, seed=zlib.crc32(spec.id.encode()))
         result = estimate(cloud, density, material=None if mat is None else mat.name, viewpoint=viewpoint)
+        if spec.source == "cloud":
+            _check_size(spec, result.obb.extents)  # the points' box once strays are dropped
     except SceneError:
         raise
     except TwinError as exc:
         raise SceneError(f"object {spec.id!r}: {exc}") from exc
     return result, DEFAULT_FRICTION if mat is None else mat.friction
+
+
+def _check_size(spec: ObjectSpec, extents: np.ndarray) -> None:
+    """Refuse a mesh or cloud object whose size (``extents``, metres, in the scene's units) says its file is in other
+    units: a cup drawn in mm read as metres is 90 m across and 90,000 t, and failed on where the end effector
+    starts; a part in metres read as mm failed in MuJoCo's inertia check."""
+    largest = float(np.max(extents))
+    low, high = tol.PLAUSIBLE_EXTENT_M
+    if low <= largest <= high:
+        return
+    if largest > high:
+        hint = 'if the file is in mm or cm, set units = "mm" or "cm" on the object'
+    else:
+        hint = 'if the file is in metres, set units = "m" on the object' if spec.units != "m" else \
+            "if the file is in metres, the object is smaller than a scene can hold"
+    raise SceneError(f"object {spec.id!r} ({spec.source} {Path(str(spec.value)).name}) is {_length(largest)} across "
+                     f"read in units = {spec.units!r}; a scene's objects are {_length(low)} to {_length(high)}: {hint}")
+
+
+def _length(metres: float) -> str:
+    return f"{metres:.3g} m" if metres >= 1 else f"{1000 * metres:.3g} mm"
 
 
 def frame_rotation(spec: ObjectSpec) -> np.ndarray:

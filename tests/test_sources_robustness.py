@@ -5,6 +5,7 @@ from __future__ import annotations
 import base64
 import json
 import os
+import re
 
 import numpy as np
 import pytest
@@ -103,6 +104,28 @@ def test_running_out_of_memory_while_loading_is_said_so_not_blamed_on_the_file(t
     err = capsys.readouterr().err.splitlines()[-1]
     assert "out of memory" in err and "cannot read mesh" not in err, err
     assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize(("source", "scale", "units", "message"), [
+    ("mesh", 1000.0, "m", r"is 100 m across read in units = 'm'; .* set units = \"mm\" or \"cm\" on the object$"),
+    ("cloud", 1000.0, "m", r"is 1\d\d m across read in units = 'm'; .* set units = \"mm\" or \"cm\" on the object$"),
+    ("mesh", 0.001, "mm", r"is 0.0001 mm across read in units = 'mm'; .* set units = \"m\" on the object$"),
+    ("mesh", 0.0006, "m", r"is 0.06 mm across read in units = 'm'; a scene's objects are 2 mm to 5 m"),
+])
+def test_a_file_in_other_units_than_the_scene_says_is_one_line_on_its_size(tmp_path, capsys, source, scale, units,
+                                                                          message):
+    # A 100 mm box drawn in mm and read as metres built a 1,000 t box and failed on where the end effector starts; a
+    # 0.06 mm one failed in MuJoCo's inertia check. Neither said what was wrong.
+    box = BOX.copy().apply_scale(scale)
+    name = "box.stl" if source == "mesh" else "box.ply"
+    if source == "mesh":
+        box.export(tmp_path / name)
+    else:
+        trimesh.PointCloud(box.sample(3000, seed=0)).export(tmp_path / name)
+    scene = tmp_path / "scene.toml"
+    scene.write_text(f'name = "s"\n[[objects]]\nid = "m"\n{source} = "{name}"\nunits = "{units}"\npoints = 2000\n')
+    err = _build_fails(scene, tmp_path, capsys)
+    assert re.search(rf"object 'm' \({source} {name}\) {message}", err), err
 
 
 def test_a_sound_gltf_and_ply_still_read(tmp_path):
