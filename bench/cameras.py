@@ -84,7 +84,9 @@ def run_scene(name: str | Path, cameras: int, noise_name: str = "KINECT_V1", cam
                               reference_estimate(spec)[0].mass.mass / truth)
             errors[spec.id] = result.volume / truth - 1
             observed = seen.points if seen.completed is None else seen.points[~seen.completed]
-            coverage[spec.id], (low, high) = assess(result, observed, surface_noise(observed))
+            facing = None if seen.normals is None else (
+                seen.normals if seen.completed is None else seen.normals[~seen.completed])
+            coverage[spec.id], (low, high) = assess(result, observed, surface_noise(observed), normals=facing)
             held[spec.id] = low <= truth <= high
             width[spec.id] = (high - low) / truth
         except TwinError as exc:

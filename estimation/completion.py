@@ -492,16 +492,29 @@ def _new(points: np.ndarray, normals: np.ndarray, have: np.ndarray, distance: fl
     return points[far], normals[far]
 
 
-def coverage(vertices: np.ndarray, faces: np.ndarray, observed: np.ndarray, *, radius: float) -> tuple[float, float]:
+#: With the observed points' normals, a face is observed only by a point within ``radius`` whose normal is within
+#: 60 degrees of the face's: a noisy normal on a small part is off by tens of degrees, while the faces a point
+#: cannot have seen (the base under a side wall's lowest points) turn 90 degrees from it.
+FACING_COS = 0.5
+
+#: Observed points whose normals are compared with each face's: the nearest this many within ``radius``.
+FACING_NEIGHBOURS = 8
+
+
+def coverage(vertices: np.ndarray, faces: np.ndarray, observed: np.ndarray, *, radius: float,
+             normals: np.ndarray | None = None) -> tuple[float, float]:
     """How much of a closed surface some sensor saw: (observed area, total area), m^2.
 
-    A face counts as observed when its centroid lies within ``radius`` of an observed point; the rest was
-    closed by completion or by the reconstruction's hole closing.
+    A face counts as observed when its centroid lies within ``radius`` of an observed point (with ``normals``:
+    of one facing its way, ``FACING_COS``); the rest was closed by completion or by the reconstruction's hole
+    closing. Without normals, a small object's base counted as seen from its side walls' lowest points: a
+    14 mm nut on a table reported 1.00.
 
     Args:
-        vertices: (v, 3) float64 metres; faces: (f, 3) int64, the closed surface.
+        vertices: (v, 3) float64 metres; faces: (f, 3) int64, the closed surface (outward winding).
         observed: (n, 3) float64 metres, same frame: the points a sensor returned (completed ones excluded).
         radius: metres, about two reconstruction cells (a face between two measured points is observed).
+        normals: (n, 3) unit outward normals of ``observed`` (NaN rows: unknown, facing any way), or None.
     """
     from scipy.spatial import cKDTree
 
@@ -510,8 +523,18 @@ def coverage(vertices: np.ndarray, faces: np.ndarray, observed: np.ndarray, *, r
     obs = as_points(observed, "observed")
     if len(obs) == 0 or len(tri) == 0:
         return 0.0, float(area.sum())
-    dist, _ = cKDTree(obs).query(tri.mean(axis=1), k=1, distance_upper_bound=radius, workers=-1)
-    return float(area[np.isfinite(dist)].sum()), float(area.sum())
+    k = 1 if normals is None else min(FACING_NEIGHBOURS, len(obs))
+    dist, index = cKDTree(obs).query(tri.mean(axis=1), k=k, distance_upper_bound=radius, workers=-1)
+    if normals is None:
+        return float(area[np.isfinite(dist)].sum()), float(area.sum())
+    dist, index = dist.reshape(len(tri), k), index.reshape(len(tri), k)
+    near = np.isfinite(dist)
+    facing = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    facing /= np.maximum(np.linalg.norm(facing, axis=1, keepdims=True), 1e-300)
+    own = np.asarray(normals, dtype=np.float64)[np.where(near, index, 0)]  # (f, k, 3)
+    agree = np.einsum("fkc,fc->fk", own, facing)
+    seen = (near & ((agree >= FACING_COS) | np.isnan(agree))).any(axis=1)
+    return float(area[seen].sum()), float(area.sum())
 
 
 #: Observed surface may lie this many noise sigmas from the reconstructed one on average (bias on curved

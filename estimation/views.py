@@ -400,6 +400,7 @@ def estimate_views(views: list[View], density: float, *, support: Plane | str | 
         closed = close_on_plane(points, origins, normals, plane, cell=point_spacing(points), cut=cut, noise=noise,
                                 views=carving, others=others)
     else:
+        normals = oriented_normals(points, origins)  # for coverage only: nothing is closed without a plane
         closed = close_on_plane(points, origins, np.full_like(points, np.nan), None, cell=0.0, cut=0.0)
     completion = closed.completion
     observed = len(points)
@@ -407,7 +408,7 @@ def estimate_views(views: list[View], density: float, *, support: Plane | str | 
     alln = np.where(closed.completed[:, None], closed.normals, np.nan)
     cloud = fused_cloud(closed.points, closed.origins, completed=closed.completed, completed_normals=alln)
     result = estimate(cloud, density, material=material, keep_strays=keep_strays, progress=progress)
-    share, bounds = assess(result, points, noise)
+    share, bounds = assess(result, points, noise, normals=normals)
     warnings.extend(result.warnings)
     if len(completion.points):
         warnings.append(f"the base ({completion.base_area * 1e4:.3g} cm^2) was closed on the support plane, "
@@ -435,20 +436,23 @@ def _one_sided(points: np.ndarray, origins: np.ndarray) -> bool:
     return float(np.linalg.norm(mean_view_direction(points, origins))) >= ONE_SIDED
 
 
-def assess(result: PhysicalEstimate, observed: np.ndarray, noise: float) -> tuple[float, tuple[float, float]]:
+def assess(result: PhysicalEstimate, observed: np.ndarray, noise: float, *,
+           normals: np.ndarray | None = None) -> tuple[float, tuple[float, float]]:
     """Coverage (0-1) of ``result``'s mesh by the ``observed`` points and its volume interval (m^3).
 
     Args:
         result: an estimate (its mesh, cell and bounds are used).
         observed: (n, 3) float64 metres, same frame: the points a sensor returned (no completed ones).
         noise: metres, the observed points' sigma (``spacing.surface_noise``).
+        normals: (n, 3) the observed points' outward normals, if known: a face counts as seen only by points
+            facing its way (``completion.coverage``).
     """
     from estimation.spacing import point_spacing
 
     # A face between two measured points is observed: the radius follows the observed points' spacing
     # when the reconstruction's cell is finer (completed points can make it so).
     radius = 2 * max(result.cell, point_spacing(observed) if len(observed) > 1 else 0.0)
-    seen, total = coverage(result.vertices, result.faces, observed, radius=radius)
+    seen, total = coverage(result.vertices, result.faces, observed, radius=radius, normals=normals)
     share = seen / total if total > 0 else 0.0
     return share, honest_bounds(result.volume, result.volume_bounds_m3, total - seen, total, noise=noise,
                                 extent=float(result.obb.extents.min()))

@@ -603,3 +603,24 @@ def test_a_support_plane_far_below_the_object_is_warned_about():
         said = [w for w in result.warnings if "above the support plane, more than the object is wide" in w]
         assert bool(said) == warned, result.warnings
     assert said[0].startswith("the object's lowest points lie 30")
+
+
+def test_a_small_objects_base_is_not_counted_seen_from_its_side_walls():
+    # A 15 mm cube on a table: every point of its base lies within the coverage radius (two 4 mm cells) of its
+    # side walls' lowest points, so a 14 mm nut reported coverage 1.00. Points seen only count for faces that
+    # face their way.
+    import trimesh
+
+    from estimation.completion import coverage
+
+    cube = trimesh.creation.box(extents=(0.015, 0.015, 0.015))
+    points, faces = trimesh.sample.sample_surface_even(cube, 4000, seed=0)
+    normals = cube.face_normals[faces]
+    seen = normals[:, 2] > -0.5  # the top and the sides, not the base
+    blind, total = coverage(cube.vertices, cube.faces, points[seen], radius=0.008)
+    facing, _ = coverage(cube.vertices, cube.faces, points[seen], radius=0.008, normals=normals[seen])
+    assert blind == pytest.approx(total)
+    assert facing == pytest.approx(total * 5 / 6, rel=1e-6)
+    unknown, _ = coverage(cube.vertices, cube.faces, points[seen], radius=0.008,
+                          normals=np.full_like(normals[seen], np.nan))
+    assert unknown == pytest.approx(total)  # a normal that could not be fitted faces any way
