@@ -416,7 +416,10 @@ def _cmd_estimate(args: argparse.Namespace) -> int:
             result = estimate(cloud, density, method=args.method, material=name, read_seconds=read,
                               viewpoint=origin if origin is not None and origin.ndim == 1 else None,
                               keep_strays=args.keep_strays, progress=progress)
-            cov = assess(result, cloud.points, 0.0)[0] if result.method == "auto" else None
+            # The points the surface was built from, with their outward normals: a face counts only where they
+            # face it (a single view's slab has a far face nothing measured).
+            cov = assess(result, result.points.astype(np.float64), 0.0,
+                         normals=result.normals.astype(np.float64))[0] if result.method == "auto" else None
             bounds, warnings, plane = result.volume_bounds_m3, result.warnings, None
         else:
             fused = estimate_views(views, density, support=support, material=name, keep_strays=args.keep_strays,

@@ -38,7 +38,6 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from estimation.contracts import as_points
-from estimation.inertia import triangle_areas
 from estimation.neighbours import nearest
 from estimation.segmentation import Plane
 
@@ -492,51 +491,6 @@ def _new(points: np.ndarray, normals: np.ndarray, have: np.ndarray, distance: fl
     return points[far], normals[far]
 
 
-#: With the observed points' normals, a face is observed only by a point within ``radius`` whose normal is within
-#: 60 degrees of the face's: a noisy normal on a small part is off by tens of degrees, while the faces a point
-#: cannot have seen (the base under a side wall's lowest points) turn 90 degrees from it.
-FACING_COS = 0.5
-
-#: Observed points whose normals are compared with each face's: the nearest this many within ``radius``.
-FACING_NEIGHBOURS = 8
-
-
-def coverage(vertices: np.ndarray, faces: np.ndarray, observed: np.ndarray, *, radius: float,
-             normals: np.ndarray | None = None) -> tuple[float, float]:
-    """How much of a closed surface some sensor saw: (observed area, total area), m^2.
-
-    A face counts as observed when its centroid lies within ``radius`` of an observed point (with ``normals``:
-    of one facing its way, ``FACING_COS``); the rest was closed by completion or by the reconstruction's hole
-    closing. Without normals, a small object's base counted as seen from its side walls' lowest points: a
-    14 mm nut on a table reported 1.00.
-
-    Args:
-        vertices: (v, 3) float64 metres; faces: (f, 3) int64, the closed surface (outward winding).
-        observed: (n, 3) float64 metres, same frame: the points a sensor returned (completed ones excluded).
-        radius: metres, about two reconstruction cells (a face between two measured points is observed).
-        normals: (n, 3) unit outward normals of ``observed`` (NaN rows: unknown, facing any way), or None.
-    """
-    from scipy.spatial import cKDTree
-
-    tri = np.asarray(vertices, dtype=np.float64)[np.asarray(faces, dtype=np.int64)]
-    area = triangle_areas(tri)
-    obs = as_points(observed, "observed")
-    if len(obs) == 0 or len(tri) == 0:
-        return 0.0, float(area.sum())
-    k = 1 if normals is None else min(FACING_NEIGHBOURS, len(obs))
-    dist, index = cKDTree(obs).query(tri.mean(axis=1), k=k, distance_upper_bound=radius, workers=-1)
-    if normals is None:
-        return float(area[np.isfinite(dist)].sum()), float(area.sum())
-    dist, index = dist.reshape(len(tri), k), index.reshape(len(tri), k)
-    near = np.isfinite(dist)
-    facing = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    facing /= np.maximum(np.linalg.norm(facing, axis=1, keepdims=True), 1e-300)
-    own = np.asarray(normals, dtype=np.float64)[np.where(near, index, 0)]  # (f, k, 3)
-    agree = np.einsum("fkc,fc->fk", own, facing)
-    seen = (near & ((agree >= FACING_COS) | np.isnan(agree))).any(axis=1)
-    return float(area[seen].sum()), float(area.sum())
-
-
 #: Observed surface may lie this many noise sigmas from the reconstructed one on average (bias on curved
 #: or small objects, flying pixels that survived). With ``BOUND_UNSEEN_FRACTION`` calibrated on the
 #: clutter20 scene at 1-3 cameras (bench/cameras.py: the estimate's own bounds held the truth in 75 % of
@@ -558,7 +512,7 @@ def honest_bounds(volume: float, estimate_bounds: tuple[float, float] | None, un
 
     Args:
         volume: m^3, the estimate. estimate_bounds: (low, high) m^3 or None (= volume).
-        unobserved_area, area: m^2 (:func:`coverage`). noise: metres, sensor sigma of the observed points.
+        unobserved_area, area: m^2 (:func:`estimation.coverage.coverage`). noise: metres, sensor sigma of the observed points.
         extent: metres, the object's smallest extent (the OBB's).
     """
     low, high = estimate_bounds if estimate_bounds is not None else (volume, volume)

@@ -24,8 +24,9 @@ import numpy as np
 from estimation import tolerances as tol
 from estimation.carving import DepthView
 from estimation.cloud import check_count_and_range, check_sensor_origin
-from estimation.completion import ONE_SIDED, close_on_plane, coverage, honest_bounds, mean_view_direction
+from estimation.completion import ONE_SIDED, close_on_plane, honest_bounds, mean_view_direction
 from estimation.contracts import as_points
+from estimation.coverage import coverage
 from estimation.errors import CloudError
 from estimation.estimate import PhysicalEstimate, estimate
 from estimation.fusion import fuse_views, fused_cloud, oriented_normals
