@@ -174,7 +174,14 @@ def estimate(
     warnings = [f"dropped {cloud.dropped_nonfinite} rows with NaN or inf"] if cloud.dropped_nonfinite else []
     # Strays go before the shape checks: a stray point 1 km off made a ball look line-like.
     cloud, spacing = _drop_strays(cloud, warnings, keep_strays)
-    check_estimable(cloud)
+    try:
+        check_estimable(cloud)
+    except CloudError as exc:
+        # Two balls 100 m apart are a line to the shape check: the parts are the news, not the line.
+        parts = next((w for w in warnings if w.startswith("the cloud is ") and "separate parts" in w), None)
+        if parts is None:
+            raise
+        raise CloudError(f"{exc}: {parts.split(': ')[0]} (split the cloud into its objects)") from None
 
     box, local = oriented_box_local(cloud.points)
     if (hint := units_warning(box.extents)) is not None:

@@ -236,11 +236,21 @@ def _largest_above(points: np.ndarray, origins: np.ndarray, plane: Plane, cut: f
     return obj, others
 
 
+#: A support plane further below the object's lowest points than this many times the object's width is refused:
+#: closing the base down to it grew a grid with the gap (a 5 cm dome over a plane 100 m below took 9 GB, one 10 km
+#: below was killed by the kernel at 24 GB; 10 m below gave 0.9 m^3 after 16 s).
+MAX_GAP_WIDTHS = 5.0
+
+
 def _gap_below(points: np.ndarray, plane: Plane) -> str | None:
     """A warning when the object's points ((n, 3) metres) all stand further above ``plane`` than the object is
     wide: no object seen rests on such a plane (a plane in another frame or other units, a floor given for
     a table), and closing the base on it makes a tower of what nobody saw. Nearer than that, a plane below
-    an object seen only from above cannot be told from one it rests on; nothing is said."""
+    an object seen only from above cannot be told from one it rests on; nothing is said.
+
+    Raises:
+        CloudError: the gap is more than ``MAX_GAP_WIDTHS`` times the object's width.
+    """
     from estimation.carving import plane_frame
 
     local = plane_frame(points, plane)[2]
@@ -248,9 +258,13 @@ def _gap_below(points: np.ndarray, plane: Plane) -> str | None:
     width = float(np.ptp(local[:, :2], axis=0).max())
     if lowest <= width:
         return None
-    return (f"the object's lowest points lie {1000 * lowest:.0f} mm above the support plane, more than the object "
-            f"is wide ({1000 * width:.0f} mm): it does not rest on that plane, and closing it down to the plane "
-            f"adds what no camera saw (is the plane in the views' frame and units?)")
+    said = (f"the object's lowest points lie {1000 * lowest:.0f} mm above the support plane, more than the object "
+            f"is wide ({1000 * width:.0f} mm)")
+    if lowest > MAX_GAP_WIDTHS * width:
+        raise CloudError(f"support plane: {said}, {lowest / max(width, 1e-12):.3g} times: it is not what the object "
+                         f"rests on (is it in the views' frame and units, its normal up into the object's side?)")
+    return (f"{said}: it does not rest on that plane, and closing it down to the plane adds what no camera saw "
+            f"(is the plane in the views' frame and units?)")
 
 
 def _standing_support(points: np.ndarray, plane: Plane, *, threshold: float, toward: np.ndarray,

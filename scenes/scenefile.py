@@ -289,7 +289,9 @@ def load_scene(path: str | Path) -> SceneSpec:
     path = Path(path)
     try:
         if not path.is_file():
-            raise SceneError(f"{path}: no such scene file")
+            what = ("is a folder, not a scene file" if path.is_dir() else "is not a regular file (a device or a pipe?)"
+                    if path.exists() else "no such scene file")
+            raise SceneError(f"{path}: {what}")
         data = path.read_bytes()
     except OSError as exc:  # a name too long, a permission denied
         raise SceneError(f"cannot read {path}: {exc.strerror or exc}") from None
@@ -394,8 +396,8 @@ def _check_beside(file: str, what: str) -> None:
     """
     path = Path(file)
     if path.is_absolute() or path.drive or ".." in path.parts:
-        raise SceneError(f"{what} {file!r} leads outside the scene file's folder: a scene names only files beside "
-                         f"or below it (copy or link the file there)")
+        raise SceneError(f"{what} {file!r} is absolute or has '..' in it: a scene names files only by a path down "
+                         f"from its own folder (copy or link the file there)")
 
 
 def _check_mesh_file(path: Path, where: str) -> None:

@@ -25,6 +25,7 @@ from estimation.fusion import oriented_normals
 from estimation.materials import resolve_density
 from estimation.units import unit_scale
 from scenes.scenefile import ObjectSpec, SceneError
+from sync.messages import MAX_COORDINATE
 from twin.decompose import DEFAULT_SETTINGS, CoacdSettings, decompose_many
 from twin.objects import DEFAULT_FRICTION, TwinObject, fit_primitive, lowest_point, visual_mesh
 
@@ -283,9 +284,17 @@ def placement(spec: ObjectSpec, lowest: float, table_top: float | None, *,
             raise ValueError(f"object {spec.id!r}: a posed cloud is placed by its centre of mass; none given")
         offset = np.asarray(center_of_mass, dtype=np.float64)
     if len(spec.position) == 3:
-        return np.asarray(spec.position, dtype=np.float64) + offset
-    base = table_top if table_top is not None else 0.0
-    return np.array([spec.position[0] + offset[0], spec.position[1] + offset[1], base - lowest + PLACEMENT_GAP])
+        placed = np.asarray(spec.position, dtype=np.float64) + offset
+    else:
+        base = table_top if table_top is not None else 0.0
+        placed = np.array([spec.position[0] + offset[0], spec.position[1] + offset[1], base - lowest + PLACEMENT_GAP])
+    if spec.posed and float(np.abs(placed).max()) > MAX_COORDINATE:
+        # The scene file's position is bounded, but a posed cloud adds its own coordinates to it: a cloud 8.7 km
+        # out built a body at (5000, 5000, 5001) m, whose poses the wire then refused.
+        raise SceneError(f"object {spec.id!r}: its cloud's own coordinates place it at "
+                         f"{np.array2string(placed, precision=4)} m, beyond the {MAX_COORDINATE:g} m a scene holds "
+                         f"(with quat or rotation, position is the cloud frame's origin: is it in the same units?)")
+    return placed
 
 
 def _primitive(p: dict) -> trimesh.Trimesh:

@@ -159,3 +159,23 @@ def test_a_nearly_orthonormal_matrix_is_made_an_exact_rotation(tmp_path):
     m = np.asarray(spec.frame_rotation)
     np.testing.assert_allclose(m.T @ m, np.eye(3), atol=1e-12)
     assert abs(np.linalg.det(m) - 1) < 1e-12
+
+
+def test_a_posed_cloud_whose_own_coordinates_leave_the_scene_is_refused(tmp_path):
+    # The scene file's position is bounded (and checked against the workspace), but a posed cloud adds its own
+    # coordinates to it: a cloud 8.7 km out built a body at (5000, 5000, 5001) m, with no word.
+    box = trimesh.creation.box(extents=(0.05, 0.05, 0.05))
+    far = sample_surface(box, 5000, seed=0).points + 5000.0
+    save_cloud(make_cloud(far), tmp_path / "far.ply")
+    near = sample_surface(box, 5000, seed=0).points + np.array([2.0, 0.0, 0.0])
+    save_cloud(make_cloud(near), tmp_path / "near.ply")
+    cache = tmp_path / "coacd"
+    scene = parse_scene(_scene(tmp_path, cloud="far.ply", quat=[1, 0, 0, 0], position=[0, 0, 1]), base=tmp_path)
+    with pytest.raises(SceneError, match=r"^object 'scan': its cloud's own coordinates place it at \[5000.* beyond "
+                                         r"the 1000 m a scene holds"):
+        build_scene(scene, cache_dir=cache, progress=False, workers=1)
+    doc = _scene(tmp_path, cloud="near.ply", quat=[1, 0, 0, 0], position=[0, 0])
+    doc["workspace"] = {"min": [-1.0, -1.0, 0.0], "max": [1.0, 1.0, 2.0]}
+    with pytest.raises(SceneError, match=r"^object 'scan': its cloud's own coordinates place it at \[ ?2\..* outside "
+                                         r"the workspace"):
+        build_scene(parse_scene(doc, base=tmp_path), cache_dir=cache, progress=False, workers=1)

@@ -186,8 +186,8 @@ def test_a_path_out_of_the_scene_files_folder_is_refused(tmp_path, source, where
     else:
         trimesh.PointCloud(box.sample(500, seed=0)).export(outside)
     file = {"absolute": str(outside), "up": f"../{name}", "up-inside": f"sub/../../{name}"}[where]
-    with pytest.raises(SceneError, match=rf"^object 'a': {source} path '{re.escape(file)}' leads outside the scene "
-                                         r"file's folder: .*\(copy or link the file there\)$"):
+    with pytest.raises(SceneError, match=rf"^object 'a': {source} path '{re.escape(file)}' is absolute or has '\.\.' "
+                                         r"in it: .*\(copy or link the file there\)$"):
         parse_scene({"name": "x", "objects": [{"id": "a", source: file}]}, base=scene_dir)
     (scene_dir / "sub" / name).symlink_to(outside)  # the folder's owner linked it: followed
     spec = parse_scene({"name": "x", "objects": [{"id": "a", source: f"sub/{name}"}]}, base=scene_dir).objects[0]
@@ -366,3 +366,12 @@ def test_an_object_outside_the_declared_workspace_is_refused(tmp_path):
         with pytest.raises(SceneError, match=r"^object 'b': position \[.*\] lies outside the workspace \(min "
                                              r"\[-0.5, -0.5, 0.0\], max \[0.5, 0.5, 1.5\]\); the twin would drop its poses$"):
             load_scene(scene(outside))
+
+
+def test_a_scene_path_that_is_a_folder_or_a_device_says_which(tmp_path):
+    with pytest.raises(SceneError, match=r"is a folder, not a scene file$"):
+        load_scene(tmp_path)
+    with pytest.raises(SceneError, match=r"is not a regular file \(a device or a pipe\?\)$"):
+        load_scene("/dev/null")
+    with pytest.raises(SceneError, match=r"no such scene file$"):
+        load_scene(tmp_path / "gone.toml")

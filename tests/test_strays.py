@@ -92,3 +92,16 @@ def test_an_object_seen_in_two_pieces_is_two_parts_not_strays():
     p = p[np.abs(p[:, 0]) > 0.015]
     found = islands(p, point_spacing(p))
     assert found.strays == 0 and found.parts == 2 and min(found.part_shares) > STRAY_SHARE
+
+
+def test_parts_far_apart_that_make_a_line_are_named_in_the_error():
+    # Two balls 100 m apart are a line to the shape check: "line-like, it encloses no volume" said nothing of the
+    # two parts (50 m apart they were a warning, and the estimate went on).
+    from estimation.errors import CloudError
+
+    rng = np.random.default_rng(0)
+    ball = rng.normal(size=(1500, 3))
+    ball = 0.05 * ball / np.linalg.norm(ball, axis=1, keepdims=True)
+    with pytest.raises(CloudError, match=r"line-like, it encloses no volume: the cloud is 2 separate parts "
+                                         r"\(50 %, 50 % of the points\).*split the cloud"):
+        estimate(make_cloud(np.vstack([ball, ball[::-1] + np.array([100.0, 0.0, 0.0])])), 1000.0)

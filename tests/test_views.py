@@ -605,6 +605,21 @@ def test_a_support_plane_far_below_the_object_is_warned_about():
     assert said[0].startswith("the object's lowest points lie 30")
 
 
+@pytest.mark.parametrize("below", [10.0, 10_000.0])
+def test_a_support_plane_many_widths_below_the_object_is_refused_at_once(capsys, tmp_path, below):
+    # Closing the base down to it grew a grid with the gap: a 5 cm dome over a plane 100 m below took 9 GB and
+    # 84 s, 10 km below the kernel killed it at 24 GB; 10 m below gave 0.9 m^3 after 16 s. Now one line, exit 2.
+    rng = np.random.default_rng(0)
+    dome = rng.normal(size=(3000, 3))
+    dome = 0.05 * dome / np.linalg.norm(dome, axis=1, keepdims=True)
+    np.save(tmp_path / "dome.npy", dome[dome[:, 2] > 0])
+    code = main(["estimate", str(tmp_path / "dome.npy"), "--support-plane", "0", "0", "1", str(below),
+                 "--viewpoint", "0", "0", "1", "--json"])
+    err = capsys.readouterr().err
+    assert code == 2
+    assert err.count("\n") == 1 and "support plane: the object's lowest points lie" in err and "times" in err, err
+
+
 def test_a_small_objects_base_is_not_counted_seen_from_its_side_walls():
     # A 15 mm cube on a table: every point of its base lies within the coverage radius (two 4 mm cells) of its
     # side walls' lowest points, so a 14 mm nut reported coverage 1.00. Points seen only count for faces that
