@@ -8,12 +8,13 @@ stderr; an error is one line on stderr and exit code 2.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import logging
 import math
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import NoReturn
 
@@ -400,7 +401,7 @@ def _cmd_estimate(args: argparse.Namespace) -> int:
     density, mat = resolve_density(args.material, args.density)
     name = None if mat is None else mat.name
     support = _support_plane(args.support_plane, scale)
-    with _open_rerun(args, "estimate") as rlog:
+    with _open_rerun(args, "estimate") as rlog, _logged_warnings("estimation") as logged:
         t0 = time.perf_counter()
         loaded = _estimate_views(args, scale)
         views = [v for v, _ in loaded]
@@ -435,12 +436,33 @@ def _cmd_estimate(args: argparse.Namespace) -> int:
     record["coverage"] = cov
     record["views"] = {"count": len(views), "points": [len(v.points) for v in views]}
     record["support_plane"] = None if plane is None else list(plane.as_abcd())
-    record["warnings"] = list(warnings)
+    # What the readers only logged (normals or colours left out, a PCD's WIDTH x HEIGHT not its POINTS) is said in
+    # the record too: a script reading the JSON saw none of it.
+    record["warnings"] = [*warnings, *(w for w in dict.fromkeys(logged) if w not in warnings)]
     if args.json:
         print(to_json(record))
     else:
         _print_estimate(record)
     return 0
+
+
+@contextlib.contextmanager
+def _logged_warnings(name: str) -> Iterator[list[str]]:
+    """The messages of the warnings the ``name`` logger and its children log inside the block, as a list."""
+    messages: list[str] = []
+
+    class Keep(logging.Handler):
+        def emit(self, record: logging.LogRecord) -> None:
+            if len(messages) < MAX_HELD_WARNINGS:
+                messages.append(one_line(record.getMessage()))
+
+    keep = Keep(logging.WARNING)
+    logger = logging.getLogger(name)
+    logger.addHandler(keep)
+    try:
+        yield messages
+    finally:
+        logger.removeHandler(keep)
 
 
 def _support_plane(words: list[str] | None, scale: float):  # type: ignore[no-untyped-def]

@@ -114,7 +114,7 @@ def make_cloud(
     if dropped == len(pts):
         raise CloudError(f"all {len(pts)} points have NaN or inf coordinates")
     if dropped:
-        log.warning("dropped %d of %d points with NaN or inf coordinates", dropped, len(pts))
+        log.warning("%s", nonfinite_note(dropped, len(pts)))
         pts = pts[good]
     if scale != 1.0:
         pts = pts * float(scale)
@@ -201,6 +201,12 @@ def check_count_and_range(points: np.ndarray) -> None:
         raise CloudError(f"coordinates reach {far:.3g} m from the origin, beyond the {tol.MAX_COORDINATE_M:g} m "
                          f"an estimate accepts" + (f"; that is {stray}: remove them" if stray else
                                                    " (wrong --units or scale?)"))
+
+
+def nonfinite_note(dropped: int, total: int) -> str:
+    """What dropping ``dropped`` of ``total`` points with NaN or inf coordinates is called: one wording in the log and
+    in an estimate's warnings, so a reader of both sees one thing said once."""
+    return f"dropped {dropped} of {total} points with NaN or inf coordinates"
 
 
 def check_estimable(cloud: PointCloud) -> None:

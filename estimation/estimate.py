@@ -28,6 +28,7 @@ from estimation.cloud import (
     check_estimable,
     check_sensor_origin,
     distinct_rows,
+    nonfinite_note,
 )
 from estimation.downsample import thin_to_budget, voxel_downsample
 from estimation.errors import CloudError
@@ -171,7 +172,8 @@ def estimate(
     check_count_and_range(cloud.points)
     if viewpoint is not None:
         check_sensor_origin(np.asarray(viewpoint, dtype=np.float64), "viewpoint")
-    warnings = [f"dropped {cloud.dropped_nonfinite} rows with NaN or inf"] if cloud.dropped_nonfinite else []
+    dropped = cloud.dropped_nonfinite
+    warnings = [nonfinite_note(dropped, len(cloud) + dropped)] if dropped else []
     # Strays go before the shape checks: a stray point 1 km off made a ball look line-like.
     cloud, spacing = _drop_strays(cloud, warnings, keep_strays)
     try:

@@ -310,3 +310,26 @@ def test_an_out_folder_that_cannot_be_made_is_one_line_before_the_work(tmp_path,
     err = capsys.readouterr().err
     assert f"{blocker} is not a folder" in err and err.count("\n") == 1 and "Traceback" not in err, err
     assert blocker.read_text() == "mine\n"
+
+
+def test_what_the_readers_only_logged_is_in_the_json_warnings(tmp_path, capsys):
+    # Given normals with a NaN row are all ignored, and a PCD whose WIDTH x HEIGHT is not its POINTS is read by
+    # POINTS: both were said on stderr only, so a script reading the JSON never knew.
+    from cli.main import main
+
+    rng = np.random.default_rng(0)
+    ball = rng.normal(size=(3000, 3))
+    ball /= np.linalg.norm(ball, axis=1, keepdims=True)
+    normals = ball.copy()
+    normals[5] = np.nan
+    header = ["ply", "format ascii 1.0", "element vertex 3000", *(f"property float {c}" for c in
+                                                                   ("x", "y", "z", "nx", "ny", "nz")), "end_header"]
+    rows = [" ".join(f"{x:g}" for x in np.r_[p * 0.05, q]) for p, q in zip(ball, normals, strict=True)]
+    (tmp_path / "ball.ply").write_text("\n".join(header + rows) + "\n")
+    pcd = ["VERSION .7", "FIELDS x y z", "SIZE 4 4 4", "TYPE F F F", "COUNT 1 1 1", "WIDTH 10", "HEIGHT 1",
+           "VIEWPOINT 0 0 0 1 0 0 0", "POINTS 3000", "DATA ascii", *(" ".join(f"{x:g}" for x in p * 0.05) for p in ball)]
+    (tmp_path / "ball.pcd").write_text("\n".join(pcd) + "\n")
+    for name, said in (("ball.ply", "ignoring all given normals"), ("ball.pcd", "WIDTH x HEIGHT is 10 x 1")):
+        assert main(["estimate", str(tmp_path / name), "--json"]) == 0
+        out = json.loads(capsys.readouterr().out)
+        assert sum(said in w for w in out["warnings"]) == 1, out["warnings"]
