@@ -20,7 +20,7 @@ import numpy as np
 
 from estimation.errors import TwinError
 from scenes.placement import check_placement
-from scenes.scenefile import ObjectSpec, SceneError, SceneSpec
+from scenes.scenefile import ObjectSpec, SceneSpec, check_in_workspace
 from scenes.sources import estimate_object, prepare_objects
 from twin.decompose import DEFAULT_SETTINGS, CoacdSettings, ProgressBar, concavity, skips_coacd
 from twin.model import DEFAULT_PHYSICS, PhysicsSettings, add_object
@@ -134,16 +134,15 @@ def build_scene(scene: SceneSpec, *, coacd: CoacdSettings = DEFAULT_SETTINGS, ca
 
 
 def _check_posed_inside(scene: SceneSpec, objects: tuple[TwinObject, ...]) -> None:
-    """Raise a :class:`SceneError` for a posed cloud placed outside the declared workspace. Its ``position`` is
-    its frame's origin and its own coordinates add to it, so the scene file's check of ``position`` alone
-    (``scenefile``) cannot see where it lands; the twin would drop every pose of it."""
-    low, high = (np.asarray(corner, dtype=np.float64) for corner in scene.workspace)  # type: ignore[union-attr]
+    """Each posed cloud where it landed, against the declared workspace. Its ``position`` is its frame's origin and
+    its own coordinates add to it, so the scene file's check of ``position`` alone (``scenefile``) cannot see
+    where that is."""
     posed = {o.id for o in scene.objects if o.posed}
     for obj in objects:
-        if obj.id in posed and not ((low <= obj.position) & (obj.position <= high)).all():
-            raise SceneError(f"object {obj.id!r}: its cloud's own coordinates place it at "
-                             f"{np.array2string(obj.position, precision=4)} m, outside the workspace (min "
-                             f"{list(low)}, max {list(high)}); the twin would drop its poses")
+        if obj.id in posed:
+            check_in_workspace(obj.id, obj.position, scene.workspace,  # type: ignore[arg-type]
+                               what=f"its cloud's own coordinates place it at "
+                                    f"{np.array2string(obj.position, precision=4)} m, which")
 
 
 def default_workers(objects: int) -> int:

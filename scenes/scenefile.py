@@ -27,6 +27,7 @@ import math
 import re
 import sys
 from collections import Counter
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Annotated, Literal
@@ -537,12 +538,17 @@ def _check_inside(objects: tuple[ObjectSpec, ...], workspace: tuple[Vec3, Vec3])
     """Raise a :class:`SceneError` for the first object placed outside the declared ``workspace`` (on x and y,
     and z when given): the twin drops every pose and cloud outside it, so such an object was built, sensed and
     never shown (a fuzz finding)."""
-    low, high = workspace
     for o in objects:
-        axes = range(len(o.position))
-        if not all(low[k] <= o.position[k] <= high[k] for k in axes):
-            raise SceneError(f"object {o.id!r}: position {list(o.position)} lies outside the workspace (min "
-                             f"{list(low)}, max {list(high)}); the twin would drop its poses")
+        check_in_workspace(o.id, o.position, workspace, what=f"position {list(o.position)}")
+
+
+def check_in_workspace(object_id: str, position: Sequence[float], workspace: tuple[Vec3, Vec3], *, what: str) -> None:
+    """Raise a :class:`SceneError` naming ``what`` placed the object when ``position`` (metres, world; its first
+    two or three coordinates) lies outside ``workspace`` (low and high corners): the twin would drop its poses."""
+    low, high = workspace
+    if not all(low[k] <= position[k] <= high[k] for k in range(len(position))):
+        raise SceneError(f"object {object_id!r}: {what} lies outside the workspace (min {list(low)}, max "
+                         f"{list(high)}); the twin would drop its poses")
 
 
 def _lookup(doc: object, tokens: list[str | int]) -> tuple[bool, object]:
