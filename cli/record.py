@@ -95,13 +95,44 @@ def recorded_scene(recording: Recording):  # type: ignore[no-untyped-def]
         raise RecordingError(f"{recording.path}: the recorded scene is not valid TOML ({exc})") from None
     except RecursionError:  # tomllib recurses once per nesting level
         raise RecordingError(f"{recording.path}: the recorded scene is nested too deeply to be a scene") from None
-    base = Path(recording.metadata.get("scene_dir") or recording.path.parent)
+    base, refused = scene_folder(recording)
     try:
         return parse_scene(doc, base=base)
     except (OverflowError, RecursionError) as exc:  # e.g. an integer too large for a float
         raise RecordingError(f"{recording.path}: the recorded scene is not a valid scene ({exc})") from None
     except SceneError as exc:  # said of the recording, not of a file the user gave
-        raise SceneError(f"{recording.path}: the recorded scene is not a valid scene ({exc})") from None
+        hint = "" if refused is None else (f"; it was recorded in {refused}, which is not read unasked: give the "
+                                           f"scene file with --scene")
+        raise SceneError(f"{recording.path}: the recorded scene is not a valid scene ({exc}){hint}") from None
+
+
+def scene_folder(recording: Recording) -> tuple[Path, str | None]:
+    """The folder the recorded scene's mesh and cloud paths are read from, and the recorded folder if it
+    was not taken (else None).
+
+    The recorded ``scene_dir`` is taken only when it is the recording's own folder or this installation's
+    scene data; otherwise the recording's folder is used. A recording is a file handed around: one whose
+    metadata named any folder would make replay read the files it names there (``/home/you/designs``) and
+    put what it built from them into its output.
+    """
+    own = recording.path.resolve().parent
+    recorded = recording.metadata.get("scene_dir") or ""
+    if not recorded:
+        return own, None
+    try:
+        folder = Path(recorded).resolve()
+    except (OSError, RuntimeError, ValueError):  # a NUL byte, a link loop: not a folder to read
+        return own, recorded
+    if folder in (own, packaged_scene_folder()):
+        return folder, None
+    return own, recorded
+
+
+def packaged_scene_folder() -> Path:
+    """The scene files that ship with the package (``scenes/data``), resolved."""
+    from importlib import resources
+
+    return Path(str(resources.files("scenes").joinpath("data"))).resolve()
 
 
 def recorded_network(recording: Recording) -> Network | None:

@@ -228,6 +228,35 @@ def test_an_experiment_asks_for_what_its_input_can_give(recorded, tmp_path, caps
     assert not (tmp_path / "a").exists() and not (tmp_path / "b").exists()
 
 
+def test_a_recorded_scene_folder_is_read_only_where_the_recording_or_the_package_is(tmp_path, capsys):
+    import trimesh
+
+    from cli.record import recorded_scene
+
+    elsewhere = tmp_path / "designs"  # someone's own folder, named by a recording made elsewhere
+    elsewhere.mkdir()
+    trimesh.creation.box(extents=[0.05] * 3).export(elsewhere / "part.stl")
+    toml = SMALL.read_text().split("[[objects]]")[0] + (
+        '[[objects]]\nid = "part"\nmesh = "part.stl"\nmaterial = "wood_pine"\nposition = [0.0, 0.0]\n')
+    shared = tmp_path / "shared"
+    shared.mkdir()
+    path = shared / "handed_around.mcap"
+    with Recorder(path, clock=SimClock(), metadata={"scene_toml": toml, "scene_dir": str(elsewhere)}):
+        pass
+    assert main(["replay", str(path), "--duration", "0.1"]) == 2
+    err = capsys.readouterr().err
+    assert f"it was recorded in {elsewhere}, which is not read unasked" in err and err.count("\n") == 1, err
+    # The same file beside the recording is read: a recording and its meshes handed around together.
+    (shared / "part.stl").write_bytes((elsewhere / "part.stl").read_bytes())
+    assert [o.id for o in recorded_scene(read_recording(path)).objects] == ["part"]
+    # The package's own scenes are read where the package is.
+    packaged = ROOT / "scenes" / "data" / "mixed100.toml"
+    with Recorder(path, clock=SimClock(), metadata={"scene_toml": packaged.read_text(),
+                                                    "scene_dir": str(packaged.parent)}):
+        pass
+    assert len(recorded_scene(read_recording(path)).objects) == 100
+
+
 def test_replay_out_never_overwrites_an_input_or_a_users_folder(recorded, cache, tmp_path, capsys):
     path, _, _ = recorded
     mine = tmp_path / "mine"
