@@ -9,6 +9,7 @@ measuring the twin against, never for the twin itself.
 from __future__ import annotations
 
 import logging
+import re
 import zlib
 from dataclasses import replace
 from pathlib import Path
@@ -70,6 +71,8 @@ def _load_mesh(spec: ObjectSpec) -> trimesh.Trimesh:
     # A third-party loader raises almost anything on a damaged file: IndexError (an .stl holding text),
     # AssertionError (a glTF byteStride of 0), KeyError, struct.error, EOFError, NotImplementedError (no loader
     # for the format), besides OSError and ValueError. Any of them means the same: the file cannot be read.
+    if str(spec.value).lower().endswith(".obj"):
+        _check_obj_indices(spec)
     try:
         # Unprocessed first: processing drops the faces of NaN vertices without a word (a box built at 45 %),
         # and indexes vertices by faces that nothing has checked yet.
@@ -86,6 +89,24 @@ def _load_mesh(spec: ObjectSpec) -> trimesh.Trimesh:
     except Exception as exc:
         raise _unreadable(spec, exc) from exc
     return mesh
+
+
+#: A face line's vertex index 0 (``f 0 2 3``, ``f 1/1 0/2 3``): OBJ counts vertices from 1 (or from -1 back).
+_OBJ_ZERO_INDEX = re.compile(rb"^[ \t]*f(?:[ \t]+[^ \t\r\n#]+)*?[ \t]+-?0+(?=[/ \t\r\n#]|$)", re.MULTILINE)
+
+
+def _check_obj_indices(spec: ObjectSpec) -> None:
+    """Refuse an OBJ face with vertex index 0: trimesh reads it as index -1, the last vertex, and builds a
+    wrong triangle without a word."""
+    try:
+        data = Path(spec.value).read_bytes()
+    except OSError:
+        return  # the loader below says why it cannot be read
+    match = _OBJ_ZERO_INDEX.search(data)
+    if match is not None:
+        line = data.count(b"\n", 0, match.start()) + 1
+        raise SceneError(f"object {spec.id!r}: mesh {spec.value} line {line}: a face with vertex index 0 "
+                         f"(OBJ counts vertices from 1)")
 
 
 def _unreadable(spec: ObjectSpec, exc: Exception) -> SceneError:

@@ -82,6 +82,25 @@ def test_ply_face_index_outside_the_vertices_is_refused(tmp_path, capsys, last):
     assert "box.ply has 1 face(s) with vertex indices outside 0..7" in err, err
 
 
+@pytest.mark.parametrize("face", ["0 2 3", "1/1 0/2 3/3", "1//1 2//2 -0//3"])
+def test_obj_face_index_zero_is_refused_naming_the_line(tmp_path, capsys, face):
+    # OBJ counts from 1; trimesh read 0 as -1, the last vertex, and built a wrong triangle without a word.
+    lines = [f"v {x:g} {y:g} {z:g}" for x, y, z in BOX.vertices]
+    lines += ["f " + " ".join(str(i + 1) for i in f) for f in BOX.faces[:-1]] + [f"f {face}"]
+    err = _build_fails(_scene(tmp_path, "box.obj", "\n".join(lines) + "\n"), tmp_path, capsys)
+    assert f"box.obj line {len(lines)}: a face with vertex index 0 (OBJ counts vertices from 1)" in err, err
+
+
+def test_an_obj_with_indices_from_1_and_from_the_end_builds(tmp_path):
+    lines = [f"v {x:g} {y:g} {z:g}" for x, y, z in BOX.vertices] + ["# f 0 0 0: a comment is not a face"]
+    lines += ["f " + " ".join(str(i + 1) for i in f) for f in BOX.faces[:-1]]
+    lines += ["f " + " ".join(str(i - len(BOX.vertices)) for i in BOX.faces[-1])]  # -8 .. -1: from the end
+    (tmp_path / "box.obj").write_text("\n".join(lines) + "\n")
+    spec = parse_scene({"name": "s", "objects": [{"id": "m", "mesh": "box.obj"}]}, base=tmp_path).objects[0]
+    mesh = source_mesh(spec)
+    assert mesh is not None and mesh.is_watertight and abs(mesh.volume - 1e-3) < 1e-9
+
+
 def test_gltf_index_buffer_outside_the_vertices_is_refused(tmp_path, capsys):
     err = _build_fails(_scene(tmp_path, "box.gltf", _gltf(_faces([0, 1, 99_999]))), tmp_path, capsys)
     assert "box.gltf has 1 face(s) with vertex indices outside 0..7" in err, err
