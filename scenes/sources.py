@@ -81,6 +81,8 @@ def _load_mesh(spec: ObjectSpec) -> trimesh.Trimesh:
         raise  # not the file's fault alone: the CLI says the machine ran out of memory
     except Exception as exc:
         raise _unreadable(spec, exc) from exc
+    if str(spec.value).lower().endswith(".stl") and len(getattr(mesh, "faces", ())) == 0:
+        _check_stl_size(spec)
     _check_mesh(mesh, f"object {spec.id!r}: mesh {spec.value}")
     try:
         mesh.process()  # what load_mesh does by default: merge duplicate vertices (an STL's), drop degenerate faces
@@ -107,6 +109,30 @@ def _check_obj_indices(spec: ObjectSpec) -> None:
         line = data.count(b"\n", 0, match.start()) + 1
         raise SceneError(f"object {spec.id!r}: mesh {spec.value} line {line}: a face with vertex index 0 "
                          f"(OBJ counts vertices from 1)")
+
+
+def _check_stl_size(spec: ObjectSpec) -> None:
+    """Say why an STL that read as no triangles is not one, where its size tells: a binary STL is an 84-byte
+    header counting its triangles, then 50 bytes each (trimesh reads a torn one as an empty text STL)."""
+    path = Path(spec.value)
+    try:
+        size = path.stat().st_size
+        with path.open("rb") as f:
+            head = f.read(84)
+    except OSError:
+        return
+    if head[:5].lower() == b"solid" and all(32 <= c < 127 or c in b"\t\r\n" for c in head):
+        return  # a text STL: "holds no triangles" is what is wrong with it
+    where = f"object {spec.id!r}: mesh {spec.value}"
+    if size < 84:
+        raise SceneError(f"{where} is {size} bytes: shorter than a binary STL's 84-byte header, and not a text STL")
+    count = int(np.frombuffer(head, dtype="<u4", count=1, offset=80)[0])
+    expected = 84 + 50 * count
+    if size < expected:
+        raise SceneError(f"{where} is cut short: its header counts {count:,} triangles ({expected:,} bytes), "
+                         f"the file has {size:,} bytes")
+    if size > expected:
+        raise SceneError(f"{where} has {size - expected:,} bytes past the {count:,} triangles its header counts")
 
 
 def _unreadable(spec: ObjectSpec, exc: Exception) -> SceneError:

@@ -101,6 +101,18 @@ def test_an_obj_with_indices_from_1_and_from_the_end_builds(tmp_path):
     assert mesh is not None and mesh.is_watertight and abs(mesh.volume - 1e-3) < 1e-9
 
 
+@pytest.mark.parametrize(("cut", "words"), [
+    (lambda b: b[: len(b) // 2], "is cut short: its header counts 12 triangles (684 bytes), the file has 342 bytes"),
+    (lambda b: b[:-1], "is cut short: its header counts 12 triangles (684 bytes), the file has 683 bytes"),
+    (lambda b: b + b"xx", "has 2 bytes past the 12 triangles its header counts"),
+    (lambda b: b[:40], "is 40 bytes: shorter than a binary STL's 84-byte header, and not a text STL"),
+])
+def test_a_torn_binary_stl_is_named_torn_not_empty(tmp_path, capsys, cut, words):
+    # trimesh reads a binary STL whose size disagrees with its header as a text STL with no triangles.
+    err = _build_fails(_scene(tmp_path, "box.stl", cut(trimesh.exchange.stl.export_stl(BOX))), tmp_path, capsys)
+    assert f"box.stl {words}" in err, err
+
+
 def test_gltf_index_buffer_outside_the_vertices_is_refused(tmp_path, capsys):
     err = _build_fails(_scene(tmp_path, "box.gltf", _gltf(_faces([0, 1, 99_999]))), tmp_path, capsys)
     assert "box.gltf has 1 face(s) with vertex indices outside 0..7" in err, err
