@@ -54,6 +54,9 @@ MIN_DEPTH_SCALE = 1e-6
 #: 0.01 degree one, past any lens we will see; outside, rays reach 1e300 m or all pixels collapse to one.
 FOCAL_RANGE_PX = (1.0, 1e6)
 
+#: PNG colour types (the IHDR byte) by name; 0, greyscale, is the one that holds depth.
+PNG_COLOUR_TYPES = {0: "greyscale", 2: "RGB", 3: "palette", 4: "greyscale with alpha", 6: "RGBA"}
+
 #: Kept for old callers: the quaternion tolerance lives with the others in ``tolerances``.
 QUAT_NORM_TOLERANCE = tol.QUAT_NORM_TOLERANCE
 
@@ -121,12 +124,20 @@ def _read_png(path: Path) -> np.ndarray:
     # The size, from the PNG header (signature, then the IHDR chunk's big-endian width and height), is held
     # to our own cap before PIL opens it: PIL warns past 89 M pixels and raises its own error past 179 M.
     with path.open("rb") as fh:
-        head = fh.read(24)
-    if head[:8] != b"\x89PNG\r\n\x1a\n" or head[12:16] != b"IHDR":
+        head = fh.read(26)
+    if len(head) < 26 or head[:8] != b"\x89PNG\r\n\x1a\n" or head[12:16] != b"IHDR":
         # PIL would open a TIFF or BMP under a .png name too, past the size check (a 192 KB TIFF of 8000 x 8000
         # pixels took 6.8 GB).
         raise CloudFileError(f"{path}: not a PNG (no PNG signature and header)")
     _check_pixels(path, int.from_bytes(head[16:20], "big"), int.from_bytes(head[20:24], "big"))
+    # Bit depth and colour type from the header: PIL reads a 16-bit RGB PNG as 8-bit RGB, so its mode cannot
+    # say which of the two is wrong.
+    bits, colour = head[24], head[25]
+    if colour != 0:
+        kind = PNG_COLOUR_TYPES.get(colour, f"colour type {colour}")
+        article = "an" if bits in (8, 11, 18) else "a"
+        raise CloudFileError(f"{path}: {article} {bits}-bit {kind} PNG; a depth image is a 16-bit single-channel "
+                             f"(greyscale) PNG in millimetres")
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", Image.DecompressionBombWarning)  # under our cap: wanted

@@ -340,6 +340,9 @@ def test_a_view_with_no_points_is_refused(capsys, tmp_path, pcds):
     ("nan.npy", lambda p: np.save(p, np.full((30, 40), np.nan)), r"no pixel holds a depth"),
     ("empty.npy", lambda p: np.save(p, np.zeros((0, 40))), r"the depth image is empty"),
     ("eight.png", lambda p: _png(p, np.full((30, 40), 200, np.uint8)), r"8-bit PNG cannot hold depth"),
+    # PIL reads a 16-bit RGB PNG as 8-bit RGB: the header says which it is.
+    ("rgb16.png", lambda p: _png_header(p, 40, 30, colour=2), r"a 16-bit RGB PNG; a depth image is a 16-bit single"),
+    ("rgba.png", lambda p: _png(p, np.full((30, 40, 4), 200, np.uint8)), r"an 8-bit RGBA PNG; a depth image is"),
     ("rgb.npy", lambda p: np.save(p, np.ones((30, 40, 3))), r"numeric \(h, w\) array"),
     # one pixel with a depth, and depths of 1e300 m: IndexErrors in the spacing and the noise of the views
     ("one.npy", lambda p: np.save(p, np.pad([[1.0]], ((15, 14), (20, 19)))), r"too few points: 1 \(need at least 100\)"),
@@ -407,12 +410,13 @@ def _tiff(path):  # type: ignore[no-untyped-def]
     Image.fromarray(np.full((30, 40), 700, np.uint16)).save(path, format="TIFF")
 
 
-def _png_header(path, width, height):  # type: ignore[no-untyped-def]
-    """A PNG signature and IHDR chunk (16-bit greyscale) for ``width`` x ``height``, and nothing after."""
+def _png_header(path, width, height, colour=0):  # type: ignore[no-untyped-def]
+    """A PNG signature and IHDR chunk (16-bit, greyscale unless ``colour`` says) for ``width`` x ``height``, and
+    nothing after."""
     import struct
     import zlib
 
-    ihdr = b"IHDR" + struct.pack(">IIBBBBB", width, height, 16, 0, 0, 0, 0)
+    ihdr = b"IHDR" + struct.pack(">IIBBBBB", width, height, 16, colour, 0, 0, 0)
     path.write_bytes(b"\x89PNG\r\n\x1a\n" + struct.pack(">I", 13) + ihdr + struct.pack(">I", zlib.crc32(ihdr)))
 
 
