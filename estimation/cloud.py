@@ -231,12 +231,15 @@ def check_estimable(cloud: PointCloud) -> None:
     if distinct < tol.MIN_POINTS:
         raise CloudError(f"too few distinct points: {distinct} distinct positions among {n} points (need at "
                          f"least {tol.MIN_POINTS}; repeated rows add no surface)")
-    spread = np.linalg.svd(sample - sample.mean(axis=0), compute_uv=False)
+    centred = sample - sample.mean(axis=0)
+    _, spread, axes = np.linalg.svd(centred, full_matrices=False)
     if spread[2] < tol.FLATNESS_RATIO * spread[0]:
         shape = "line-like" if spread[1] < tol.FLATNESS_RATIO * spread[0] else "flat (planar)"
+        # The extents say which: a needle 1 m long and 1.5 x 0.5 mm across is flat by these ratios, a strip.
+        extents = " x ".join(f"{e:.3g}" for e in np.ptp(centred @ axes.T, axis=0))
         far = far_points(cloud.points)
-        raise CloudError(f"degenerate cloud: {shape}, it encloses no volume" + (f"; but that is {far}: remove them"
-                                                                              if far else ""))
+        raise CloudError(f"degenerate cloud: {shape}, it encloses no volume ({extents} m along its principal axes)"
+                         + (f"; but that is {far}: remove them" if far else ""))
 
 
 def far_points(points: np.ndarray) -> str:

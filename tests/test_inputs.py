@@ -64,6 +64,14 @@ def test_planar_cloud():
         estimate(make_cloud(np.c_[xy, np.zeros(1000)]), 1000.0)
 
 
+def test_a_flat_verdict_gives_the_extents_that_made_it():
+    # A needle 1 m long and 1.5 x 0.5 mm across is a strip by the flatness ratios: the extents say so.
+    box = np.random.default_rng(0).uniform(size=(5000, 3)) * [1.0, 0.0015, 0.0005]
+    with pytest.raises(CloudError, match=r"flat \(planar\), it encloses no volume \(1 x 0\.0015\d* x 0\.000[45]\d* m along "
+                                         r"its principal axes\)$"):
+        estimate(make_cloud(box), 1000.0)
+
+
 def test_line_cloud():
     t = np.linspace(0, 1, 500)
     with pytest.raises(CloudError, match="line-like"):
@@ -85,7 +93,7 @@ def test_a_few_far_points_are_dropped_as_strays_and_said(far):
 @pytest.mark.parametrize(("far", "verdict"), [
     ([[1000.0, 0, 0]], r"the points span 1e\+03 m at a 0.0\d+ m spacing: \S+ grid nodes, more than the 3e\+07 "
                        r"an estimate holds; "),
-    ([[1000.0 + i / 4, 0, 0] for i in range(5)], r"degenerate cloud: line-like, it encloses no volume; but that is "),
+    ([[1000.0 + i / 4, 0, 0] for i in range(5)], r"degenerate cloud: line-like, it encloses no volume \(1e\+03 x \S+ x \S+ m along its principal axes\); but that is "),
 ])
 def test_far_points_kept_on_request_are_named_when_they_make_the_cloud_unusable(far, verdict):
     with pytest.raises(CloudError, match=verdict + rf"{len(far)} far point\(s\), up to 1e\+03 m from the rest, which "
@@ -99,7 +107,7 @@ def test_points_beyond_range_are_named():
                                          r"lies within 0.0\d+ m: remove them$"):
         estimate(make_cloud(np.r_[_sphere(2000), [[1e200, 0, 0]]]), 1000.0)
     t = np.linspace(0, 1, 500)  # a real line stays a plain line
-    with pytest.raises(CloudError, match=r"line-like, it encloses no volume$"):
+    with pytest.raises(CloudError, match=r"line-like, it encloses no volume \(2\.45 x \S+ x \S+ m along its principal axes\)$"):
         estimate(make_cloud(np.c_[t, 2 * t, -t]), 1000.0)
 
 

@@ -102,6 +102,6 @@ def test_parts_far_apart_that_make_a_line_are_named_in_the_error():
     rng = np.random.default_rng(0)
     ball = rng.normal(size=(1500, 3))
     ball = 0.05 * ball / np.linalg.norm(ball, axis=1, keepdims=True)
-    with pytest.raises(CloudError, match=r"line-like, it encloses no volume: the cloud is 2 separate parts "
+    with pytest.raises(CloudError, match=r"line-like, it encloses no volume \(100 x \S+ x \S+ m along its principal axes\): the cloud is 2 separate parts "
                                          r"\(50 %, 50 % of the points\).*split the cloud"):
         estimate(make_cloud(np.vstack([ball, ball[::-1] + np.array([100.0, 0.0, 0.0])])), 1000.0)
