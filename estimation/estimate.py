@@ -104,8 +104,10 @@ class PhysicalEstimate:
         normals: (points_used, 3) float32, unit, cloud frame: their outward normals (given or estimated).
         volume_bounds_m3: (low, high) m^3, the volumes the cloud cannot tell apart from the estimate
             ('auto' only, else None): surface the points did not measure (holes closed by the shell)
-            could lie anywhere across the shell, and walls thinner than a cell anywhere from nothing
-            to a cell thick. Equal to the volume up to rounding when the cloud pins everything down.
+            could lie anywhere across the shell, walls thinner than a cell anywhere from nothing
+            to a cell thick, and noise on a curved surface moves it by up to twice sigma^2 times the
+            mean curvature (``tol.NOISE_CURVATURE_BIAS``). Equal to the volume up to rounding when the
+            cloud pins everything down.
     """
 
     method: str
@@ -268,13 +270,18 @@ def _estimate_auto(
     props, surface, h = run.props, run.surface, run.h
     if run.note is not None:
         warnings.append(run.note)
-    bounds = (max(0.0, props.volume - run.hole - run.thin), props.volume + run.hole + run.thin)
+    curved = _noise_on_curvature(surface, noise, h)
+    doubt = run.hole + run.thin + curved
+    bounds = (max(0.0, props.volume - doubt), props.volume + doubt)
     bounds = _one_sheet(run, surface, noise, bounds, warnings)  # first: when it holds, what follows is said of (0, inf)
     unmeasured = surface.unmeasured_area / max(_area(surface), 1e-30)
     if run.hole > tol.VOLUME_DOUBT_FRACTION * props.volume:
         warnings.append(f"{100 * unmeasured:.1f} % of the surface "
                         f"was not measured (holes closed by a {run.closing}-cell shell): the volume is "
                         f"only known to {bounds[0]:.4g}..{bounds[1]:.4g} m^3")
+    if curved > tol.NOISE_CURVATURE_WARN * props.volume and np.isfinite(bounds[1]):
+        warnings.append(f"the noise ({1000 * noise:.2g} mm) is a large share of the surface's radius of curvature: "
+                        f"it may move the volume by up to {100 * curved / props.volume:.2g} %: the volume is only known to {bounds[0]:.4g}..{bounds[1]:.4g} m^3")
     if run.sealed > tol.VOLUME_DOUBT_FRACTION * props.volume:
         # No closing radius closed the cloud for good: the inside is what the widest shell enclosed, behind
         # walls thinner than it or openings it sealed (a hollow ball's mouth, with noise as thick as its
@@ -314,6 +321,16 @@ def _estimate_auto(
         normals=box.to_cloud(run.normals, direction=True).astype(np.float32),
         volume_bounds_m3=bounds,
     )
+
+
+def _noise_on_curvature(surface: DualSurface, noise: float, h: float) -> float:
+    """m^3: how far noise of sigma ``noise`` (metres) on the curved ``surface`` may move its volume either way
+    (``tol.NOISE_CURVATURE_BIAS``); 0 where the noise is under ``tol.NOISE_CURVATURE_MIN_CELLS`` of the cell ``h``."""
+    if noise < tol.NOISE_CURVATURE_MIN_CELLS * h:
+        return 0.0
+    from estimation.curvature import integrated_mean_curvature
+
+    return tol.NOISE_CURVATURE_BIAS * noise**2 * abs(integrated_mean_curvature(surface.vertices, surface.faces))
 
 
 def _merged_sheets(run: _AutoPass, surface: DualSurface, bounds: tuple[float, float],
