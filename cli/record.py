@@ -84,17 +84,15 @@ def recorded_scene(recording: Recording):  # type: ignore[no-untyped-def]
         RecordingError: the recording carries no scene (``twin local`` records none: pass ``--scene``).
         SceneError: the text is not a valid scene here (e.g. a mesh path missing on this machine).
     """
-    from scenes.scenefile import SceneError, parse_scene, tomllib
+    from scenes.scenefile import SceneError, parse_scene, scene_document
 
     text = recording.metadata.get("scene_toml", "")
     if not text:
         raise RecordingError(f"{recording.path}: the recording carries no scene file; give one with --scene")
     try:
-        doc = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise RecordingError(f"{recording.path}: the recorded scene is not valid TOML ({exc})") from None
-    except RecursionError:  # tomllib recurses once per nesting level
-        raise RecordingError(f"{recording.path}: the recorded scene is nested too deeply to be a scene") from None
+        doc = scene_document(text, f"{recording.path}: the recorded scene")
+    except SceneError as exc:
+        raise RecordingError(str(exc)) from None
     base, refused = scene_folder(recording)
     try:
         return parse_scene(doc, base=base)

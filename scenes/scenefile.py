@@ -301,13 +301,25 @@ def load_scene(path: str | Path) -> SceneSpec:
         text = data.decode("utf-8-sig")
     except UnicodeDecodeError as exc:  # read_text() let it out as a traceback
         raise SceneError(f"{path}: not UTF-8 text, so not TOML ({exc.reason} at byte {exc.start})") from None
+    return parse_scene(scene_document(text, str(path)), base=path.parent, path=path)
+
+
+def scene_document(text: str, where: str) -> dict:
+    """The TOML document of a scene file's ``text``; ``where`` starts the error message.
+
+    Raises:
+        SceneError: not TOML, or TOML Python will not hold (nested too deeply, an integer of over 4,300 digits).
+    """
     try:
-        doc = tomllib.loads(text)
+        return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
-        raise SceneError(f"{path}: not valid TOML ({exc})") from exc
+        raise SceneError(f"{where}: not valid TOML ({exc})") from None
+    except ValueError as exc:  # Python's cap on int() of a long digit string: 4,300 digits
+        # Its advice (sys.set_int_max_str_digits) is for programmers, not for whoever wrote the file.
+        reason = next((line for line in str(exc).splitlines() if line.strip()), type(exc).__name__).split(";")[0]
+        raise SceneError(f"{where}: not a scene file Python can read ({reason})") from None
     except RecursionError:  # tomllib recurses once per level of nesting: 5000 levels of [[[...
-        raise SceneError(f"{path}: nested too deeply to be a scene file") from None
-    return parse_scene(doc, base=path.parent, path=path)
+        raise SceneError(f"{where}: nested too deeply to be a scene file") from None
 
 
 def parse_scene(doc: dict, *, base: Path = Path("."), path: Path | None = None) -> SceneSpec:

@@ -341,6 +341,7 @@ def _rewrite(src: Path, dst: Path, *, topic: str | None = None, data: bytes = b"
     ({"end": {"twin_time_s": "abc"}}, "twin_time_s 'abc' is not a number"),
     ({"session": {"network": json.dumps({"uplink": {"delay": 0.01}, "downlink": None, "seed": -5})}}, "seed must be"),
     ({"session": {"scene_toml": 'name="x"\nq=' + "[" * 5000 + "]" * 5000 + "\n"}}, "nested too deeply"),
+    ({"session": {"scene_toml": 'name="x"\nq=1' + "0" * 5000 + "\n"}}, "the recorded scene: not a scene file Python"),
     ({"session": {"scene_toml": 'name="x"\n[[objects]]\nid="a"\nprimitive={type="box",size=[0.05,0.05,0.05]}\n'
                                 'position=[1' + "0" * 400 + ',0]\n'}}, "not a valid scene"),
     ({"session": {"network": json.dumps({"uplink": {"rate_bps": 1e-300}, "downlink": None, "seed": 0})}}, "rate_bps"),

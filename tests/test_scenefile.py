@@ -136,6 +136,15 @@ def test_deeply_nested_toml_is_a_scene_error(tmp_path, nested):
         load_scene(path)
 
 
+def test_an_integer_longer_than_python_reads_is_a_scene_error(tmp_path):
+    # tomllib's ValueError past Python's 4,300-digit cap on int() was a traceback, exit 1.
+    path = tmp_path / "big.toml"
+    path.write_text(f'name = "t"\n[[objects]]\nid = "a"\npaper = "box"\ndensity = 1{"0" * 5000}\n')
+    with pytest.raises(SceneError, match=r"big\.toml: not a scene file Python can read \(Exceeds the limit \(4300 "
+                                         r"digits\) for integer string conversion: value has 5001 digits\)$"):
+        load_scene(path)
+
+
 def test_a_mesh_that_is_no_mesh_is_a_scene_error_naming_the_file(tmp_path):
     from scenes.sources import source_mesh
 
