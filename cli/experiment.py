@@ -120,6 +120,9 @@ def parse(args: argparse.Namespace):  # type: ignore[no-untyped-def]
     if args.tasks is None:
         args.tasks = "recorded" if is_recording(args.scene) else "push,press"
     tasks = tuple(t.strip() for t in args.tasks.split(",") if t.strip())
+    twice = next((t for i, t in enumerate(tasks) if t in tasks[:i]), None)
+    if twice is not None:  # as for the numbers: each repeat would run every condition again
+        raise TwinError(f"--tasks: {twice} is given twice in {args.tasks!r}")
     if "recorded" in tasks and not is_recording(args.scene):
         raise TwinError("--tasks recorded needs a recording (.mcap) in place of the scene file")
     sweep = Sweep(tasks=tasks, delays=tuple(d / 1e3 for d in delays), jitter=args.jitter / 1e3,
