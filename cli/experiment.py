@@ -162,7 +162,13 @@ def source(args: argparse.Namespace):  # type: ignore[no-untyped-def]
             raise TwinError(f"{args.scene}: the recording has no operator targets (a remote's recording has none; "
                             "record the twin side, or give --tasks push,press)")
         return scene, None
-    return scene, RecordedTask(times=times, points=points)
+    task = RecordedTask(times=times, points=points)
+    if "recorded" in args.tasks.split(","):
+        try:
+            task.plan(args.speed)  # its length checked before any work
+        except TwinError as exc:
+            raise TwinError(f"{args.scene}: {exc}") from None
+    return scene, task
 
 
 def run(args: argparse.Namespace) -> int:

@@ -137,8 +137,9 @@ _NUMBERS: dict[str, tuple[str, float, bool, float]] = {
     "threshold": ("--threshold", 0.0, False, 1.0),  # CoACD's range (it aborts the process past 1)
     "density": ("--density", MIN_DENSITY, True, MAX_DENSITY),  # what scene files and the wire take
     "force_rate": ("--force-rate", 0.0, True, MAX_RATE_HZ),
-    "delay_ms": ("--delay", 0.0, True, math.inf),
-    "jitter_ms": ("--jitter", 0.0, True, math.inf),
+    # In ms here, an hour at most: sync.netem.MAX_DELAY_S, which said it in seconds ("got 10000000.0" for 1e10 ms).
+    "delay_ms": ("--delay", 0.0, True, 3.6e6),
+    "jitter_ms": ("--jitter", 0.0, True, 3.6e6),
     "loss_pct": ("--loss", 0.0, True, 100.0),
     "replay_duration": ("--duration", 0.0, False, math.inf),
 }

@@ -209,9 +209,11 @@ def replay(path: str | Path, *, script: Path | None = None, scene: Path | None =
         network = recorded_network(recording)
     if network is not None and seed is not None:
         network = replace(network, seed=seed)
+    asked = duration is not None
     duration = _recorded_duration(recording) if duration is None else duration
     if duration > MAX_REPLAY_SECONDS:
-        raise RecordingError(f"--duration {duration:g} s is more than a replay runs (at most {MAX_REPLAY_SECONDS:g} s)")
+        what = f"--duration {duration:g} s is" if asked else f"{recording.path}: the recorded session runs {duration:.7g} s,"
+        raise RecordingError(f"{what} more than a replay runs (at most {MAX_REPLAY_SECONDS:g} s)")
     if not duration > 0:
         damage = f"; {recording.damage.removeprefix(f'{recording.path}: ')}" if recording.damage else ""
         raise RecordingError(f"{recording.path}: nothing to replay (the recorded session lasted {duration:g} s){damage}")

@@ -41,6 +41,7 @@ import numpy as np
 from estimation.errors import TwinError
 from scenes.scenefile import SceneSpec
 from sync.netem import Conditions, LinkModel, Network
+from sync.recording import MAX_REPLAY_SECONDS
 from twin.runtime import DEFAULT_LOCAL, LocalSettings
 
 #: Tasks :func:`run_experiment` knows.
@@ -125,7 +126,11 @@ class RecordedTask:
         from twin.trajectory import held_trajectory
 
         times = (np.asarray(self.times, float) - float(self.times[0])) / speed
-        return held_trajectory(times, self.points), float(times[-1]) + self.settle
+        seconds = float(times[-1]) + self.settle
+        if seconds > MAX_REPLAY_SECONDS:  # a 1.4 kB recording of two targets an hour apart, at speed 0.05: 20 h
+            raise ExperimentError(f"the recorded targets span {times[-1] * speed:.7g} s, a {seconds:.7g} s session at "
+                                  f"speed {speed:g}: more than a replay runs (at most {MAX_REPLAY_SECONDS:g} s)")
+        return held_trajectory(times, self.points), seconds
 
 
 @dataclass(frozen=True)

@@ -180,7 +180,27 @@ def test_impossible_conditions_and_a_recording_without_a_scene_exit_2(recorded, 
     assert "jitter" in capsys.readouterr().err
     assert main(["replay", str(path), "--delay", "1e308"]) == 2  # was an OverflowError traceback
     err = capsys.readouterr().err
-    assert "delay must be finite and in [0, 3600]" in err and err.count("\n") == 1, err
+    assert "delay must be >= 0 and <= 3.6e+06, got 1e+308" in err and err.count("\n") == 1, err
+    # The command line's bound, in the ms it takes, is the link model's hour (which said it in seconds, no unit).
+    from cli.main import _NUMBERS
+    from sync.netem import MAX_DELAY_S
+
+    assert _NUMBERS["delay_ms"][3] == _NUMBERS["jitter_ms"][3] == MAX_DELAY_S * 1e3
+    # Of a recording that runs past the hour: its length, not a --duration nobody gave.
+    long = tmp_path / "long.mcap"
+    clock = SimClock()
+    with Recorder(long, clock=clock, metadata={"scene_toml": SMALL.read_text()}) as r:
+        r.target(0.0, np.zeros(3))
+        clock.advance(3600.0)
+        r.target(3600.0, np.zeros(3))
+    assert main(["replay", str(long)]) == 2
+    err = capsys.readouterr().err
+    assert "long.mcap: the recorded session runs 3600.001 s, more than a replay runs (at most 3600 s)" in err, err
+    assert main(["experiment", str(long), "--out", str(tmp_path / "x"), "--delays", "0", "--speed", "0.05"]) == 2
+    err = capsys.readouterr().err
+    assert ("long.mcap: the recorded targets span 3600 s, a 72001 s session at speed 0.05: more than a replay runs"
+            in err and err.count("\n") == 1), err
+    assert not (tmp_path / "x").exists()
     bare = tmp_path / "bare.mcap"
     with Recorder(bare, clock=SimClock(), metadata={"scene_name": "x", "scene_toml": ""}) as r:
         r.target(0.5, np.zeros(3))
