@@ -48,7 +48,7 @@ import tempfile
 import threading
 import zlib
 from collections import Counter
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -91,6 +91,12 @@ MAX_RECORDING_BYTES = 1 * 2**30
 #: tick, poses, truth and forces), 13.7 M, with room. Each costs ~280 bytes of Python once read whatever its
 #: size, so the byte limit alone let a 12.5 KB file of empty messages hold 4 M records in 1.1 GB, and ~34 M.
 MAX_RECORDS = 16_000_000
+
+#: The most records a recording may hold per byte of its file. A recording's records take 20-40 bytes each
+#: compressed with their message index (a target a millisecond, 25 B if it never moves, 34 B if it does); a 43 KB
+#: file of 16 M empty messages packed into four zstd chunks took 4 GB to read. One a byte leaves 20x room for a
+#: writer that packs tighter than ours and keeps such a file to a few hundred bytes of Python per byte read.
+MAX_RECORDS_PER_BYTE = 1
 
 #: The longest replay, twin seconds: the live commands' default session (an hour). A replay also runs no
 #: longer than its recording holds (:meth:`Recording.span_s` plus :data:`RECORDED_TIME_SLACK_S`).
@@ -341,7 +347,7 @@ class RecordingTransport:
 # -- reading -----------------------------------------------------------------------------------------
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)  # slots: a recording holds millions of them (~170 bytes each with slots)
 class Record:
     """One message of a recording: its channel's topic, times (ns of the recording's clock), bytes."""
 
@@ -527,11 +533,13 @@ def read_recording(path: str | Path) -> Recording:
     metadata: dict[str, str] | None = None
     end: dict[str, str] | None = None
     topics: dict[int, str] = {}
-    held: list[tuple[int, int, int, bytes]] = []  # channel id, log time, publish time, data: in file order
+    held: list[Record | None] = []  # in file order
+    unknown: list[tuple[int, int]] = []  # (index in held, channel id) of messages whose channel comes later
     skipped: list[_Skipped] = []
     damage: str | None = None
     try:
         f = open(path, "rb")
+        limit = min(MAX_RECORDS, MAX_RECORDS_PER_BYTE * os.fstat(f.fileno()).st_size)
     except OSError as exc:
         raise RecordingError(f"{path}: cannot read the recording ({exc.strerror or exc})") from None
     with f:
@@ -578,9 +586,13 @@ def read_recording(path: str | Path) -> Recording:
                     # known only from the summary at the end of the file, so it is looked up then.
                     if rec.channel_id not in topics and not skipped:
                         raise McapError(f"message on unknown channel {rec.channel_id}")
-                    if len(held) >= MAX_RECORDS:
-                        raise RecordingError(f"{path}: holds more than {MAX_RECORDS:,} records, the limit")
-                    held.append((rec.channel_id, rec.log_time, rec.publish_time, rec.data))
+                    if len(held) >= limit:
+                        raise RecordingError(_too_many(path, limit))
+                    topic = topics.get(rec.channel_id)
+                    if topic is None:
+                        unknown.append((len(held), rec.channel_id))
+                        topic = ""
+                    held.append(Record(topic, rec.log_time, rec.publish_time, rec.data))
         except RecordingError:
             raise
         except RecordLengthLimitExceeded as exc:
@@ -593,7 +605,11 @@ def read_recording(path: str | Path) -> Recording:
             damage = f"the recording is damaged after {len(held)} messages ({what}); using those"
     if metadata is None:
         raise RecordingError(f"{path}: no tactile_twin.session metadata: not a tactile-twin recording")
-    records = [Record(topics[c], log, pub, data) for c, log, pub, data in held if c in topics]
+    for i, channel in unknown:
+        r = held[i]
+        held[i] = None if channel not in topics or r is None else Record(topics[channel], r.log_time,
+                                                                         r.publish_time, r.data)
+    records = [r for r in held if r is not None] if unknown else held
     notes = [_skipped_note(skipped, len(held) - len(records))] if skipped else []
     if damage is not None:
         notes.append(damage)
@@ -601,6 +617,13 @@ def read_recording(path: str | Path) -> Recording:
     recording = Recording(path, metadata, records, end, damage, Counter(r.topic for r in records))
     recording.end_time()  # checked here, whatever the caller reads (targets and truth: when they are read)
     return recording
+
+
+def _too_many(path: Path, limit: int) -> str:
+    if limit == MAX_RECORDS:
+        return f"{path}: holds more than {MAX_RECORDS:,} records, the limit"
+    return (f"{path}: holds more than {limit:,} records in {limit // MAX_RECORDS_PER_BYTE:,} bytes, more than "
+            f"{MAX_RECORDS_PER_BYTE} a byte (a recording's take 20-40 bytes each): not a session's recording")
 
 
 @dataclass
@@ -694,24 +717,24 @@ def _inflate(path: Path, chunk) -> bytes:  # type: ignore[no-untyped-def]
     return data
 
 
-def _chunk_records(data: bytes) -> list:  # type: ignore[type-arg]
-    """The schema, channel and message records in a chunk's decompressed ``data`` (others skipped)."""
+def _chunk_records(data: bytes) -> Iterator[object]:
+    """The channel and message records in a chunk's decompressed ``data`` (others skipped), one at a time: a
+    chunk of 4 M empty messages read whole into a list took 900 MB before the record limit could refuse it."""
     from io import BytesIO
 
     from mcap.data_stream import ReadDataStream
     from mcap.opcode import Opcode
     from mcap.records import Channel, Message
 
-    stream, out = ReadDataStream(BytesIO(data)), []
+    stream = ReadDataStream(BytesIO(data))
     while stream.count < len(data):
         opcode, length = stream.read1(), stream.read8()
         if opcode == Opcode.CHANNEL:
-            out.append(Channel.read(stream))
+            yield Channel.read(stream)
         elif opcode == Opcode.MESSAGE:
-            out.append(Message.read(stream, length))
+            yield Message.read(stream, length)
         else:
             stream.read(length)
-    return out
 
 
 def _check_version(path: Path, metadata: dict[str, str]) -> None:

@@ -440,6 +440,35 @@ def test_a_recording_of_more_records_than_the_limit_is_refused(recorded, tmp_pat
     assert f"more than {held - 1:,} records, the limit" in err and err.count("\n") == 1
 
 
+def test_a_small_file_packed_with_empty_records_is_refused_by_its_size(recorded, tmp_path, capsys):
+    # 16 M empty messages in four zstd chunks, 43 KB, took 4 GB and 87 s to read: under MAX_RECORDS, ~250 bytes
+    # of Python each. Now at most one record per byte of file, and a chunk's records are read one at a time.
+    from mcap.writer import CompressionType, IndexType, Writer
+
+    packed = tmp_path / "packed.mcap"
+    with packed.open("wb") as f:
+        w = Writer(f, compression=CompressionType.ZSTD, chunk_size=64 << 20, index_types=IndexType.NONE)
+        w.start(profile="tactile-twin")
+        w.add_metadata("tactile_twin.session", read_recording(recorded[0]).metadata)
+        channel = w.register_channel(FORCE_TOPIC, "json", 0)
+        for _ in range(200_000):
+            w.add_message(channel, 0, b"", 0)
+        w.finish()
+    size = packed.stat().st_size
+    assert size < 20_000
+    assert main(["replay", str(packed)]) == 2
+    err = capsys.readouterr().err
+    assert (f"packed.mcap: holds more than {size:,} records in {size:,} bytes, more than 1 a byte" in err
+            and err.count("\n") == 1), err
+    # A recording of ours takes 20-40 bytes a record even where nothing changes but the time, and reads whole.
+    dense, clock = tmp_path / "dense.mcap", SimClock()
+    with Recorder(dense, clock=clock, metadata={}) as r:
+        for _ in range(20_000):
+            clock.advance(0.001)
+            r.target(clock.now(), np.zeros(3))
+    assert len(read_recording(dense).records) == 20_000 and dense.stat().st_size > 20 * 20_000
+
+
 def test_a_damaged_recording_with_nothing_left_to_replay_says_it_is_damaged(recorded, tmp_path, capsys):
     path, _, _ = recorded
     torn = tmp_path / "torn.mcap"
