@@ -508,10 +508,11 @@ def _estimate_views(args: argparse.Namespace, scale: float) -> list[tuple]:  # t
         try:
             if depth:
                 from estimation.carving import DepthView
-                from estimation.depthimage import depth_view, intrinsics, pose, read_depth
+                from estimation.depthimage import coarsened, depth_view, intrinsics, pose, read_depth
 
                 image = read_depth(path, scale=args.depth_scale)
                 camera = intrinsics(*args.intrinsics, width=image.shape[1], height=image.shape[0])
+                image, camera, _ = coarsened(image, camera)
                 rot, pos = pose(args.viewpoint_pose[k] if args.viewpoint_pose else [0, 0, 0, 1, 0, 0, 0])
                 points, origin = depth_view(image, camera, rot, pos)
                 view = (View(points, origin, path.name, DepthView(image, 0.0, camera, rot, pos)), None)

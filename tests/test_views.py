@@ -690,3 +690,26 @@ def test_a_whole_objects_points_face_all_of_its_surface(shape, sigma):
     result = estimate(cloud, 1000.0)
     assert not any("points face only" in w for w in result.warnings), result.warnings
     assert np.isfinite(result.volume_bounds_m3[1])
+
+
+def test_a_depth_image_past_the_pixel_cap_is_thinned_to_the_same_points(caplog):
+    # A 4096 x 4096 frame took 2.8 GB as points; past MAX_VIEW_PIXELS every stride-th row and column is read,
+    # and each of those pixels lands where it would have in the whole image.
+    from estimation.depthimage import MAX_VIEW_PIXELS, coarsened, intrinsics
+    from estimation.fusion import depth_to_points
+
+    rng = np.random.default_rng(0)
+    depth = rng.uniform(0.5, 1.5, size=(301, 403))
+    depth[rng.random(depth.shape) < 0.1] = np.nan
+    camera = intrinsics(350.0, 340.0, 201.3, 149.8, width=403, height=301)
+    assert coarsened(depth, camera) == (depth, camera, 1)  # under the cap: untouched
+    assert MAX_VIEW_PIXELS >= 1920 * 1080
+    thin, grid, stride = coarsened(depth, camera, max_pixels=20_000)
+    assert stride == 3 and thin.shape == (101, 135) and "read every 3rd pixel of the 403x301 depth image" in caplog.text
+    rot, pos = np.eye(3), np.array([0.1, -0.2, 0.3])
+    whole, index = depth_to_points(depth, camera, rot, pos)
+    kept = {int(i): p for i, p in zip(index, whole, strict=True)}
+    points, thin_index = depth_to_points(thin, grid, rot, pos)
+    rows, cols = np.divmod(thin_index, thin.shape[1])
+    expected = np.array([kept[int(r * stride * depth.shape[1] + c * stride)] for r, c in zip(rows, cols, strict=True)])
+    assert np.allclose(points, expected, rtol=0, atol=1e-12)
