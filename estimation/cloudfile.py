@@ -72,6 +72,9 @@ _PCD_TYPES = {
     ("I", 1): "i1", ("U", 1): "u1", ("I", 2): "i2", ("U", 2): "u2", ("I", 4): "i4", ("U", 4): "u4",
     ("I", 8): "i8", ("U", 8): "u8", ("F", 4): "f4", ("F", 8): "f8",
 }  # fmt: skip
+#: Most values one PCD field may hold per point (its COUNT): PCL's widest descriptor, VFH, holds 308.
+MAX_PCD_COUNT = 4096
+
 _PCD_KEYS = ("VERSION", "FIELDS", "SIZE", "TYPE", "COUNT", "WIDTH", "HEIGHT", "VIEWPOINT", "POINTS", "DATA")
 #: The PCD format's default VIEWPOINT (no translation, identity rotation w x y z): "no viewpoint known".
 _DEFAULT_VIEWPOINT = (0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0)
@@ -229,6 +232,10 @@ def _header_lines(head: bytes, is_last: Callable[[str], bool]) -> tuple[list[str
     return None
 
 
+#: Largest count a header may claim: a row takes a byte at least, and no file reaches 2^53 bytes.
+MAX_COUNT = 2**53
+
+
 def _count(path: Path, text: str, what: str) -> int:
     # Decimal digits only: Python's int() also takes "2_000", "+2000" and other scripts' digits, which no PLY or
     # PCD writer produces and other readers refuse.
@@ -237,6 +244,8 @@ def _count(path: Path, text: str, what: str) -> int:
     value = int(text)
     if value < 0:
         raise CloudFileError(f"{path}: {what} count is negative ({value})")
+    if value > MAX_COUNT:  # past int64 it was an OverflowError deep in the reading
+        raise CloudFileError(f"{path}: {what} count {value} is more than any file holds")
     return value
 
 
@@ -308,6 +317,9 @@ class _PlyElement:
 
 
 def _parse_ply_header(path: Path, head: bytes) -> tuple[str, list[_PlyElement], int]:
+    if head.startswith(b"ply\r") and not head.startswith(b"ply\r\n"):
+        raise CloudFileError(f"{path}: the PLY header's lines end in a carriage return alone (an old Mac "
+                             f"convention); PLY lines end in a line feed")
     if not (head.startswith(b"ply\n") or head.startswith(b"ply\r\n")):
         raise CloudFileError(f"{path}: not a PLY file (it starts with {head[:16]!r}, not 'ply')")
     found = _header_lines(head, lambda line: line == "end_header")
@@ -531,9 +543,17 @@ def _read_pcd(path: Path, max_points: int) -> _Columns:
         codes.append(code)
     if len(set(names)) != len(names):
         raise CloudFileError(f"{path}: the PCD header names a field twice ({fields})")
+    for name, k in zip(names, counts, strict=True):
+        if k > MAX_PCD_COUNT:  # a COUNT of 1e19 was numpy's "invalid shape in fixed-type tuple"
+            raise CloudFileError(f"{path}: the PCD field {name!r} has COUNT {k}, more than the {MAX_PCD_COUNT} values "
+                                 f"a point's field may hold")
     for axis in "xyz":
         if axis not in names or counts[names.index(axis)] != 1:
             raise CloudFileError(f"{path}: the PCD file has no scalar {axis} field (has {fields})")
+    for name in ("normal_x", "normal_y", "normal_z"):
+        if name in names and counts[names.index(name)] != 1:
+            raise CloudFileError(f"{path}: the PCD field {name!r} has COUNT {counts[names.index(name)]}; a normal's "
+                                 f"fields hold one value each")
     origins = _viewpoint(path, header.get("VIEWPOINT"))
     dtype = np.dtype([(nm, "<" + c, (k,)) if k != 1 else (nm, "<" + c) for nm, c, k in zip(names, codes, counts, strict=True)])
     data = header["DATA"][0].lower() if header["DATA"] else ""

@@ -110,7 +110,7 @@ def read_depth(path: str | Path, *, scale: float | None = None) -> np.ndarray:
     with np.errstate(invalid="ignore"):
         depth[~(np.isfinite(depth) & (depth > 0))] = np.nan
     if np.isnan(depth).all():
-        raise CloudError(f"{path}: no pixel holds a depth (all {raw.size} are zero or NaN)")
+        raise CloudError(f"{path}: no pixel holds a depth (all {raw.size} are zero, negative or NaN)")
     return depth
 
 

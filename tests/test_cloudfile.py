@@ -368,6 +368,11 @@ PLY_HEAD = "ply\nformat binary_little_endian 1.0\nelement vertex 1\n"
         ("ply\nformat ascii 1.0\nelement vertex 2\n" + XYZ_FLOAT + "end_header\n1 2 3\n4 5 6 7\n", r"hold 7 values, not 2 x 3"),
         ("ply\nformat ascii 1.0\nfrobnicate 3\nend_header\n", r"unexpected PLY header line 'frobnicate 3'"),
         ("ply\nformat ascii 1.0\nelement edge 1\nproperty int a\nend_header\n", r"the PLY header has no vertex element"),
+        # Past int64 it was "Python int too large to convert to C ssize_t" from the line split
+        ("ply\nformat ascii 1.0\nelement face 99999999999999999999\nproperty int a\nelement vertex 1\n" + XYZ_FLOAT
+         + "end_header\n1 2 3\n", r"element 'face' count 99999999999999999999 is more than any file holds"),
+        ("ply\rformat ascii 1.0\relement vertex 1\r" + XYZ_FLOAT.replace("\n", "\r") + "end_header\r1 2 3\r",
+         r"lines end in a carriage return alone"),
     ],
 )
 def test_bad_ply_is_one_line_error(tmp_path, content, match):
@@ -391,6 +396,11 @@ def test_bad_ply_is_one_line_error(tmp_path, content, match):
         ("FIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nVIEWPOINT 1 2\nPOINTS 1\nDATA ascii\n1 2 3\n", r"VIEWPOINT needs 7 finite numbers"),
         ("FIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nPOINTS 1\nDATA lzma\n", r"unknown PCD DATA kind 'lzma'"),
         ("FIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nPOINTS 2000000000\nDATA binary\n", r"more than max_points"),
+        # numpy's "invalid shape in fixed-type tuple" and a KeyError 'normal_x' before
+        ("FIELDS x y z n\nSIZE 4 4 4 4\nTYPE F F F F\nCOUNT 1 1 1 2000000000\nPOINTS 1\nDATA binary\n",
+         r"the PCD field 'n' has COUNT 2000000000, more than the 4096"),
+        ("FIELDS x y z normal_x normal_y normal_z\nSIZE 4 4 4 4 4 4\nTYPE F F F F F F\nCOUNT 1 1 1 2 1 1\nPOINTS 1\n"
+         "DATA ascii\n1 2 3 0 0 0 1\n", r"the PCD field 'normal_x' has COUNT 2; a normal's fields hold one value each"),
     ],
 )
 def test_bad_pcd_is_one_line_error(tmp_path, content, match):

@@ -338,6 +338,7 @@ def test_a_view_with_no_points_is_refused(capsys, tmp_path, pcds):
 @pytest.mark.parametrize(("name", "write", "message"), [
     ("zeros.png", lambda p: _png(p, np.zeros((30, 40), np.uint16)), r"no pixel holds a depth \(all 1200"),
     ("nan.npy", lambda p: np.save(p, np.full((30, 40), np.nan)), r"no pixel holds a depth"),
+    ("negative.npy", lambda p: np.save(p, np.full((30, 40), -1.0)), r"all 1200 are zero, negative or NaN"),
     ("empty.npy", lambda p: np.save(p, np.zeros((0, 40))), r"the depth image is empty"),
     ("eight.png", lambda p: _png(p, np.full((30, 40), 200, np.uint8)), r"8-bit PNG cannot hold depth"),
     # PIL reads a 16-bit RGB PNG as 8-bit RGB: the header says which it is.
