@@ -12,6 +12,7 @@ import contextlib
 import json
 import logging
 import math
+import re
 import sys
 import time
 from collections.abc import Callable, Iterator
@@ -228,6 +229,12 @@ class _Parser(argparse.ArgumentParser):
     """argparse's parser with one-line usage errors (the CLI's contract: a clear line, exit 2), pointing at
     ``--help`` instead of printing the whole usage first (eight lines before the error for ``twin estimate``).
     Subcommands' parsers are of this class too (``add_subparsers`` takes the parent's)."""
+
+    def __init__(self, *args: object, **kwargs: object) -> None:
+        super().__init__(*args, **kwargs)  # type: ignore[arg-type]
+        # argparse takes "-1e-3" (and "-inf") for an option: its own pattern knows only -1 and -1.5, so
+        # "--support-plane 0 0 1 -1e-3" was "unrecognized arguments: -1e-3". No option of ours starts with a digit.
+        self._negative_number_matcher = re.compile(r"^-(?:(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?|inf|nan)$", re.I)
 
     def error(self, message: str) -> NoReturn:
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")

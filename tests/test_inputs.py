@@ -387,3 +387,16 @@ def test_an_error_quoting_a_huge_value_is_cut_to_a_readable_line(tmp_path, capsy
     assert main(["build", str(scene), "--out", str(tmp_path / "out")]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and err.startswith("twin build: error: ") and len(err) <= MAX_ERROR_CHARS + 40, err[:300]
+
+
+def test_negative_numbers_in_exponent_notation_are_values_not_options():
+    # argparse's own pattern knows -1 and -1.5 only: "-1e-3" was "unrecognized arguments: -1e-3".
+    from cli.main import _parser
+
+    args = _parser().parse_args(["estimate", "a.pcd", "--support-plane", "0", "0", "1", "-1e-3",
+                                 "--viewpoint", "-1E+1", "-.5", "-2."])
+    assert args.support_plane == ["0", "0", "1", "-1e-3"]
+    assert list(args.viewpoint[0]) == [-10.0, -0.5, -2.0]
+    assert _parser().parse_args(["replay", "r.mcap", "--delay", "-inf"]).delay_ms == float("-inf")
+    with pytest.raises(SystemExit):  # an option is still an option
+        _parser().parse_args(["estimate", "a.pcd", "--support-plane", "0", "0", "1", "-e"])
