@@ -90,3 +90,19 @@ def test_walls_thinner_than_the_point_spacing_are_flagged():
     assert any("thinner than the point spacing" in w for w in est.warnings)
     low, high = est.volume_bounds_m3
     assert low <= plate.volume <= high
+
+
+def test_a_drilled_blocks_wall_is_its_thinnest_bore_wall():
+    # The block's smallest extent (in its random pose, at that) was taken for the wall of any drilled block.
+    from scenes.shapes import _drilled_wall
+
+    extents = np.array([1.0, 0.6, 0.4])
+    near_face = (0, np.array([0.0, 0.0, 0.1]), 0.09)  # along x, 0.01 under the top face (z = 0.2)
+    assert _drilled_wall(extents, [near_face]) == pytest.approx(0.01)
+    parallel = (0, np.array([0.0, 0.15, -0.05]), 0.05)  # 0.158 from the other's axis: a 0.018 wall between them
+    assert _drilled_wall(extents, [parallel, (0, np.array([0.0, 0.0, 0.0]), 0.09)]) == pytest.approx(
+        np.hypot(0.15, 0.05) - 0.14)
+    crossing = [(0, np.array([0.0, 0.0, 0.05]), 0.05), (1, np.array([0.0, 0.0, -0.07]), 0.05)]  # 0.12 apart in z
+    assert _drilled_wall(extents, crossing) == pytest.approx(0.02)
+    through = (0, np.array([0.0, 0.12, 0.19]), 0.05)  # breaks out of the top face: an open slot, no wall there
+    assert _drilled_wall(extents, [through]) == pytest.approx(0.3 - 0.12 - 0.05)  # the side face's is the thinnest
