@@ -281,7 +281,8 @@ def _estimate_auto(
                         f"only known to {bounds[0]:.4g}..{bounds[1]:.4g} m^3")
     if curved > tol.NOISE_CURVATURE_WARN * props.volume and np.isfinite(bounds[1]):
         warnings.append(f"the noise ({1000 * noise:.2g} mm) is a large share of the surface's radius of curvature: "
-                        f"it may move the volume by up to {100 * curved / props.volume:.2g} %: the volume is only known to {bounds[0]:.4g}..{bounds[1]:.4g} m^3")
+                        f"it may move the volume by up to {100 * curved / props.volume:.2g} %: the volume is only "
+                        f"known to {bounds[0]:.4g}..{bounds[1]:.4g} m^3")
     if run.sealed > tol.VOLUME_DOUBT_FRACTION * props.volume:
         # No closing radius closed the cloud for good: the inside is what the widest shell enclosed, behind
         # walls thinner than it or openings it sealed (a hollow ball's mouth, with noise as thick as its
