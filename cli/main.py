@@ -893,7 +893,7 @@ class _ReplayProgress:
             if stage == "building":
                 print("twin replay: building the scene", file=sys.stderr, flush=True)
             elif done >= self._next or done >= total:
-                print(f"twin replay: {done:.0f} / {total:.0f} s simulated", file=sys.stderr, flush=True)
+                print(f"twin replay: {done:.3g} / {total:.3g} s simulated", file=sys.stderr, flush=True)
                 self._next = done + total / 10
             return
         if self._bar is None:
@@ -906,7 +906,7 @@ class _ReplayProgress:
             self._task = self._bar.add_task("building the scene", total=None, done="")
         if stage != "building":
             self._bar.update(self._task, description="replaying", completed=done, total=total,
-                             done=f"{done:.0f} / {total:.0f} s simulated")
+                             done=f"{done:.3g} / {total:.3g} s simulated")
 
 
 def _cmd_replay(args: argparse.Namespace) -> int:

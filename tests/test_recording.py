@@ -150,7 +150,7 @@ def test_a_torn_tail_is_reported_and_the_intact_part_replays(recorded, cache, tm
     # Progress on stderr (not a terminal: plain lines), up to the simulated time replayed; stdout the JSON.
     progress = [line for line in captured.err.splitlines() if not line.startswith("twin replay: warning")]
     assert progress[0] == "twin replay: building the scene", progress
-    assert progress[-1] == f"twin replay: {summary['duration_s']:.0f} / {summary['duration_s']:.0f} s simulated"
+    assert progress[-1] == f"twin replay: {summary['duration_s']:.3g} / {summary['duration_s']:.3g} s simulated"
 
 
 def test_bad_recordings_are_one_line_errors(tmp_path, capsys):
