@@ -1,6 +1,7 @@
 """Noise on a curved surface: the estimate's error against the interval it gives for it.
 
     .venv/bin/python bench/noise_curvature.py      # output in bench/results/noise_curvature.txt
+    .venv/bin/python bench/noise_curvature.py --without   # the same with the widening off (the "before")
 
 Isotropic Gaussian noise (sigma 0.5 and 1 mm) on 100,000 surface points, no normals, of every shape of
 ``scenes.shapes`` (seeds 0 and 1) whose walls are at least 3 mm, and of spheres of 5, 8 and 15 mm radius, cubes
@@ -38,10 +39,19 @@ def cases() -> list[tuple[str, trimesh.Trimesh]]:
     return out
 
 
-def main() -> int:
+def main(argv: list[str] | None = None) -> int:
+    import argparse
+
+    from estimation import tolerances as tol
+
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--without", action="store_true", help="NOISE_CURVATURE_BIAS set to 0: the interval as before")
+    args = ap.parse_args(argv)
+    if args.without:
+        tol.NOISE_CURVATURE_BIAS = 0.0  # read at each estimate (estimation.estimate._noise_on_curvature)
     shapes = cases()
-    print(f"bench/noise_curvature.py: {POINTS:,} points, isotropic Gaussian noise, 'auto' without normals, "
-          f"{len(shapes)} shapes\n")
+    print(f"bench/noise_curvature.py{' --without' if args.without else ''}: {POINTS:,} points, isotropic Gaussian "
+          f"noise, 'auto' without normals, {len(shapes)} shapes\n")
     for sigma in SIGMAS:
         inside, widths, rows = 0, [], []
         for k, (name, mesh) in enumerate(shapes):

@@ -138,20 +138,20 @@ VOLUME_DOUBT_FRACTION = 0.005
 #: (``PhysicalEstimate.volume_bounds_m3`` widens by this times sigma^2 times the integral of the mean curvature).
 #: Isotropic noise sigma on a surface of mean curvature H moves the points' mean outward by sigma^2 H (their
 #: tangential scatter lifts them off the curve) and the peak of their density inward by 2 sigma^2 H (the same
-#: points spread over more area outside than inside); a reconstruction lands between. Measured on 23 shapes
-#: and spheres at sigma 0.5 and 1 mm (session 34, a scratch script over ``scenes.shapes``): the error was 0.02
-#: to 0.5 of this bound on smooth shapes (a 1 cm ellipsoid at 0.5 mm: +1.7 % against 7.2 %), inside it on all
-#: but two thin-walled ones at 1 mm, whose walls the noise merged.
+#: points spread over more area outside than inside); a reconstruction lands between. ``bench/noise_curvature.py``
+#: (70 shapes at sigma 0.5 and 1 mm): the truth inside the interval for 68 and 64 of 70 with it, 43 and 37
+#: without; the error was at most two thirds of the widening wherever the noise is under an eighth of the radius
+#: of curvature (past a fifth, as on a 5 mm ball at 1 mm, the noise reads low and the widening falls short).
 NOISE_CURVATURE_BIAS = 2.0
 
 #: The noise's reach on a curved surface (above) earns a warning past this fraction of the volume: the error
-#: was at most half the reach on the shapes measured, so past it the error may pass 1 %, the accuracy the
+#: was up to two thirds of the reach on the shapes measured, so past it the error may pass 1 %, the accuracy the
 #: issue asks of noisy clouds at the median. (At ``VOLUME_DOUBT_FRACTION`` it warned for most shapes at 0.5 mm
 #: noise, a 14 cm torus off by 0.01 % among them: sharp edges count in the curvature integral, and move less.)
 NOISE_CURVATURE_WARN = 0.02
 
 #: Noise below this share of the cell moves the surface by under a 200th of a cell wherever the grid resolves
-#: the curvature (radius a cell or more): the curvature integral is not worth its time (70 ms at 200k faces).
+#: the curvature (radius a cell or more): the curvature integral (a sort of every edge) is not worth its time.
 NOISE_CURVATURE_MIN_CELLS = 0.05
 
 #: A cloud whose coarse flood fill enclosed nothing and whose surface is more than this share unmeasured
