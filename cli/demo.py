@@ -12,7 +12,6 @@ from __future__ import annotations
 import multiprocessing as mp
 import queue
 import time
-from importlib import resources
 from pathlib import Path
 
 import numpy as np
@@ -26,7 +25,9 @@ RAW_BYTES_PER_POINT, RAW_STREAM_HZ = 12, 30.0
 
 
 def default_scene() -> Path:
-    return Path(str(resources.files("scenes").joinpath("data/paper_table.toml")))
+    from scenes.scenefile import scene_data
+
+    return scene_data() / "paper_table.toml"
 
 
 def remote_sensor(name: str, scene):  # type: ignore[no-untyped-def]

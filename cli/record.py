@@ -121,16 +121,11 @@ def scene_folder(recording: Recording) -> tuple[Path, str | None]:
         folder = Path(recorded).resolve()
     except (OSError, RuntimeError, ValueError):  # a NUL byte, a link loop: not a folder to read
         return own, recorded
-    if folder in (own, packaged_scene_folder()):
+    from scenes.scenefile import scene_data
+
+    if folder in (own, scene_data()):
         return folder, None
     return own, recorded
-
-
-def packaged_scene_folder() -> Path:
-    """The scene files that ship with the package (``scenes/data``), resolved."""
-    from importlib import resources
-
-    return Path(str(resources.files("scenes").joinpath("data"))).resolve()
 
 
 def recorded_network(recording: Recording) -> Network | None:

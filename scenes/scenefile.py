@@ -281,6 +281,13 @@ class SceneSpec:
         return new_spec(self.name, table=self.table, end_effector=self.end_effector, physics=physics)
 
 
+def scene_data() -> Path:
+    """The folder of the scene files that ship with the package (``scenes/data``), resolved."""
+    from importlib import resources
+
+    return Path(str(resources.files("scenes").joinpath("data"))).resolve()
+
+
 def load_scene(path: str | Path) -> SceneSpec:
     """Read and validate a scene file.
 
