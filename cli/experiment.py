@@ -137,8 +137,9 @@ def is_recording(path: Path) -> bool:
     return path.suffix.lower() == ".mcap"
 
 
-def source(args: argparse.Namespace):  # type: ignore[no-untyped-def]
-    """The scene and, for a recording, its operator as a :class:`scenes.experiment.RecordedTask` (else None).
+def source(args: argparse.Namespace, tasks: tuple[str, ...]):  # type: ignore[no-untyped-def]
+    """The scene and, for a recording, its operator as a :class:`scenes.experiment.RecordedTask` (else None);
+    ``tasks`` as :func:`parse` read them (``"push, recorded"`` holds ``recorded``).
 
     Raises:
         TwinError: an unreadable scene file or recording, a recording without a scene, or one whose operator
@@ -158,12 +159,12 @@ def source(args: argparse.Namespace):  # type: ignore[no-untyped-def]
     scene = recorded_scene(recording)
     times, points = recording.targets()
     if len(times) == 0:
-        if "recorded" in args.tasks.split(","):
+        if "recorded" in tasks:
             raise TwinError(f"{args.scene}: the recording has no operator targets (a remote's recording has none; "
                             "record the twin side, or give --tasks push,press)")
         return scene, None
     task = RecordedTask(times=times, points=points)
-    if "recorded" in args.tasks.split(","):
+    if "recorded" in tasks:
         try:
             task.plan(args.speed)  # its length checked before any work
         except TwinError as exc:
@@ -180,7 +181,7 @@ def run(args: argparse.Namespace) -> int:
     from scenes.experiment import dask_executor, run_experiment
 
     sweep = parse(args)
-    scene, recorded = source(args)
+    scene, recorded = source(args, sweep.tasks)
     out: Path = args.out
     engine = nullcontext(None) if args.dask is None else dask_executor(args.dask, args.workers)
     with engine as executor, Progress(TextColumn("sessions"), BarColumn(), MofNCompleteColumn(),

@@ -234,7 +234,9 @@ class _Parser(argparse.ArgumentParser):
         super().__init__(*args, **kwargs)  # type: ignore[arg-type]
         # argparse takes "-1e-3" (and "-inf") for an option: its own pattern knows only -1 and -1.5, so
         # "--support-plane 0 0 1 -1e-3" was "unrecognized arguments: -1e-3". No option of ours starts with a digit.
-        self._negative_number_matcher = re.compile(r"^-(?:(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?|inf|nan)$", re.I)
+        # A comma list of numbers (--delays -5,0) is a value too, and said negative by the command.
+        number = r"(?:(?:\d+\.?\d*|\.\d+)(?:e[-+]?\d+)?|inf(?:inity)?|nan)"
+        self._negative_number_matcher = re.compile(rf"^-{number}(?:,-?{number})*$", re.I)
 
     def error(self, message: str) -> NoReturn:
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")

@@ -139,7 +139,7 @@ def _read_png(path: Path) -> np.ndarray:
     bits, colour = head[24], head[25]
     if colour != 0:
         kind = PNG_COLOUR_TYPES.get(colour, f"colour type {colour}")
-        article = "an" if bits in (8, 11, 18) else "a"
+        article = "an" if bits == 8 else "a"
         raise CloudFileError(f"{path}: {article} {bits}-bit {kind} PNG; a depth image is a 16-bit single-channel "
                              f"(greyscale) PNG in millimetres")
     try:
@@ -154,8 +154,9 @@ def _read_png(path: Path) -> np.ndarray:
             ValueError, SyntaxError, EOFError, struct.error, zlib.error) as exc:
         raise CloudFileError(f"{path}: not a readable PNG ({exc})") from None
     if mode in ("L", "P", "1") or raw.dtype == np.uint8:
-        raise CloudFileError(f"{path}: an 8-bit PNG cannot hold depth; expected a 16-bit single-channel PNG "
-                             f"(millimetres)")
+        article = "an" if bits == 8 else "a"
+        raise CloudFileError(f"{path}: {article} {bits}-bit PNG cannot hold depth; expected a 16-bit single-channel "
+                             f"PNG (millimetres)")
     if raw.ndim != 2:
         raise CloudFileError(f"{path}: expected a single-channel depth PNG, got mode {mode} with shape {raw.shape}")
     return raw
@@ -189,9 +190,12 @@ def coarsened(depth: np.ndarray, camera: Intrinsics, *,
     Every pixel would become a point before the estimate thins them to its own budget: a 4096 x 4096 frame took
     2.8 GB, two of them 4.6 GB. The thinned grid is still far denser than the estimate uses.
     """
-    stride = int(np.ceil(np.sqrt(depth.size / max_pixels))) if depth.size > max_pixels else 1
-    if stride == 1:
+    if depth.size <= max_pixels:
         return depth, camera, 1
+    height, width = depth.shape
+    stride = int(np.ceil(np.sqrt(depth.size / max_pixels)))
+    while -(-height // stride) * -(-width // stride) > max_pixels:  # a narrow image thins by less than stride^2
+        stride += 1
     thin = np.ascontiguousarray(depth[::stride, ::stride])
     # Pixel k of the thinned grid is pixel stride * k of the image; fusion.Intrinsics puts centres at + 0.5.
     grid = Intrinsics(camera.fx / stride, camera.fy / stride, (camera.cx - 0.5) / stride + 0.5,

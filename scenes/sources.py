@@ -8,6 +8,7 @@ measuring the twin against, never for the twin itself.
 
 from __future__ import annotations
 
+import io
 import logging
 import re
 import zlib
@@ -71,12 +72,14 @@ def _load_mesh(spec: ObjectSpec) -> trimesh.Trimesh:
     # A third-party loader raises almost anything on a damaged file: IndexError (an .stl holding text),
     # AssertionError (a glTF byteStride of 0), KeyError, struct.error, EOFError, NotImplementedError (no loader
     # for the format), besides OSError and ValueError. Any of them means the same: the file cannot be read.
+    source: object = spec.value
+    kind = None
     if str(spec.value).lower().endswith(".obj"):
-        _check_obj_indices(spec)
+        source, kind = io.BytesIO(_obj_text(spec)), "obj"
     try:
         # Unprocessed first: processing drops the faces of NaN vertices without a word (a box built at 45 %),
         # and indexes vertices by faces that nothing has checked yet.
-        mesh = trimesh.load_mesh(spec.value, force="mesh", process=False)
+        mesh = trimesh.load_mesh(source, file_type=kind, force="mesh", process=False)
     except MemoryError:
         raise  # not the file's fault alone: the CLI says the machine ran out of memory
     except Exception as exc:
@@ -97,18 +100,31 @@ def _load_mesh(spec: ObjectSpec) -> trimesh.Trimesh:
 _OBJ_ZERO_INDEX = re.compile(rb"^[ \t]*f(?:[ \t]+[^ \t\r\n#]+)*?[ \t]+-?0+(?=[/ \t\r\n#]|$)", re.MULTILINE)
 
 
-def _check_obj_indices(spec: ObjectSpec) -> None:
-    """Refuse an OBJ face with vertex index 0: trimesh reads it as index -1, the last vertex, and builds a
-    wrong triangle without a word."""
+def _obj_text(spec: ObjectSpec) -> bytes:
+    """An OBJ file's text as trimesh reads it: a face with vertex index 0 refused (trimesh read it as -1, the last
+    vertex, and built a wrong triangle without a word); a byte-order mark, tabs, indented lines and comments after
+    a statement, all valid OBJ, evened out (trimesh found no triangles in the first three and could not read the
+    fourth). Geometry only: its ``mtllib`` materials are not read.
+
+    Raises:
+        SceneError: the file cannot be read, or a face has vertex index 0 (with its line).
+    """
     try:
         data = Path(spec.value).read_bytes()
-    except OSError:
-        return  # the loader below says why it cannot be read
+    except OSError as exc:
+        raise SceneError(f"object {spec.id!r}: cannot read mesh {spec.value} ({exc.strerror or exc})") from None
     match = _OBJ_ZERO_INDEX.search(data)
     if match is not None:
         line = data.count(b"\n", 0, match.start()) + 1
         raise SceneError(f"object {spec.id!r}: mesh {spec.value} line {line}: a face with vertex index 0 "
                          f"(OBJ counts vertices from 1)")
+    data = data.removeprefix(b"\xef\xbb\xbf").replace(b"\t", b" ")
+    return _OBJ_COMMENT.sub(b"", _OBJ_INDENT.sub(b"", data))
+
+
+#: Whitespace at the start of an OBJ line; a comment, with the spaces before it, to the end of its line.
+_OBJ_INDENT = re.compile(rb"^[ ]+", re.MULTILINE)
+_OBJ_COMMENT = re.compile(rb"[ ]*#[^\r\n]*")
 
 
 def _check_stl_size(spec: ObjectSpec) -> None:
@@ -118,11 +134,16 @@ def _check_stl_size(spec: ObjectSpec) -> None:
     try:
         size = path.stat().st_size
         with path.open("rb") as f:
-            head = f.read(84)
+            start = f.read(4096)
     except OSError:
         return
-    if head[:5].lower() == b"solid" and all(32 <= c < 127 or c in b"\t\r\n" for c in head):
-        return  # a text STL: "holds no triangles" is what is wrong with it
+    head = start[:84]
+    # A text STL starts "solid" (after a byte-order mark, maybe) and its first 84 bytes are printable, the count's
+    # four included, unless its name holds UTF-8 (then its facets give it away); "holds no triangles" is what is
+    # wrong with it. A binary STL's header may start "solid" too (SolidWorks), but not its count's bytes.
+    if start.removeprefix(b"\xef\xbb\xbf").lstrip()[:5].lower() == b"solid" and (
+            all(32 <= c < 127 or c in b"\t\r\n" for c in head) or b"facet normal" in start.lower()):
+        return
     where = f"object {spec.id!r}: mesh {spec.value}"
     if size < 84:
         raise SceneError(f"{where} is {size} bytes: shorter than a binary STL's 84-byte header, and not a text STL")

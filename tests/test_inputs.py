@@ -398,5 +398,7 @@ def test_negative_numbers_in_exponent_notation_are_values_not_options():
     assert args.support_plane == ["0", "0", "1", "-1e-3"]
     assert list(args.viewpoint[0]) == [-10.0, -0.5, -2.0]
     assert _parser().parse_args(["replay", "r.mcap", "--delay", "-inf"]).delay_ms == float("-inf")
+    assert _parser().parse_args(["estimate", "a.pcd", "--viewpoint", "-Infinity", "0", "0"]).viewpoint[0][0] == float("-inf")
+    assert _parser().parse_args(["experiment", "s.toml", "--out", "o", "--delays", "-5,0"]).delays == "-5,0"
     with pytest.raises(SystemExit):  # an option is still an option
         _parser().parse_args(["estimate", "a.pcd", "--support-plane", "0", "0", "1", "-e"])

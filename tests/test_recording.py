@@ -196,11 +196,13 @@ def test_impossible_conditions_and_a_recording_without_a_scene_exit_2(recorded, 
     assert main(["replay", str(long)]) == 2
     err = capsys.readouterr().err
     assert "long.mcap: the recorded session runs 3600.001 s, more than a replay runs (at most 3600 s)" in err, err
-    assert main(["experiment", str(long), "--out", str(tmp_path / "x"), "--delays", "0", "--speed", "0.05"]) == 2
-    err = capsys.readouterr().err
-    assert ("long.mcap: the recorded targets span 3600 s, a 72001 s session at speed 0.05: more than a replay runs"
-            in err and err.count("\n") == 1), err
-    assert not (tmp_path / "x").exists()
+    for tasks in ("recorded", "push, recorded"):  # the list as parse() reads it: spaces once skipped this check
+        assert main(["experiment", str(long), "--out", str(tmp_path / "x"), "--delays", "0", "--speed", "0.05",
+                     "--tasks", tasks]) == 2
+        err = capsys.readouterr().err
+        assert ("long.mcap: the recorded targets span 3600 s, a 72001 s session at speed 0.05: more than a replay runs"
+                in err and err.count("\n") == 1), err
+        assert not (tmp_path / "x").exists()
     bare = tmp_path / "bare.mcap"
     with Recorder(bare, clock=SimClock(), metadata={"scene_name": "x", "scene_toml": ""}) as r:
         r.target(0.5, np.zeros(3))

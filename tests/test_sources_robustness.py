@@ -113,6 +113,34 @@ def test_a_torn_binary_stl_is_named_torn_not_empty(tmp_path, capsys, cut, words)
     assert f"box.stl {words}" in err, err
 
 
+def test_a_text_stl_with_a_utf8_name_is_not_taken_for_a_torn_binary_one(tmp_path, capsys):
+    # "solid Würfel" has bytes past ASCII in its first 84, which the text test wanted printable: a text STL
+    # without its last line was said "cut short: its header counts 175,140,719 triangles".
+    text = trimesh.exchange.stl.export_stl_ascii(BOX).replace("solid", "solid Würfel", 1)
+    text = text[: text.rindex("endsolid")]
+    err = _build_fails(_scene(tmp_path, "box.stl", text.encode("utf-8")), tmp_path, capsys)
+    assert "box.stl holds no triangles" in err, err
+
+
+@pytest.mark.parametrize("variant", ["tabs", "indented", "comments", "bom"])
+def test_valid_obj_layouts_build_the_same_box(tmp_path, variant):
+    # Valid OBJ that trimesh read as no triangles (tabs, indented lines) or could not read (a comment after a
+    # statement, a byte-order mark).
+    lines = [f"v {x:g} {y:g} {z:g}" for x, y, z in BOX.vertices]
+    lines += ["f " + " ".join(str(i + 1) for i in f) for f in BOX.faces]
+    if variant == "tabs":
+        lines = [line.replace(" ", "\t") for line in lines]
+    elif variant == "indented":
+        lines = ["  " + line for line in lines]
+    elif variant == "comments":
+        lines = [line + "  # a note" for line in lines]
+    text = ("\ufeff" if variant == "bom" else "") + "\n".join(lines) + "\n"
+    (tmp_path / "box.obj").write_bytes(text.encode("utf-8"))
+    spec = parse_scene({"name": "s", "objects": [{"id": "m", "mesh": "box.obj"}]}, base=tmp_path).objects[0]
+    mesh = source_mesh(spec)
+    assert mesh is not None and len(mesh.faces) == 12 and abs(mesh.volume - 1e-3) < 1e-9
+
+
 def test_gltf_index_buffer_outside_the_vertices_is_refused(tmp_path, capsys):
     err = _build_fails(_scene(tmp_path, "box.gltf", _gltf(_faces([0, 1, 99_999]))), tmp_path, capsys)
     assert "box.gltf has 1 face(s) with vertex indices outside 0..7" in err, err

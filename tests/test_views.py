@@ -341,6 +341,7 @@ def test_a_view_with_no_points_is_refused(capsys, tmp_path, pcds):
     ("negative.npy", lambda p: np.save(p, np.full((30, 40), -1.0)), r"all 1200 are zero, negative or NaN"),
     ("empty.npy", lambda p: np.save(p, np.zeros((0, 40))), r"the depth image is empty"),
     ("eight.png", lambda p: _png(p, np.full((30, 40), 200, np.uint8)), r"8-bit PNG cannot hold depth"),
+    ("one.png", lambda p: _png(p, np.ones((30, 40), bool)), r"a 1-bit PNG cannot hold depth"),
     # PIL reads a 16-bit RGB PNG as 8-bit RGB: the header says which it is.
     ("rgb16.png", lambda p: _png_header(p, 40, 30, colour=2), r"a 16-bit RGB PNG; a depth image is a 16-bit single"),
     ("rgba.png", lambda p: _png(p, np.full((30, 40, 4), 200, np.uint8)), r"an 8-bit RGBA PNG; a depth image is"),
@@ -714,3 +715,8 @@ def test_a_depth_image_past_the_pixel_cap_is_thinned_to_the_same_points(caplog):
     rows, cols = np.divmod(thin_index, thin.shape[1])
     expected = np.array([kept[int(r * stride * depth.shape[1] + c * stride)] for r, c in zip(rows, cols, strict=True)])
     assert np.allclose(points, expected, rtol=0, atol=1e-12)
+    # A narrow image thins by less than stride^2: the stride grows until the cap holds (1 x 16 M came out 5.3 M).
+    row = np.ones((1, 40_000))
+    thin, _, stride = coarsened(row, intrinsics(100.0, 100.0, 20_000.0, 0.5, width=40_000, height=1),
+                                max_pixels=5_000)
+    assert stride == 8 and thin.size == 5_000
