@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import logging
+import math
+import numbers
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -105,6 +107,9 @@ def make_cloud(
     Raises:
         CloudError: empty cloud, wrong shapes, no finite point left, or non-finite sensor origins.
     """
+    if isinstance(scale, bool) or not isinstance(scale, numbers.Real) or not (math.isfinite(scale) and scale > 0):
+        # NaN made every point NaN past the finiteness check; a negative one mirrored the object.
+        raise CloudError(f"scale must be a positive number of metres per unit, got {str(scale)[:40]}")
     pts = as_points(points, "points", allow_nonfinite=True)
     if len(pts) == 0:
         raise CloudError("the cloud is empty (0 points)")

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import difflib
 import math
+import numbers
 import sys
 from dataclasses import dataclass
 from functools import cache
@@ -126,11 +127,17 @@ def resolve_density(material_name: str | None, density: float | None) -> tuple[f
 
 
 def check_density(density: float) -> float:
-    """Return ``density`` (kg/m^3) if it is a positive finite number.
+    """Return ``density`` (kg/m^3) if it is a number from ``MIN_DENSITY`` to ``MAX_DENSITY``.
 
     Raises:
-        MaterialError: zero, negative, NaN or infinite.
+        MaterialError: not a real number, zero, negative, NaN, infinite or outside that range (the Python API
+            took 1e306, and eigh failed on the inertia it made; 1e-300 gave an all-zero inertia).
     """
+    if isinstance(density, bool) or not isinstance(density, numbers.Real):
+        raise MaterialError(f"density must be a number of kg/m^3, got {str(density)[:40]!r}")
     if not math.isfinite(density) or density <= 0:
         raise MaterialError(f"density must be a positive number of kg/m^3, got {density}")
+    if not MIN_DENSITY <= density <= MAX_DENSITY:
+        raise MaterialError(f"density must be a positive number of kg/m^3 from {MIN_DENSITY:g} to {MAX_DENSITY:g} "
+                            f"(aerogel to past osmium), got {density:g}")
     return float(density)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import logging
+import re
 
 import numpy as np
 import pytest
@@ -217,6 +218,23 @@ def test_scales_within_range_are_estimated(radius, method):
 def test_bad_density(box_cloud, density):
     with pytest.raises(MaterialError, match="density must be a positive"):
         estimate(box_cloud, density)
+
+
+@pytest.mark.parametrize(("density", "said"), [
+    # eigh failed on the inertia 1e306 made; 1e-300 gave an all-zero inertia; 1e300 a 2e296 kg box
+    (1e306, "from 0.1 to 100000"), (1e-300, "from 0.1 to 100000"), (1e300, "from 0.1 to 100000"),
+    ("1000", "density must be a number of kg/m^3, got '1000'"), (None, "must be a number"), (True, "must be a number"),
+])
+def test_a_density_no_object_has_is_refused(box_cloud, density, said):
+    with pytest.raises(MaterialError, match=re.escape(said)):
+        estimate(box_cloud, density)  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize("scale", [float("nan"), float("inf"), 0.0, -1.0, None, "0.001"])
+def test_a_scale_that_is_not_a_positive_number_is_refused(scale):
+    # NaN made every point NaN past the finiteness check (then scipy's "data must be finite"); -1 mirrored it.
+    with pytest.raises(CloudError, match="scale must be a positive number of metres per unit"):
+        make_cloud(_sphere(200), scale=scale)  # type: ignore[arg-type]
 
 
 def test_unknown_method(box_cloud):
