@@ -30,6 +30,7 @@ from estimation.cloud import (
     distinct_rows,
     nonfinite_note,
 )
+from estimation.contracts import as_points
 from estimation.downsample import thin_to_budget, voxel_downsample
 from estimation.errors import CloudError
 from estimation.inertia import MassProperties, mass_properties, triangle_areas
@@ -704,19 +705,38 @@ def from_mesh(vertices: np.ndarray, faces: np.ndarray, density: float, *,
               material: str | None = None) -> PhysicalEstimate:
     """The exact record of a known closed mesh (metres, outward faces): no cloud, no reconstruction.
 
-    For reference models (the truth a twin is compared with) and for objects whose CAD mesh is known.
+    For reference models (the truth a twin is compared with) and for objects whose CAD mesh is known. A mesh
+    that is not closed and consistently wound is estimated all the same, ``watertight`` False and a warning
+    saying its volume is not a solid's (half a box's faces gave half its volume, without a word).
+
+    Raises:
+        CloudError: vertices not a finite (v, 3) array within ``tol.MAX_COORDINATE_M``, faces not (f, 3) whole
+            vertex indices within them, or no volume enclosed.
+        MaterialError: as :func:`estimate`.
     """
     check_density(density)
-    vertices = np.asarray(vertices, dtype=np.float64)
-    faces = np.asarray(faces, dtype=np.int64)
+    vertices = as_points(vertices, "mesh vertices")
+    if len(vertices) and float(np.abs(vertices).max()) > tol.MAX_COORDINATE_M:
+        raise CloudError(f"mesh vertices reach {float(np.abs(vertices).max()):.3g} m from the origin, beyond the "
+                         f"{tol.MAX_COORDINATE_M:g} m an estimate accepts (wrong units?)")
+    raw = np.asarray(faces)
+    if raw.ndim != 2 or raw.shape[1:] != (3,) or not (np.issubdtype(raw.dtype, np.integer) or raw.size == 0):
+        raise CloudError(f"mesh faces: expected (f, 3) whole vertex indices, got {raw.dtype} {raw.shape}")
+    faces = raw.astype(np.int64)
+    if faces.size and (faces.min() < 0 or faces.max() >= len(vertices)):
+        raise CloudError(f"mesh faces: vertex indices must be 0 to {len(vertices) - 1}, got {faces.min()} to "
+                         f"{faces.max()}")
     t0 = time.perf_counter()
     props = mass_properties(vertices, faces, density)
     if props.volume <= 0:
         raise CloudError("mesh encloses no volume (open, empty or inside-out)")
+    watertight = _is_watertight(vertices, faces)
+    warnings = () if watertight else (
+        "the mesh is not closed and consistently wound: its volume is a signed sum over its faces, not a solid's",)
     return PhysicalEstimate(
         method="mesh", mass=props, obb=oriented_box(vertices), vertices=vertices, faces=faces,
-        watertight=_is_watertight(vertices, faces), points_in=0, points_used=0, cell=0.0,
-        timings=Timings(mass_properties=time.perf_counter() - t0), material=material)
+        watertight=watertight, points_in=0, points_used=0, cell=0.0,
+        timings=Timings(mass_properties=time.perf_counter() - t0), material=material, warnings=warnings)
 
 
 def box_mesh(box: OrientedBox) -> tuple[np.ndarray, np.ndarray]:

@@ -420,3 +420,21 @@ def test_negative_numbers_in_exponent_notation_are_values_not_options():
     assert _parser().parse_args(["experiment", "s.toml", "--out", "o", "--delays", "-5,0"]).delays == "-5,0"
     with pytest.raises(SystemExit):  # an option is still an option
         _parser().parse_args(["estimate", "a.pcd", "--support-plane", "0", "0", "1", "-e"])
+
+
+def test_from_mesh_checks_its_mesh_and_says_when_it_is_not_closed():
+    # Half a box's faces gave half its volume with no word; NaN vertices a LinAlgError; faces past the vertices
+    # an IndexError; float faces were truncated.
+    from estimation import from_mesh
+
+    box = trimesh.creation.box(extents=[0.1, 0.06, 0.04])
+    v, f = np.asarray(box.vertices), np.asarray(box.faces)
+    whole = from_mesh(v, f, 1000.0)
+    assert whole.watertight and whole.warnings == () and whole.volume == pytest.approx(2.4e-4)
+    half = from_mesh(v, f[:6], 1000.0)
+    assert not half.watertight and any("not closed" in w for w in half.warnings)
+    for vertices, faces, said in [(np.vstack([v, [np.nan] * 3]), f, "mesh vertices: contains NaN"),
+                                  (v * 1e200, f, "beyond the 10000 m"), (v, f + 100, "vertex indices must be 0 to 7"),
+                                  (v, f.astype(float), "whole vertex indices"), (v[:, :2], f, "expected shape (n, 3)")]:
+        with pytest.raises(CloudError, match=re.escape(said)):
+            from_mesh(vertices, faces, 1000.0)
