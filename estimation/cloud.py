@@ -200,10 +200,19 @@ def check_count_and_range(points: np.ndarray) -> None:
     n = len(points)
     if n < tol.MIN_POINTS:
         raise CloudError(f"too few points: {n} (need at least {tol.MIN_POINTS})")
-    far = float(np.abs(points).max())
+    check_range(points)
+
+
+def check_range(points: np.ndarray, what: str = "coordinates") -> None:
+    """Raise unless ``points`` ((n, 3) finite, metres) all lie within ``tolerances.MAX_COORDINATE_M`` of the origin.
+
+    Raises:
+        CloudError: how far ``what`` reach, and the stray points if a few make it.
+    """
+    far = float(np.abs(points).max()) if len(points) else 0.0
     if far > tol.MAX_COORDINATE_M:
         stray = far_points(points)
-        raise CloudError(f"coordinates reach {far:.3g} m from the origin, beyond the {tol.MAX_COORDINATE_M:g} m "
+        raise CloudError(f"{what} reach {far:.3g} m from the origin, beyond the {tol.MAX_COORDINATE_M:g} m "
                          f"an estimate accepts" + (f"; that is {stray}: remove them" if stray else
                                                    " (wrong --units or scale?)"))
 

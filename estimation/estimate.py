@@ -26,6 +26,7 @@ from estimation.cloud import (
     PointCloud,
     check_count_and_range,
     check_estimable,
+    check_range,
     check_sensor_origin,
     distinct_rows,
     nonfinite_note,
@@ -716,9 +717,7 @@ def from_mesh(vertices: np.ndarray, faces: np.ndarray, density: float, *,
     """
     check_density(density)
     vertices = as_points(vertices, "mesh vertices")
-    if len(vertices) and float(np.abs(vertices).max()) > tol.MAX_COORDINATE_M:
-        raise CloudError(f"mesh vertices reach {float(np.abs(vertices).max()):.3g} m from the origin, beyond the "
-                         f"{tol.MAX_COORDINATE_M:g} m an estimate accepts (wrong units?)")
+    check_range(vertices, "mesh vertices")
     raw = np.asarray(faces)
     if raw.ndim != 2 or raw.shape[1:] != (3,) or not (np.issubdtype(raw.dtype, np.integer) or raw.size == 0):
         raise CloudError(f"mesh faces: expected (f, 3) whole vertex indices, got {raw.dtype} {raw.shape}")
