@@ -25,6 +25,10 @@ MIN_EXTENT_M = 1e-6
 #: missing component is off by far more). Within it, the quaternion is normalised before use.
 QUAT_NORM_TOLERANCE = 1e-3
 
+#: A normal in a PointCloud built by hand must have a length within this of 1: float32 files and sums of
+#: rounded components stay far inside it, an unnormalised or zero normal is far outside.
+UNIT_NORMAL_TOLERANCE = 1e-3
+
 #: A cloud whose smallest principal extent is below this fraction of its largest is flat (a sheet) or
 #: line-like: it encloses no volume. 1e-3 is a 1 mm thick sheet at 1 m, far below any real object.
 FLATNESS_RATIO = 1e-3

@@ -9,7 +9,16 @@ import numpy as np
 import pytest
 import trimesh
 
-from estimation import CloudError, CloudFileError, MaterialError, estimate, load_cloud, make_cloud, save_cloud
+from estimation import (
+    CloudError,
+    CloudFileError,
+    MaterialError,
+    PointCloud,
+    estimate,
+    load_cloud,
+    make_cloud,
+    save_cloud,
+)
 from estimation.materials import MAX_DENSITY, MIN_DENSITY, material, materials
 from estimation.units import UnitsError, unit_scale
 from scenes.sampling import sample_surface
@@ -40,6 +49,51 @@ def test_nan_rows_are_dropped_and_reported(box_cloud, caplog):
     assert "dropped 8" in caplog.text
     result = estimate(cloud, 1000.0)
     assert any("dropped 8" in w for w in result.warnings)
+
+
+def _with_nan(points):
+    out = points.copy()
+    out[3, 2] = np.nan
+    return out
+
+
+# Ways a PointCloud built by hand (not by make_cloud) goes wrong: its fields from good points p and unit
+# normals n, and what the error must say.
+BY_HAND = {
+    "nan point": (lambda p, n: dict(points=_with_nan(p)), r"points: 1 of \d+ rows hold NaN or inf"),
+    "2 columns": (lambda p, n: dict(points=p[:, :2]), r"points: expected shape \(n, 3\)"),
+    "strings": (lambda p, n: dict(points=[["a", "b", "c"]] * len(p)), "points: expected a numeric"),
+    "short normals": (lambda p, n: dict(points=p, normals=n[:10]), r"normals: expected shape \(\d+, 3\)"),
+    "nan normals": (lambda p, n: dict(points=p, normals=np.full_like(n, np.nan)), "normals: .* NaN or inf"),
+    "zero normals": (lambda p, n: dict(points=p, normals=np.zeros_like(n)), "normals: expected unit vectors"),
+    "long normals": (lambda p, n: dict(points=p, normals=n * 2), "normals: expected unit vectors"),
+    "short colours": (lambda p, n: dict(points=p, colors=np.zeros((5, 3))), "colors: expected shape"),
+    "0-255 colours": (lambda p, n: dict(points=p, colors=np.full(p.shape, 200.0)), r"colors: expected values in \[0, 1\]"),
+    "short origins": (lambda p, n: dict(points=p, sensor_origins=p[:-1]), "sensor_origins: expected shape"),
+    "nan origin": (lambda p, n: dict(points=p, sensor_origins=np.broadcast_to([np.nan, 0, 0], p.shape)),
+                   "sensor_origins: .* NaN or inf"),
+    "dropped": (lambda p, n: dict(points=p, dropped_nonfinite=-1), "dropped_nonfinite: expected a count"),
+}
+
+
+@pytest.mark.parametrize("case", list(BY_HAND))
+def test_a_cloud_built_by_hand_is_checked_like_one_from_make_cloud(case):
+    good = sample_surface(trimesh.creation.box(extents=(0.2, 0.1, 0.05)), 1_000, seed=1, with_normals=True)
+    fields, said = BY_HAND[case]
+    with pytest.raises(CloudError, match=said):
+        PointCloud(**fields(good.points, good.normals))
+
+
+def test_a_cloud_built_by_hand_with_huge_finite_points_is_refused_by_range(box_cloud):
+    cloud = PointCloud(np.vstack([box_cloud.points, [[1e308, 1e308, 0]]]))  # its sum overflows: checked row by row
+    with pytest.raises(CloudError, match="beyond the 10000 m"):
+        estimate(cloud, 1000.0)
+
+
+def test_a_cloud_built_by_hand_from_lists_is_the_cloud_make_cloud_builds(box_cloud):
+    by_hand = PointCloud(box_cloud.points.tolist())
+    assert by_hand.points.dtype == np.float64 and by_hand.points.shape == box_cloud.points.shape
+    assert estimate(by_hand, 1000.0).volume == estimate(make_cloud(box_cloud.points), 1000.0).volume
 
 
 def test_all_nan():
