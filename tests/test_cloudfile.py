@@ -119,6 +119,19 @@ def test_ply_fixed_element_before_vertices_and_crlf(tmp_path, cloud):
     np.testing.assert_array_equal(load_cloud(tmp_path / "crlf.ply").points, cloud.points)
 
 
+@pytest.mark.parametrize("ascii", [False, True])
+@pytest.mark.parametrize(("offset", "size"), [(0.0, "4"), (15.0, "4"), (100.0, "8"), (5000.0, "8")])
+def test_pcd_keeps_coordinates_far_from_the_origin_to_a_micrometre(tmp_path, cloud, offset, size, ascii):
+    """float32 near the origin, as PCL's point types hold; float64 where float32 would move a point."""
+    far = PointCloud(cloud.points + np.array([offset, -offset / 2, 0.3]), cloud.normals, cloud.colors)
+    save_cloud(far, tmp_path / "f.pcd", ascii=ascii)
+    header = (tmp_path / "f.pcd").read_bytes().partition(b"DATA")[0].decode()
+    assert f"SIZE {size} {size} {size} 4 4 4 4" in header
+    back = load_cloud(tmp_path / "f.pcd")
+    np.testing.assert_allclose(back.points, far.points, rtol=0, atol=1e-6)
+    np.testing.assert_allclose(back.colors, far.colors, atol=1e-12)
+
+
 def test_pcd_viewpoint_becomes_sensor_origin(tmp_path, cloud):
     one = make_cloud(cloud.points, sensor_origins=[0.5, -0.25, 1.0])
     for ascii in (False, True):
