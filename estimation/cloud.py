@@ -220,8 +220,10 @@ def check_sensor_origin(origin: np.ndarray, what: str) -> None:
     Raises:
         CloudError: naming ``what`` and how far the sensor is.
     """
+    if not np.isfinite(origin).all():
+        raise CloudError(f"{what}: the sensor's position is not finite (NaN or inf): a damaged VIEWPOINT or pose?")
     far = float(np.abs(origin).max(initial=0.0))
-    if not far <= tol.MAX_COORDINATE_M:  # NaN too
+    if far > tol.MAX_COORDINATE_M:
         raise CloudError(f"{what}: the sensor is {far:.3g} m from the origin, beyond the {tol.MAX_COORDINATE_M:g} m "
                          "an estimate accepts (wrong --units, or a damaged VIEWPOINT?)")
 

@@ -170,6 +170,9 @@ def estimate(
         ValueError: an unknown method.
         ReconstructionError: 'auto' found no closed solid.
     """
+    if not isinstance(cloud, PointCloud):
+        raise TypeError(f"estimate takes a PointCloud (make_cloud(points) builds one from an (n, 3) array), "
+                        f"got {type(cloud).__name__}")
     if method not in METHODS:
         raise ValueError(f"unknown method {method!r}; choose from {', '.join(METHODS)}")
     density = check_density(density)

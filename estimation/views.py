@@ -76,7 +76,8 @@ class View:
 
     Attributes:
         points: (n, 3) float64, metres, world frame (n may be 0: reported, not fused).
-        origin: (3,) float64 metres, world frame: the sensor centre; None when unknown.
+        origin: (3,) float64 metres, world frame: the sensor centre, or (n, 3) one per point (a fused
+            file's per-point origins); None when unknown.
         name: where it came from (a file name), for messages.
         depth: the depth image the points came from, if any: with one for every view, the space the
             cameras saw through is carved (``estimation.carving``) to close what none of them saw.
@@ -86,6 +87,24 @@ class View:
     origin: np.ndarray | None
     name: str = ""
     depth: DepthView | None = None
+
+    def __post_init__(self) -> None:
+        label = self.name or "a view"
+        object.__setattr__(self, "points", as_points(self.points, f"{label}: points"))
+        if self.origin is not None:
+            origin = np.asarray(self.origin, dtype=np.float64) if _numeric(self.origin) else None
+            if origin is None or origin.shape not in ((3,), self.points.shape):
+                raise CloudError(f"{label}: origin: expected the sensor's position, (3,) or one per point "
+                                 f"{self.points.shape}, got {getattr(origin, 'shape', type(self.origin).__name__)}")
+            object.__setattr__(self, "origin", origin)
+
+
+def _numeric(value: object) -> bool:
+    try:
+        np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        return False
+    return True
 
 
 @dataclass(frozen=True)
@@ -348,6 +367,8 @@ def estimate_views(views: list[View], density: float, *, support: Plane | str | 
     """
     from estimation.spacing import point_spacing, surface_noise
 
+    if isinstance(views, View) or not all(isinstance(v, View) for v in views):
+        raise TypeError("estimate_views takes a list of View records (View(points, origin) builds one)")
     for k, view in enumerate(views):
         label = view.name or f"view {k + 1}"
         if view.origin is None:

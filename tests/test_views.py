@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 from cli.main import main
-from estimation import make_cloud, save_cloud
+from estimation import CloudError, estimate, make_cloud, save_cloud
+from estimation.views import View, estimate_views
 
 TOP = 0.75  # table top, metres
 # An L-bracket: a 10 x 6 x 1.5 cm foot and a 1.5 x 6 x 7 cm upright, standing on the table.
@@ -325,6 +326,39 @@ def test_a_view_without_viewpoint_is_refused(capsys, tmp_path, views, pcds):
     o0, o1 = (map(str, o) for _, o in views)
     assert main(["estimate", pcds[0], str(tmp_path / "bare.ply"), "--density", "1000", "--json",
                  "--viewpoint", *o0, "--viewpoint", *o1]) == 0
+
+
+def _ball_view():
+    rng = np.random.default_rng(0)
+    points = rng.normal(size=(3000, 3))
+    return 0.05 * points / np.linalg.norm(points, axis=1, keepdims=True) + [0.0, 0.0, 0.06], np.array([0.3, 0, 0.3])
+
+
+@pytest.mark.parametrize(("build", "error", "said"), [
+    (lambda p, o: View(np.vstack([p, [np.nan, 0, 0]]), o, "cam"), CloudError, "cam: points: contains NaN"),
+    (lambda p, o: View(p[:, :2], o), CloudError, r"a view: points: expected shape \(n, 3\)"),
+    (lambda p, o: View(p, o[:2]), CloudError, r"origin: expected the sensor's position, \(3,\) or one per point"),
+    (lambda p, o: View(p, "here"), CloudError, "origin: expected the sensor's position"),
+    (lambda p, o: [View(p, [np.nan, 0, 0])], CloudError, "the sensor's position is not finite"),
+    (lambda p, o: [p], TypeError, "a list of View records"),
+    (lambda p, o: View(p, o), TypeError, "a list of View records"),
+])
+def test_views_built_by_hand_are_checked(build, error, said):
+    with pytest.raises(error, match=said):
+        estimate_views(build(*_ball_view()), 1000.0, support="auto")
+
+
+def test_a_view_from_lists_or_with_an_origin_per_point_is_the_same_view():
+    points, origin = _ball_view()
+    volume = estimate_views([View(points, origin)], 1000.0, support="auto").estimate.volume
+    assert estimate_views([View(points.tolist(), origin.tolist())], 1000.0, support="auto").estimate.volume == volume
+    per_point = np.tile(origin, (len(points), 1))
+    assert estimate_views([View(points, per_point)], 1000.0, support="auto").estimate.volume == volume
+
+
+def test_estimate_names_the_record_it_takes():
+    with pytest.raises(TypeError, match=r"takes a PointCloud \(make_cloud\(points\) builds one"):
+        estimate(_ball_view()[0], 1000.0)
 
 
 def test_a_view_with_no_points_is_refused(capsys, tmp_path, pcds):
