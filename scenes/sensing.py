@@ -163,6 +163,9 @@ class CameraSensor:
     Scans happen at most every ``track_period`` simulated seconds; in between, the last track is reported,
     with the scan's time.
 
+    While an object rests, its track is the running mean of its last fits (``rest_window`` of them at most,
+    see :meth:`_at_rest`), so each scan's noise does not move it; 1 turns that off.
+
     Between scans an object is predicted at constant velocity (from its last two tracks), and ICP starts
     from that prediction and, when the segment is the object's alone, from the segment's centroid; the
     better fit wins. An object not found near its prediction is looked for again, in segments no other
@@ -180,9 +183,11 @@ class CameraSensor:
     """
 
     def __init__(self, feed, *, track_period: float = 0.5, seed: int = 0,  # type: ignore[no-untyped-def]
-                 background: bool = False) -> None:
+                 background: bool = False, rest_window: int | None = None) -> None:
         self.feed = feed
         self.track_period = track_period
+        self.rest_window = REST_WINDOW if rest_window is None else max(1, int(rest_window))  # 1: each scan's own fit
+        self._rest: dict[str, int] = {}  # id -> fits averaged into its track since it last moved (see _at_rest)
         self.seed = seed
         self._scan = None
         self._claims: dict[int, set[str]] = {}
@@ -205,11 +210,12 @@ class CameraSensor:
 
     @classmethod
     def for_scene(cls, scene, *, cameras: int = 3, seed: int = 0, track_period: float = 0.5,  # type: ignore[no-untyped-def]
-                  noise=None, background: bool = False, **camera: object) -> CameraSensor:
+                  noise=None, background: bool = False, rest_window: int | None = None,
+                  **camera: object) -> CameraSensor:
         """The default rig for a scene file: ``cameras`` around its table, the table's workspace.
 
         ``noise``: a :class:`scenes.cameras.DepthNoise` (None: the Kinect model); ``camera`` options go to
-        every :class:`scenes.cameras.Camera`; ``background``: see the class.
+        every :class:`scenes.cameras.Camera`; ``background``, ``rest_window``: see the class.
         """
         from scenes.cameras import KINECT_V1, CameraFeed, table_ring, table_workspace
 
@@ -217,7 +223,7 @@ class CameraSensor:
         height = None if scene.table is None else scene.table.height
         rig = table_ring(size, height, count=cameras, **camera)
         feed = CameraFeed(rig, table_workspace(size, height), noise=KINECT_V1 if noise is None else noise, seed=seed)
-        return cls(feed, track_period=track_period, seed=seed, background=background)
+        return cls(feed, track_period=track_period, seed=seed, background=background, rest_window=rest_window)
 
     # -- the Sensor seam -------------------------------------------------------------------------
 
@@ -285,6 +291,7 @@ class CameraSensor:
         observed = self._scan.trackable(seen.points[~seen.completed])  # type: ignore[union-attr,index]
         back = (observed - motion[:3, 3]) @ motion[:3, :3]  # R^T (x - t)
         self._model[object_id] = (self._icp_model(back, shot), self._model[object_id][1])
+        self._rest[object_id] = 1  # the fits averaged so far answered to the old model
         self._observed[object_id] = seen
         return seen
 
@@ -350,11 +357,12 @@ class CameraSensor:
             # What the model's surface cannot show (a ball's turns, a can's about its axis) stays as it was:
             # ICP's answer there is noise, and it went out as corrections of objects at rest.
             step = self._surface_motions(object_id, model).without(np.linalg.inv(before) @ result.transform)
+            step, shrink = self._at_rest(object_id, model, step, result.rmse)
             motion = self._motion[object_id] = before @ step
             position = motion[:3, :3] @ centre + motion[:3, 3]
             linvel, angvel = self._update_velocity(object_id, position, motion[:3, :3] @ before[:3, :3].T, scan.time)
             track = Track(position, matrix_quat(motion[:3, :3]), linvel, angvel,
-                          result.position_sigma(position), result.angle_sigma, time=scan.time)
+                          shrink * result.position_sigma(position), shrink * result.angle_sigma, time=scan.time)
             self._review(scan, k, object_id, motion, linvel)
         self._tracked[object_id] = (scan.time, track)
         return track
@@ -573,6 +581,25 @@ class CameraSensor:
         top = max(f.fitness for f in fits)
         return min((f for f in fits if f.fitness >= top - FITNESS_TIE), key=lambda f: f.rmse)
 
+    def _at_rest(self, object_id: str, model: np.ndarray, step: np.ndarray, rmse: float) -> tuple[np.ndarray, float]:
+        """``step`` ((4, 4), what ICP found since the last track, acting on the model's points), averaged with
+        the fits before it while the object rests; and the factor its uncertainty shrinks by.
+
+        A step that moves no model point further than ``REST_GATE`` times the fit's own RMS residual is one a
+        single scan cannot tell from noise: the track moves by ``1/n`` of it, the running mean of the last
+        ``n`` such fits (at most ``REST_WINDOW``; the first is the pose the object came to rest at). A larger
+        step is motion: the track takes it whole and the count starts again. At rest each scan's fresh noise
+        turned a 3 cm dice by up to 1.4 degrees seen by one camera, and every such turn past the remote's
+        deadband went out as a correction of an object that had not moved. The price: a creep slower than
+        the gate a scan is followed up to the gate late.
+        """
+        moved = model @ step[:3, :3].T + step[:3, 3] - model
+        if not len(model) or float(np.sqrt(np.einsum("ij,ij->i", moved, moved).max())) > REST_GATE * rmse:
+            self._rest[object_id] = 1
+            return step, 1.0
+        n = self._rest[object_id] = min(self._rest.get(object_id, 1) + 1, self.rest_window)
+        return _partial_motion(step, model.mean(axis=0), 1.0 / n), 1.0 / np.sqrt(n)
+
     def _surface_motions(self, object_id: str, model: np.ndarray) -> SurfaceMotions:
         """:func:`estimation.fusion.unseen_motions` of the object's ICP model (worked out once per model)."""
         cached = self._unseen.get(object_id)
@@ -703,6 +730,16 @@ MAX_SPEED = 1.0
 #: says little about the motion now).
 VELOCITY_WINDOW = 1.5
 
+#: A step of ICP that moves no point of the model further than this many times the fit's RMS residual is
+#: taken for noise at rest (``CameraSensor._at_rest``): three sigmas of the residual. One noisy camera's fits
+#: of a resting box reached 1.5-3 times it; a push moves an object centimetres between two scans.
+REST_GATE = 3.0
+
+#: Fits at rest a track is the running mean of, at most (``CameraSensor._at_rest``): eight scans, 4 s at the
+#: default period, take the noise of each down by a factor of 2.8; a longer memory would follow a slow creep
+#: (under the fit's residual a scan) later.
+REST_WINDOW = 8
+
 #: Turns about the vertical (radians) tried from the segment's centroid: a pushed object turns.
 CENTROID_TURNS = (0.0, np.pi / 2, np.pi, -np.pi / 2)
 
@@ -715,6 +752,18 @@ GOOD_FITNESS = 0.95
 #: Fits within this much of the best fitness are told apart by their RMSE (fitness saturates at 1 when the
 #: correspondence distance is several noise sigmas).
 FITNESS_TIE = 0.02
+
+
+def _partial_motion(step: np.ndarray, centre: np.ndarray, share: float) -> np.ndarray:
+    """``share`` (0-1) of the rigid motion ``step`` ((4, 4)): the same turn about ``centre`` ((3,) metres) by
+    ``share`` of its angle, and ``share`` of ``centre``'s shift."""
+    from scipy.spatial.transform import Rotation
+
+    out = np.eye(4)
+    out[:3, :3] = Rotation.from_rotvec(share * Rotation.from_matrix(step[:3, :3]).as_rotvec()).as_matrix()
+    shift = step[:3, :3] @ centre + step[:3, 3] - centre
+    out[:3, 3] = centre + share * shift - out[:3, :3] @ centre
+    return out
 
 
 class _Still:

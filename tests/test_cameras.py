@@ -203,6 +203,42 @@ def test_tracking_at_rest_is_within_2_mm_and_1_degree():
     assert len(model) and (scan.plane.height(model) > scan.cut).all()
 
 
+def _rest_tracks(window: int | None, scans: int, *, move_at: int | None = None):  # type: ignore[no-untyped-def]
+    """A box at rest seen by one noisy camera, tracked ``scans`` times (0.5 s apart) with ``rest_window``
+    ``window``; moved 2 cm along x before scan ``move_at``. Per scan: (position error m, turn deg, sigma m)."""
+    from twin.poses import angle_deg
+
+    model, data = _model({"a": (0.02, 0.01)})
+    truth = _Truth(model, data)
+    sensor = CameraSensor(CameraFeed(_rig(1), WORKSPACE, seed=4), rest_window=window)
+    seen = sensor.observe(truth, "a", 0, shot=1)  # type: ignore[arg-type]
+    shift = np.zeros(3)
+    out = []
+    for k in range(1, scans + 1):
+        if k == move_at:
+            shift = np.array([0.02, 0.0, 0.0])
+            _move(model, data, "a", 0.04, 0.01)
+        truth.twin.time = 0.5 * k
+        track = sensor.track(truth, "a")  # type: ignore[arg-type]
+        out.append((float(np.linalg.norm(track.position - seen.frame_position - shift)),
+                    angle_deg(track.quat, np.array([1.0, 0, 0, 0])), track.position_sigma))
+    return np.array(out)
+
+
+def test_at_rest_a_track_is_the_mean_of_its_fits_and_a_move_is_taken_whole():
+    from scenes.sensing import REST_WINDOW
+
+    each, mean = _rest_tracks(1, 8), _rest_tracks(None, 8)
+    # The same scans (same seed): each fit's noise moves the first tracker; the mean settles.
+    assert each[:, 0].mean() > 1.5 * mean[:, 0].mean() and each[:, 1].mean() > 1.5 * mean[:, 1].mean()
+    assert mean[-1, 2] < 0.6 * each[-1, 2]  # the sigma it reports shrinks with the fits it averages
+    assert REST_WINDOW > 1
+    # A move of 2 cm, far beyond a fit's residual, is not averaged: the track is there at the next scan
+    # (within this noisy camera's fit, 4-5 mm; averaged with the three before it, it would lag 15 mm).
+    moved = _rest_tracks(None, 6, move_at=4)
+    assert moved[3, 0] < 0.005 and moved[-1, 0] < 0.005
+
+
 def _move(model, data, name: str, x: float, y: float) -> None:  # type: ignore[no-untyped-def]
     import mujoco
 
