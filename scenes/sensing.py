@@ -188,6 +188,7 @@ class CameraSensor:
         self.track_period = track_period
         self.rest_window = REST_WINDOW if rest_window is None else max(1, int(rest_window))  # 1: each scan's own fit
         self._rest: dict[str, int] = {}  # id -> fits averaged into its track since it last moved (see _at_rest)
+        self._scatter: dict[str, tuple[int, float]] = {}  # id -> (steps at rest counted, their mean square reach)
         self.seed = seed
         self._scan = None
         self._claims: dict[int, set[str]] = {}
@@ -585,18 +586,29 @@ class CameraSensor:
         """``step`` ((4, 4), what ICP found since the last track, acting on the model's points), averaged with
         the fits before it while the object rests; and the factor its uncertainty shrinks by.
 
-        A step that moves no model point further than ``REST_GATE`` times the fit's own RMS residual is one a
-        single scan cannot tell from noise: the track moves by ``1/n`` of it, the running mean of the last
-        ``n`` such fits (at most ``REST_WINDOW``; the first is the pose the object came to rest at). A larger
-        step is motion: the track takes it whole and the count starts again. At rest each scan's fresh noise
-        turned a 3 cm dice by up to 1.4 degrees seen by one camera, and every such turn past the remote's
-        deadband went out as a correction of an object that had not moved. The price: a creep slower than
-        the gate a scan is followed up to the gate late.
+        A step is noise at rest when it moves no model point further than ``REST_GATE`` times the scatter of
+        this object's earlier steps at rest (their RMS reach), and never further than ``REST_GATE`` times the
+        fit's RMS residual (all a first step has to go by). Then the track moves by ``1/n`` of it, the running
+        mean of the last ``n`` such fits (at most ``REST_WINDOW``). The first is the pose the object was first
+        seen in, or after a motion the first fit at rest (taken whole: the last fit in motion may have caught
+        it still sliding). A larger step is motion: the track takes it whole and the count starts again.
+
+        At rest each scan's fresh noise turned a 3 cm dice by up to 1.4 degrees seen by one camera, and every
+        such turn past the remote's deadband went out as a correction of an object that had not moved. The
+        price: a creep slower than the gate a scan is followed up to the gate late. The gate follows the
+        scatter because the residual alone let a can's first 2 mm of being pushed (its fits at rest moved it
+        0.1-0.4 mm; the residual was 2.5 mm) be averaged away.
         """
         moved = model @ step[:3, :3].T + step[:3, 3] - model
-        if not len(model) or float(np.sqrt(np.einsum("ij,ij->i", moved, moved).max())) > REST_GATE * rmse:
-            self._rest[object_id] = 1
+        reach = float(np.sqrt(np.einsum("ij,ij->i", moved, moved).max())) if len(model) else np.inf
+        count, scatter = self._scatter.get(object_id, (0, 0.0))
+        gate = REST_GATE * (rmse if count < 2 else min(rmse, np.sqrt(scatter)))
+        if reach > gate:
+            self._rest[object_id] = 0
             return step, 1.0
+        # The scatter's memory is REST_WINDOW steps too: a new view or noise level shows within a few scans.
+        count = min(count + 1, self.rest_window)
+        self._scatter[object_id] = (count, scatter + (reach**2 - scatter) / count)
         n = self._rest[object_id] = min(self._rest.get(object_id, 1) + 1, self.rest_window)
         return _partial_motion(step, model.mean(axis=0), 1.0 / n), 1.0 / np.sqrt(n)
 
@@ -730,9 +742,10 @@ MAX_SPEED = 1.0
 #: says little about the motion now).
 VELOCITY_WINDOW = 1.5
 
-#: A step of ICP that moves no point of the model further than this many times the fit's RMS residual is
-#: taken for noise at rest (``CameraSensor._at_rest``): three sigmas of the residual. One noisy camera's fits
-#: of a resting box reached 1.5-3 times it; a push moves an object centimetres between two scans.
+#: A step of ICP that moves no point of the model further than this many times the scatter of the object's
+#: earlier steps at rest (their RMS reach), nor this many times the fit's RMS residual, is taken for noise at
+#: rest (``CameraSensor._at_rest``): three sigmas. One noisy camera's fits of a resting box reached 1.5-3
+#: times the residual; a push moves an object centimetres between two scans.
 REST_GATE = 3.0
 
 #: Fits at rest a track is the running mean of, at most (``CameraSensor._at_rest``): eight scans, 4 s at the
