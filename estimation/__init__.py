@@ -44,9 +44,9 @@ __getattr__, __dir__ = lazy_exports("estimation", _EXPORTS, globals())
 
 
 class _Package(types.ModuleType):
-    """This package's module type: ``estimation.estimate`` stays the function.
+    """This package's module type: ``estimation.estimate`` (and ``estimation.materials``) stay the functions.
 
-    The submodule ``estimation/estimate.py`` and its function share a name. Whenever the submodule is
+    The submodule ``estimation/estimate.py`` and its function share a name (so do ``materials``'s). Whenever the submodule is
     imported (by anyone, at any time), the import system binds it on the package as ``estimate``, which
     would hide the function from ``from estimation import estimate``. The eager ``__init__`` this
     replaces rebound the function once, after its own import; here every such binding is turned into
@@ -54,9 +54,13 @@ class _Package(types.ModuleType):
     """
 
     def __setattr__(self, name: str, value: object) -> None:
-        if name == "estimate" and isinstance(value, types.ModuleType):
-            value = value.estimate
+        if name in _SHADOWED and isinstance(value, types.ModuleType):
+            value = getattr(value, name)
         super().__setattr__(name, value)
+
+
+#: Public functions that share their name with the submodule defining them (the class above).
+_SHADOWED = frozenset(name for name, module in _EXPORTS.items() if module == f"estimation.{name}")
 
 
 sys.modules[__name__].__class__ = _Package

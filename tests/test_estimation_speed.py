@@ -141,6 +141,9 @@ def test_the_package_is_lazy_and_estimate_stays_the_function():
         "assert callable(estimate) and estimation.estimate is estimate, estimation.estimate\n"
         "from estimation.estimate import Timings\n"
         "assert estimation.estimate is estimate\n"
+        # materials too: the function, though its submodule was imported first (by material, estimate)
+        "from estimation import material, materials\n"
+        "assert callable(materials) and 'water' in materials(), materials\n"
     )
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr
