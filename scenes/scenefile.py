@@ -41,7 +41,7 @@ from estimation.errors import TwinError
 from estimation.materials import MAX_DENSITY, MIN_DENSITY
 from sync.keys import ID_PATTERN
 from sync.messages import MAX_COORDINATE
-from twin.model import DEFAULT_PHYSICS, EndEffectorSpec, PhysicsSettings, TableSpec, new_spec
+from twin.model import DEFAULT_PHYSICS, RESERVED_IDS, EndEffectorSpec, PhysicsSettings, TableSpec, new_spec
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -365,6 +365,9 @@ def parse_scene(doc: dict, *, base: Path = Path("."), path: Path | None = None) 
     dupes = {i for i, n in counts.items() if n > 1}
     if dupes:
         raise SceneError(f"scene: duplicate object id(s) {sorted(dupes)}")
+    if taken := sorted(RESERVED_IDS.intersection(counts)):
+        raise SceneError(f"scene: object id(s) {taken} are names the twin's model uses itself "
+                         f"({', '.join(sorted(RESERVED_IDS))}); rename them")
     if workspace is not None:
         _check_inside(objects, workspace)
     return SceneSpec(name=scene.name, objects=objects, table=table, end_effector=ee, path=path, workspace=workspace)

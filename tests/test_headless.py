@@ -394,6 +394,20 @@ def test_a_newer_view_estimated_while_the_first_compiles_replaces_it(cache):
         local.close()
 
 
+def test_a_cloud_or_pose_named_like_the_models_own_bodies_is_dropped_and_counted(cache):
+    local, _, sensor, keys = _twin_with_a_worker(cache)
+    try:
+        cube = _box_cloud("cube", np.array([0.0, 0.0, 0.53]), epoch=1, seq=1)
+        for k, taken in enumerate(("ee", "ee_target", "world")):
+            sensor.put(keys.object(taken, "cloud"), msgspec.structs.replace(cube, object_id=taken, seq=k + 1))
+        local.iterate()
+        _until(local, local.clock, lambda: not local.adding)
+        assert local.link.counters.dropped_by_reason["reserved-id"] == 3
+        assert local.expected == 0 and local.report.failed_edits == 0 and local.twin.failed_edits == 0
+    finally:
+        local.close()
+
+
 def test_clouds_of_ever_new_ids_are_taken_only_up_to_the_object_limit(cache):
     assert MAX_OBJECTS >= scenefile.MAX_OBJECTS  # every scene a remote can load fits
     local, _, sensor, keys = _twin_with_a_worker(cache)

@@ -115,6 +115,13 @@ def test_a_file_with_a_nan_position_never_reaches_the_model(tmp_path):
         load_scene(path)
 
 
+@pytest.mark.parametrize("taken", ["ee", "ee_target", "world"])
+def test_an_object_may_not_take_a_name_the_model_uses_itself(taken):
+    scene = {"name": "x", "objects": [{"id": "a", "paper": "box"}, {"id": taken, "paper": "box"}]}
+    with pytest.raises(SceneError, match=rf"^scene: object id\(s\) \['{taken}'\] are names the twin's model uses"):
+        parse_scene(scene)
+
+
 def test_object_count_is_capped_and_duplicates_are_found_in_linear_time():
     from scenes.scenefile import MAX_OBJECTS
 

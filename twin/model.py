@@ -25,6 +25,10 @@ VISUAL_GROUP, COLLISION_GROUP = 1, 3
 #: Names of the end-effector bodies (the twin's API for operator devices).
 EE_TARGET, EE_BODY = "ee_target", "ee"
 
+#: Body names the model gives itself: an object (its body is named by its id) may not take one. MuJoCo
+#: refused the second body, and 'twin build' ended in a traceback.
+RESERVED_IDS = frozenset({"world", EE_BODY, EE_TARGET})
+
 #: Weld solref of the end effector to its mocap target: stiff (20 ms) but not rigid, so pushing into an
 #: object yields a force a haptic device can render instead of an impulse.
 EE_WELD_SOLREF = (0.02, 1.0)

@@ -70,7 +70,15 @@ from twin.decompose import DEFAULT_SETTINGS, CoacdSettings
 from twin.history import CORRECTION, STATE, History
 from twin.hold import DEFAULT_HOLD, Hold, HoldSettings
 from twin.loop import LoopStats, run_loop
-from twin.model import EndEffectorSpec, TableSpec, add_object, has_object, new_spec, remove_object
+from twin.model import (
+    RESERVED_IDS,
+    EndEffectorSpec,
+    TableSpec,
+    add_object,
+    has_object,
+    new_spec,
+    remove_object,
+)
 from twin.objects import DEFAULT_FRICTION, TwinObject, lowest_point, object_at_estimate
 from twin.poses import from_rotvec, quat_conj, quat_mul, quat_product, rotation, to_rotvec
 from twin.samples import Samples
@@ -643,6 +651,9 @@ class Local:
             self._on_device_target(msg, received)
         elif isinstance(msg, Heartbeat):
             self._on_heartbeat(msg, received)
+        elif isinstance(msg, (Pose, Cloud)) and msg.object_id in RESERVED_IDS:
+            self.link.dropped("reserved-id", "dropped a %s of %r: the twin's model uses that name itself",
+                              type(msg).__name__, msg.object_id)
         elif isinstance(msg, Pose):
             if not self._in_scene(msg, msg.position) or not self._newer(self._pose_mark, msg):
                 return
