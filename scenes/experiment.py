@@ -59,10 +59,13 @@ SETUP_S = 0.5
 #: How often C'-C divergence is sampled, simulated seconds (as :data:`twin.runtime.DIVERGENCE_EVERY`).
 DIVERGENCE_EVERY = 0.01
 
-#: Blow-up: a contact force above this (newtons) or an end-effector or object speed above this (m/s) is
-#: not a simulation of a hand pushing things on a table. A 2 kg arm pushing at 1 g is 20 N.
+#: Blow-up: a contact force above this (newtons), an end-effector or object speed above this (m/s), or a
+#: spin above this (rad/s) is not a simulation of a hand pushing things on a table. A 2 kg arm pushing at
+#: 1 g is 20 N; 1000 rad/s turns a 2 cm ball's surface at 20 m/s (the end effector's sphere, rolling
+#: along a pushed box, spun at 21 rad/s in an ordinary push, which the speed limit alone called a blow-up).
 ABSURD_FORCE_N = 1e4
 ABSURD_SPEED = 20.0
+ABSURD_SPIN = 1000.0
 
 #: The truth is "in contact" where its force is above this fraction of its peak: the steps over which the
 #: mean felt force is compared with the truth's (a sustained force, what discrimination thresholds are about).
@@ -357,9 +360,33 @@ class _EndEffector:
 
 def _absurd(twin, force: np.ndarray) -> bool:  # type: ignore[no-untyped-def]
     qvel = twin.data.qvel
-    return not (np.isfinite(force).all() and np.isfinite(qvel).all()
-                and float(np.abs(force).max(initial=0.0)) < ABSURD_FORCE_N
-                and float(np.abs(qvel).max(initial=0.0)) < ABSURD_SPEED)
+    if not (np.isfinite(force).all() and np.isfinite(qvel).all()
+            and float(np.abs(force).max(initial=0.0)) < ABSURD_FORCE_N):
+        return True
+    # Every body here moves on a free joint: 3 linear (m/s) then 3 angular (rad/s) velocities.
+    linear, angular = _free_dofs(twin.model)
+    return (float(np.abs(qvel[linear]).max(initial=0.0)) >= ABSURD_SPEED
+            or float(np.abs(qvel[angular]).max(initial=0.0)) >= ABSURD_SPIN)
+
+
+def _free_dofs(model) -> tuple[np.ndarray, np.ndarray]:  # type: ignore[no-untyped-def]
+    """Indices into ``qvel`` of the free joints' linear and angular velocities; any other joint's count as
+    angular (rad/s). Worked out once per model (asked at every step of both sides)."""
+    import mujoco
+
+    cached = _FREE_DOFS.get(id(model))
+    if cached is not None and cached[0] is model:  # the model is held, so its id is not reused meanwhile
+        return cached[1]
+    free = np.flatnonzero(model.jnt_type == mujoco.mjtJoint.mjJNT_FREE)
+    linear = (model.jnt_dofadr[free][:, None] + np.arange(3)).ravel()
+    dofs = (linear, np.setdiff1d(np.arange(model.nv), linear))
+    if len(_FREE_DOFS) > 8:  # a live edit compiles a new model: keep the last few
+        _FREE_DOFS.clear()
+    _FREE_DOFS[id(model)] = (model, dofs)
+    return dofs
+
+
+_FREE_DOFS: dict[int, tuple[object, tuple[np.ndarray, np.ndarray]]] = {}
 
 
 def force_sample_bytes() -> int:

@@ -172,3 +172,25 @@ def test_an_unreachable_dask_scheduler_is_one_line(tmp_path, capsys):
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "no Dask scheduler at" in err, err
     assert not (tmp_path / "o").exists()  # nothing was run, so nothing is left behind
+
+
+def test_a_blow_up_is_a_speed_in_metres_or_a_spin_past_what_a_hand_makes():
+    """An end-effector sphere rolling along a pushed box spins at tens of rad/s: not a blow-up."""
+    import numpy as np
+
+    from scenes.experiment import ABSURD_SPEED, ABSURD_SPIN, _absurd
+    from twin.model import EndEffectorSpec, TableSpec, new_spec
+    from twin.sim import Twin
+
+    twin = Twin(new_spec("blowup", table=TableSpec(), end_effector=EndEffectorSpec()), background=False)
+    none = np.zeros(3)
+    assert not _absurd(twin, none)
+    twin.data.qvel[3:6] = (0.0, 25.0, 0.0)  # the sphere's spin, rad/s
+    assert not _absurd(twin, none)
+    twin.data.qvel[3:6] = (0.0, ABSURD_SPIN, 0.0)
+    assert _absurd(twin, none)
+    twin.data.qvel[:] = 0.0
+    twin.data.qvel[0] = ABSURD_SPEED
+    assert _absurd(twin, none)
+    twin.data.qvel[0] = 0.0
+    assert _absurd(twin, np.array([0.0, 0.0, np.inf]))
