@@ -13,6 +13,7 @@ planes (``estimation.dualcontour``), so creases stay sharp and thin walls keep t
 from __future__ import annotations
 
 import logging
+import numbers
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -167,7 +168,7 @@ def estimate(
         CloudError: too few points, a flat or line-like cloud, a viewpoint beyond
             ``tolerances.MAX_COORDINATE_M``.
         MaterialError: a non-positive or non-finite density.
-        ValueError: an unknown method.
+        ValueError: an unknown method, a resolution outside ``tolerances.MIN_RESOLUTION``..``MAX_RESOLUTION``.
         ReconstructionError: 'auto' found no closed solid.
     """
     if not isinstance(cloud, PointCloud):
@@ -176,9 +177,15 @@ def estimate(
     if method not in METHODS:
         raise ValueError(f"unknown method {method!r}; choose from {', '.join(METHODS)}")
     density = check_density(density)
+    if isinstance(resolution, bool) or not isinstance(resolution, numbers.Integral) or not (
+            tol.MIN_RESOLUTION <= resolution <= tol.MAX_RESOLUTION):
+        # 0 divided by zero, 1 cell lost two thirds of a box without a word, NaN asked for negative dimensions.
+        raise ValueError(f"resolution must be a whole number of cells from {tol.MIN_RESOLUTION} to {tol.MAX_RESOLUTION}, "
+                         f"got {str(resolution)[:40]}")
     check_count_and_range(cloud.points)
     if viewpoint is not None:
-        check_sensor_origin(np.asarray(viewpoint, dtype=np.float64), "viewpoint")
+        viewpoint = as_points(np.reshape(np.asarray(viewpoint, dtype=np.float64), (1, -1)), "viewpoint")[0]
+        check_sensor_origin(viewpoint, "viewpoint")
     dropped = cloud.dropped_nonfinite
     warnings = [nonfinite_note(dropped, len(cloud) + dropped)] if dropped else []
     # Strays go before the shape checks: a stray point 1 km off made a ball look line-like.

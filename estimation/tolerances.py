@@ -52,6 +52,10 @@ CLUSTERED_SPACING = 100.0
 #: method's grid. 'auto' takes its fine cell from the point spacing instead (``FINE_CELL_SPACINGS``).
 GRID_RESOLUTION = 128
 
+#: The ``resolution`` an estimate accepts: fewer than 8 cells across cannot hold an object's shape (1 cell
+#: lost two thirds of a box without a word); past 1024 a dense grid outgrows memory (1024^3 cells).
+MIN_RESOLUTION, MAX_RESOLUTION = 8, 1024
+
 #: 'auto': fine cell as a multiple of the point spacing (square root of the surface area per point).
 #: One spacing is the finest the points support: with about one point per cell every node near the
 #: surface is within a cell of a point, and a wall two spacings thick has nodes inside it.

@@ -16,6 +16,7 @@ points" is horizontal), as in MuJoCo's world.
 from __future__ import annotations
 
 import logging
+import math
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 
@@ -131,6 +132,20 @@ class ViewsEstimate:
     completed_points: int
     plane: Plane | None
     warnings: tuple[str, ...]
+
+
+def _checked_plane(support: object) -> Plane:
+    """A support plane given to :func:`estimate_views`: a :class:`Plane` made unit (a normal of length 2
+    doubled the volume, of 1000 asked for 1 TiB), or four numbers A B C D as :func:`plane_from_abcd` reads.
+
+    Raises:
+        CloudError: as :func:`plane_from_abcd`, or a Plane whose rms is negative or not finite.
+    """
+    if not isinstance(support, Plane):
+        return plane_from_abcd(support)
+    if not (math.isfinite(support.rms) and support.rms >= 0):
+        raise CloudError(f"support plane: its rms must be a finite number of metres >= 0, got {support.rms!r}")
+    return replace(plane_from_abcd(support.as_abcd()), rms=float(support.rms), inliers=support.inliers)
 
 
 def plane_from_abcd(abcd: object) -> Plane:
@@ -353,7 +368,8 @@ def estimate_views(views: list[View], density: float, *, support: Plane | str | 
     Args:
         views: one or more views in one world frame; every view needs an ``origin``.
         density: kg/m^3.
-        support: a :class:`Plane` (normal up into the object's side), ``"auto"`` (found in the data, else
+        support: a :class:`Plane` or four numbers A B C D (normal up into the object's side; normalised),
+            ``"auto"`` (found in the data, else
             the horizontal plane through the lowest point) or None (no plane: nothing is cut or closed).
         material: recorded with the estimate.
         seed: RANSAC's randomness (``"auto"``).
@@ -405,8 +421,10 @@ def estimate_views(views: list[View], density: float, *, support: Plane | str | 
             plane = plane_below(points)
             warnings.append(f"no support plane in the data; assumed the horizontal plane through the lowest "
                             f"point (z = {-plane.offset:.4g} m)")
+    elif support is not None:
+        plane = _checked_plane(support)
     else:
-        plane = support
+        plane = None
     cut = 0.0
     if plane is not None:
         h = plane.height(points)

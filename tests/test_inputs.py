@@ -291,6 +291,18 @@ def test_a_scale_that_is_not_a_positive_number_is_refused(scale):
         make_cloud(_sphere(200), scale=scale)  # type: ignore[arg-type]
 
 
+@pytest.mark.parametrize("resolution", [0, 1, -5, 7, 1025, 64.0, float("nan"), True, "64"])
+@pytest.mark.parametrize("method", ["obb", "surface"])
+def test_a_resolution_that_cannot_hold_a_shape_is_refused(box_cloud, method, resolution):
+    with pytest.raises(ValueError, match=r"resolution must be a whole number of cells from 8 to 1024"):
+        estimate(box_cloud, 1000.0, method=method, resolution=resolution)
+
+
+def test_a_viewpoint_that_is_not_a_point_is_refused(box_cloud):
+    with pytest.raises(CloudError, match=r"viewpoint: expected shape \(n, 3\)"):
+        estimate(box_cloud, 1000.0, viewpoint=[0.0, 1.0])
+
+
 def test_unknown_method(box_cloud):
     with pytest.raises(ValueError, match="unknown method 'poisson'"):
         estimate(box_cloud, 1000.0, method="poisson")

@@ -778,3 +778,20 @@ def test_two_frames_from_one_camera_are_one_object(sigma):
     two = estimate_views([View(f, cam, f"f{k}") for k, f in enumerate(frames)], 1000.0, support=plane)
     assert two.estimate.volume == pytest.approx(one.estimate.volume, rel=0.03)
     assert not any("lie apart from the object" in w for w in two.warnings), two.warnings
+
+
+def test_a_support_plane_given_to_the_api_is_made_unit_or_refused():
+    from estimation.segmentation import Plane
+
+    points = np.random.default_rng(0).uniform([-0.05, -0.03, 0.0], [0.05, 0.03, 0.04], (4000, 3))
+    view = View(points, np.array([0.0, 0.0, 1.0]))
+    unit = estimate_views([view], 1000.0, support=Plane(np.array([0.0, 0.0, 1.0]), 0.0, 0.0, 0)).estimate.volume
+    for scale in (2.0, 1000.0):  # a normal of length 2 doubled the volume; of 1000, asked for 1 TiB
+        plane = Plane(np.array([0.0, 0.0, scale]), 0.0, 0.0, 0)
+        assert estimate_views([view], 1000.0, support=plane).estimate.volume == pytest.approx(unit, rel=1e-9)
+    assert estimate_views([view], 1000.0, support=[0, 0, 1, 0]).estimate.volume == pytest.approx(unit, rel=1e-9)
+    for bad, said in ((Plane(np.array([np.nan, 0.0, 1.0]), 0.0, 0.0, 0), "four finite numbers"),
+                      (Plane(np.array([0.0, 0.0, 1.0]), 0.0, -1.0, 0), "its rms must be"),
+                      ([0, 0, 0, 0], "normal .* is zero"), (7, "four finite numbers")):
+        with pytest.raises(CloudError, match=f"support plane: .*{said}"):
+            estimate_views([view], 1000.0, support=bad)
