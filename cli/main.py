@@ -9,9 +9,11 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import errno
 import json
 import logging
 import math
+import os
 import re
 import sys
 import time
@@ -77,6 +79,16 @@ def main(argv: list[str] | None = None) -> int:
             return EXIT_BAD_INPUT
         except KeyboardInterrupt:
             return 130
+        except OSError as exc:
+            if exc.errno not in _OUTPUT_ERRNOS or exc.filename is not None:
+                raise
+            # stdout is full or gone (a full disk, a closed pipe): one line, and no second failure at exit
+            # when Python flushes stdout again.
+            _drop_held(held_log)
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+            if exc.errno != errno.EPIPE:  # a closed pipe is the reader's choice (| head): said by no one
+                print(f"twin {args.command}: error: cannot write the output: {exc.strerror}", file=sys.stderr)
+            return 1
     if held_log is not None:
         held_log.flush()
     for category, message in held:
@@ -85,6 +97,9 @@ def main(argv: list[str] | None = None) -> int:
         log.warning("%d more warnings", more)
     return code
 
+
+#: errno of a failed write to the standard output: a full disk or quota, a closed pipe, an I/O error.
+_OUTPUT_ERRNOS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EPIPE, errno.EIO})
 
 #: Warnings kept and shown after a command that succeeded; the rest are counted.
 MAX_HELD_WARNINGS = 20

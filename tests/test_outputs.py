@@ -333,3 +333,18 @@ def test_what_the_readers_only_logged_is_in_the_json_warnings(tmp_path, capsys):
         assert main(["estimate", str(tmp_path / name), "--json"]) == 0
         out = json.loads(capsys.readouterr().out)
         assert sum(said in w for w in out["warnings"]) == 1, out["warnings"]
+
+
+@pytest.mark.skipif(not Path("/dev/full").exists(), reason="needs /dev/full")
+@pytest.mark.parametrize("command", [["materials"], ["schema", "scene"]])
+def test_output_that_cannot_be_written_is_one_line_and_a_closed_pipe_is_quiet(command):
+    """A full disk is said in one line; a reader that stopped reading is not an error to print."""
+    twin = [sys.executable, "-m", "cli.main", *command]
+    with open("/dev/full", "w") as full:
+        done = subprocess.run(twin, stdout=full, stderr=subprocess.PIPE, text=True, timeout=60, cwd=ROOT)
+    assert done.returncode == 1
+    assert done.stderr == f"twin {command[0]}: error: cannot write the output: No space left on device\n"
+    gone = subprocess.Popen(twin, stdout=subprocess.PIPE, stderr=subprocess.PIPE, cwd=ROOT)
+    gone.stdout.close()  # type: ignore[union-attr]  # the reader left before the first line (| head -0)
+    assert gone.wait(timeout=60) == 1 and gone.stderr.read() == b""  # type: ignore[union-attr]
+    gone.stderr.close()  # type: ignore[union-attr]
