@@ -41,7 +41,16 @@ from estimation.errors import TwinError
 from estimation.materials import MAX_DENSITY, MIN_DENSITY
 from sync.keys import ID_PATTERN
 from sync.messages import MAX_COORDINATE
-from twin.model import DEFAULT_PHYSICS, RESERVED_IDS, EndEffectorSpec, PhysicsSettings, TableSpec, new_spec
+from twin.model import (
+    DEFAULT_PHYSICS,
+    RESERVED_IDS,
+    SCENE_REACH,
+    EndEffectorSpec,
+    PhysicsSettings,
+    TableSpec,
+    new_spec,
+    reach_corners,
+)
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -370,6 +379,10 @@ def parse_scene(doc: dict, *, base: Path = Path("."), path: Path | None = None) 
                          f"({', '.join(sorted(RESERVED_IDS))}); rename them")
     if workspace is not None:
         _check_inside(objects, workspace)
+    else:  # the twin's default box: SCENE_REACH around the table (an object 999 m off was built, then dropped)
+        box = reach_corners(None if table is None else table.size, 0.0 if table is None else table.height,
+                            ee.position, SCENE_REACH)
+        _check_inside(objects, (tuple(box[0].tolist()), tuple(box[1].tolist())))
     return SceneSpec(name=scene.name, objects=objects, table=table, end_effector=ee, path=path, workspace=workspace)
 
 

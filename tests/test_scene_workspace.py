@@ -139,3 +139,22 @@ def test_a_cloud_placed_inside_whose_points_lie_outside_is_dropped(cache):
         session.run(0.2)
         assert session.local.report.out_of_scene == 1
         assert "stray" not in session.local.objects and "stray" not in session.local.pending
+
+
+@pytest.mark.parametrize(("table", "position", "ok"), [
+    ({"size": [1.0, 0.6, 0.04], "height": 0.75}, [5.4, 0.0], True),       # 10 m beyond the table's edge: in
+    ({"size": [1.0, 0.6, 0.04], "height": 0.75}, [999.0, 999.0], False),
+    ({"size": [1.0, 0.6, 0.04], "height": 0.75}, [0.0, -10.4], False),
+    (None, [9.0, 0.0], True),                                              # no table: 10 m round the hand
+    (None, [0.0, 12.0], False),
+])
+def test_without_a_declared_workspace_an_object_outside_the_default_box_is_refused(table, position, ok):
+    """The twin drops poses and clouds outside the default box: such an object was built, then never shown."""
+    doc = {"name": "x", "objects": [{"id": "a", "paper": "box", "position": position}]}
+    if table is not None:
+        doc["table"] = table
+    if ok:
+        assert parse_scene(doc).objects[0].id == "a"
+    else:
+        with pytest.raises(SceneError, match=r"^object 'a': position .* lies outside the workspace"):
+            parse_scene(doc)

@@ -10,6 +10,7 @@ from, so a compile error points back to it.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -75,6 +76,24 @@ class EndEffectorSpec:
 
     radius: float = 0.02
     position: tuple[float, float, float] = (0.0, -0.5, 0.9)
+
+
+#: How far beyond the table (and above its top) an object's pose may be, metres: objects fall off tables and
+#: roll across floors, but a pose 10 m from the table is no pose of this scene (a forged or corrupt one).
+#: The twin drops what lies outside (``twin.runtime``); a scene file may not place an object there.
+SCENE_REACH = 10.0
+
+
+def reach_corners(table_size: Sequence[float] | None, table_height: float, ee_position: Sequence[float],
+                  reach: float) -> tuple[np.ndarray, np.ndarray]:
+    """(low, high) corners, metres, world frame, of the box ``reach`` beyond the table's edges (full size x y)
+    and above its top (``table_height``), down to the floor; without a table, ``reach`` around
+    ``ee_position``, the end effector's start."""
+    if table_size is None:
+        centre = np.asarray(ee_position, dtype=float)
+        return centre - reach, centre + reach
+    half = np.array([table_size[0] / 2 + reach, table_size[1] / 2 + reach])
+    return np.array([-half[0], -half[1], 0.0]), np.array([half[0], half[1], table_height + reach])
 
 
 def new_spec(name: str, *, table: TableSpec | None = None, end_effector: EndEffectorSpec | None = None,  # type: ignore[no-untyped-def]

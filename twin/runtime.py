@@ -72,11 +72,13 @@ from twin.hold import DEFAULT_HOLD, Hold, HoldSettings
 from twin.loop import LoopStats, run_loop
 from twin.model import (
     RESERVED_IDS,
+    SCENE_REACH,
     EndEffectorSpec,
     TableSpec,
     add_object,
     has_object,
     new_spec,
+    reach_corners,
     remove_object,
 )
 from twin.objects import DEFAULT_FRICTION, TwinObject, lowest_point, object_at_estimate
@@ -1070,20 +1072,10 @@ class Local:
         return found[0]
 
 
-#: How far beyond the table (and above its top) an object's pose may be, metres: objects fall off tables and
-#: roll across floors, but a pose 10 m from the table is no pose of this scene (a forged or corrupt one).
-SCENE_REACH = 10.0
-
-
 def reach_box(info: SceneInfo, reach: float) -> tuple[np.ndarray, np.ndarray]:
     """(low, high) corners of the box targets or object poses must lie in, metres, world frame: ``reach`` beyond
-    the table's edges and above its top, down to the floor; without a table, ``reach`` around the end
-    effector's start."""
-    if info.table_size is None:
-        centre = np.asarray(info.ee_position, dtype=float)
-        return centre - reach, centre + reach
-    half = np.array([info.table_size[0] / 2 + reach, info.table_size[1] / 2 + reach])
-    return np.array([-half[0], -half[1], 0.0]), np.array([half[0], half[1], info.table_height + reach])
+    the announced table (:func:`twin.model.reach_corners`)."""
+    return reach_corners(info.table_size, info.table_height, info.ee_position, reach)
 
 
 def _scene_box(info: SceneInfo) -> tuple[np.ndarray, np.ndarray]:
