@@ -93,6 +93,8 @@ def material(name: str) -> Material:
     Raises:
         MaterialError: unknown name; the message lists close matches among names and aliases.
     """
+    if not isinstance(name, str):  # material(123) was an AttributeError ('int' object has no attribute 'strip')
+        raise MaterialError(f"a material is named by a string (see 'twin materials'), got {type(name).__name__}")
     table, other = materials(), aliases()
     key = _normalise(name)
     if key in table:

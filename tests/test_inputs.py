@@ -313,6 +313,12 @@ def test_unknown_material_suggests():
         material("wood_oka")
 
 
+@pytest.mark.parametrize("name", [123, None, b"steel", ["steel"]])
+def test_a_material_that_is_not_a_name_is_refused(name):
+    with pytest.raises(MaterialError, match=r"^a material is named by a string \(see 'twin materials'\), got "):
+        material(name)
+
+
 def test_material_table_has_sources():
     table = materials()
     assert len(table) >= 20
