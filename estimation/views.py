@@ -93,19 +93,14 @@ class View:
         label = self.name or "a view"
         object.__setattr__(self, "points", as_points(self.points, f"{label}: points"))
         if self.origin is not None:
-            origin = np.asarray(self.origin, dtype=np.float64) if _numeric(self.origin) else None
+            try:
+                origin = np.asarray(self.origin, dtype=np.float64)
+            except (TypeError, ValueError):
+                origin = None
             if origin is None or origin.shape not in ((3,), self.points.shape):
                 raise CloudError(f"{label}: origin: expected the sensor's position, (3,) or one per point "
                                  f"{self.points.shape}, got {getattr(origin, 'shape', type(self.origin).__name__)}")
             object.__setattr__(self, "origin", origin)
-
-
-def _numeric(value: object) -> bool:
-    try:
-        np.asarray(value, dtype=np.float64)
-    except (TypeError, ValueError):
-        return False
-    return True
 
 
 @dataclass(frozen=True)
@@ -243,9 +238,9 @@ PARALLEL_DEGREES = 15.0
 EXTENT_MARGIN_THRESHOLDS = 2.0
 
 
-def _cut_threshold(points: np.ndarray, plane: Plane, noise: float, threshold: float) -> float:
-    """The RANSAC ``threshold`` (metres) with the spacing of what stands on ``plane`` in place of the whole
-    cloud's, where that is finer: the band cut away above the plane.
+def _cut_threshold(points: np.ndarray, height: np.ndarray, noise: float, threshold: float) -> float:
+    """The RANSAC ``threshold`` (metres) with the spacing of what stands on the plane (``height``: (n,) each
+    point's, metres) in place of the whole cloud's, where that is finer: the band cut away above the plane.
 
     A table sampled every 11 mm under a 2 cm cube sampled every 0.6 mm set the spacing, and so a 15 mm cut:
     three quarters of the cube went with the table and it came out 5 times its volume, its interval's low
@@ -254,7 +249,7 @@ def _cut_threshold(points: np.ndarray, plane: Plane, noise: float, threshold: fl
     """
     from estimation.spacing import point_spacing
 
-    above = points[plane.height(points) > PLANE_NOISE_SIGMAS * noise]
+    above = points[height > PLANE_NOISE_SIGMAS * noise]
     if len(above) < MIN_CLUSTER_POINTS:
         return threshold
     return min(threshold, max(PLANE_NOISE_SIGMAS * noise, PLANE_SPACINGS * point_spacing(above)))
@@ -447,7 +442,7 @@ def estimate_views(views: list[View], density: float, *, support: Plane | str | 
         h = plane.height(points)
         # At least the RANSAC threshold, not only 3 rms: the plane's noise tail next to the object would join it
         # (bracket scan: +8 % at 3 rms, +4 % at the threshold; the skirt of close_bottom restores the band cut).
-        cut = plane.clearance(_cut_threshold(points, plane, noise, threshold))
+        cut = plane.clearance(_cut_threshold(points, h, noise, threshold))
         below = float((h < -cut).mean())
         if below > MAX_BELOW_GIVEN:
             raise CloudError(f"support plane: {100 * below:.0f} % of the points lie more than {1000 * cut:.2g} mm "
@@ -463,7 +458,7 @@ def estimate_views(views: list[View], density: float, *, support: Plane | str | 
                     break
                 plane = higher
                 h = plane.height(points)
-                cut = plane.clearance(_cut_threshold(points, plane, noise, threshold))
+                cut = plane.clearance(_cut_threshold(points, h, noise, threshold))
                 obj, others = _largest_above(points, origins, plane, cut, view_of)
                 warnings.append(f"what stood on the first plane found was itself mostly a plane with something "
                                 f"standing on it (a table on the floor?): took that plane (z = {-plane.offset:.4g} "
