@@ -184,7 +184,7 @@ def estimate(
                          f"got {str(resolution)[:40]}")
     check_count_and_range(cloud.points)
     if viewpoint is not None:
-        viewpoint = as_points(np.reshape(np.asarray(viewpoint, dtype=np.float64), (1, -1)), "viewpoint")[0]
+        viewpoint = as_points(np.reshape(viewpoint, (1, -1)), "viewpoint")[0]
         check_sensor_origin(viewpoint, "viewpoint")
     dropped = cloud.dropped_nonfinite
     warnings = [nonfinite_note(dropped, len(cloud) + dropped)] if dropped else []

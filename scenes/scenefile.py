@@ -377,12 +377,11 @@ def parse_scene(doc: dict, *, base: Path = Path("."), path: Path | None = None) 
     if taken := sorted(RESERVED_IDS.intersection(counts)):
         raise SceneError(f"scene: object id(s) {taken} are names the twin's model uses itself "
                          f"({', '.join(sorted(RESERVED_IDS))}); rename them")
-    if workspace is not None:
-        _check_inside(objects, workspace)
-    else:  # the twin's default box: SCENE_REACH around the table (an object 999 m off was built, then dropped)
-        box = reach_corners(None if table is None else table.size, 0.0 if table is None else table.height,
-                            ee.position, SCENE_REACH)
-        _check_inside(objects, (tuple(box[0].tolist()), tuple(box[1].tolist())))
+    # Without a declared workspace, the twin's default box: SCENE_REACH around the table (an object 999 m off
+    # was built, then dropped).
+    low, high = workspace or reach_corners(None if table is None else table.size,
+                                           0.0 if table is None else table.height, ee.position, SCENE_REACH)
+    _check_inside(objects, (tuple(np.asarray(low).tolist()), tuple(np.asarray(high).tolist())))
     return SceneSpec(name=scene.name, objects=objects, table=table, end_effector=ee, path=path, workspace=workspace)
 
 
