@@ -15,7 +15,7 @@ import math
 from pathlib import Path
 
 from cli.outputs import check_output_folder, claim_output_folder, replace_file
-from estimation.errors import TwinError
+from estimation.errors import TwinError, refused_number
 
 log = logging.getLogger(__name__)
 
@@ -97,20 +97,20 @@ def parse(args: argparse.Namespace):  # type: ignore[no-untyped-def]
 
     delays = _floats(args.delays, "--delays")
     if min(delays) < 0:
-        raise TwinError(f"--delays: a delay cannot be negative, got {min(delays):g} ms")
+        raise TwinError(f"--delays: a delay cannot be negative, got {refused_number(min(delays), 0)} ms")
     for flag, value in (("--jitter", args.jitter), ("--loss", args.loss)):
         if not math.isfinite(value) or value < 0:
-            raise TwinError(f"{flag} must be a finite number >= 0, got {value:g}")
+            raise TwinError(f"{flag} must be a finite number >= 0, got {refused_number(value, 0)}")
     if args.loss > 100:
-        raise TwinError(f"--loss is a percentage: at most 100, got {args.loss:g}")
+        raise TwinError(f"--loss is a percentage: at most 100, got {refused_number(args.loss, 100)}")
     low, high = SPEED_RANGE
     if not (math.isfinite(args.speed) and low <= args.speed <= high):
-        raise TwinError(f"--speed must be from {low:g} to {high:g}, got {args.speed:g}")
+        raise TwinError(f"--speed must be from {low:g} to {high:g}, got {refused_number(args.speed, low, high)}")
     masses = _floats(args.mass_scale, "--mass-scale")
     low, high = MASS_SCALE_RANGE
     if not all(low <= m <= high for m in masses):
         bad = next(m for m in masses if not low <= m <= high)
-        raise TwinError(f"--mass-scale: a mass scale must be from {low:g} to {high:g}, got {bad:g}")
+        raise TwinError(f"--mass-scale: a mass scale must be from {low:g} to {high:g}, got {refused_number(bad, low, high)}")
     if args.seeds < 1:
         raise TwinError(f"--seeds must be at least 1, got {args.seeds}")
     if not 0 <= args.workers <= MAX_WORKERS:

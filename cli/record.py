@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from cli.outputs import check_output_folder, claim_output_folder, replace_file
+from estimation.errors import refused_number
 from sync.clock import Clock
 from sync.netem import Conditions, GilbertElliott, Network
 from sync.recording import (
@@ -207,7 +208,8 @@ def replay(path: str | Path, *, script: Path | None = None, scene: Path | None =
     asked = duration is not None
     duration = _recorded_duration(recording) if duration is None else duration
     if duration > MAX_REPLAY_SECONDS:
-        what = f"--duration {duration:g} s is" if asked else f"{recording.path}: the recorded session runs {duration:.7g} s,"
+        what = (f"--duration {refused_number(duration, MAX_REPLAY_SECONDS)} s is" if asked else
+                f"{recording.path}: the recorded session runs {refused_number(duration, MAX_REPLAY_SECONDS, digits=7)} s,")
         raise RecordingError(f"{what} more than a replay runs (at most {MAX_REPLAY_SECONDS:g} s)")
     if not duration > 0:
         damage = f"; {recording.damage.removeprefix(f'{recording.path}: ')}" if recording.damage else ""

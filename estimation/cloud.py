@@ -10,8 +10,8 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from estimation import tolerances as tol
-from estimation.contracts import as_points
-from estimation.errors import CloudError
+from estimation.contracts import all_finite, as_points
+from estimation.errors import CloudError, refused_number
 from estimation.obb import column_bounds
 
 log = logging.getLogger(__name__)
@@ -103,10 +103,21 @@ class PointCloud:
         )
 
 
+def check_is_cloud(value: object, caller: str) -> None:
+    """Raise unless ``value`` is a :class:`PointCloud`: one check for every function that takes the record.
+
+    Raises:
+        TypeError: naming ``caller``, what it takes, how to build one, and what came in (an (n, 3) array was an
+            AttributeError deep inside).
+    """
+    if not isinstance(value, PointCloud):
+        raise TypeError(f"{caller} takes a PointCloud (make_cloud(points) builds one from an (n, 3) array), "
+                        f"got {type(value).__name__}")
+
+
 def _check_finite(values: np.ndarray, name: str, what: str) -> None:
     """Raise naming ``name`` unless every entry of ``values`` is finite."""
-    # A finite sum (half the cost of np.isfinite) proves it; an overflowing one falls back to the exact check.
-    if np.isfinite(np.einsum("ij->", values)) or np.isfinite(values).all():
+    if all_finite(values):
         return
     bad = int((~np.isfinite(values).all(axis=1)).sum())
     raise CloudError(f"{name}: {bad} of {len(values)} rows hold NaN or inf; expected finite {what}")
@@ -224,7 +235,8 @@ def check_sensor_origin(origin: np.ndarray, what: str) -> None:
         raise CloudError(f"{what}: the sensor's position is not finite (NaN or inf): a damaged VIEWPOINT or pose?")
     far = float(np.abs(origin).max(initial=0.0))
     if far > tol.MAX_COORDINATE_M:
-        raise CloudError(f"{what}: the sensor is {far:.3g} m from the origin, beyond the {tol.MAX_COORDINATE_M:g} m "
+        raise CloudError(f"{what}: the sensor is {refused_number(far, tol.MAX_COORDINATE_M, digits=3)} m from the origin, beyond "
+                         f"the {tol.MAX_COORDINATE_M:g} m "
                          "an estimate accepts (wrong --units, or a damaged VIEWPOINT?)")
 
 
@@ -250,7 +262,8 @@ def check_range(points: np.ndarray, what: str = "coordinates") -> None:
     far = float(np.abs(points).max()) if len(points) else 0.0
     if far > tol.MAX_COORDINATE_M:
         stray = far_points(points)
-        raise CloudError(f"{what} reach {far:.3g} m from the origin, beyond the {tol.MAX_COORDINATE_M:g} m "
+        raise CloudError(f"{what} reach {refused_number(far, tol.MAX_COORDINATE_M, digits=3)} m from the origin, beyond the "
+                         f"{tol.MAX_COORDINATE_M:g} m "
                          f"an estimate accepts" + (f"; that is {stray}: remove them" if stray else
                                                    " (wrong --units or scale?)"))
 
@@ -277,7 +290,8 @@ def check_estimable(cloud: PointCloud) -> None:
     if across == 0:
         raise CloudError("degenerate cloud: all points are identical")
     if across < tol.MIN_EXTENT_M:
-        raise CloudError(f"object is {across:.3g} m across, below the {tol.MIN_EXTENT_M:g} m an estimate "
+        raise CloudError(f"object is {refused_number(across, tol.MIN_EXTENT_M, digits=3)} m across, below the "
+                         f"{tol.MIN_EXTENT_M:g} m an estimate "
                          f"resolves (wrong --units or scale?)")
     distinct = count_distinct(cloud.points, tol.MIN_POINTS)
     if distinct < tol.MIN_POINTS:

@@ -16,7 +16,11 @@ Sensor origins: a PCD ``VIEWPOINT tx ty tz qw qx qy qz`` becomes the cloud's sin
 ``(tx, ty, tz)``, read as the sensor's position in the points' own frame (as PCL's range-image code and
 octomap use ``sensor_origin_``; the rotation does not move an origin and is not kept). The format's
 default ``VIEWPOINT 0 0 0 1 0 0 0`` is what every writer puts there when it knows nothing, so it is read
-as "no viewpoint" (None), not as a sensor at the origin.
+as "no viewpoint" (None), not as a sensor at the origin; a sensor that is at the origin is written with the
+quaternion's w = -1 (the same rotation) so that it reads back.
+
+Writing refuses to lose data: a field the chosen format cannot keep (normals in .xyz, sensor origins in .ply)
+is an error naming the formats that keep it, unless the caller names it in ``save_cloud(..., drop=...)``.
 """
 
 from __future__ import annotations
@@ -27,15 +31,15 @@ import stat
 import tokenize
 import warnings
 import zipfile
-from collections.abc import Callable
-from dataclasses import dataclass
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import BinaryIO
 
 import numpy as np
 
 from estimation import tolerances as tol
-from estimation.cloud import PointCloud, is_single_origin, make_cloud
+from estimation.cloud import PointCloud, check_is_cloud, is_single_origin, make_cloud
 from estimation.contracts import unit_quaternion
 from estimation.errors import CloudError, CloudFileError
 
@@ -159,26 +163,71 @@ def check_input_file(path: Path) -> None:
         raise CloudFileError(f"{path}: not a regular file")
 
 
-def save_cloud(cloud: PointCloud, path: str | Path, *, ascii: bool = False) -> None:
+#: What each format :func:`save_cloud` writes keeps besides x y z: PointCloud fields, and "per-point
+#: sensor_origins" for origins that differ from point to point (a PCD's VIEWPOINT is one origin). No format keeps
+#: ``dropped_nonfinite``: it counts rows that are already gone, not data the cloud holds.
+WRITE_HOLDS: dict[str, frozenset[str]] = {
+    ".npz": frozenset({"normals", "colors", "sensor_origins", "per-point sensor_origins"}),
+    ".pcd": frozenset({"normals", "colors", "sensor_origins"}),
+    ".ply": frozenset({"normals", "colors"}),
+    ".npy": frozenset({"normals"}),
+    ".xyzn": frozenset({"normals"}),
+    ".xyzrgb": frozenset({"colors"}),
+    ".pts": frozenset({"colors"}),
+    ".xyz": frozenset(),
+}
+#: The fields ``save_cloud(..., drop=...)`` may leave out, in the order messages name them.
+DROPPABLE = ("normals", "colors", "sensor_origins")
+
+
+def save_cloud(cloud: PointCloud, path: str | Path, *, ascii: bool = False,
+               drop: str | Iterable[str] = ()) -> None:
     """Write ``cloud`` (metres) to a file; the suffix picks the format.
 
     .ply: binary little endian (x y z nx ny nz as double, red green blue as uchar). .pcd: binary, x y z
     normal_x.. as F 4 and packed ``rgb`` (what PCL's point types hold), with VIEWPOINT when the cloud has a
     single sensor origin; x y z as F 8 instead when float32 would move a point by more than
-    ``PCD_FLOAT32_ERROR_M`` (coordinates beyond about 16 m). .npz keeps everything, sensor origins included; .npy holds x y z [nx ny nz]; .xyz/.xyzn/.xyzrgb/
-    .pts are text. Per-point (not single) sensor origins survive .npz only.
+    ``PCD_FLOAT32_ERROR_M`` (coordinates beyond about 16 m). .npz keeps everything, sensor origins included;
+    .npy holds x y z [nx ny nz]; .xyz x y z, .xyzn x y z nx ny nz, .xyzrgb x y z r g b, .pts a count then x y z
+    [r g b], all as text. ``WRITE_HOLDS`` says which fields each keeps.
+
+    A cloud holding what the format cannot keep is refused, naming what would be lost and the formats that keep
+    it, unless ``drop`` names those fields: leaving data out is the caller's decision, never a silent one.
 
     Args:
         cloud: the cloud to write.
         path: the file to create or overwrite.
         ascii: write .ply or .pcd as text instead of binary.
+        drop: fields to leave out of the file, one name or several of ``DROPPABLE`` ("normals", "colors",
+            "sensor_origins"); whatever the format could keep, a named field is not written.
 
     Raises:
-        CloudFileError: an unwritable path, a format we do not write, or .xyzn/.xyzrgb without the normals
-            or colours they hold.
+        TypeError: ``cloud`` is not a PointCloud.
+        CloudError: ``drop`` names something that is not one of ``DROPPABLE``.
+        CloudFileError: an unwritable path, a format we do not write, .xyzn/.xyzrgb without the normals or
+            colours they hold, or fields the format cannot keep that ``drop`` does not name.
     """
+    check_is_cloud(cloud, "save_cloud")
+    names = {drop} if isinstance(drop, str) else set(drop)
+    unknown = sorted(names - set(DROPPABLE))
+    if unknown:
+        raise CloudError(f"drop: {unknown[0]!r} is not a field a file can leave out; name some of "
+                         f"{', '.join(sorted(DROPPABLE))}")
     path = Path(path)
     suffix = path.suffix.lower()
+    if suffix not in WRITE_HOLDS:
+        raise CloudFileError(f"{path}: cannot write format {suffix!r}")
+    dropped = {name: None for name in names if getattr(cloud, name) is not None}
+    if dropped:
+        cloud = replace(cloud, **dropped)
+    contents = _contents(cloud)
+    lost = [what for what in contents if what not in WRITE_HOLDS[suffix]]
+    if lost:
+        keep = sorted(fmt for fmt, holds in WRITE_HOLDS.items() if holds.issuperset(contents))
+        fields = sorted({what.removeprefix("per-point ") for what in lost})
+        raise CloudFileError(f"{path}: a {suffix} file cannot hold the cloud's {_listed(lost, 'and')} "
+                             f"({_listed(keep, 'or')} can; pass drop={{{', '.join(map(repr, fields))}}} to write it "
+                             f"without them)")
     try:
         if suffix == ".npz":
             arrays = {"points": cloud.points}
@@ -197,14 +246,32 @@ def save_cloud(cloud: PointCloud, path: str | Path, *, ascii: bool = False) -> N
             _write_ply(cloud, path, ascii=ascii)
         elif suffix in PCD_SUFFIXES:
             _write_pcd(cloud, path, ascii=ascii)
-        elif suffix in XYZ_SUFFIXES:
-            _write_xyz(cloud, path, suffix)
         else:
-            raise CloudFileError(f"{path}: cannot write format {suffix!r}")
+            _write_xyz(cloud, path, suffix)
     except OSError as exc:
         if isinstance(exc, CloudFileError):
             raise
         raise CloudFileError(f"{path}: could not write ({exc.strerror or exc})") from exc
+
+
+def _contents(cloud: PointCloud) -> list[str]:
+    """What ``cloud`` holds besides x y z, as ``WRITE_HOLDS`` names it, in ``DROPPABLE``'s order."""
+    held = [name for name in DROPPABLE if getattr(cloud, name) is not None and len(getattr(cloud, name))]
+    if "sensor_origins" in held and _one_origin(cloud.sensor_origins) is None:  # type: ignore[arg-type]
+        held = [("per-point sensor_origins" if name == "sensor_origins" else name) for name in held]
+    return held
+
+
+def _one_origin(origins: np.ndarray) -> np.ndarray | None:
+    """The one sensor origin ((3,) metres) every row of ``origins`` ((n, 3), n > 0) holds, or None if they differ."""
+    if is_single_origin(origins) or (origins == origins[0]).all():
+        return origins[0]
+    return None
+
+
+def _listed(items: list[str], last: str) -> str:
+    """'a', 'a and b', 'a, b and c' (``last`` the word before the last item)."""
+    return items[0] if len(items) == 1 else f"{', '.join(items[:-1])} {last} {items[-1]}"
 
 
 # --- headers -----------------------------------------------------------------------------------------
@@ -843,9 +910,11 @@ def _read_text(path: Path, max_points: int) -> _Columns:
     lines = text.decode("latin-1").splitlines()
     if len(lines) > max_points + 1:  # '\r' (old Mac) ends lines too, which the count of '\n' above missed
         raise CloudFileError(f"{path}: more than max_points={max_points} lines (pass a larger max_points if real)")
-    named = _header_row(path, lines, first_line=1 if claimed is None else 2)
+    first_line = 1 if claimed is None else 2  # the file's line number of lines[0]
+    named = _header_row(path, lines, first_line=first_line)
     if named is not None:
         lines = lines[named.line + 1:]
+        first_line += named.line + 1
         if not any(line.split("#", 1)[0].strip() for line in lines):
             raise CloudFileError(f"{path}: a header row and no rows of numbers after it")
     first = _first_content(lines)
@@ -856,6 +925,13 @@ def _read_text(path: Path, max_points: int) -> _Columns:
             table = np.loadtxt(lines, delimiter=delimiter, ndmin=2)
         except UserWarning as exc:
             raise CloudFileError(f"{path}: holds no numbers ({exc})") from None
+        except ValueError:
+            # numpy's own words ("the number of columns changed from 3 to 2 at row 3; use `usecols`...") count
+            # rows its way and speak of its arguments: name the file's line instead.
+            bad = _ragged_row(lines, delimiter)
+            if bad is None:
+                raise
+            raise CloudFileError(f"{path}: line {bad[0] + first_line} {bad[1]}") from None
     if claimed is not None and claimed != len(table):
         if claimed > len(table):
             raise CloudFileError(f"{path}: truncated: the first line claims {claimed} points but the file holds {len(table)}")
@@ -939,6 +1015,27 @@ def _header_row(path: Path, lines: list[str], first_line: int = 1) -> _HeaderRow
     return _HeaderRow(index, len(tokens), found)
 
 
+def _ragged_row(lines: list[str], delimiter: str | None) -> tuple[int, str] | None:
+    """The index in ``lines`` of the first row with a number of values other than the rows' before it, and what
+    it holds; None when a value that is not a number comes first (numpy's message names it and its column).
+
+    A loop over the lines, for the failure path only (numpy has refused the file already).
+    """
+    width = None
+    for index, line in enumerate(lines):
+        text = line.split("#", 1)[0].strip()  # '#' starts a comment, as numpy.loadtxt reads it
+        if not text:
+            continue
+        values = text.split(delimiter)
+        if width is None:
+            width = len(values)
+        elif len(values) != width:
+            return index, f"holds {len(values)} values where the rows before hold {width}"
+        if not all(_is_number(v) for v in values):
+            return None
+    return None
+
+
 def _first_content(lines: list[str]) -> int | None:
     """The index of the first line that is neither blank nor a ``#`` comment (None: there is none)."""
     return next((i for i, line in enumerate(lines) if line.strip() and not line.lstrip().startswith("#")), None)
@@ -1011,12 +1108,12 @@ def _write_pcd(cloud: PointCloud, path: Path, *, ascii: bool) -> None:
         fields.append(("rgb", "f4"))
         columns.append(((rgb[:, 0] << 16) | (rgb[:, 1] << 8) | rgb[:, 2]).view(np.float32)[:, None])
     viewpoint = _DEFAULT_VIEWPOINT
-    origins = cloud.sensor_origins
-    if origins is not None and len(origins):
-        if is_single_origin(origins) or (origins == origins[0]).all():
-            viewpoint = (*(float(v) for v in origins[0]), 1.0, 0.0, 0.0, 0.0)
-        else:
-            log.warning("%s: per-point sensor origins do not fit a PCD VIEWPOINT; not written (use .npz)", path)
+    origins = cloud.sensor_origins  # one origin: save_cloud refused (or dropped) origins that differ
+    if origins is not None and len(origins) and (origin := _one_origin(origins)) is not None:
+        # w = -1 at the origin: the same (identity) rotation as w = 1, but not the default VIEWPOINT, which is
+        # read as "no viewpoint": a camera-frame cloud's sensor at (0, 0, 0) was lost that way.
+        w = -1.0 if not origin.any() else 1.0
+        viewpoint = (*(float(v) for v in origin), w, 0.0, 0.0, 0.0)
     header = [
         "# .PCD v0.7 - Point Cloud Data file format, written by tactile-twin",
         "VERSION 0.7",

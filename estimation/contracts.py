@@ -5,19 +5,21 @@ from __future__ import annotations
 import numpy as np
 
 from estimation import tolerances as tol
-from estimation.errors import CloudError
+from estimation.errors import CloudError, refused_number
 
 
-def as_points(array: object, name: str = "points", *, allow_nonfinite: bool = False) -> np.ndarray:
+def as_points(array: object, name: str = "points", *, allow_nonfinite: bool = False, min_rows: int = 0) -> np.ndarray:
     """Return ``array`` as a C-contiguous ``(n, 3) float64`` array, or raise naming the problem.
 
     Args:
         array: anything ``np.asarray`` accepts.
         name: the argument's name, used in the error.
         allow_nonfinite: keep NaN/inf rows (the caller drops and reports them).
+        min_rows: fewest rows the caller can use (an empty array made numpy warn "Mean of empty slice").
 
     Raises:
-        CloudError: wrong shape, non-numeric, or non-finite values when not allowed.
+        CloudError: wrong shape, non-numeric, fewer than ``min_rows`` rows, or non-finite values when not
+            allowed.
     """
     try:
         out = np.ascontiguousarray(array, dtype=np.float64)
@@ -25,9 +27,45 @@ def as_points(array: object, name: str = "points", *, allow_nonfinite: bool = Fa
         raise CloudError(f"{name}: expected a numeric (n, 3) array, got {type(array).__name__}") from exc
     if out.ndim != 2 or out.shape[1] != 3:
         raise CloudError(f"{name}: expected shape (n, 3), got {out.shape}")
-    if not allow_nonfinite and not np.isfinite(out).all():
+    if len(out) < min_rows:
+        raise CloudError(f"{name}: expected at least {min_rows} row(s), got {len(out)}")
+    if not allow_nonfinite and not all_finite(out):
         raise CloudError(f"{name}: contains NaN or inf values")
     return out
+
+
+def all_finite(values: np.ndarray) -> bool:
+    """True when every entry of ``values`` ((n, d) float) is finite.
+
+    A finite sum proves it at half the cost of ``np.isfinite`` (0.5 against 0.9 ms on a million points, which
+    every estimate checks more than once); only a sum that overflows or holds a NaN takes the exact check.
+    """
+    return bool(np.isfinite(np.einsum("ij->", values)) or np.isfinite(values).all())
+
+
+def as_faces(array: object, vertex_count: int, name: str = "faces") -> np.ndarray:
+    """Return ``array`` as ``(f, 3) int64`` indices into ``vertex_count`` vertices, or raise naming the problem.
+
+    Args:
+        array: triangles as rows of three vertex indices (any integer type).
+        vertex_count: how many vertices the indices may name (0 to ``vertex_count - 1``).
+        name: the argument's name, used in the error.
+
+    Raises:
+        CloudError: not whole numbers in rows of three (floats were truncated), or an index outside the
+            vertices (past them was an IndexError; a negative one, numpy counted from the end without a word).
+    """
+    raw = np.asarray(array)
+    if raw.ndim != 2 or raw.shape[1:] != (3,) or not (np.issubdtype(raw.dtype, np.integer) or raw.size == 0):
+        raise CloudError(f"{name}: expected (f, 3) whole vertex indices, got {raw.dtype} {raw.shape}")
+    faces = raw.astype(np.int64, copy=False)
+    if faces.size:
+        low, high = int(faces.min()), int(faces.max())
+        if not vertex_count:
+            raise CloudError(f"{name}: vertex indices {low} to {high}, but there are no vertices")
+        if low < 0 or high >= vertex_count:
+            raise CloudError(f"{name}: vertex indices must be 0 to {vertex_count - 1}, got {low} to {high}")
+    return faces
 
 
 def unit_quaternion(wxyz: object, name: str = "quaternion") -> np.ndarray:
@@ -47,5 +85,6 @@ def unit_quaternion(wxyz: object, name: str = "quaternion") -> np.ndarray:
         raise CloudError(f"{name}: expected four finite numbers w x y z, got {q.tolist()}")
     norm = float(np.linalg.norm(q))
     if abs(norm - 1) > tol.QUAT_NORM_TOLERANCE:
-        raise CloudError(f"{name} must have norm 1 (within {tol.QUAT_NORM_TOLERANCE:g}), got {norm:.4g}")
+        raise CloudError(f"{name} must have norm 1 (within {tol.QUAT_NORM_TOLERANCE:g}), got "
+                         f"{refused_number(norm, 1 - tol.QUAT_NORM_TOLERANCE, 1 + tol.QUAT_NORM_TOLERANCE, digits=4)}")
     return q / norm

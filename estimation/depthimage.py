@@ -24,7 +24,7 @@ import numpy as np
 from estimation import tolerances as tol
 from estimation.cloudfile import REAL_KINDS, check_input_file, npy_header
 from estimation.contracts import unit_quaternion
-from estimation.errors import CloudError, CloudFileError
+from estimation.errors import CloudError, CloudFileError, refused_number
 from estimation.fusion import Intrinsics, depth_to_points
 
 log = logging.getLogger(__name__)
@@ -84,7 +84,8 @@ def read_depth(path: str | Path, *, scale: float | None = None) -> np.ndarray:
     path = Path(path)
     if scale is not None and not (np.isfinite(scale) and MIN_DEPTH_SCALE <= scale <= MAX_DEPTH_SCALE):
         raise CloudError(f"depth scale must be metres per unit in [{MIN_DEPTH_SCALE:g}, {MAX_DEPTH_SCALE:g}] (0.001 for millimetres; "
-                         f"Open3D's depth_scale is the inverse), got {scale:g}")
+                         f"Open3D's depth_scale is the inverse), got "
+                         f"{refused_number(scale, MIN_DEPTH_SCALE, MAX_DEPTH_SCALE)}")
     check_input_file(path)
     suffix = path.suffix.lower()
     if suffix == ".png":
@@ -174,9 +175,11 @@ def intrinsics(fx: float, fy: float, cx: float, cy: float, *, width: int, height
         raise CloudError(f"intrinsics must be finite, got fx fy cx cy = {' '.join(f'{v:g}' for v in values)}")
     low, high = FOCAL_RANGE_PX
     if not (low <= fx <= high and low <= fy <= high):
-        raise CloudError(f"focal lengths must be {low:g} to {high:g} pixels, got fx {fx:g}, fy {fy:g}")
+        raise CloudError(f"focal lengths must be {low:g} to {high:g} pixels, got fx {refused_number(fx, low, high)}, "
+                         f"fy {refused_number(fy, low, high)}")
     if not (0 <= cx <= width and 0 <= cy <= height):
-        raise CloudError(f"principal point ({cx:g}, {cy:g}) lies outside the {width}x{height} image (intrinsics "
+        raise CloudError(f"principal point ({refused_number(cx, 0, width)}, {refused_number(cy, 0, height)}) lies "
+                         f"outside the {width}x{height} image (intrinsics "
                          f"for another resolution?)")
     # fusion.Intrinsics puts pixel centres at integer + 0.5 (its rays start at u + 0.5).
     return Intrinsics(float(fx), float(fy), float(cx) + 0.5, float(cy) + 0.5, int(width), int(height))
@@ -220,7 +223,8 @@ def pose(values: object) -> tuple[np.ndarray, np.ndarray]:
         raise CloudError(f"pose: expected seven finite numbers tx ty tz qw qx qy qz, got {v.tolist()}")
     far = float(np.abs(v[:3]).max())
     if far > tol.MAX_COORDINATE_M:
-        raise CloudError(f"pose: the camera is {far:.3g} m from the origin, beyond the {tol.MAX_COORDINATE_M:g} m "
+        raise CloudError(f"pose: the camera is {refused_number(far, tol.MAX_COORDINATE_M, digits=3)} m from the origin, beyond "
+                         f"the {tol.MAX_COORDINATE_M:g} m "
                          f"an estimate accepts")
     q = unit_quaternion(v[3:], "pose: the quaternion qw qx qy qz")
     # scipy's order is x y z w; ours (MuJoCo's, PCD's VIEWPOINT) is w x y z.

@@ -26,3 +26,27 @@ class MaterialError(TwinError, LookupError):
 
 class ReconstructionError(TwinError, RuntimeError):
     """Surface reconstruction could not produce a usable solid from a valid cloud."""
+
+
+#: Significant digits that write any double exactly: the most a refused number takes.
+_MOST_DIGITS = 17
+
+
+def refused_number(value: float, *limits: float, digits: int = 6) -> str:
+    """``value`` as an error shows it: with ``digits`` significant digits (``:g``'s 6 unless the message is
+    written shorter), or as many more as it takes to leave it on the same side of each of ``limits`` as
+    ``value`` is, or exactly.
+
+    ``:g`` printed ``--density 100000.0001`` as "got 100000", the limit itself, and ``:.4g`` a quaternion's
+    norm of 1.0010001 as "1.001" against a tolerance of 0.001: the reason was rounded away. This keeps
+    "got 1e+300" short and writes "got 100000.0001" in full. One rule for every range message.
+    """
+    def side(x: float, limit: float) -> tuple[bool, bool]:
+        return x < limit, x > limit
+
+    for shown_digits in range(digits, _MOST_DIGITS + 1):
+        text = f"{value:.{shown_digits}g}"
+        shown = float(text)
+        if shown == value or all(side(shown, limit) == side(value, limit) for limit in limits):
+            return text
+    return f"{value:.{_MOST_DIGITS}g}"

@@ -27,6 +27,7 @@ from estimation.cloud import (
     PointCloud,
     check_count_and_range,
     check_estimable,
+    check_is_cloud,
     check_range,
     check_sensor_origin,
     distinct_rows,
@@ -34,7 +35,7 @@ from estimation.cloud import (
 )
 from estimation.contracts import as_points
 from estimation.downsample import thin_to_budget, voxel_downsample
-from estimation.errors import CloudError
+from estimation.errors import CloudError, ReconstructionError, refused_number
 from estimation.inertia import MassProperties, mass_properties, triangle_areas
 from estimation.materials import check_density
 from estimation.obb import OrientedBox, oriented_box, oriented_box_local
@@ -171,9 +172,7 @@ def estimate(
         ValueError: an unknown method, a resolution outside ``tolerances.MIN_RESOLUTION``..``MAX_RESOLUTION``.
         ReconstructionError: 'auto' found no closed solid.
     """
-    if not isinstance(cloud, PointCloud):
-        raise TypeError(f"estimate takes a PointCloud (make_cloud(points) builds one from an (n, 3) array), "
-                        f"got {type(cloud).__name__}")
+    check_is_cloud(cloud, "estimate")
     if method not in METHODS:
         raise ValueError(f"unknown method {method!r}; choose from {', '.join(METHODS)}")
     density = check_density(density)
@@ -521,7 +520,8 @@ def _auto_pass(cloud: PointCloud, box: OrientedBox, local: np.ndarray, spacing: 
                 f" (the points come in clusters {even / spacing:.3g} times tighter than {len(points):,} points spread "
                 f"over the object would be: copies of one scan? merge them)" if spacing < even / tol.CLUSTERED_SPACING
                 else " (several objects, or --method obb?)")
-        raise CloudError(f"the points span {float(box.extents.max()):.3g} m at a {h:.3g} m spacing: {nodes:.3g} grid "
+        raise CloudError(f"the points span {float(box.extents.max()):.3g} m at a {h:.3g} m spacing: "
+                         f"{refused_number(nodes, tol.MAX_BAND_NODES, digits=3)} grid "
                          f"nodes, more than the {tol.MAX_BAND_NODES:.3g} an estimate holds{hint}")
     band = narrow_band(coarse, occ, ratio)
     values, measured = band_field(points, normals, band)
@@ -718,30 +718,49 @@ def from_mesh(vertices: np.ndarray, faces: np.ndarray, density: float, *,
 
     For reference models (the truth a twin is compared with) and for objects whose CAD mesh is known. A mesh
     that is not closed and consistently wound is estimated all the same, ``watertight`` False and a warning
-    saying its volume is not a solid's (half a box's faces gave half its volume, without a word).
+    saying its volume is not a solid's (half a box's faces gave half its volume, without a word). A closed mesh
+    whose closed parts overlap is the union of its parts: its record's surface and mass properties are the
+    union's, with a warning (the sum over the faces counted the shared space twice); nested shells, a hollow
+    object's outer shell and its inward-facing inner one, are the hollow solid they bound, as before.
+
+    Args:
+        vertices: (v, 3) float64, metres.
+        faces: (f, 3) int, outward winding.
+        density: kg/m^3.
+        material: name recorded with the estimate.
 
     Raises:
         CloudError: vertices not a finite (v, 3) array within ``tol.MAX_COORDINATE_M``, faces not (f, 3) whole
             vertex indices within them, or no volume enclosed.
         MaterialError: as :func:`estimate`.
     """
+    from estimation.contracts import as_faces
+    from estimation.meshparts import overlap_union
+
     check_density(density)
     vertices = as_points(vertices, "mesh vertices")
     check_range(vertices, "mesh vertices")
-    raw = np.asarray(faces)
-    if raw.ndim != 2 or raw.shape[1:] != (3,) or not (np.issubdtype(raw.dtype, np.integer) or raw.size == 0):
-        raise CloudError(f"mesh faces: expected (f, 3) whole vertex indices, got {raw.dtype} {raw.shape}")
-    faces = raw.astype(np.int64)
-    if faces.size and (faces.min() < 0 or faces.max() >= len(vertices)):
-        raise CloudError(f"mesh faces: vertex indices must be 0 to {len(vertices) - 1}, got {faces.min()} to "
-                         f"{faces.max()}")
+    faces = as_faces(faces, len(vertices), "mesh faces")
     t0 = time.perf_counter()
-    props = mass_properties(vertices, faces, density)
-    if props.volume <= 0:
-        raise CloudError("mesh encloses no volume (open, empty or inside-out)")
-    watertight = _is_watertight(vertices, faces)
-    warnings = () if watertight else (
+    try:
+        props = mass_properties(vertices, faces, density)
+    except ReconstructionError:  # the CloudError this docstring promised (mass_properties' error came through)
+        raise CloudError("mesh encloses no volume (open, empty or inside-out)") from None
+    merged = _merged(vertices, faces)
+    watertight = _is_closed(merged)
+    warnings: tuple[str, ...] = () if watertight else (
         "the mesh is not closed and consistently wound: its volume is a signed sum over its faces, not a solid's",)
+    overlap = overlap_union(np.asarray(merged.vertices), np.asarray(merged.faces, dtype=np.int64)) if watertight else None
+    if overlap is not None and overlap.vertices is not None and overlap.faces is not None:
+        vertices, faces = overlap.vertices, overlap.faces
+        props = mass_properties(vertices, faces, density)
+        warnings += (f"closed parts of the mesh overlap ({overlap.overlapping} of its {overlap.parts} parts): "
+                     f"{overlap.shared:.3g} m^3 the sum over its faces counted more than once; its surface and mass "
+                     f"properties are their union's",)
+    elif overlap is not None:
+        warnings += (f"closed parts of the mesh may overlap ({overlap.overlapping} of its {overlap.parts} parts have "
+                     f"overlapping bounds) but their union was not formed ({overlap.unresolved}): its volume is the "
+                     f"sum over its faces, which counts any space they share more than once",)
     return PhysicalEstimate(
         method="mesh", mass=props, obb=oriented_box(vertices), vertices=vertices, faces=faces,
         watertight=watertight, points_in=0, points_used=0, cell=0.0,
@@ -775,8 +794,17 @@ def _rotate_properties(props: MassProperties, frame: np.ndarray, center: np.ndar
     )
 
 
-def _is_watertight(vertices: np.ndarray, faces: np.ndarray) -> bool:
+def _merged(vertices: np.ndarray, faces: np.ndarray):  # type: ignore[no-untyped-def]
+    """The mesh as a ``trimesh.Trimesh`` with duplicate vertices merged (a triangle soup's faces joined)."""
     import trimesh
 
-    mesh = trimesh.Trimesh(vertices, faces, process=True)
+    return trimesh.Trimesh(vertices, faces, process=True)
+
+
+def _is_closed(mesh) -> bool:  # type: ignore[no-untyped-def]
+    """True when a merged mesh (:func:`_merged`) is closed and consistently wound."""
     return bool(mesh.is_watertight and mesh.is_winding_consistent)
+
+
+def _is_watertight(vertices: np.ndarray, faces: np.ndarray) -> bool:
+    return _is_closed(_merged(vertices, faces))

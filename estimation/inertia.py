@@ -12,7 +12,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from estimation.errors import ReconstructionError
+from estimation.contracts import as_faces, as_points
+from estimation.errors import CloudError, ReconstructionError
+from estimation.materials import check_density
 
 
 @dataclass(frozen=True)
@@ -55,30 +57,50 @@ def mass_properties(
     """Volume, mass, centre of mass and inertia of the solid bounded by a triangle mesh.
 
     Args:
-        vertices: (v, 3) float64, metres.
-        faces: (f, 3) int, wound counter-clockwise seen from outside (normals out).
-        density: kg/m^3, > 0.
+        vertices: (v, 3) float64, metres, finite.
+        faces: (f, 3) int, indices into ``vertices``, wound counter-clockwise seen from outside (normals out).
+        density: kg/m^3, from ``materials.MIN_DENSITY`` to ``materials.MAX_DENSITY``.
         apex: (3,) metres, the shared tetrahedron apex; defaults to the vertex centroid, which for a
             closed mesh changes nothing but rounding.
 
     Raises:
-        ReconstructionError: the signed volume is not positive (inside-out or no enclosed volume).
+        CloudError: vertices not a finite (v, 3) array, faces not (f, 3) whole indices into them, a non-finite
+            apex, or coordinates so large that the integrals overflow.
+        MaterialError: a density that is not a number in that range.
+        ReconstructionError: no faces, or a signed volume that is not positive (inside-out or no enclosed
+            volume): what a reconstruction that failed gives.
     """
-    vertices = np.asarray(vertices, dtype=np.float64)
-    apex = vertices.mean(axis=0) if apex is None else np.asarray(apex, dtype=np.float64)
-    tri = vertices[np.asarray(faces)] - apex  # (f, 3 vertices, 3 coords), apex at the origin
-    signed = signed_volumes(tri)
-    volume = float(signed.sum())
-    if volume <= 0:
-        raise ReconstructionError(f"the surface encloses no positive volume ({volume:.3g} m^3)")
-    # First moments: a tetrahedron's centroid is the mean of its four vertices (one is the origin).
-    vertex_sum = tri.sum(axis=1)
-    # Second moments, exact for a tetrahedron with a vertex at the origin:
-    # integral of x x^T = V / 20 * (sum_k p_k p_k^T + s s^T), s = sum_k p_k.
-    # As three (3 x f) @ (f x 3) products: BLAS, several times faster than one einsum on big meshes.
-    second = sum((tri[:, k] * signed[:, None]).T @ tri[:, k] for k in range(3))
-    second = second + (vertex_sum * signed[:, None]).T @ vertex_sum
-    second = density * second / 20
+    # One vectorised pass each (a finite sum, a min and max of the indices): ~1 ms on a million vertices.
+    vertices = as_points(vertices, "vertices")
+    faces = as_faces(faces, len(vertices), "faces")
+    density = check_density(density)
+    if not len(faces):  # before the mean of the vertices, which may be none ("Mean of empty slice")
+        raise ReconstructionError("the surface has no faces: it encloses no volume")
+    if apex is None:
+        apex = vertices.mean(axis=0)  # faces name some vertex, so there is one
+    else:
+        apex = as_points(np.reshape(apex, (1, -1)), "apex")[0]
+    tri = vertices[faces] - apex  # (f, 3 vertices, 3 coords), apex at the origin
+    # Huge coordinates overflow (numpy warned, then eigh failed): the finite results are checked instead.
+    with np.errstate(over="ignore", invalid="ignore"):
+        signed = signed_volumes(tri)
+        volume = float(signed.sum())
+        if not np.isfinite(volume):
+            raise CloudError(f"vertices: coordinates up to {float(np.abs(vertices).max()):.3g} m overflow the "
+                             f"volume integrals (float64)")
+        if volume <= 0:
+            raise ReconstructionError(f"the surface encloses no positive volume ({volume:.3g} m^3)")
+        # First moments: a tetrahedron's centroid is the mean of its four vertices (one is the origin).
+        vertex_sum = tri.sum(axis=1)
+        # Second moments, exact for a tetrahedron with a vertex at the origin:
+        # integral of x x^T = V / 20 * (sum_k p_k p_k^T + s s^T), s = sum_k p_k.
+        # As three (3 x f) @ (f x 3) products: BLAS, several times faster than one einsum on big meshes.
+        second = sum((tri[:, k] * signed[:, None]).T @ tri[:, k] for k in range(3))
+        second = second + (vertex_sum * signed[:, None]).T @ vertex_sum
+        second = density * second / 20
+    if not np.isfinite(second).all():  # fifth powers of the coordinates: they overflow before the volume's cubes
+        raise CloudError(f"vertices: coordinates up to {float(np.abs(vertices).max()):.3g} m overflow the inertia "
+                         f"integrals (float64)")
     return from_moments(volume, float(density), density * (signed[:, None] * vertex_sum).sum(axis=0) / 4, second,
                         origin=apex)
 

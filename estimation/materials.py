@@ -10,7 +10,7 @@ from dataclasses import dataclass
 from functools import cache
 from importlib import resources
 
-from estimation.errors import MaterialError
+from estimation.errors import MaterialError, refused_number
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -141,5 +141,5 @@ def check_density(density: float) -> float:
         raise MaterialError(f"density must be a positive number of kg/m^3, got {density}")
     if not MIN_DENSITY <= density <= MAX_DENSITY:
         raise MaterialError(f"density must be a positive number of kg/m^3 from {MIN_DENSITY:g} to {MAX_DENSITY:g} "
-                            f"(aerogel to past osmium), got {density:g}")
+                            f"(aerogel to past osmium), got {refused_number(density, MIN_DENSITY, MAX_DENSITY)}")
     return float(density)

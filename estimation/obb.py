@@ -10,6 +10,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from estimation.contracts import as_points
+
 
 @dataclass(frozen=True)
 class OrientedBox:
@@ -66,7 +68,11 @@ SKEW_SAMPLE = 20_000
 
 
 def oriented_box(points: np.ndarray) -> OrientedBox:
-    """OBB of ``points`` ((n, 3) float64, metres) from the covariance eigenvectors."""
+    """OBB of ``points`` ((n, 3) float64, metres, at least one, finite) from the covariance eigenvectors.
+
+    Raises:
+        CloudError: as :func:`oriented_box_local`.
+    """
     return oriented_box_local(points)[0]
 
 
@@ -75,7 +81,13 @@ def oriented_box_local(points: np.ndarray) -> tuple[OrientedBox, np.ndarray]:
 
     The box frame is where 'auto' works; on a million points each pass over them costs ~10-25 ms of
     CPU, so the projection that finds the extents is handed on instead of being done twice.
+
+    Raises:
+        CloudError: ``points`` not a numeric (n, 3) array, empty, or holding NaN or inf (the eigenvectors
+            of a NaN covariance did not converge).
     """
+    # ~0.5 ms on a million points (a finite sum), against ~50 ms for the box.
+    points = as_points(points, "points", min_rows=1)
     mean = column_mean(points)
     centred = points - mean
     # eigh returns ascending eigenvalues; reverse so the first axis carries the largest spread.

@@ -167,3 +167,9 @@ NOISE_CURVATURE_MIN_CELLS = 0.05
 #: the points' convex hull. A clean thin-walled cloud leaves almost nothing unmeasured (bench/shapes.py's
 #: noisy mugs 1.2-1.3 %); clutter20's cereal box, its 28 x 19 cm back unseen, 44 %.
 LEAK_UNMEASURED_SHARE = 0.1
+
+#: Closed parts of one mesh overlap when the sum over its faces exceeds their union's volume by more than this
+#: fraction of it (``estimation.meshparts``); a cavity lies in a part when their intersection is its volume to
+#: within it. Parts whose bounding boxes overlap while they do not (a rod through a ring, a ball in a cavity)
+#: differ by rounding, 1e-16 of the volume; an overlap worth a word, by many orders more.
+MESH_OVERLAP_SHARE = 1e-9

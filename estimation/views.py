@@ -28,7 +28,7 @@ from estimation.cloud import check_count_and_range, check_sensor_origin
 from estimation.completion import ONE_SIDED, close_on_plane, honest_bounds, mean_view_direction
 from estimation.contracts import as_points
 from estimation.coverage import coverage
-from estimation.errors import CloudError
+from estimation.errors import CloudError, refused_number
 from estimation.estimate import PhysicalEstimate, estimate
 from estimation.fusion import fuse_views, fused_cloud, oriented_normals
 from estimation.segmentation import (
@@ -165,7 +165,8 @@ def plane_from_abcd(abcd: object) -> Plane:
     length = float(np.linalg.norm(values[:3]))
     distance = float(values[3]) / length
     if abs(distance) > tol.MAX_COORDINATE_M:
-        raise CloudError(f"support plane: it passes {abs(distance):.3g} m from the origin, beyond the "
+        raise CloudError(f"support plane: it passes {refused_number(abs(distance), tol.MAX_COORDINATE_M, digits=3)} m from the "
+                         f"origin, beyond the "
                          f"{tol.MAX_COORDINATE_M:g} m an estimate accepts (D is in the file's units)")
     return Plane(values[:3] / length, distance, 0.0, 0)
 

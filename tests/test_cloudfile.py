@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 import subprocess
 import sys
 import textwrap
@@ -188,6 +189,24 @@ def test_npz_sensor_origins(tmp_path, cloud):
         back = load_cloud(tmp_path / "o.npz")
         np.testing.assert_array_equal(back.sensor_origins, original.sensor_origins)
 
+@pytest.mark.parametrize(("name", "text", "line"), [
+    ("r.xyz", "0 0 0\n1 0 0\n0 1\n0 0 1\n", 3),
+    ("r.xyz", "# scan\n\n0 0 0\n1 0 0 7\n", 4),  # comments and blank lines count as the editor counts them
+    ("r.pts", "3\n0 0 0\n1 0 0\n0 1 0 5 5\n", 4),  # after a Leica point count
+    ("r.csv", "x,y,z\n0,0,0\n1,0\n", 3),  # after a header row
+    ("r.txt", "0 0 0\r\n1 0 0\r\n0 1\r\n", 3),
+])
+def test_a_ragged_text_cloud_names_its_first_bad_line(tmp_path, name, text, line):
+    # numpy's wording leaked: "the number of columns changed from 3 to 2 at row 3; use `usecols` to select ...".
+    path = tmp_path / name
+    path.write_bytes(text.encode())
+    with pytest.raises(CloudFileError) as caught:
+        load_cloud(path)
+    message = str(caught.value)
+    assert message.startswith(f"{path}: line {line} holds ") and "usecols" not in message and "\n" not in message
+    assert re.search(r"line \d+ holds \d+ values where the rows before hold \d+$", message), message
+
+
 def test_a_text_cloud_with_a_byte_order_mark(tmp_path, cloud):
     for suffix in (".xyz", ".csv"):
         sep = "," if suffix == ".csv" else " "
@@ -257,7 +276,8 @@ def test_a_header_row_that_does_not_fit_is_refused(tmp_path, cloud, header, matc
 
 @pytest.mark.parametrize("suffix", [".xyz", ".xyzn", ".xyzrgb", ".pts"])
 def test_xyz_family_round_trip(tmp_path, cloud, suffix):
-    save_cloud(cloud, tmp_path / f"c{suffix}")
+    kept = {".xyz": (), ".xyzn": ("normals",), ".xyzrgb": ("colors",), ".pts": ("colors",)}[suffix]
+    save_cloud(cloud, tmp_path / f"c{suffix}", drop={"normals", "colors"} - set(kept))
     back = load_cloud(tmp_path / f"c{suffix}")
     np.testing.assert_array_equal(back.points, cloud.points)
     assert (back.normals is not None) == (suffix == ".xyzn")
@@ -520,6 +540,65 @@ def test_warnings_go_to_the_log_not_stdout(tmp_path, cloud, capfd, caplog):
     out, err = capfd.readouterr()
     assert out == "" and err == ""
     assert "the header accounts for" in caplog.text
+
+
+@pytest.mark.parametrize(("suffix", "fields", "said"), [
+    (".ply", dict(sensor_origins=[0.0, 0.0, 1.0]), "a .ply file cannot hold the cloud's sensor_origins (.npz or .pcd "
+     "can; pass drop={'sensor_origins'} to write it without them)"),
+    (".xyz", dict(normals=True, colors=True), "a .xyz file cannot hold the cloud's normals and colors (.npz, .pcd or "
+     ".ply can; pass drop={'colors', 'normals'} to write it without them)"),
+    (".xyzn", dict(normals=True, colors=True), "cannot hold the cloud's colors (.npz, .pcd or .ply can;"),
+    (".xyzrgb", dict(normals=True, colors=True), "cannot hold the cloud's normals (.npz, .pcd or .ply can;"),
+    (".pts", dict(normals=True), "a .pts file cannot hold the cloud's normals (.npy, .npz, .pcd, .ply or .xyzn can;"),
+    (".npy", dict(colors=True), "a .npy file cannot hold the cloud's colors (.npz, .pcd, .ply, .pts or .xyzrgb can;"),
+    # One origin a point: only .npz holds them (a PCD VIEWPOINT is one origin).
+    (".pcd", dict(sensor_origins="per point"), "a .pcd file cannot hold the cloud's per-point sensor_origins (.npz "
+     "can; pass drop={'sensor_origins'}"),
+])
+def test_save_refuses_to_drop_what_the_format_cannot_hold(tmp_path, cloud, suffix, fields, said):
+    # .ply dropped sensor origins, .xyz normals and colours, .pcd per-point origins (with a log line), silently.
+    origins = fields.get("sensor_origins")
+    full = make_cloud(cloud.points, cloud.normals if fields.get("normals") else None,
+                      cloud.colors if fields.get("colors") else None,
+                      sensor_origins=cloud.points * 2 if origins == "per point" else origins)
+    path = tmp_path / f"c{suffix}"
+    with pytest.raises(CloudFileError, match=re.escape(said)) as caught:
+        save_cloud(full, path)
+    assert "\n" not in str(caught.value) and str(path) in str(caught.value)
+    assert not path.exists()
+    # Said so, it writes the rest.
+    lost = [name for name in ("normals", "colors", "sensor_origins") if name in str(caught.value).split(" (")[0]]
+    save_cloud(full, path, drop=lost)
+    back = load_cloud(path)
+    np.testing.assert_allclose(back.points, full.points, rtol=0, atol=1e-7)
+    assert all(getattr(back, name) is None for name in lost)
+
+
+def test_save_drop_names_fields_and_drops_only_those(tmp_path, cloud):
+    with pytest.raises(CloudError, match=re.escape("drop: 'colours' is not a field a file can leave out; "
+                                                   "name some of colors, normals, sensor_origins")):
+        save_cloud(cloud, tmp_path / "c.xyz", drop=["normals", "colours"])
+    # Dropping what the format holds anyway leaves it out too: the caller asked for it.
+    save_cloud(cloud, tmp_path / "c.ply", drop="colors")
+    back = load_cloud(tmp_path / "c.ply")
+    assert back.colors is None and back.normals is not None
+
+
+def test_save_takes_a_point_cloud(tmp_path, cloud):
+    # An (n, 3) array was an AttributeError ('numpy.ndarray' object has no attribute 'points').
+    with pytest.raises(TypeError, match=re.escape("save_cloud takes a PointCloud (make_cloud(points) builds one "
+                                                  "from an (n, 3) array), got ndarray")):
+        save_cloud(cloud.points, tmp_path / "c.ply")  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize("ascii", [False, True])
+def test_a_pcd_sensor_origin_at_the_origin_is_kept(tmp_path, cloud, ascii):
+    # A camera-frame cloud's sensor sits at (0, 0, 0): written as the default VIEWPOINT, it read back as none.
+    at_zero = make_cloud(cloud.points, sensor_origins=[0.0, 0.0, 0.0])
+    save_cloud(at_zero, tmp_path / "z.pcd", ascii=ascii)
+    back = load_cloud(tmp_path / "z.pcd")
+    assert back.sensor_origins is not None
+    np.testing.assert_array_equal(back.sensor_origins, np.zeros((len(cloud), 3)))
 
 
 def test_writing_errors(tmp_path, cloud):

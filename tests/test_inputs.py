@@ -284,6 +284,54 @@ def test_a_density_no_object_has_is_refused(box_cloud, density, said):
         estimate(box_cloud, density)  # type: ignore[arg-type]
 
 
+@pytest.mark.parametrize(("density", "shown"), [
+    # ":g" printed these as "got 100000" and "got 0.1", the limits themselves: the reason was rounded away.
+    (100000.0001, "got 100000.0001"), (0.09999999, "got 0.09999999"), (100000.5, "got 100000.5"),
+    (2e5, "got 200000"), (1e-300, "got 1e-300"),  # as :g wrote them where its six digits tell them apart
+])
+def test_a_refused_density_shows_the_digits_that_refuse_it(box_cloud, density, shown):
+    with pytest.raises(MaterialError, match=re.escape(f"from 0.1 to 100000 (aerogel to past osmium), {shown}") + "$"):
+        estimate(box_cloud, density)
+
+
+@pytest.mark.parametrize(("argv", "said"), [
+    (["estimate", "c.ply", "--density", "100000.0001"], "--density must be >= 0.1 and <= 100000, got 100000.0001"),
+    (["estimate", "c.ply", "--density", "0.0999999999"], "--density must be >= 0.1 and <= 100000, got 0.0999999999"),
+    (["run", "s.toml", "--threshold", "1.0000001"], "--threshold must be > 0 and <= 1, got 1.0000001"),
+    (["experiment", "s.toml", "--out", "o", "--loss", "100.00001"], "--loss is a percentage: at most 100, got 100.00001"),
+])
+def test_the_cli_shows_a_refused_number_with_the_digits_that_refuse_it(capsys, argv, said):
+    from cli.main import main
+
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert said in err and err.count("\n") == 1, err
+
+
+@pytest.mark.parametrize(("value", "limits", "digits", "shown"), [
+    (100000.0001, (0.1, 1e5), 6, "100000.0001"), (1e300, (0.1, 1e5), 6, "1e+300"), (0.0, (0.0,), 6, "0"),
+    (1.0010001, (0.999, 1.001), 1, "1.0010001"),  # "1" lies inside the range, "1.001" on its limit
+    (100000.6, (1e5,), 3, "100001"), (float("nan"), (1.0,), 6, "nan"), (-1e-20, (0.0,), 6, "-1e-20"),
+    (319.5, (0.0, 40.0), 6, "319.5"), (12345.678, (1e4,), 3, "1.23e+04"),  # as :g and :.3g wrote them
+])
+def test_a_refused_number_is_shown_on_its_own_side_of_each_limit(value, limits, digits, shown):
+    from estimation.errors import refused_number
+
+    assert refused_number(value, *limits, digits=digits) == shown
+
+
+def test_a_quaternion_just_off_unit_norm_shows_why_it_is_refused():
+    from estimation.contracts import unit_quaternion
+
+    with pytest.raises(CloudError, match=re.escape("must have norm 1 (within 0.001), got 1.0010001")):
+        unit_quaternion([1.0010001, 0.0, 0.0, 0.0])
+
+
+def test_coordinates_just_past_the_range_show_why_they_are_refused():
+    with pytest.raises(CloudError, match=re.escape("coordinates reach 10000.0001 m from the origin, beyond the 10000 m")):
+        estimate(make_cloud(np.r_[_sphere(2000) + 9999.5, [[10000.0001, 0, 0]]]), 1000.0, keep_strays=True)
+
+
 @pytest.mark.parametrize("scale", [float("nan"), float("inf"), 0.0, -1.0, None, "0.001"])
 def test_a_scale_that_is_not_a_positive_number_is_refused(scale):
     # NaN made every point NaN past the finiteness check (then scipy's "data must be finite"); -1 mirrored it.
@@ -507,6 +555,8 @@ def test_from_mesh_checks_its_mesh_and_says_when_it_is_not_closed():
     assert not half.watertight and any("not closed" in w for w in half.warnings)
     for vertices, faces, said in [(np.vstack([v, [np.nan] * 3]), f, "mesh vertices: contains NaN"),
                                   (v * 1e200, f, "beyond the 10000 m"), (v, f + 100, "vertex indices must be 0 to 7"),
-                                  (v, f.astype(float), "whole vertex indices"), (v[:, :2], f, "expected shape (n, 3)")]:
+                                  (v, f.astype(float), "whole vertex indices"), (v[:, :2], f, "expected shape (n, 3)"),
+                                  # the CloudError the docstring promised (a ReconstructionError came through)
+                                  (v, f[:, ::-1], "mesh encloses no volume"), (v, f[:0], "mesh encloses no volume")]:
         with pytest.raises(CloudError, match=re.escape(said)):
             from_mesh(vertices, faces, 1000.0)

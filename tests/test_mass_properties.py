@@ -2,11 +2,15 @@
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 import trimesh
 
+from estimation import CloudError, MaterialError, ReconstructionError, from_mesh
 from estimation.inertia import mass_properties
+from estimation.obb import oriented_box, oriented_box_local
 
 
 def test_box_matches_closed_form():
@@ -80,3 +84,129 @@ def test_inside_out_mesh_is_an_error():
     box = trimesh.creation.box(extents=(0.1, 0.1, 0.1))
     with pytest.raises(ReconstructionError, match="no positive volume"):
         mass_properties(box.vertices, box.faces[:, ::-1], 1000.0)
+
+
+# --- bad input: one line naming the problem ------------------------------------------------------------
+
+_BOX = trimesh.creation.box(extents=(0.3, 0.2, 0.1))
+_V, _F = np.asarray(_BOX.vertices), np.asarray(_BOX.faces)
+
+
+@pytest.mark.filterwarnings("error")  # an empty mesh leaked numpy's "Mean of empty slice" RuntimeWarning
+@pytest.mark.parametrize(("vertices", "faces", "density", "error", "said"), [
+    (np.vstack([_V, [[np.nan] * 3]]), _F, 1000.0, CloudError, "vertices: contains NaN or inf"),  # was LinAlgError
+    (_V[:, :2], _F, 1000.0, CloudError, "vertices: expected shape (n, 3), got (8, 2)"),
+    # No faces is what a failed reconstruction gives: its error, as an inside-out surface's.
+    (np.zeros((0, 3)), np.zeros((0, 3), int), 1000.0, ReconstructionError, "the surface has no faces"),
+    (np.zeros((0, 3)), _F, 1000.0, CloudError, "faces: vertex indices 0 to 7, but there are no vertices"),
+    (_V, _F + 100, 1000.0, CloudError, "faces: vertex indices must be 0 to 7, got 100 to 107"),  # was IndexError
+    (_V, _F - 1, 1000.0, CloudError, "faces: vertex indices must be 0 to 7, got -1 to 6"),  # numpy wrapped -1
+    (_V, _F.astype(float), 1000.0, CloudError, "faces: expected (f, 3) whole vertex indices, got float64 (12, 3)"),
+    (_V, _F[:, :2], 1000.0, CloudError, "faces: expected (f, 3) whole vertex indices, got int64 (12, 2)"),
+    (_V, _F, -1.0, MaterialError, "density must be a positive number of kg/m^3, got -1.0"),
+    (_V, _F, float("nan"), MaterialError, "density must be a positive number of kg/m^3, got nan"),
+    (_V * 1e200, _F, 1000.0, CloudError, "vertices: coordinates up to 1.5e+199 m overflow"),  # was LinAlgError
+])
+def test_mass_properties_refuses_a_bad_mesh_in_one_line(vertices, faces, density, error, said):
+    with pytest.raises(error, match=re.escape(said)) as caught:
+        mass_properties(vertices, faces, density)
+    assert "\n" not in str(caught.value)
+
+
+def test_mass_properties_refuses_a_non_finite_apex():
+    with pytest.raises(CloudError, match=re.escape("apex: contains NaN or inf")):
+        mass_properties(_V, _F, 1000.0, apex=np.array([0.0, np.nan, 0.0]))
+
+
+@pytest.mark.filterwarnings("error")
+@pytest.mark.parametrize(("points", "said"), [
+    (np.full((8, 3), np.nan), "points: contains NaN or inf"),  # was LinAlgError
+    (np.zeros((0, 3)), "points: expected at least 1 row(s), got 0"),  # was "Mean of empty slice", then ValueError
+    (np.zeros((5, 2)), "points: expected shape (n, 3), got (5, 2)"),  # was IndexError
+    ("abc", "points: expected a numeric (n, 3) array, got str"),
+])
+@pytest.mark.parametrize("function", [oriented_box, oriented_box_local])
+def test_oriented_box_refuses_bad_points_in_one_line(function, points, said):
+    with pytest.raises(CloudError, match=re.escape(said)):
+        function(points)
+
+
+def test_oriented_box_takes_any_array_of_points():
+    # A list was an AttributeError ('list' object has no attribute 'shape').
+    box = oriented_box(_V.tolist())
+    np.testing.assert_allclose(np.sort(box.extents), [0.1, 0.2, 0.3], rtol=1e-12)
+
+
+# --- meshes of several closed parts -------------------------------------------------------------------
+
+
+def _parts(*meshes: trimesh.Trimesh) -> tuple[np.ndarray, np.ndarray]:
+    """One mesh holding ``meshes`` as separate parts (no vertex shared), as an assembly exported whole."""
+    whole = trimesh.util.concatenate(list(meshes))
+    return np.asarray(whole.vertices), np.asarray(whole.faces)
+
+
+def _box(extents, at=(0.0, 0.0, 0.0), *, inward=False) -> trimesh.Trimesh:
+    box = trimesh.creation.box(extents=extents)
+    box.apply_translation(at)
+    if inward:
+        box.invert()
+    return box
+
+
+def test_overlapping_closed_parts_are_their_union():
+    # Two 10 cm cubes 5 cm apart are a 15 x 10 x 10 cm box; the faces' signed sum counted the shared half twice
+    # (1.5e-3 + 0.5e-3 m^3) without a word.
+    result = from_mesh(*_parts(_box((0.1, 0.1, 0.1)), _box((0.1, 0.1, 0.1), (0.05, 0, 0))), 1000.0)
+    truth = from_mesh(*_parts(_box((0.15, 0.1, 0.1), (0.025, 0, 0))), 1000.0)
+    assert result.volume == pytest.approx(1.5e-3, rel=1e-12)
+    np.testing.assert_allclose(result.mass.center_of_mass, truth.mass.center_of_mass, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(result.mass.inertia, truth.mass.inertia, rtol=1e-12, atol=1e-18)
+    assert result.watertight and mass_properties(result.vertices, result.faces, 1000.0).volume == \
+        pytest.approx(1.5e-3, rel=1e-12)  # the surface is the union's too
+    assert result.warnings == ("closed parts of the mesh overlap (2 of its 2 parts): 0.0005 m^3 the sum over its "
+                               "faces counted more than once; its surface and mass properties are their union's",)
+
+
+def test_a_part_through_a_hollow_parts_cavity_is_united_with_the_solid_around_the_cavity():
+    # A 20 cm bar through a 10 cm box with a 5 cm cavity: the bar fills the cavity where it crosses it (a
+    # solid is wherever some part is); the union of the outer shell and the bar, less the cavity, lost that.
+    hollow = (_box((0.1, 0.1, 0.1)), _box((0.05, 0.05, 0.05), inward=True))
+    bar = _box((0.2, 0.02, 0.02))
+    result = from_mesh(*_parts(*hollow, bar), 1000.0)
+    shell, outside, inside = 1e-3 - 1.25e-4, 0.1 * 4e-4, 0.05 * 4e-4  # the bar's length out of the box, in the cavity
+    assert result.volume == pytest.approx(shell + outside + inside, rel=1e-12)
+    assert any("overlap" in w for w in result.warnings)
+
+
+def test_parts_whose_boxes_overlap_but_not_their_solids_are_summed_as_before():
+    # A rod through a ring's hole (their bounding boxes overlap, they do not) and a cube rattling in a hollow box's
+    # cavity: each part's volume counts once, as it did.
+    ring = trimesh.creation.torus(major_radius=0.05, minor_radius=0.01)
+    rod = trimesh.creation.cylinder(radius=0.02, height=0.2)
+    rattle = (_box((0.1, 0.1, 0.1)), _box((0.06, 0.06, 0.06), inward=True), _box((0.02, 0.02, 0.02)))
+    for parts in ((ring, rod), rattle):
+        vertices, faces = _parts(*parts)
+        result = from_mesh(vertices, faces, 1000.0)
+        assert result.warnings == () and result.faces.shape == faces.shape
+        assert result.volume == pytest.approx(sum(p.volume for p in parts), rel=1e-12)
+
+
+def test_a_hollow_mesh_of_nested_shells_is_estimated_as_before():
+    # An outer shell and an inward-facing inner one: the signed sum is the hollow solid's, and no part overlaps.
+    vertices, faces = _parts(_box((0.1, 0.1, 0.1)), _box((0.05, 0.05, 0.05), inward=True))
+    result = from_mesh(vertices, faces, 1000.0)
+    assert result.watertight and result.warnings == ()
+    assert result.volume == pytest.approx(1e-3 - 1.25e-4, rel=1e-12)
+    np.testing.assert_array_equal(result.faces, faces)
+
+
+def test_overlapping_parts_whose_union_cannot_be_formed_are_summed_and_said():
+    # An inside-out part beside two overlapping cubes: no outward part holds it, so the solid is not known; the
+    # signed sum stands (1.5e-3 + 0.5e-3 - 8e-6 m^3), and the warning says it may count shared space twice.
+    parts = (_box((0.1, 0.1, 0.1)), _box((0.1, 0.1, 0.1), (0.05, 0, 0)), _box((0.02, 0.02, 0.02), (1, 0, 0), inward=True))
+    vertices, faces = _parts(*parts)
+    result = from_mesh(vertices, faces, 1000.0)
+    assert result.volume == pytest.approx(2e-3 - 8e-6, rel=1e-12)
+    assert len(result.warnings) == 1 and "may overlap" in result.warnings[0]
+    assert "an inward-facing part lies inside no outward part" in result.warnings[0]
