@@ -210,7 +210,8 @@ class Remote:
         Returns a Future that resolves to the id once the object is there (at the next step). A pose where it
         would be inside another object, the table or the end effector (:mod:`scenes.placement`) is no move
         MuJoCo could follow (it pushes the pair apart at once): the object stays where it was and the Future
-        raises :class:`SceneError` naming what it would overlap.
+        raises :class:`SceneError` naming what it would overlap; so it does for a pose that is not finite or
+        lies beyond :data:`sync.messages.MAX_COORDINATE` (:meth:`twin.sim.Twin.set_pose`).
         """
         done: Future = Future()
 
@@ -219,7 +220,11 @@ class Remote:
                 done.set_exception(SceneError(f"{self.scene.name}: cannot move {object_id!r}: no such object"))
                 return
             before = self.twin.pose(object_id)
-            self.twin.set_pose(object_id, np.asarray(position, float), np.asarray(quat, float))
+            try:  # the caller's Future, not the loop that runs this, hears of a pose no scene holds
+                self.twin.set_pose(object_id, np.asarray(position, float), np.asarray(quat, float))
+            except ValueError as exc:
+                done.set_exception(SceneError(f"{self.scene.name}: cannot move {object_id!r}: {exc}"))
+                return
             try:
                 check_placement(self.scene.name, self.twin.model, set(self._objects), self.twin.data,
                                 added=object_id, moved=True)

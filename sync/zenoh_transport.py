@@ -11,7 +11,9 @@ from __future__ import annotations
 
 import json
 import logging
+import re
 import socket
+from dataclasses import dataclass
 from pathlib import Path
 
 from estimation.errors import TwinError
@@ -39,13 +41,18 @@ def exposed_without_tls(endpoints: list[str]) -> list[str]:
     """The ``endpoints`` another machine could reach in plain text: not loopback, and not ``tls/``/``quic/``.
 
     ``tcp/127.0.0.1:7447``, ``tcp/localhost:7447`` and ``tcp/[::1]:7447`` stay on this machine; ``tcp/0.0.0.0``,
-    ``tcp/[::]`` or an interface's address do not.
+    ``tcp/[::]`` or an interface's address do not. An endpoint :func:`parse_endpoint` refuses, or one of a
+    protocol without a host (a serial line, a vsock), counts as exposed: only a known loopback host is not.
     """
     exposed = []
     for endpoint in endpoints:
-        proto, _, rest = endpoint.partition("/")
-        host = rest.split("#")[0].rsplit(":", 1)[0].strip("[]").lower()
-        if proto in ("tls", "quic") or host == "localhost" or host == "::1" or host.startswith("127."):
+        try:
+            parsed = parse_endpoint(endpoint)
+        except SessionError:
+            exposed.append(endpoint)
+            continue
+        host = (parsed.host or "").lower()
+        if parsed.protocol in ("tls", "quic") or host == "localhost" or host == "::1" or host.startswith("127."):
             continue
         exposed.append(endpoint)
     return exposed
@@ -57,24 +64,95 @@ _HOST_PORT_PROTOCOLS = ("tcp", "udp", "tls", "quic", "ws")
 #: Every link protocol Zenoh builds may carry (the rest have their own address forms).
 _PROTOCOLS = (*_HOST_PORT_PROTOCOLS, "unixsock-stream", "unixpipe", "serial", "vsock")
 
+#: One label of a host name (RFC 1123; underscores too, as resolvers and container networks allow them).
+_LABEL = re.compile(r"[A-Za-z0-9_](?:[A-Za-z0-9_-]{0,61}[A-Za-z0-9_])?")
 
-def check_endpoint(endpoint: str, what: str = "endpoint") -> None:
-    """Refuse an endpoint Zenoh would reject with a Rust error, or a HOST:PORT one without a port.
+#: The longest host name DNS carries, characters.
+_MAX_HOST_NAME = 253
 
-    Form: ``PROTOCOL/ADDRESS[?METADATA][#CONFIG]``, e.g. ``tcp/192.168.1.5:7447`` or ``tls/[::1]:7447``.
+
+@dataclass(frozen=True)
+class Endpoint:
+    """A Zenoh endpoint, ``PROTOCOL/ADDRESS[?METADATA][#CONFIG]``, split.
+
+    Attributes:
+        protocol: e.g. 'tcp'.
+        address: what follows the protocol, without metadata and config.
+        host: for HOST:PORT protocols, the IP address or name, IPv6 without its brackets; else None.
+        port: for HOST:PORT protocols, 0 to 65535 (0: any free port, for listening); else None.
+    """
+
+    protocol: str
+    address: str
+    host: str | None = None
+    port: int | None = None
+
+
+def parse_endpoint(endpoint: str, what: str = "endpoint") -> Endpoint:
+    """Split and check an endpoint: the one place that knows Zenoh's endpoint syntax here.
+
+    Form: ``PROTOCOL/ADDRESS[?METADATA][#CONFIG]``, e.g. ``tcp/192.168.1.5:7447``, ``tls/[::1]:7447`` or
+    ``tcp/router.local:7447``. Zenoh takes a malformed address (``tcp/999.0.0.1:1``) without a word and retries
+    it for as long as a session waits; so it is refused here, at once.
 
     Raises:
-        SessionError: naming ``what`` and the endpoint, and the expected form.
+        SessionError: naming ``what``, the endpoint and what is wrong: no protocol, one Zenoh does not know,
+            no port or one past 65535, an IPv4 address with a bad octet, an IPv6 one without brackets, or a
+            host name with characters no host name has.
     """
     proto, slash, rest = endpoint.partition("/")
     address = rest.split("#")[0].split("?")[0]
     form = "expected PROTOCOL/HOST:PORT, e.g. tcp/127.0.0.1:7447"
-    if not slash or proto not in _PROTOCOLS or not address:
-        raise SessionError(f"{what} {endpoint!r}: not a Zenoh endpoint ({form})")
-    if proto in _HOST_PORT_PROTOCOLS:
-        host, colon, port = address.rpartition(":")
-        if not colon or not host or not port.isdigit() or not 0 <= int(port) <= 65535:
-            raise SessionError(f"{what} {endpoint!r}: no valid port ({form})")
+    said = f"{what} {endpoint!r}"
+    if not slash or not address:
+        raise SessionError(f"{said}: not a Zenoh endpoint ({form})")
+    if proto not in _PROTOCOLS:
+        raise SessionError(f"{said}: unknown protocol {proto!r}, not one of {', '.join(_PROTOCOLS)} ({form})")
+    if proto not in _HOST_PORT_PROTOCOLS:
+        return Endpoint(proto, address)
+    host, colon, port = address.rpartition(":")
+    if not colon or not host or not port.isdigit() or not 0 <= int(port) <= 65535:
+        raise SessionError(f"{said}: no valid port ({form})")
+    problem = _host_problem(host)
+    if problem:
+        raise SessionError(f"{said}: {problem} ({form})")
+    return Endpoint(proto, address, host[1:-1] if host.startswith("[") else host, int(port))
+
+
+def _host_problem(host: str) -> str | None:
+    """What is wrong with the HOST of a HOST:PORT endpoint (brackets still on an IPv6 one), or None."""
+    import ipaddress
+
+    if host.startswith("[") and host.endswith("]"):
+        try:
+            ipaddress.IPv6Address(host[1:-1])
+        except ValueError:
+            return f"{host[1:-1]!r} is not an IPv6 address"
+        return None
+    if ":" in host or "[" in host or "]" in host:
+        return f"{host!r} is not a host; an IPv6 address goes in brackets, e.g. tcp/[::1]:7447"
+    if all(part.isdigit() for part in host.split(".")):  # only numbers: an IPv4 address, dotted quad
+        try:
+            ipaddress.IPv4Address(host)
+        except ValueError:
+            return f"{host!r} is not an IPv4 address (four numbers 0-255)"
+        return None
+    name = host.removesuffix(".")  # a fully qualified name may end in a dot
+    if len(name) > _MAX_HOST_NAME or not all(_LABEL.fullmatch(label) for label in name.split(".")):
+        return f"{host!r} is not a host name"
+    return None
+
+
+def check_endpoint(endpoint: str, what: str = "endpoint", *, connect: bool = False) -> None:
+    """Refuse an endpoint :func:`parse_endpoint` refuses, and, to ``connect`` to, port 0 (no one listens there).
+
+    Raises:
+        SessionError: naming ``what`` and the endpoint, and the expected form.
+    """
+    parsed = parse_endpoint(endpoint, what)
+    if connect and parsed.port == 0:
+        raise SessionError(f"{what} {endpoint!r}: port 0 means any free port, for listening; connect to the port "
+                           f"a peer listens on")
 
 
 def _zenoh_error(exc: Exception) -> str:
@@ -109,9 +187,9 @@ def make_config(*, listen: list[str] | None = None, connect: list[str] | None = 
         conf.insert_json5("scouting/multicast/enabled", "false")
         conf.insert_json5("scouting/gossip/enabled", "false")
         conf.insert_json5("listen/endpoints", json.dumps([LOOPBACK_ANY_PORT]))
-    for what, endpoints in (("listen endpoint", listen), ("connect endpoint", connect)):
+    for what, endpoints, connecting in (("listen endpoint", listen, False), ("connect endpoint", connect, True)):
         for endpoint in endpoints or ():
-            check_endpoint(endpoint, what)
+            check_endpoint(endpoint, what, connect=connecting)
     try:
         if listen is not None:
             conf.insert_json5("listen/endpoints", json.dumps(listen))

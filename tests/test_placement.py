@@ -204,5 +204,10 @@ def test_a_move_into_another_object_is_refused_and_leaves_both_where_they_were(c
         assert _ticked(session, remote.move("crate", aside, crate[1])).result(timeout=0) == "crate"
         with pytest.raises(SceneError, match=r"cannot move 'mug': no such object"):
             _ticked(session, remote.move("mug", aside, crate[1])).result(timeout=0)
+        # A pose no scene holds is the caller's error, told through the Future; the loop that ran it runs on.
+        with pytest.raises(SceneError, match=r"cannot move 'crate': object 'crate': position must be 3 finite"):
+            _ticked(session, remote.move("crate", np.array([np.nan, 0.0, 0.0]), crate[1])).result(timeout=0)
+        with pytest.raises(SceneError, match=r"cannot move 'crate': .*non-zero quaternion"):
+            _ticked(session, remote.move("crate", aside, np.zeros(4))).result(timeout=0)
         session.run(0.3)
         assert np.linalg.norm(remote.twin.pose("crate")[0][:2] - aside[:2]) < 2e-3

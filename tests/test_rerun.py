@@ -84,6 +84,39 @@ def test_parse_target_accepts_the_three_modes_and_names_what_is_wrong(tmp_path):
         parse_target(["spawn"], 0)
 
 
+@pytest.mark.parametrize(("address", "problem"), [
+    ("notahost", "no valid port"),  # once rerun+http://notahost/proxy: port 80, where no viewer is
+    ("host:99999", "no valid port"), ("host:abc", "no valid port"), ("host:0", "no valid port"),
+    (":9876", "no valid host"), ("a b:9876", "no valid host"), ("[::1:9876", "not a host and port"),
+    ("http://127.0.0.1:9876/proxy", "the scheme must be rerun"),
+    ("rerun+http://127.0.0.1:9876", "the path must be /proxy, got none"),
+    ("rerun+http://127.0.0.1:9876/other", "the path must be /proxy, got '/other'"),
+])
+def test_connect_refuses_what_is_no_viewer_address(address, problem):
+    with pytest.raises(TwinError, match=f"--rerun connect {re.escape(repr(address))}: {re.escape(problem)}"):
+        parse_target(["connect", address])
+
+
+def test_connect_takes_host_port_and_rerun_urls():
+    assert parse_target(["connect", "[::1]:9876"]).address == "rerun+http://[::1]:9876/proxy"
+    for url in ("rerun+https://viewer.example:443/proxy", "rerun://viewer.example/proxy"):
+        assert parse_target(["connect", url]).address == url
+
+
+@pytest.mark.parametrize(("address", "message"), [
+    ("notahost", r"--rerun connect 'notahost': no valid port"),
+    # .invalid never resolves (RFC 2606): no network needed to see the refusal.
+    ("notahost.invalid:9876", r"--rerun connect: host 'notahost\.invalid' does not resolve"),
+])
+def test_a_bad_connect_address_is_one_line_and_exit_2_before_any_work(box_cloud, address, message, capfd):
+    # capfd: the Rust log lines rerun's writer process printed went to the file descriptors, not sys.stderr.
+    t0 = time.perf_counter()
+    assert main(["estimate", str(box_cloud), "--density", "500", "--rerun", "connect", address]) == 2
+    out, err = capfd.readouterr()
+    assert not out and err.count("\n") == 1 and re.search(message, err), err
+    assert time.perf_counter() - t0 < 5  # no estimate, no rerun retrying the address for seconds
+
+
 def test_off_logs_nothing_and_is_never_due():
     assert not OFF.enabled
     assert not any(OFF.due(t) for t in np.arange(0, 1, 0.001))

@@ -386,13 +386,38 @@ def test_a_flood_of_garbage_and_stale_poses_is_counted_and_the_twin_runs_on(tmp_
     (["local", "--listen", "tcp/notanaddress"], r"--listen 'tcp/notanaddress': no valid port"),  # not "exposed"
     (["remote", str(Path(__file__).parent / "data" / "small.toml"), "--listen", "tcp/127.0.0.1:99999"],
      r"--listen 'tcp/127.0.0.1:99999': no valid port"),
+    # Zenoh takes these and retries them: 'twin local' waited 10 s for "no remote scene answered".
+    (["local", "--connect", "tcp/999.0.0.1:1"], r"--connect 'tcp/999\.0\.0\.1:1': '999\.0\.0\.1' is not an IPv4 address"),
+    (["local", "--connect", "tcp/10.0.1:7447"], r"'10\.0\.1' is not an IPv4 address \(four numbers 0-255\)"),
+    (["local", "--connect", "tcp/::1:7447"], r"'::1' is not a host; an IPv6 address goes in brackets"),
+    (["local", "--connect", "tcp/[::g]:7447"], r"'::g' is not an IPv6 address"),
+    (["local", "--connect", "tcp/bad host:7447"], r"'bad host' is not a host name"),
+    (["local", "--connect", "127.0.0.1:7447"], r"--connect '127\.0\.0\.1:7447': not a Zenoh endpoint"),
+    (["local", "--connect", "tpc/127.0.0.1:7447"], r"unknown protocol 'tpc', not one of tcp, udp, tls"),
+    (["local", "--connect", "tcp/127.0.0.1:0"], r"--connect 'tcp/127\.0\.0\.1:0': port 0 means any free port"),
+    (["local", "--listen", "tcp/300.1.1.1:0"], r"--listen 'tcp/300\.1\.1\.1:0': '300\.1\.1\.1' is not an IPv4"),
 ])
 def test_bad_endpoints_are_one_line_errors_naming_them(argv, message, capsys):
     from cli.main import main
 
+    t0 = time.perf_counter()
     assert main(argv) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and re.search(message, err), err
+    assert time.perf_counter() - t0 < 5  # refused at once, no session waiting for a peer
+
+
+@pytest.mark.parametrize(("endpoint", "host", "port"), [
+    ("tcp/127.0.0.1:7447", "127.0.0.1", 7447), ("tcp/localhost:0", "localhost", 0), ("tcp/[::1]:7447", "::1", 7447),
+    ("tls/router-1.example.org.:7447", "router-1.example.org.", 7447), ("udp/[::]:7447?rel=0#iface=lo", "::", 7447),
+    ("unixsock-stream//tmp/zenoh.sock", None, None),
+])
+def test_good_endpoints_parse_into_their_parts(endpoint, host, port):
+    from sync.zenoh_transport import check_endpoint, parse_endpoint
+
+    parsed = parse_endpoint(endpoint)
+    assert (parsed.protocol, parsed.host, parsed.port) == (endpoint.split("/")[0], host, port)
+    check_endpoint(endpoint, "--listen")  # raises nothing
 
 
 def test_a_bad_zenoh_config_is_one_line_with_its_position(tmp_path, capsys):

@@ -400,6 +400,40 @@ def test_cli_estimate_subprocess(tmp_path):
     assert res.returncode == 2 and res.stderr.strip().count("\n") == 0 and "no such file" in res.stderr
 
 
+def test_build_says_each_objects_estimation_warnings(tmp_path, capsys):
+    # A 1 mm disc from 2,000 points: the estimate's volume is several times the disc's, and it says so.
+    scene = tmp_path / "thin.toml"
+    scene.write_text('name = "thin"\n[table]\nsize = [1.0, 0.6, 0.04]\nheight = 0.5\n[[objects]]\nid = "disc"\n'
+                     'primitive = { type = "cylinder", size = [0.05, 0.001] }\ndensity = 700\n'
+                     'position = [0.0, 0.0]\npoints = 2000\n')
+    assert main(["build", str(scene), "--out", str(tmp_path / "out")]) == 0
+    out = capsys.readouterr().err  # warnings go to stderr, the table to stdout
+    saved = json.loads((tmp_path / "out" / "estimates.json").read_text())["objects"][0]["warnings"]
+    assert saved  # the case this is about
+    shown = [line.removeprefix("warning: disc: ") for line in out.splitlines() if line.startswith("warning: ")]
+    assert shown == saved  # each warning whole, one line each, with its object
+    assert main(["build", str(scene), "--out", str(tmp_path / "out"), "--json"]) == 0
+    record = json.loads(capsys.readouterr().out)  # the JSON carries them, and nothing else is on stdout
+    assert record["objects"][0]["warnings"] == saved
+
+
+def test_build_warns_up_front_of_a_slow_coacd_threshold_and_reports_each_object(tmp_path, capsys):
+    from twin.decompose import FAST_THRESHOLD
+
+    # The small scene's box and can are near-convex: no CoACD runs, so a low threshold costs this test nothing.
+    slow = FAST_THRESHOLD / 2
+    assert main(["build", str(SMALL), "--out", str(tmp_path / "slow"), "--threshold", f"{slow:g}"]) == 0
+    err = capsys.readouterr().err.splitlines()
+    assert err[0] == (f"twin build: warning: --threshold {slow:g} is below {FAST_THRESHOLD:g}, where CoACD slows sharply "
+                      f"(a 2,300-face torus: 2 s at 0.02, 60 s at 0.01); each concave object may take minutes")
+    assert err[1] == "building 'small': 2 objects"
+    # A line per object as it is built, whole (not wrapped at 80 columns, as a pipe had it).
+    assert sorted(line.split(":")[0] for line in err[2:4]) == ["[1/2] crate", "[2/2] can"]
+    assert all(re.search(r"hull\(s\) in [\d.]+ s \((near-convex, no CoACD|cached|CoACD)\)$", line) for line in err[2:4])
+    assert main(["build", str(SMALL), "--out", str(tmp_path / "fast"), "--threshold", f"{FAST_THRESHOLD:g}"]) == 0
+    assert "warning" not in capsys.readouterr().err
+
+
 def test_a_live_edit_that_does_not_compile_is_rolled_back_and_the_twin_runs_on(built):
     from dataclasses import replace
 
@@ -458,6 +492,51 @@ def test_a_non_finite_object_is_put_back_and_the_rest_of_the_twin_runs_on(built,
             twin.set_pose("crate", np.zeros(3), np.zeros(4))
         with pytest.raises(ValueError, match="finite"):
             twin.set_end_effector(np.array([0.0, np.inf, 0.0]))
+
+
+def test_setters_and_step_refuse_absurd_values_and_leave_the_state_alone(built):
+    from sync.messages import MAX_ANGULAR_SPEED, MAX_COORDINATE, MAX_SPEED
+
+    with Twin(built.spec.copy(), background=False) as twin:
+        twin.step(10)
+        qpos, qvel, mocap, t = twin.data.qpos.copy(), twin.data.qvel.copy(), twin.data.mocap_pos.copy(), twin.time
+        refused = [
+            (lambda: twin.set_velocity("can", np.array([1e300, 0, 0]), np.zeros(3)),
+             rf"'can': linear velocity must be at most {MAX_SPEED:g} m/s in magnitude"),
+            (lambda: twin.set_velocity("can", np.zeros(3), np.array([0, 0, 2 * MAX_ANGULAR_SPEED])),
+             rf"'can': angular velocity must be at most {MAX_ANGULAR_SPEED:g} rad/s"),
+            (lambda: twin.set_velocity("can", np.array([0, np.nan, 0]), np.zeros(3)), "3 finite numbers"),
+            (lambda: twin.set_velocity("can", np.zeros(2), np.zeros(3)), "linear velocity must be 3 finite numbers"),
+            (lambda: twin.set_pose("can", np.array([2 * MAX_COORDINATE, 0, 0]), np.array([1.0, 0, 0, 0])),
+             rf"'can': position must be at most {MAX_COORDINATE:g} m in each axis"),
+            (lambda: twin.set_pose("can", np.zeros(3), np.array([np.inf, 0, 0, 0])), "non-zero quaternion"),
+            (lambda: twin.set_pose("can", np.zeros(3), np.array([1.0, 0, 0])), "non-zero quaternion"),
+            (lambda: twin.set_end_effector(np.array([0.0, 0.0, 1e300])), "end-effector target must be at most"),
+            (lambda: twin.step(-1), r"n must be a whole number >= 0, got -1"),
+            (lambda: twin.step(2.5), r"n must be a whole number >= 0, got 2\.5"),
+            (lambda: twin.step(True), r"n must be a whole number >= 0, got True"),
+        ]
+        for call, message in refused:
+            with pytest.raises(ValueError, match=message):
+                call()
+        for setter, args in ((twin.set_velocity, (np.zeros(3), np.zeros(3))), (twin.set_pose, (np.zeros(3), np.ones(4)))):
+            with pytest.raises(KeyError, match="no object 'mug'"):
+                setter("mug", *args)
+        assert twin.time == t and twin.recovered == 0  # nothing was written, nothing stepped
+        assert np.array_equal(twin.data.qpos, qpos) and np.array_equal(twin.data.qvel, qvel)
+        assert np.array_equal(twin.data.mocap_pos, mocap)
+        # What stays allowed: up to the limits, a quaternion of any finite scale (normalised), no steps at all.
+        twin.set_velocity("can", np.array([0.0, MAX_SPEED, 0.0]), np.array([MAX_ANGULAR_SPEED, 0.0, 0.0]))
+        twin.set_velocity("can", np.zeros(3), np.zeros(3))
+        position = twin.pose("can")[0]
+        for scale in (1e-200, 2.0, 1e300):  # their norms underflow and overflow unless scaled first
+            twin.set_pose("can", position, scale * np.array([1.0, 0, 0, 1.0]))
+            assert np.allclose(twin.pose("can")[1], [0.5**0.5, 0, 0, 0.5**0.5])
+        twin.set_pose("can", position, np.array([1.0, 0, 0, 0]))
+        assert np.allclose(twin.pose("can")[0], position)
+        twin.step(0)
+        twin.step(np.int64(2))
+        assert twin.time == pytest.approx(t + 2 * twin.model.opt.timestep)
 
 
 def test_the_twin_estimates_a_cloud_with_the_normals_that_came_with_it(tmp_path):

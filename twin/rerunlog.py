@@ -111,7 +111,8 @@ def parse_target(words: list[str], rate_hz: float = DEFAULT_RATE_HZ) -> RerunTar
     """``['spawn']``, ``['save', 'FILE.rrd']`` or ``['connect']`` / ``['connect', 'HOST:PORT' or URL]``.
 
     Raises:
-        TwinError: anything else, a save path that is not a writable .rrd, or a non-positive rate.
+        TwinError: anything else, a save path that is not a writable .rrd, a connect address
+            :func:`connect_url` refuses, or a non-positive rate.
     """
     if not rate_hz > 0:
         raise TwinError(f"--rerun-rate must be > 0 Hz, got {rate_hz}")
@@ -128,11 +129,63 @@ def parse_target(words: list[str], rate_hz: float = DEFAULT_RATE_HZ) -> RerunTar
             raise TwinError(f"--rerun save: {path} exists and is not a rerun recording; refusing to replace it")
         return RerunTarget("save", str(path), rate_hz)
     if mode == "connect" and len(rest) <= 1:
-        address = rest[0] if rest else DEFAULT_CONNECT
-        if "://" not in address:  # HOST:PORT shorthand
-            address = f"rerun+http://{address}/proxy"
-        return RerunTarget("connect", address, rate_hz)
+        return RerunTarget("connect", connect_url(rest[0]) if rest else DEFAULT_CONNECT, rate_hz)
     raise TwinError(f"--rerun expects 'spawn', 'save FILE.rrd' or 'connect [HOST:PORT]', got {' '.join(words)!r}")
+
+
+#: The URL schemes rerun's gRPC client takes (``rerun://`` is ``rerun+https://``), and the one path a viewer's
+#: proxy has. rerun itself refuses anything else, but in the writer process, where the refusal was a warning
+#: at the end of a run that had exited 0.
+CONNECT_SCHEMES, CONNECT_PATH = ("rerun+http", "rerun+https", "rerun"), "/proxy"
+
+
+def connect_url(address: str) -> str:
+    """The viewer URL for ``--rerun connect ADDRESS``: ``HOST:PORT`` (``[::1]:PORT`` for IPv6) becomes
+    ``rerun+http://HOST:PORT/proxy``; a URL must be ``SCHEME://HOST[:PORT]/proxy``. Only the form is checked
+    here; :meth:`RerunLog.open` checks that the host resolves.
+
+    Raises:
+        TwinError: naming the address and what is wrong with it.
+    """
+    from urllib.parse import urlsplit
+
+    said = f"--rerun connect {address!r}"
+    form = f"expected HOST:PORT such as 127.0.0.1:9876, or a URL such as {DEFAULT_CONNECT}"
+    url = address if "://" in address else f"rerun+http://{address}{CONNECT_PATH}"
+    try:
+        parts = urlsplit(url)
+    except ValueError:  # an unclosed IPv6 bracket
+        raise TwinError(f"{said}: not a host and port ({form})") from None
+    try:
+        port = parts.port  # urllib reads the port only when asked for it
+    except ValueError:  # not a number, or past 65535
+        port = -1
+    schemes = [f"{s}://" for s in CONNECT_SCHEMES]
+    if parts.scheme not in CONNECT_SCHEMES:
+        raise TwinError(f"{said}: the scheme must be {', '.join(schemes[:-1])} or {schemes[-1]} ({form})")
+    if not parts.hostname or any(c.isspace() for c in parts.netloc):
+        raise TwinError(f"{said}: no valid host ({form})")
+    if port == -1 or port == 0 or ("://" not in address and port is None):  # else rerun tries port 80
+        raise TwinError(f"{said}: no valid port, 1 to 65535 ({form})")
+    if parts.path != CONNECT_PATH:
+        got = repr(parts.path) if parts.path else "none"
+        raise TwinError(f"{said}: the path must be {CONNECT_PATH}, got {got} ({form})")
+    return url
+
+
+def _check_resolves(url: str) -> None:
+    """Refuse a viewer URL whose host does not resolve: rerun would retry it in the writer process for the whole
+    run, log Rust errors, and the command still exit 0. A host that resolves but where no viewer listens stays
+    a warning at the end (the viewer may start later)."""
+    import socket
+    from urllib.parse import urlsplit
+
+    host = urlsplit(url).hostname or ""
+    try:
+        socket.getaddrinfo(host, None, type=socket.SOCK_STREAM)
+    except (OSError, UnicodeError) as exc:  # socket.gaierror; an IDNA-invalid name raises UnicodeError
+        reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
+        raise TwinError(f"--rerun connect: host {host!r} does not resolve ({reason})") from None
 
 
 #: The layout each command asks for: which panels it fills. A panel nothing is logged to is left out.
@@ -209,10 +262,13 @@ class RerunLog:
         """A log to ``target`` (None: off), shown in the viewer with the default ``layout`` (see :data:`LAYOUTS`).
 
         Raises:
-            TwinError: ``spawn`` without a display, or an unknown layout.
+            TwinError: ``spawn`` without a display, ``connect`` to a host that does not resolve, or an unknown
+                layout.
         """
         if target is not None and target.mode == "spawn":
             _check_display()
+        if target is not None and target.mode == "connect" and target.address is not None:
+            _check_resolves(target.address)
         return cls(target, layout=layout, recording_id=recording_id)
 
     @property

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import logging
+import math
+import numbers
 from collections import deque
 from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor
@@ -10,6 +12,7 @@ from concurrent.futures import Future, ThreadPoolExecutor
 import numpy as np
 
 from sync.clock import REAL_CLOCK, Clock
+from sync.messages import MAX_ANGULAR_SPEED, MAX_COORDINATE, MAX_SPEED
 from twin.debuglog import OFF, DebugLog
 from twin.loop import LoopStats, run_loop
 from twin.model import EE_BODY, EE_TARGET, add_object, free_joint, remove_object
@@ -76,9 +79,15 @@ class Twin:
         MuJoCo's own answer to a non-finite state is to reset the whole model (its auto-reset, which the
         twin's models disable): every object would jump to its start. Here only the objects with bad
         values return to their last good pose, at rest, and are counted in :attr:`recovered` and logged.
+
+        Raises:
+            ValueError: ``n`` is not a whole number >= 0 (0 steps nothing).
         """
         import mujoco
 
+        # bool is an int to Python, and mj_step takes -1 or 2.5 without a word and steps nothing.
+        if not isinstance(n, numbers.Integral) or isinstance(n, bool) or n < 0:
+            raise ValueError(f"step count n must be a whole number >= 0, got {n!r}")
         d = self.data
         if not self._finite():  # a bad write since the last step: catch it before the solver spreads it
             self._recover()
@@ -125,14 +134,12 @@ class Twin:
         """Move the operator's mocap target (world frame, metres).
 
         Raises:
-            LookupError: the scene has no end effector. ValueError: a non-finite position.
+            LookupError: the scene has no end effector. ValueError: not 3 finite numbers within
+                :data:`sync.messages.MAX_COORDINATE` of the origin.
         """
         if self._mocap is None:
             raise LookupError("this scene has no end effector")
-        position = np.asarray(position, dtype=np.float64)
-        if position.shape != (3,) or not np.isfinite(position).all():
-            raise ValueError(f"end-effector target must be 3 finite numbers, got {position!r}")
-        self.data.mocap_pos[self._mocap] = position
+        self.data.mocap_pos[self._mocap] = _vector(position, 3, MAX_COORDINATE, "end-effector target", "m")
 
     def end_effector_force(self) -> np.ndarray:
         """Net contact force the scene exerts on the end effector, world axes, newtons, (3,).
@@ -304,10 +311,19 @@ class Twin:
         return self.data.qvel[adr:adr + 3].copy(), xmat @ self.data.qvel[adr + 3:adr + 6]
 
     def set_velocity(self, object_id: str, linear: np.ndarray, angular: np.ndarray) -> None:
-        """Set an object's free-joint velocity (linear m/s and angular rad/s, both in world axes)."""
+        """Set an object's free-joint velocity (linear m/s and angular rad/s, both in world axes).
+
+        Raises:
+            KeyError: no such object. ValueError: ``linear`` or ``angular`` not 3 finite numbers, or faster
+                than :data:`sync.messages.MAX_SPEED` m/s or :data:`~sync.messages.MAX_ANGULAR_SPEED` rad/s
+                (what the wire takes: 1e300 m/s went into MuJoCo's state and blew the step up).
+        """
         adr, xmat = self._dof(object_id)
+        what = f"object {object_id!r}: "
+        linear = _vector(linear, 3, MAX_SPEED, what + "linear velocity", "m/s", norm=True)
+        angular = _vector(angular, 3, MAX_ANGULAR_SPEED, what + "angular velocity", "rad/s", norm=True)
         self.data.qvel[adr:adr + 3] = linear
-        self.data.qvel[adr + 3:adr + 6] = xmat.T @ np.asarray(angular)  # MuJoCo keeps it in body axes
+        self.data.qvel[adr + 3:adr + 6] = xmat.T @ angular  # MuJoCo keeps it in body axes
 
     def _dof(self, object_id: str) -> tuple[int, np.ndarray]:
         body, _, dof = self.joint(object_id)
@@ -321,17 +337,29 @@ class Twin:
         return True
 
     def set_pose(self, object_id: str, position: np.ndarray, quat: np.ndarray, *, forward: bool = True) -> None:
-        """Teleport an object's free joint (world frame; quaternion w x y z).
+        """Teleport an object's free joint (world frame, metres; quaternion w x y z, normalised here).
 
         ``forward=False`` skips recomputing positions (the next step does it): for several poses at once.
+
+        Raises:
+            KeyError: no such object. ValueError: ``position`` not 3 finite numbers within
+                :data:`sync.messages.MAX_COORDINATE` of the origin, or ``quat`` not 4 finite numbers with a
+                non-zero norm.
         """
         import mujoco
 
         _, adr, _ = self.joint(object_id)
-        if not (np.isfinite(position).all() and np.isfinite(quat).all() and np.linalg.norm(quat) > 0):
-            raise ValueError(f"object {object_id!r}: pose must be finite with a non-zero quaternion")
+        position = _vector(position, 3, MAX_COORDINATE, f"object {object_id!r}: position", "m")
+        quat = np.asarray(quat, dtype=np.float64)
+        biggest = float(np.abs(quat).max()) if quat.shape == (4,) else math.nan
+        if not 0 < biggest < math.inf:  # NaN fails too
+            raise ValueError(f"object {object_id!r}: pose must be finite with a non-zero quaternion, "
+                             f"got {_short(quat)}")
+        # Scaled first: the norm of 1e300s overflows to inf and that of 1e-200s underflows to 0, and MuJoCo's
+        # own normalisation then made a zero (NaN) or identity rotation of a quaternion that has a direction.
+        quat = quat / biggest
         self.data.qpos[adr:adr + 3] = position
-        self.data.qpos[adr + 3:adr + 7] = quat
+        self.data.qpos[adr + 3:adr + 7] = quat / np.linalg.norm(quat)
         if forward:
             mujoco.mj_forward(self.model, self.data)
 
@@ -340,6 +368,34 @@ class Twin:
 
         bid = mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_BODY, EE_TARGET)
         return None if bid < 0 else int(self.model.body_mocapid[bid])
+
+
+def _vector(value: object, size: int, limit: float, what: str, unit: str, *, norm: bool = False) -> np.ndarray:
+    """``value`` as a (size,) float64 array of finite numbers, each (or, with ``norm``, their length) at most
+    ``limit`` ``unit``.
+
+    Raises:
+        ValueError: naming ``what``, the bound and the value.
+    """
+    try:
+        v = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ValueError(f"{what} must be {size} finite numbers, got {_short(value)}") from None
+    if v.shape != (size,) or not np.isfinite(v).all():
+        raise ValueError(f"{what} must be {size} finite numbers, got {_short(v)}")
+    biggest = float(np.abs(v).max())
+    # The length only under the limit: it is at least the largest component, and 1e300s overflow it.
+    if not (biggest <= limit and (not norm or float(np.linalg.norm(v)) <= limit)):
+        bound = f"at most {limit:g} {unit}" + (" in magnitude" if norm else " in each axis")
+        raise ValueError(f"{what} must be {bound}, got {_short(v)}")
+    return v
+
+
+def _short(value: object) -> str:
+    """``value`` for an error message: an array's first numbers, not a megabyte of them."""
+    if isinstance(value, np.ndarray):
+        return np.array2string(value.ravel()[:8], precision=4, threshold=8) + (" ..." if value.size > 8 else "")
+    return repr(value)[:200]
 
 
 def _copy_free_bodies(m_old, d_old, m_new, d_new) -> None:  # type: ignore[no-untyped-def]
