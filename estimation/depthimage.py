@@ -22,10 +22,11 @@ from pathlib import Path
 import numpy as np
 
 from estimation import tolerances as tol
-from estimation.cloudfile import REAL_KINDS, check_input_file, npy_header
+from estimation.cloudfile import check_input_file
 from estimation.contracts import unit_quaternion
 from estimation.errors import CloudError, CloudFileError, refused_number
 from estimation.fusion import Intrinsics, depth_to_points
+from estimation.numpycloud import REAL_KINDS, npy_header
 
 log = logging.getLogger(__name__)
 
