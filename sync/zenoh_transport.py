@@ -3,8 +3,10 @@ and :class:`ZenohTransport`, the :class:`sync.transport.Transport` over one sess
 
 Defaults: peer mode, multicast and gossip scouting off, and listening on 127.0.0.1 only (Zenoh's own
 default listens on every interface), so nothing is reachable from another machine unless an endpoint
-says so. A config file (Zenoh's JSON5) is taken as it is, then ``listen``/``connect`` given here override
-its endpoints: that is where TLS, access control and routers are set (see docs/sync.md, "Beyond one machine").
+says so. A config file (Zenoh's JSON5) is where TLS, access control and routers are set (see docs/sync.md,
+"Beyond one machine"); what it leaves out of those defaults gets them too, and ``listen``/``connect`` given
+here override its endpoints. :func:`make_config` is the one place that knows this policy: the effective
+listen endpoints and scouting, file or not, must stay on this machine or be TLS unless ``insecure``.
 """
 
 from __future__ import annotations
@@ -169,10 +171,39 @@ def _zenoh_error(exc: Exception) -> str:
 
 
 def make_config(*, listen: list[str] | None = None, connect: list[str] | None = None,
-                config_file: str | Path | None = None, mode: str = "peer"):  # type: ignore[no-untyped-def]
-    """A ``zenoh.Config``: the file's settings (if any), then mode, scouting off, and the endpoints."""
+                config_file: str | Path | None = None, mode: str = "peer", insecure: bool = False,
+                listen_default: str = LOOPBACK_ANY_PORT,
+                connect_default: str | None = None):  # type: ignore[no-untyped-def]
+    """A ``zenoh.Config``: the file's settings (if any), the safe defaults for what it leaves out, then the
+    endpoints given here; refused if it would expose the session in plain text, unless ``insecure``.
+
+    Without a file: ``mode``, multicast and gossip scouting off, listening on ``listen_default``. With one,
+    the file's mode is kept, and a file that sets no ``listen/endpoints`` (or sets Zenoh's own defaults,
+    which listen on every interface) listens on ``listen_default``; one that sets no
+    ``scouting/multicast/enabled`` or ``scouting/gossip/enabled`` has them off. ``connect_default`` is
+    connected to when neither ``connect`` nor the file names an endpoint to connect to.
+
+    Args:
+        listen: endpoints to listen on, replacing the file's.
+        connect: endpoints to connect to, replacing the file's.
+        config_file: a Zenoh JSON5 config.
+        mode: the mode without a file ('peer', 'client' or 'router').
+        insecure: allow exposure (below), with a warning (the CLI's ``--insecure``).
+        listen_default: where to listen when neither ``listen`` nor the file says.
+        connect_default: where to connect when neither ``connect`` nor the file says, or None.
+
+    Raises:
+        SessionError: the file is missing or Zenoh refuses it; an endpoint, given here or in the file,
+            that :func:`check_endpoint` refuses; or, unless ``insecure``, exposure: an effective listen
+            endpoint :func:`exposed_without_tls` names, or multicast scouting the file turns on (it
+            announces the session to the whole network and joins whoever answers).
+    """
     import zenoh
 
+    for what, endpoints, connecting in (("listen endpoint", listen, False), ("connect endpoint", connect, True)):
+        for endpoint in endpoints or ():
+            check_endpoint(endpoint, what, connect=connecting)
+    source = "" if config_file is None else f"zenoh config {config_file}: "
     if config_file is not None:
         path = Path(config_file)
         if not path.is_file():
@@ -184,20 +215,55 @@ def make_config(*, listen: list[str] | None = None, connect: list[str] | None = 
     else:
         conf = zenoh.Config()
         conf.insert_json5("mode", json.dumps(mode))
-        conf.insert_json5("scouting/multicast/enabled", "false")
-        conf.insert_json5("scouting/gossip/enabled", "false")
-        conf.insert_json5("listen/endpoints", json.dumps([LOOPBACK_ANY_PORT]))
-    for what, endpoints, connecting in (("listen endpoint", listen, False), ("connect endpoint", connect, True)):
+    file_mode = json.loads(conf.get_json("mode")) or "peer"  # Zenoh's default mode is peer
+    file_listen = _mode_endpoints(conf, "listen/endpoints", file_mode)
+    # A file without listen endpoints reads back as Zenoh's defaults (every interface, one list per mode).
+    if json.loads(conf.get_json("listen/endpoints")) == json.loads(zenoh.Config().get_json("listen/endpoints")):
+        file_listen = None
+    file_connect = _mode_endpoints(conf, "connect/endpoints", file_mode) or None
+    for what, endpoints, connecting in (("listen endpoint", file_listen, False),
+                                        ("connect endpoint", file_connect, True)):
         for endpoint in endpoints or ():
-            check_endpoint(endpoint, what, connect=connecting)
+            check_endpoint(endpoint, f"{source}{what}", connect=connecting)
+    multicast = json.loads(conf.get_json("scouting/multicast/enabled"))
+    for key in ("scouting/multicast/enabled", "scouting/gossip/enabled"):
+        if json.loads(conf.get_json(key)) is None:  # not in the file: off, as without one
+            conf.insert_json5(key, "false")
+
+    effective_listen = listen if listen is not None else file_listen if file_listen is not None else [listen_default]
+    effective_connect = connect if connect is not None else file_connect or ([connect_default] if connect_default
+                                                                             else None)
+    exposed = exposed_without_tls(effective_listen)
+    if not insecure:
+        if exposed:
+            said = source if listen is None and file_listen is not None else ""
+            raise SessionError(f"{said}listen endpoint {exposed[0]!r} is reachable from other machines in plain "
+                               f"text; listen on a tls/ endpoint (certificates in a zenoh config) or pass --insecure")
+        if multicast:
+            raise SessionError(f"{source}scouting/multicast/enabled is true: it announces this session to every "
+                               f"machine on the network in plain text; remove it or pass --insecure")
+    if exposed:
+        log.warning("listening on %s without TLS: anyone on that network can read and drive this scene",
+                    ", ".join(exposed))
+    if multicast:
+        log.warning("multicast scouting on (zenoh config %s): any machine on the network can find this session "
+                    "and join it", config_file)
     try:
-        if listen is not None:
-            conf.insert_json5("listen/endpoints", json.dumps(listen))
-        if connect is not None:
-            conf.insert_json5("connect/endpoints", json.dumps(connect))
+        conf.insert_json5("listen/endpoints", json.dumps(effective_listen))
+        if effective_connect is not None:
+            conf.insert_json5("connect/endpoints", json.dumps(effective_connect))
     except Exception as exc:  # zenoh's ZError: an endpoint it still refuses
-        raise SessionError(f"Zenoh endpoints {listen or []} {connect or []}: {_zenoh_error(exc)}") from exc
+        raise SessionError(f"Zenoh endpoints {effective_listen} {effective_connect or []}: "
+                           f"{_zenoh_error(exc)}") from exc
     return conf
+
+
+def _mode_endpoints(conf, key: str, mode: str) -> list[str] | None:  # type: ignore[no-untyped-def]
+    """The endpoints at ``key`` (a list, or one per mode) for ``mode``; None if there are none for it."""
+    value = json.loads(conf.get_json(key))
+    if isinstance(value, dict):
+        value = value.get(mode)
+    return None if value is None else [str(endpoint) for endpoint in value]
 
 
 def open_session(conf):  # type: ignore[no-untyped-def]

@@ -430,6 +430,149 @@ def test_a_bad_zenoh_config_is_one_line_with_its_position(tmp_path, capsys):
     assert err.count("\n") == 1 and "at line 1, column 2" in err and ".rs:" not in err, err
 
 
+# -- what a zenoh config leaves open ------------------------------------------------------------------
+
+SMALL_SCENE = str(Path(__file__).parent / "data" / "small.toml")
+
+
+def _own_sockets() -> list[tuple[str, str]]:
+    """This process's listening TCP and bound UDP sockets, as (table, hex local address) from /proc/net."""
+    import os
+
+    inodes = set()
+    for fd in os.listdir("/proc/self/fd"):
+        try:
+            target = os.readlink(f"/proc/self/fd/{fd}")
+        except OSError:  # closed since listed
+            continue
+        if target.startswith("socket:["):
+            inodes.add(target[len("socket:["):-1])
+    found = []
+    for table in ("tcp", "tcp6", "udp", "udp6"):
+        for line in Path(f"/proc/net/{table}").read_text().splitlines()[1:]:
+            fields = line.split()
+            if fields[9] in inodes and (table.startswith("udp") or fields[3] == "0A"):  # 0A: LISTEN
+                found.append((table, fields[1]))
+    return found
+
+
+def _stop_before_opening(monkeypatch) -> list:  # type: ignore[no-untyped-def]
+    """Make the CLI stop where it would open its session (exit 2): the configs it got that far with."""
+    import sync.zenoh_transport as zt
+
+    reached = []
+
+    def stop(conf):  # type: ignore[no-untyped-def]
+        reached.append(conf)
+        raise zt.SessionError("stopped before opening (test)")
+
+    monkeypatch.setattr(zt, "open_session", stop)
+    return reached
+
+
+def _effective(conf) -> tuple:  # type: ignore[no-untyped-def]
+    return tuple(json.loads(conf.get_json(key)) for key in ("listen/endpoints", "connect/endpoints",
+                                                            "scouting/multicast/enabled", "scouting/gossip/enabled"))
+
+
+@pytest.mark.parametrize("text", [
+    "{}",
+    '{ mode: "router" }',  # Zenoh's router default is tcp/[::]:7447
+    '{ listen: { endpoints: { router: ["tcp/[::]:7447"], peer: ["tcp/[::]:0"] } } }',  # Zenoh's defaults, written out
+    # docs/sync.md's TLS example for the twin: no listen key
+    '{ mode: "peer", transport: { link: { tls: { root_ca_certificate: "ca.pem" } } } }',
+])
+def test_a_zenoh_config_that_does_not_say_listens_on_loopback_only_with_scouting_off(text, tmp_path):
+    """Zenoh's own defaults listen on every interface and join multicast scouting (224.0.0.224:7446)."""
+    file = tmp_path / "said-nothing.json5"
+    file.write_text(text)
+    conf = make_config(config_file=file)
+    # Checked before the session opens, so that even failing this test never listens beyond loopback.
+    assert _effective(conf) == (["tcp/127.0.0.1:0"], [], False, False)
+    assert _effective(make_config(config_file=file, listen_default="tcp/127.0.0.1:7447",
+                                  connect_default="tcp/127.0.0.1:7448")) == (
+        ["tcp/127.0.0.1:7447"], ["tcp/127.0.0.1:7448"], False, False)  # the CLI's defaults, as without a file
+    if "tls" in text:
+        return  # its certificate file does not exist
+    before = set(_own_sockets())
+    session = open_session(conf)
+    try:
+        opened = set(_own_sockets()) - before
+        assert opened == {(table, address) for table, address in opened if address.startswith("0100007F:")}, opened
+        assert len(opened) == 1 and next(iter(opened))[0] == "tcp"  # one TCP listener on 127.0.0.1, no UDP
+    finally:
+        session.close()
+
+
+def test_the_cli_with_a_zenoh_config_that_does_not_say_keeps_its_loopback_defaults(tmp_path, monkeypatch, capsys):
+    empty = tmp_path / "empty.json5"
+    empty.write_text("{}\n")
+    reached = _stop_before_opening(monkeypatch)
+    from cli.main import main
+
+    assert main(["remote", SMALL_SCENE, "--zenoh-config", str(empty)]) == 2
+    assert main(["local", "--zenoh-config", str(empty)]) == 2
+    assert capsys.readouterr().err.count("stopped before opening (test)") == 2
+    assert [_effective(conf) for conf in reached] == [(["tcp/127.0.0.1:7447"], [], False, False),
+                                                      (["tcp/127.0.0.1:0"], ["tcp/127.0.0.1:7447"], False, False)]
+
+
+@pytest.mark.parametrize(("text", "message", "warning"), [
+    ('{ listen: { endpoints: ["tcp/0.0.0.0:7447"] } }',
+     r"zenoh config \S+: listen endpoint 'tcp/0\.0\.0\.0:7447' is reachable from other machines in plain text; "
+     r"listen on a tls/ endpoint \(certificates in a zenoh config\) or pass --insecure",
+     "listening on tcp/0.0.0.0:7447 without TLS"),
+    ('{ mode: "peer", listen: { endpoints: { peer: ["tls/[::1]:7447", "udp/[::]:7447"] } } }',
+     r"zenoh config \S+: listen endpoint 'udp/\[::\]:7447' is reachable", "listening on udp/[::]:7447 without TLS"),
+    ('{ scouting: { multicast: { enabled: true } } }',
+     r"zenoh config \S+: scouting/multicast/enabled is true: it announces this session to every machine on the "
+     r"network in plain text; remove it or pass --insecure", "multicast scouting on"),
+])
+def test_a_zenoh_config_exposing_the_session_needs_insecure(text, message, warning, tmp_path, monkeypatch, capsys,
+                                                            caplog):
+    file = tmp_path / "exposed.json5"
+    file.write_text(text)
+    reached = _stop_before_opening(monkeypatch)  # and so no test here listens beyond loopback, even failing
+    from cli.main import main
+
+    t0 = time.perf_counter()
+    assert main(["local", "--zenoh-config", str(file)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and re.search(message, err), err
+    assert reached == [] and time.perf_counter() - t0 < 5  # refused before any session
+    assert not any(warning in r.getMessage() for r in caplog.records)
+
+    assert main(["local", "--zenoh-config", str(file), "--insecure"]) == 2  # let through to the stop, warned
+    assert "stopped before opening (test)" in capsys.readouterr().err and len(reached) == 1
+    assert any(r.levelname == "WARNING" and warning in r.getMessage() for r in caplog.records)
+    if "listen" in text:  # --listen replaces the file's endpoints: nothing exposed then
+        assert main(["local", "--zenoh-config", str(file), "--listen", "tcp/127.0.0.1:0"]) == 2
+        assert "stopped before opening (test)" in capsys.readouterr().err and len(reached) == 2
+        assert _effective(reached[1])[0] == ["tcp/127.0.0.1:0"]
+
+
+@pytest.mark.parametrize(("text", "message"), [
+    ('{ listen: { endpoints: ["tcp/999.0.0.1:1"] } }',
+     r"zenoh config \S+: listen endpoint 'tcp/999\.0\.0\.1:1': '999\.0\.0\.1' is not an IPv4 address"),
+    ('{ listen: { endpoints: ["tcp/::1:7447"] } }',  # not "exposed": malformed
+     r"listen endpoint 'tcp/::1:7447': '::1' is not a host; an IPv6 address goes in brackets"),
+    ('{ connect: { endpoints: ["tcp/127.0.0.1:0"] } }',
+     r"zenoh config \S+: connect endpoint 'tcp/127\.0\.0\.1:0': port 0 means any free port"),
+    ('{ connect: { endpoints: { peer: ["tcp/bad host:7447"] } } }', r"connect endpoint .*'bad host' is not a host name"),
+])
+def test_bad_endpoints_in_a_zenoh_config_are_one_line_errors_naming_them(text, message, tmp_path, monkeypatch,
+                                                                         capsys):
+    file = tmp_path / "bad-endpoint.json5"
+    file.write_text(text)
+    reached = _stop_before_opening(monkeypatch)
+    from cli.main import main
+
+    assert main(["local", "--zenoh-config", str(file), "--insecure"]) == 2  # malformed, whatever --insecure says
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and re.search(message, err) and str(file) in err, err
+    assert reached == []
+
+
 def test_a_peer_asking_for_the_state_in_a_loop_gets_a_burst_then_one_answer_a_second(tmp_path_factory):
     from scenes.remote import STATE_QUERY_BURST, STATE_QUERY_RATE
     from sync.zenoh_transport import ZenohTransport
