@@ -30,6 +30,26 @@ def default_scene() -> Path:
     return scene_data() / "paper_table.toml"
 
 
+def remote_record_path(record: Path) -> Path:
+    """Where the demo's remote process records its side, beside the twin's ``record``: ``x.mcap`` ->
+    ``x.remote.mcap`` (the one place that name is made)."""
+    return Path(record).with_suffix(".remote.mcap")
+
+
+def check_demo_records(record: Path, inputs: tuple[Path | None, ...] = ()) -> None:
+    """Refuse, before anything starts, a ``record`` or its remote sibling (:func:`remote_record_path`) that
+    the recordings must not replace: an input, a folder, a device, a file that is not an MCAP recording.
+
+    Raises:
+        TwinError: naming ``--record``, the file and why.
+    """
+    from cli.outputs import check_record_file
+
+    check_record_file(Path(record), inputs)
+    sibling = remote_record_path(record)
+    check_record_file(sibling, inputs, f"--record {record}: the remote's side goes to")
+
+
 def remote_sensor(name: str, scene):  # type: ignore[no-untyped-def]
     """The remote's sensor for ``--sensor name``: None (the Remote's default, the surface sensor) or the
     scene's default camera rig (:meth:`scenes.sensing.CameraSensor.for_scene`), scanning in the background
@@ -53,11 +73,12 @@ def _remote_main(scene_path: str, endpoint: str, zenoh_config: str | None, ready
 
     die_with_parent()  # a killed demo must not leave its remote listening
     session = open_session(make_config(listen=[endpoint], config_file=zenoh_config))
-    recorder = open_recorder(None if record is None else Path(record), clock=REAL_CLOCK, command="demo",
-                             side="remote", scene_path=Path(scene_path))
+    recorder = None
     started = False
     try:
         try:
+            recorder = open_recorder(None if record is None else Path(record), clock=REAL_CLOCK, command="demo",
+                                     side="remote", scene_path=Path(scene_path))
             scene = load_scene(scene_path)
             remote = Remote(scene, recording_transport(ZenohTransport(session), recorder, "remote"),
                             recorder=recorder, sensor=remote_sensor(sensor, scene))
@@ -68,11 +89,17 @@ def _remote_main(scene_path: str, endpoint: str, zenoh_config: str | None, ready
         ready.set()
         stats = remote.run(24 * 3600.0, stop=stop)
         c = remote.link.counters
-        results.put({"bytes_sent": c.bytes_sent, "messages_sent": c.messages_sent, "pose_updates": remote.pose_updates,
-                     "points": remote.cloud_points(), "step_p99_ms": stats.p99 * 1e3,
-                     "dropped_malformed": c.dropped_malformed,
-                     "true_mass_kg": body_masses(remote.twin.model, remote.twin.object_ids())})
+        said = {"bytes_sent": c.bytes_sent, "messages_sent": c.messages_sent, "pose_updates": remote.pose_updates,
+                "points": remote.cloud_points(), "step_p99_ms": stats.p99 * 1e3,
+                "dropped_malformed": c.dropped_malformed,
+                "true_mass_kg": body_masses(remote.twin.model, remote.twin.object_ids())}
         remote.close()
+        if recorder is not None:
+            try:  # before the results: a recording that could not be put in place is the parent's error
+                recorder.close()
+            except TwinError as exc:
+                said = {"error": str(exc)}
+        results.put(said)
     finally:
         session.close()
         if recorder is not None:
@@ -104,10 +131,12 @@ def run_demo(*, duration: float = 5.0, scene_path: Path | None = None, zenoh_con
 
     console = Console(quiet=not progress, stderr=True)
     scene_path = scene_path or default_scene()
+    if record is not None:  # both files, before the remote starts: a refused one costs nothing
+        check_demo_records(record, (scene_path, Path(zenoh_config) if zenoh_config else None))
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     ctx = mp.get_context("spawn")
     ready, stop, results = ctx.Event(), ctx.Event(), ctx.Queue()
-    remote_record = None if record is None else str(Path(record).with_suffix(".remote.mcap"))
+    remote_record = None if record is None else str(remote_record_path(record))
     remote = ctx.Process(target=_remote_main, args=(str(scene_path), endpoint, zenoh_config, ready, stop, results,
                                                     remote_record, sensor))
     console.print(f"[bold]tactile-twin demo[/bold]: remote scene {scene_path.name} on {endpoint} (peer mode)")
@@ -166,6 +195,10 @@ def run_demo(*, duration: float = 5.0, scene_path: Path | None = None, zenoh_con
     remote.join(timeout=10)
     if remote.is_alive():
         remote.terminate()
+    if "error" in remote_stats:  # the remote ran but could not finish its recording
+        from estimation.errors import TwinError
+
+        raise TwinError(remote_stats["error"])
     raw = sum(remote_stats["points"].values()) * RAW_BYTES_PER_POINT * RAW_STREAM_HZ * session_s
     lat_all = np.asarray(report.pose_latency) * 1e3
     lat = lat_all[pushed_from:] if len(lat_all) > pushed_from else np.zeros(1)

@@ -15,9 +15,6 @@ from pathlib import Path
 
 from estimation.errors import TwinError
 
-#: The first bytes of every MCAP file: an existing file without them is not a recording we may replace.
-MCAP_MAGIC = b"\x89MCAP0\r\n"
-
 
 def same_file(a: Path, b: Path) -> bool:
     """Whether ``a`` and ``b`` name one file (the same inode, or the same resolved path if either is new)."""
@@ -117,17 +114,14 @@ def replace_file(path: Path, write: Callable[[Path], object]) -> None:
     What stood at ``path`` is replaced, not written through: a symbolic link planted in an output folder
     (``summary.json`` -> a user's file elsewhere) had that file overwritten by the next run. A failed
     ``write`` leaves ``path`` as it was and no temporary file behind. The file gets the permissions a plain
-    ``open()`` would have given it, not ``mkstemp``'s 0600.
+    ``open()`` would have given it, not ``mkstemp``'s 0600 (:func:`sync.recording.hidden_sibling`, which
+    recordings use too).
     """
-    import tempfile
+    from sync.recording import hidden_sibling
 
-    fd, name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=path.suffix, dir=path.parent)
+    fd, tmp = hidden_sibling(path, path.suffix)
     os.close(fd)
-    tmp = Path(name)
     try:
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)
         write(tmp)
         os.replace(tmp, path)
     except BaseException:
@@ -136,21 +130,56 @@ def replace_file(path: Path, write: Callable[[Path], object]) -> None:
 
 
 def check_record_file(path: Path, inputs: Iterable[Path | None], flag: str = "--record") -> None:
-    """Refuse a recording path that is an input, or an existing file that is not an MCAP recording (a user's
-    own file, which the recording would replace).
+    """Refuse a recording path that is an input, a folder, a device or pipe, or an existing file that is not
+    an MCAP recording (a user's own file, which the recording would replace); the same check the recorder
+    makes when it opens (:func:`sync.recording.check_record_destination`), here before any work.
 
     Raises:
         TwinError: naming the flag, the file and why.
     """
+    from sync.recording import check_record_destination
+
     check_not_input(path, inputs, flag)
-    if path.is_file():
-        try:
-            with path.open("rb") as f:
-                head = f.read(len(MCAP_MAGIC))
-        except OSError as exc:
-            raise TwinError(f"{flag} {path}: cannot read it ({exc.strerror or exc})") from None
-        if head != MCAP_MAGIC:
-            raise TwinError(f"{flag} {path}: exists and is not an MCAP recording; refusing to replace it")
-    elif path.exists() and not path.is_dir():
-        raise TwinError(f"{flag} {path}: not a regular file")
+    check_record_destination(path, f"{flag} {path}")
+
+
+#: A mesh ``--mesh-out`` writes (trimesh's export of each format) starts so: a binary STL with a zeroed 80-byte
+#: header, a PLY or OBJ with trimesh's comment line. A file without these is not one this command wrote.
+_PLY_MARK, _OBJ_MARK = b"comment https://github.com/mikedh/trimesh\n", b"# https://github.com/mikedh/trimesh\n"
+
+
+def written_mesh(path: Path) -> bool:
+    """Whether ``path`` is empty or a mesh as ``--mesh-out`` writes it: a binary STL with a zeroed header whose
+    triangle count matches its size, a PLY or OBJ carrying trimesh's comment. A user's CAD export (an STL
+    header naming its tool, an ASCII STL) and any other file are not."""
+    try:
+        size = path.stat().st_size
+        with path.open("rb") as f:
+            head = f.read(512)
+    except OSError:
+        return False
+    if size == 0:  # nothing of a user's is lost (as for --rerun save)
+        return True
+    suffix = path.suffix.lower()
+    if suffix == ".stl":
+        return (len(head) >= 84 and head[:80] == bytes(80)
+                and size == 84 + 50 * int.from_bytes(head[80:84], "little"))
+    if suffix == ".ply":
+        return head.startswith(b"ply\n") and _PLY_MARK in head.split(b"end_header", 1)[0]
+    if suffix == ".obj":
+        return head.startswith(_OBJ_MARK)
+    return False
+
+
+def check_mesh_file(path: Path, inputs: Iterable[Path | None], flag: str, *, suffixes: Iterable[str]) -> None:
+    """:func:`check_output_file`, and refuse an existing file that is not a mesh this command wrote
+    (:func:`written_mesh`): the rule ``--record`` and ``--rerun save`` follow, a file of the output's own kind
+    is replaced and any other is the user's.
+
+    Raises:
+        TwinError: naming the flag, the file and why.
+    """
+    check_output_file(path, inputs, flag, suffixes=suffixes)
+    if path.is_file() and not written_mesh(path):
+        raise TwinError(f"{flag} {path}: exists and is not a mesh this command wrote; refusing to replace it")
 

@@ -38,6 +38,7 @@ and what came before it is kept.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import logging
 import math
@@ -106,6 +107,9 @@ MAX_REPLAY_SECONDS = 3600.0
 #: clock starts after the recorder's, and a step or a late final record is far below a second.
 RECORDED_TIME_SLACK_S = 1.0
 
+#: The first bytes of every MCAP file: an existing file without them is not a recording a recorder may replace.
+MCAP_MAGIC = b"\x89MCAP0\r\n"
+
 WIRE_SCHEMA = "tactile_twin.wire"
 TARGET_TOPIC = "/operator/target"
 FORCE_TOPIC = "/operator/force"
@@ -160,7 +164,8 @@ class Recorder:
         truth_rate: ground-truth and force samples per second of the sampled side's time.
 
     Raises:
-        RecordingError: the file cannot be created.
+        RecordingError: ``path`` is a folder, a device or pipe, or an existing file that is not an MCAP
+            recording (:func:`check_record_destination`), or the file cannot be created.
     """
 
     def __init__(self, path: str | Path, *, clock: Clock, metadata: Mapping[str, object] | None = None,
@@ -172,9 +177,9 @@ class Recorder:
         if not (math.isfinite(truth_rate) and truth_rate > 0):
             raise RecordingError(f"truth rate must be a positive number of samples per second, got {truth_rate}")
         self.truth_every = 1.0 / truth_rate
+        check_record_destination(self.path)  # now, not at close(): a folder there cost the whole session
         try:
-            fd, partial = tempfile.mkstemp(dir=self.path.parent, prefix=f".{self.path.name}.", suffix=".partial")
-            self._partial = Path(partial)
+            fd, self._partial = hidden_sibling(self.path, ".partial")
             self._file = os.fdopen(fd, "wb")  # closed by close()
         except OSError as exc:
             raise RecordingError(f"{self.path}: cannot write a recording ({exc.strerror or exc})") from None
@@ -238,15 +243,32 @@ class Recorder:
 
     def close(self, **end: object) -> None:
         """Drain the queue, finish the file and rename it onto ``path`` (idempotent); ``end`` goes into
-        ``tactile_twin.end``."""
+        ``tactile_twin.end``.
+
+        Raises:
+            RecordingError: finishing the file failed (it is removed: not a whole recording), or the rename
+                failed (``path`` became a folder during the session, the file system refused): the whole
+                recording stays in its hidden file, which the error names.
+        """
         if not self._stop():
             return
         duration = 0.0 if self._first_ns is None else (self._last_ns - self._first_ns) * 1e-9
         self._writer.add_metadata("tactile_twin.end", {"messages": str(self.messages), "duration_s": repr(duration),
                                                        **{k: str(v) for k, v in end.items()}})
-        self._writer.finish()
-        self._file.close()
-        os.replace(self._partial, self.path)
+        try:
+            self._writer.finish()
+            self._file.close()
+        except OSError as exc:  # the file is not whole (a full disk): nothing worth keeping
+            with contextlib.suppress(OSError):  # a close that failed to flush may fail again
+                self._file.close()
+            self._partial.unlink(missing_ok=True)
+            raise RecordingError(f"{self.path}: cannot finish the recording ({exc.strerror or exc}); "
+                                 "the session was not recorded") from None
+        try:
+            os.replace(self._partial, self.path)
+        except OSError as exc:  # a whole recording: kept where it is, and said where
+            raise RecordingError(f"{self.path}: cannot put the recording in place ({exc.strerror or exc}); "
+                                 f"it is kept as {self._partial}") from None
 
     def discard(self) -> None:
         """Stop recording and delete what was written; ``path`` is left as it was (idempotent)."""
@@ -520,8 +542,9 @@ def read_recording(path: str | Path) -> Recording:
 
     Raises:
         RecordingError: no such file, not an MCAP file, no ``tactile_twin.session`` metadata before the
-            damage, a schema version this code does not read, a record past :data:`MAX_RECORD_BYTES` or a
-            file past :data:`MAX_RECORDING_BYTES` decompressed, or a bad end record
+            damage, a schema version this code does not read, a record past :data:`MAX_RECORD_BYTES` before
+            the session metadata (after it, such a length is damage: the read ends there), a chunk or a
+            file past :data:`MAX_RECORD_BYTES` / :data:`MAX_RECORDING_BYTES` decompressed, or a bad end record
             (:meth:`Recording.end_time`).
     """
     from mcap.exceptions import McapError, RecordLengthLimitExceeded
@@ -596,7 +619,12 @@ def read_recording(path: str | Path) -> Recording:
         except RecordingError:
             raise
         except RecordLengthLimitExceeded as exc:
-            raise RecordingError(f"{path}: a record is larger than the {MAX_RECORD_BYTES >> 20} MiB limit ({exc})") from None
+            # Past the session metadata, a length past the limit is damaged framing like any other (one byte of
+            # a chunk's length field): what came before it is kept, as for a torn tail.
+            if metadata is None:
+                raise RecordingError(f"{path}: a record is larger than the {MAX_RECORD_BYTES >> 20} MiB limit ({exc})") from None
+            damage = (f"the recording is damaged after {len(held)} messages (a record claims more than the "
+                      f"{MAX_RECORD_BYTES >> 20} MiB limit: {exc}); using those")
         except (McapError, ValueError, struct.error, zlib.error, EOFError, MemoryError, UnicodeDecodeError) as exc:
             # ValueError covers the reader's CRC mismatch; _inflate turns zstd's and lz4's errors into McapError.
             what = type(exc).__name__ + (f": {exc}" if str(exc) else "")
@@ -659,6 +687,58 @@ def check_recording_file(path: Path) -> None:
         raise RecordingError(f"{path}: is a folder, not a recording")
     if not stat.S_ISREG(mode):  # a FIFO would block the read, /dev/zero never end it
         raise RecordingError(f"{path}: is not a regular file (a device, pipe or socket), not a recording")
+
+
+def check_record_destination(path: Path, label: str | None = None) -> None:
+    """Refuse a path a recording must not be renamed onto: a folder, a device, pipe or socket, or an existing
+    file that is not an MCAP recording (a user's own file, which the recording would replace).
+
+    ``label`` starts the error (default: ``path``), e.g. ``"--record x.mcap"``.
+
+    Raises:
+        RecordingError: naming the path and why.
+    """
+    import stat
+
+    label = str(path) if label is None else label
+    try:
+        mode = path.stat().st_mode
+    except FileNotFoundError:
+        return
+    except OSError as exc:  # a loop of links, a name too long, a folder we may not enter
+        raise RecordingError(f"{label}: cannot check it ({exc.strerror or exc})") from None
+    if stat.S_ISDIR(mode):
+        raise RecordingError(f"{label}: is a folder, not a recording file")
+    if not stat.S_ISREG(mode):  # the rename would delete the FIFO or device node
+        raise RecordingError(f"{label}: not a regular file")
+    try:
+        with path.open("rb") as f:
+            head = f.read(len(MCAP_MAGIC))
+    except OSError as exc:
+        raise RecordingError(f"{label}: cannot read it ({exc.strerror or exc})") from None
+    if head != MCAP_MAGIC:
+        raise RecordingError(f"{label}: exists and is not an MCAP recording; refusing to replace it")
+
+
+def hidden_sibling(path: Path, suffix: str) -> tuple[int, Path]:
+    """Create ``.<name>.<random><suffix>`` beside ``path``, to be written and then renamed onto ``path``; return
+    its open descriptor and path. It gets the permissions a plain ``open()`` would give a new file (0666 less
+    the umask), not ``mkstemp``'s 0600: the renamed file would otherwise replace an earlier file's 0644 with
+    0600. The one way the project makes such files (:func:`cli.outputs.replace_file` too).
+
+    Raises:
+        OSError: the file cannot be created.
+    """
+    fd, name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=suffix, dir=path.parent)
+    try:
+        umask = os.umask(0)
+        os.umask(umask)
+        os.fchmod(fd, 0o666 & ~umask)
+    except BaseException:
+        os.close(fd)
+        Path(name).unlink(missing_ok=True)
+        raise
+    return fd, Path(name)
 
 
 def _check_total(path: Path, total: int) -> None:

@@ -348,3 +348,32 @@ def test_output_that_cannot_be_written_is_one_line_and_a_closed_pipe_is_quiet(co
     gone.stdout.close()  # type: ignore[union-attr]  # the reader left before the first line (| head -0)
     assert gone.wait(timeout=60) == 1 and gone.stderr.read() == b""  # type: ignore[union-attr]
     gone.stderr.close()  # type: ignore[union-attr]
+
+
+def test_mesh_out_replaces_only_a_mesh_it_wrote(tmp_path, capsys):
+    """``--mesh-out thesis.stl`` replaced any existing file; ``--record`` and ``--rerun save`` refuse a file that
+    is not of their own kind, and so does --mesh-out now: a mesh it wrote (or an empty file) is replaced."""
+    cloud = tmp_path / "box.npy"
+    np.save(cloud, trimesh.creation.box(extents=[0.1, 0.06, 0.04]).sample(2000, return_index=False))
+    thesis = tmp_path / "thesis.stl"
+    thesis.write_text("chapter 1\n")
+    cad = tmp_path / "part.stl"  # a real binary STL from another tool: its header names the tool
+    cad.write_bytes(b"exported by a CAD tool".ljust(80, b" ") + (0).to_bytes(4, "little"))
+    mine = tmp_path / "mine.ply"
+    save_cloud(make_cloud(np.load(cloud)), mine)  # a PLY, but a cloud the user saved, not our mesh
+    for path in (thesis, cad, mine):
+        before = path.read_bytes()
+        assert main(["estimate", str(cloud), "--method", "hull", "--mesh-out", str(path)]) == 2
+        err = capsys.readouterr().err
+        assert f"--mesh-out {path}: exists and is not a mesh this command wrote; refusing to replace it" in err
+        assert err.count("\n") == 1 and path.read_bytes() == before, err
+    for suffix in (".stl", ".ply", ".obj"):  # written, then replaced by the next run
+        out = tmp_path / f"m{suffix}"
+        for _ in range(2):
+            assert main(["estimate", str(cloud), "--method", "hull", "--mesh-out", str(out)]) == 0, capsys.readouterr()
+            assert len(trimesh.load_mesh(out).faces) > 0
+    empty = tmp_path / "empty.obj"
+    empty.touch()
+    assert main(["estimate", str(cloud), "--method", "hull", "--mesh-out", str(empty)]) == 0
+    assert len(trimesh.load_mesh(empty).faces) > 0
+    assert not [p.name for p in tmp_path.iterdir() if p.name.startswith(".")]

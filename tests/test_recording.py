@@ -531,3 +531,92 @@ def test_a_folder_a_pipe_or_a_device_is_named_not_read(tmp_path, capsys):
         assert main(["replay", str(bad)]) == 2
         err = capsys.readouterr().err
         assert words in err and err.count("\n") == 1, err
+
+
+def test_an_oversized_record_mid_file_is_damage_and_the_intact_part_replays(recorded, cache, tmp_path, capsys):
+    """One byte (the top byte of the middle chunk's length) refused the whole recording with the 128 MiB limit,
+    while truncating the file at that byte kept the first half: it is damage at that point, as truncation is."""
+    path, _, _ = recorded
+    data = bytearray(path.read_bytes())
+    whole = read_recording(path)
+    start, _ = _chunk_offsets(bytes(data))[len(_chunk_offsets(bytes(data))) // 2]
+    data[start + 8] = 0x01  # the length field's top byte: the chunk now claims 2**56 bytes
+    damaged = tmp_path / "onebyte.mcap"
+    damaged.write_bytes(bytes(data))
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(bytes(data[:start]))
+    rec, truncated = read_recording(damaged), read_recording(cut)
+    assert rec.damage is not None and "damaged after" in rec.damage and "128 MiB limit" in rec.damage
+    assert "\n" not in rec.damage and len(rec.records) == len(truncated.records) > 0
+    assert [r.data for r in rec.records] == [r.data for r in whole.records[: len(rec.records)]]
+    assert main(["replay", str(damaged), "--duration", "0.3", "--json", "--cache-dir", str(cache)]) == 0
+    captured = capsys.readouterr()
+    assert captured.err.count("damaged after") == 1 and "warning" in captured.err
+    assert json.loads(captured.out)["damage"] == rec.damage
+    # Nothing intact: the first record (the header) oversized is still the one-line error.
+    first = bytearray(path.read_bytes())
+    first[8 + 8] = 0x01  # past the magic, the header record's length field's top byte
+    damaged.write_bytes(bytes(first))
+    with pytest.raises(RecordingError, match=r"a record is larger than the 128 MiB limit"):
+        read_recording(damaged)
+    assert main(["replay", str(damaged)]) == 2
+    err = capsys.readouterr().err
+    assert "128 MiB limit" in err and err.count("\n") == 1, err
+
+
+def test_a_recorder_refuses_a_folder_or_a_users_file_when_it_opens(tmp_path):
+    """A folder at the path failed only at close(), after the whole session, leaving the hidden .partial."""
+    (tmp_path / "dir.mcap").mkdir()
+    notes = tmp_path / "notes.mcap"
+    notes.write_text("precious\n")
+    for bad, words in [(tmp_path / "dir.mcap", "is a folder, not a recording file"),
+                       (notes, "exists and is not an MCAP recording; refusing to replace it")]:
+        with pytest.raises(RecordingError, match=words):
+            Recorder(bad, clock=SimClock())
+    assert notes.read_text() == "precious\n"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["dir.mcap", "notes.mcap"]  # no .partial
+
+
+def test_a_failed_final_rename_keeps_the_whole_recording_and_names_it_in_one_line(tmp_path):
+    path = tmp_path / "late.mcap"
+    r = Recorder(path, clock=SimClock())
+    r.target(0.0, np.zeros(3))
+    path.mkdir()  # a folder appears there during the session
+    with pytest.raises(RecordingError, match=r"late.mcap: cannot put the recording in place \(Is a directory\); "
+                                             r"it is kept as ") as e:
+        r.close()
+    assert "\n" not in str(e.value)
+    kept = Path(str(e.value).rsplit("it is kept as ", 1)[1])
+    assert path.is_dir() and kept.parent == tmp_path and kept.is_file()
+    whole = read_recording(kept)  # nothing lost: the session is all there
+    assert whole.damage is None and len(whole.topic(TARGET_TOPIC)) == 1
+
+
+def test_a_recording_gets_the_permissions_open_gives_not_0600(tmp_path):
+    """Recordings were mkstemp's 0600, and replaced an earlier recording's 0644 with it."""
+    umask = os.umask(0o022)
+    try:
+        path = tmp_path / "shared.mcap"
+        for _ in range(2):  # created, then replacing the first
+            with Recorder(path, clock=SimClock()) as r:
+                r.target(0.0, np.zeros(3))
+            assert path.stat().st_mode & 0o777 == 0o644
+    finally:
+        os.umask(umask)
+
+
+def test_demo_refuses_a_remote_recording_path_it_must_not_replace_before_starting(tmp_path, capsys):
+    """``--record notes.mcap`` made the remote write ``notes.remote.mcap`` over the user's file, exit 0; a folder
+    there was a traceback in the remote process at the end, the recording lost."""
+    notes = tmp_path / "notes.remote.mcap"
+    notes.write_text("notes\n")
+    (tmp_path / "dd.remote.mcap").mkdir()
+    for record, words in [(tmp_path / "notes.mcap", f"the remote's side goes to {notes}: exists and is not an "
+                                                    "MCAP recording; refusing to replace it"),
+                          (tmp_path / "dd.mcap", "dd.remote.mcap: is a folder, not a recording file")]:
+        assert main(["demo", "--scene", str(SMALL), "--duration", "1", "--record", str(record),
+                     "--rerun", "save", str(tmp_path / "v.rrd")]) == 2  # refused before rerun starts writing
+        err = capsys.readouterr().err
+        assert words in err and f"--record {record}" in err and err.count("\n") == 1, err
+    assert notes.read_text() == "notes\n"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["dd.remote.mcap", "notes.remote.mcap"]
