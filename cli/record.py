@@ -165,7 +165,7 @@ class ReplayResult:
     remote_poses: dict[str, np.ndarray]
 
 
-def replay(path: str | Path, *, script: Path | None = None, scene: Path | None = None,
+def replay(path: str | Path, *, script: Path | None = None, units: str = "m", scene: Path | None = None,
            network: Network | None = None, seed: int | None = None, duration: float | None = None,
            out: Path | None = None, cache_dir: Path | None = None,
            progress: Callable[[str, float, float], None] | None = None) -> ReplayResult:
@@ -174,6 +174,7 @@ def replay(path: str | Path, *, script: Path | None = None, scene: Path | None =
     Args:
         path: the recording.
         script: a trajectory CSV to use instead of the recorded targets.
+        units: the units of the script's positions (m, cm, mm).
         scene: a scene file to use instead of the recorded one.
         network: conditions to use; None: the recording's (headless recordings), else none.
         seed: the network's seed (default: the recording's, else 0).
@@ -188,19 +189,30 @@ def replay(path: str | Path, *, script: Path | None = None, scene: Path | None =
 
     Raises:
         RecordingError: a missing, corrupt or unknown-version recording, or one without a scene.
-        TwinError: a bad script, scene or network conditions.
+        TwinError: a bad script, scene or network conditions; a script or recorded target outside the operator's
+            reach of the scene's table (:func:`twin.trajectory.check_reach`).
     """
     from dataclasses import replace
 
     from scenes.headless import Headless
     from scenes.scenefile import load_scene
-    from twin.trajectory import load_trajectory
+    from twin.model import reach_corners
+    from twin.runtime import OPERATOR_REACH
+    from twin.trajectory import check_reach, load_trajectory
 
     recording = read_recording(path)
     if recording.damage:
         log.info("%s", recording.damage)  # the summary's "damage"; `twin replay` prints it once, as a warning
     spec = load_scene(scene) if scene is not None else recorded_scene(recording)
-    trajectory = load_trajectory(script) if script is not None else recorded_trajectory(recording)
+    trajectory = load_trajectory(script, units=units) if script is not None else recorded_trajectory(recording)
+    # The box the twin drops live device targets outside of (Local.workspace, from the scene the remote announces).
+    table, ee = spec.table, spec.end_effector
+    box = reach_corners(None if table is None else table.size, 0.0 if table is None else table.height,
+                        (0.0, 0.0, 0.0) if ee is None else ee.position, OPERATOR_REACH)
+    if script is not None:
+        trajectory.check_reach(box)  # type: ignore[union-attr]
+    elif trajectory is not None:
+        check_reach(*recording.targets(), box, source=str(recording.path))
     if network is None:
         network = recorded_network(recording)
     if network is not None and seed is not None:

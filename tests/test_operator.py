@@ -192,3 +192,18 @@ def test_twin_local_shows_objects_in_flight_on_stderr(endpoint, cache, capsys):
     assert touchable, err  # two small objects, two workers, six seconds: at least one is in the twin
     for line in touchable:
         assert re.match(r"twin: (can|crate): touchable after \d+\.\d s \(\d in the twin, \d in flight\)$", line)
+
+
+def test_twin_local_refuses_a_script_beyond_the_remote_table_and_reads_units(endpoint, cache, tmp_path, capsys):
+    from cli.main import main
+
+    script = tmp_path / "mm.csv"
+    script.write_text("t,x,y,z\n0,-300,0,560\n2,-100,0,530\n")  # millimetres: the end effector went to 560 m
+    with running_remote(endpoint, cache):
+        assert main(["local", "--connect", endpoint, "--duration", "0.5", "--script", str(script)]) == 2
+        err = capsys.readouterr().err
+        line = [x for x in err.splitlines() if "error" in x]
+        assert len(line) == 1 and line[0].endswith("is outside the operator's reach (x -2.5 to 2.5, y -2.3 to 2.3, "
+                                                   "z 0 to 2.5 m): looks like millimetres: pass --units mm"), err
+        assert main(["local", "--connect", endpoint, "--duration", "0.5", "--script", str(script), "--units", "mm",
+                     "--json"]) == 0

@@ -90,3 +90,106 @@ def test_positions_beyond_the_wire_bound_are_refused(tmp_path, capsys):
         load_trajectory(path)
     assert main(["run", str(Path(__file__).parent / "data" / "small.toml"), "--script", str(path)]) == 2
     assert capsys.readouterr().err.count("\n") == 1
+
+
+SMALL = __import__("pathlib").Path(__file__).parent / "data" / "small.toml"
+
+#: The operator's reach around small.toml's table (1.0 x 0.6 m, top at 0.5 m): 2 m beyond its edges and top.
+SMALL_BOX = (np.array([-2.5, -2.3, 0.0]), np.array([2.5, 2.3, 2.5]))
+
+
+def test_a_file_in_millimetres_is_refused_naming_units_and_read_with_them(tmp_path, capsys):
+    from cli.main import main
+
+    path = _write(tmp_path, "t,x,y,z\n0,-300,0,560\n2,300,0,560\n")  # the fuzz pass's tr_mm.csv
+    with pytest.raises(TrajectoryError, match=r"path.csv: the target at t = 0 s, \(-300, 0, 560\) m, is outside the "
+                                              r"operator's reach \(x -2.5 to 2.5, y -2.3 to 2.3, z 0 to 2.5 m\): "
+                                              r"looks like millimetres: pass --units mm$"):
+        load_trajectory(path, box=SMALL_BOX)
+    at = load_trajectory(path, units="mm", box=SMALL_BOX)
+    assert at(1.0) == pytest.approx([0.0, 0.0, 0.56]) and at(0.0) == pytest.approx([-0.3, 0.0, 0.56])
+    assert load_trajectory(_write(tmp_path, "0,-30,0,56\n", "cm.csv"), units="cm")(0.0) == pytest.approx([-0.3, 0, 0.56])
+    from estimation.units import UnitsError
+
+    with pytest.raises(UnitsError, match="unknown units 'inch'"):
+        load_trajectory(path, units="inch")
+    # The CLI checks against the scene's table (sent the end effector to 560 m before, exit 0, no word).
+    assert main(["run", str(SMALL), "--script", str(path), "--duration", "0.1", "--no-realtime"]) == 2
+    err = capsys.readouterr().err.lstrip("\n")  # (the build's progress display ends with a blank line)
+    assert err.count("\n") == 1 and "looks like millimetres: pass --units mm" in err, err
+    assert main(["run", str(SMALL), "--script", str(path), "--units", "mm", "--duration", "0.1", "--no-realtime",
+                 "--json"]) == 0
+
+
+def test_targets_under_the_floor_or_a_stray_far_one_are_refused_without_a_units_hint(tmp_path):
+    under = _write(tmp_path, "t,x,y,z\n0,-0.3,0,0.56\n0.5,0.0,0,-5\n")  # was 25,100 N on the end effector
+    with pytest.raises(TrajectoryError, match=r"the target at t = 0.5 s, \(0, 0, -5\) m, is outside the operator's "
+                                              r"reach \(x -2.5 to 2.5, y -2.3 to 2.3, z 0 to 2.5 m\)$"):
+        load_trajectory(under, box=SMALL_BOX)
+    far = _write(tmp_path, "t,x,y,z\n0,-0.3,0,0.56\n0.1,999,999,999\n", "far.csv")
+    with pytest.raises(TrajectoryError, match=r"\(999, 999, 999\) m, is outside the operator's reach \(.*\)$"):
+        load_trajectory(far, box=SMALL_BOX)
+    at = load_trajectory(far)  # no box: checked later (Waypoints.check_reach), as the CLI does once it has the scene
+    with pytest.raises(TrajectoryError, match=r"far.csv: the target at t = 0.1 s"):
+        at.check_reach(SMALL_BOX)
+
+
+def test_times_that_look_like_milliseconds_are_warned_about(tmp_path, caplog):
+    load_trajectory(_write(tmp_path, "t,x,y,z\n0,-0.3,0,0.56\n2000,0.3,0,0.56\n"))
+    assert "runs 2000 s and the target moves at most 0.3 mm/s: if its times are in milliseconds" in caplog.text
+    caplog.clear()
+    load_trajectory(_write(tmp_path, "0,-0.3,0,0.56\n2,0.3,0,0.56\n", "s.csv"))  # seconds
+    load_trajectory(_write(tmp_path, "0,-0.3,0,0.56\n3600,-0.3,0,0.56\n", "hold.csv"))  # an hour holding still
+    assert "milliseconds" not in caplog.text
+
+
+def test_evaluation_agrees_with_numpy_interp_and_copes_with_extreme_times(tmp_path):
+    rng = np.random.default_rng(7)
+    times = np.cumsum(rng.uniform(1e-4, 0.1, 500))
+    points = rng.uniform(-1, 1, (500, 3))
+    rows = "\n".join(",".join(repr(float(v)) for v in (t, *p)) for t, p in zip(times, points, strict=True))
+    at = load_trajectory(_write(tmp_path, rows + "\n"))
+    for t in np.concatenate([rng.uniform(times[0] - 1, times[-1] + 1, 300), times, [times[0] - 5, times[-1] + 5]]):
+        reference = [np.interp(t, times, points[:, i]) for i in range(3)]  # the slow path this replaced
+        assert at(float(t)) == pytest.approx(reference, abs=1e-12)
+    assert at.points.flags.c_contiguous and at.times.flags.c_contiguous
+    at(0.5)[:] = 9  # a new array each call: the waypoints stay
+    assert at(times[0]) == pytest.approx(points[0])
+    huge = load_trajectory(_write(tmp_path, "-1.7e308,0,0,0.5\n1.7e308,1,0,0.5\n", "huge.csv"))
+    assert np.isfinite(huge(0.0)).all()
+
+
+def test_numpy_and_the_line_by_line_reader_agree(tmp_path):
+    from twin.trajectory import _read_checked, _read_fast
+
+    path = _write(tmp_path, '\ufeff# comment\n\nT, X, Y, Z\n0, 0.1,0,0.2\n"1","0.2","0","0.3"\n# note\n2,0.3,0,0.4\n')
+    fast, slow = _read_fast(path, 0.001), _read_checked(path, 0.001)
+    assert fast is not None and np.array_equal(fast, slow) and fast.shape == (3, 4)
+    assert fast[1] == pytest.approx([1.0, 2e-4, 0.0, 3e-4])
+    # An indented comment is a row of one empty value to numpy: read line by line instead.
+    indented = _write(tmp_path, "0,0.1,0,0.2\n  # note\n1,0.2,0,0.3\n", "indented.csv")
+    assert _read_fast(indented, 1.0) is None
+    assert load_trajectory(indented)(0.5) == pytest.approx([0.15, 0, 0.25])
+    # What numpy does not read but Python's float does is still read, line by line.
+    assert load_trajectory(_write(tmp_path, "0,1_0.0,0,0.5\n", "u.csv"))(0) == pytest.approx([10.0, 0, 0.5])
+
+
+def test_too_large_files_and_too_many_waypoints_are_refused(tmp_path, monkeypatch):
+    import twin.trajectory as trajectory
+
+    path = _write(tmp_path, "".join(f"{i},0,0,0.5\n" for i in range(10)))
+    monkeypatch.setattr(trajectory, "MAX_TRAJECTORY_BYTES", 50)
+    with pytest.raises(TrajectoryError, match=r"path.csv: trajectory file is 0 MiB, more than the 0 MiB"):
+        load_trajectory(path)
+    monkeypatch.setattr(trajectory, "MAX_TRAJECTORY_BYTES", 2**20)
+    monkeypatch.setattr(trajectory, "MAX_WAYPOINTS", 5)
+    with pytest.raises(TrajectoryError, match=r"path.csv: more than 5 waypoints \(thin them\)$"):
+        load_trajectory(path)
+    bad = _write(tmp_path, "".join(f"{i},0,0,0.5\n" for i in range(10)) + "x,0,0,0\n", "bad.csv")
+    with pytest.raises(TrajectoryError, match=r"bad.csv: more than 5 waypoints"):  # the line-by-line reader too
+        load_trajectory(bad)
+
+
+def test_a_huge_value_is_quoted_short(tmp_path):
+    with pytest.raises(TrajectoryError, match=r"path.csv:1: non-finite value in '0,1{78}\.\.\.'$"):
+        load_trajectory(_write(tmp_path, "0," + "1" * 5000 + ",0,0.56\n"))

@@ -96,6 +96,20 @@ def reach_corners(table_size: Sequence[float] | None, table_height: float, ee_po
     return np.array([-half[0], -half[1], 0.0]), np.array([half[0], half[1], table_height + reach])
 
 
+def model_reach_corners(model, reach: float) -> tuple[np.ndarray, np.ndarray]:  # type: ignore[no-untyped-def]
+    """:func:`reach_corners` of a compiled scene (:func:`new_spec`'s ``table`` geom and :data:`EE_TARGET` body;
+    a built folder's scene.xml), the box :class:`twin.runtime.Local` takes from the remote's announcement."""
+    import mujoco
+
+    table = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, "table")
+    ee = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, EE_TARGET)
+    start = model.body_pos[ee] if ee >= 0 else np.zeros(3)
+    if table < 0:
+        return reach_corners(None, 0.0, start, reach)
+    size, pos = model.geom_size[table], model.geom_pos[table]
+    return reach_corners(2 * size, float(pos[2] + size[2]), start, reach)
+
+
 def new_spec(name: str, *, table: TableSpec | None = None, end_effector: EndEffectorSpec | None = None,  # type: ignore[no-untyped-def]
              physics: PhysicsSettings = DEFAULT_PHYSICS):
     """An MjSpec with the floor, the table and the end effector, and no objects."""

@@ -2,20 +2,42 @@
 
 from __future__ import annotations
 
+import array
 import csv
+import logging
 import math
-from collections.abc import Callable
+import warnings
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from estimation.errors import TwinError
+from estimation.units import UNIT_SCALE, unit_scale
 from sync.messages import MAX_COORDINATE
+
+log = logging.getLogger(__name__)
 
 Trajectory = Callable[[float], np.ndarray]
 
 #: The header row a trajectory CSV may start with.
 TRAJECTORY_HEADER = ("t", "x", "y", "z")
+
+#: A trajectory file larger than this is refused before it is read (as scene meshes are,
+#: :data:`scenes.scenefile.MAX_MESH_BYTES`): an hour of 1 kHz waypoints written at full precision is ~90 MiB.
+MAX_TRAJECTORY_BYTES = 128 * 2**20
+
+#: Most waypoints a trajectory may hold: more than an hour at 1 kHz. 32 bytes each in memory.
+MAX_WAYPOINTS = 5_000_000
+
+#: Times that look like milliseconds: a script running this long (seconds) whose target never moves faster
+#: than :data:`MS_SLOWEST_PEAK` (m/s), but would at a thousand times the speed, is warned about (a 1 m push
+#: written in ms runs 2000 s at 0.5 mm/s).
+MS_SPAN_S, MS_SLOWEST_PEAK = 100.0, 1e-3
+
+#: Unit names as messages say them.
+_UNIT_WORDS = {"m": "metres", "cm": "centimetres", "mm": "millimetres"}
 
 
 class TrajectoryError(TwinError, ValueError):
@@ -52,70 +74,250 @@ def held_trajectory(times: np.ndarray, points: np.ndarray, *, start_time: float 
     return at
 
 
-def load_trajectory(path: str | Path) -> Trajectory:
+@dataclass(frozen=True, eq=False)
+class Waypoints:
+    """A trajectory read from a file: targets at times, linear between them, held before the first and after
+    the last. Call it with a twin time to get the target; O(log n) a call.
+
+    Attributes:
+        times: (n,) float64, seconds, strictly increasing.
+        points: (n, 3) float64, metres, world frame, C-contiguous.
+        source: where the waypoints came from (a file name), for messages.
+        units: the units the file was read in (``--units``), for the hint of :meth:`check_reach`.
+    """
+
+    times: np.ndarray
+    points: np.ndarray
+    source: str = "trajectory"
+    units: str = "m"
+
+    def __call__(self, t: float) -> np.ndarray:
+        """The target at twin time ``t``, seconds: (3,) float64, metres, world frame (a new array)."""
+        times, points = self.times, self.points
+        i = int(np.searchsorted(times, t, side="right"))
+        if i == 0:
+            return points[0].copy()
+        if i == len(times):
+            return points[-1].copy()
+        t0, t1 = float(times[i - 1]), float(times[i])
+        s = (t - t0) / (t1 - t0)
+        if not 0.0 <= s <= 1.0:  # a span past the float range (t from -1e308 to 1e308) made it inf or nan
+            s = 1.0 if s > 1.0 else 0.0
+        return points[i - 1] + s * (points[i] - points[i - 1])
+
+    def check_reach(self, box: tuple[np.ndarray, np.ndarray]) -> None:
+        """Refuse waypoints outside ``box`` (:func:`check_reach`), hinting at ``--units`` when they fit in it
+        scaled.
+
+        Raises:
+            TrajectoryError: a waypoint outside the box.
+        """
+        check_reach(self.times, self.points, box, source=self.source, units=self.units)
+
+
+def check_reach(times: np.ndarray, points: np.ndarray, box: tuple[np.ndarray, np.ndarray], *, source: str,
+                units: str | None = None) -> None:
+    """Refuse operator targets outside ``box``: the twin's operator workspace
+    (:func:`twin.model.reach_corners` with :attr:`twin.runtime.OperatorSettings.reach`), the box live device
+    targets are dropped outside of. A script or recording that leaves it sends the end effector through the
+    floor (25 kN at z = -5 m) or to 560 m (a file in millimetres).
+
+    Args:
+        times: (n,) float64, seconds: when each target applies, for the message.
+        points: (n, 3) float64, metres, world frame.
+        box: (low, high) corners, (3,) float64 each, metres, world frame.
+        source: the file the targets came from, for the message.
+        units: the units the file was read in; the message then says when the targets would fit read in
+            smaller ones (None: the source has no units option, as a recording).
+
+    Raises:
+        TrajectoryError: the first target outside the box, and the box.
+    """
+    low, high = (np.asarray(c, dtype=np.float64) for c in box)
+    inside = np.all((points >= low) & (points <= high), axis=1)
+    if inside.all():
+        return
+    i = int(np.argmin(inside))
+    x, y, z = points[i]
+    hint = ""
+    if units is not None and not inside.any():  # all outside: read in the wrong units, not a stray target
+        fits = [name for name, scale in UNIT_SCALE.items() if scale < UNIT_SCALE[units]
+                and np.all((points * (scale / UNIT_SCALE[units]) >= low) & (points * (scale / UNIT_SCALE[units]) <= high))]
+        if fits:
+            hint = (f": looks like {' or '.join(_UNIT_WORDS[f] for f in fits)}: pass "
+                    f"{' or '.join(f'--units {f}' for f in fits)}")
+    raise TrajectoryError(f"{source}: the target at t = {float(times[i]):g} s, ({x:g}, {y:g}, {z:g}) m, is outside the "
+                          f"operator's reach (x {low[0]:g} to {high[0]:g}, y {low[1]:g} to {high[1]:g}, z {low[2]:g} to "
+                          f"{high[2]:g} m){hint}")
+
+
+def load_trajectory(path: str | Path, *, units: str = "m", box: tuple[np.ndarray, np.ndarray] | None = None,
+                    ) -> Waypoints:
     """An end-effector trajectory from a CSV file.
 
     Format: one row per waypoint, ``t,x,y,z``: time in seconds (strictly increasing) and the target
-    position in metres, world frame. An optional first row ``t,x,y,z`` names the columns; blank lines and
-    lines starting with ``#`` are skipped. Between waypoints the target moves linearly; before the first
-    it is the first, after the last it stays at the last. Example::
+    position in ``units`` (metres by default), world frame. An optional first row ``t,x,y,z`` names the
+    columns; blank lines and ``#`` comments are skipped. Between waypoints the target moves linearly; before
+    the first it is the first, after the last it stays at the last. Example::
 
         t,x,y,z
         0.0,0.30,0.00,0.12
         2.0,0.45,0.00,0.12
 
+    A script whose times look like milliseconds (over :data:`MS_SPAN_S` s long, never faster than
+    :data:`MS_SLOWEST_PEAK` m/s) is read, with a warning.
+
     Args:
-        path: the CSV file.
+        path: the CSV file, at most :data:`MAX_TRAJECTORY_BYTES` and :data:`MAX_WAYPOINTS` rows.
+        units: the positions' units: ``m``, ``cm`` or ``mm`` (:data:`estimation.units.UNIT_SCALE`).
+        box: (low, high) corners, metres, world frame, every target must lie in (:func:`check_reach`); None:
+            checked later with :meth:`Waypoints.check_reach`, or not at all.
 
     Returns:
-        ``trajectory(t) -> (3,) float64``, metres, world frame.
+        ``trajectory(t) -> (3,) float64``, metres, world frame: a :class:`Waypoints`.
 
     Raises:
-        TrajectoryError: the file is not a regular file or cannot be read, a row has other than four
-            columns or a value that is not a finite number, a position beyond
-            :data:`sync.messages.MAX_COORDINATE` (what the wire carries), there are no waypoints, or the
-            times do not increase.
+        TrajectoryError: the file is not a regular file, is too large, or cannot be read, a row has other than
+            four columns or a value that is not a finite number, a position beyond
+            :data:`sync.messages.MAX_COORDINATE` (what the wire carries), there are no waypoints or too many,
+            the times do not increase, or (with ``box``) a target lies outside the box.
+        UnitsError: ``units`` is not one of m, cm, mm.
     """
     path = Path(path)
+    scale = unit_scale(units)
     if path.exists() and not path.is_file() and not path.is_dir():  # a FIFO or device: reading blocks forever
         raise TrajectoryError(f"{path}: not a regular file")
     try:
-        # utf-8-sig: a spreadsheet's CSV starts with a byte-order mark, which made the header "not a number".
-        text = path.read_text(encoding="utf-8-sig")
-    except (OSError, UnicodeDecodeError) as exc:
+        size = path.stat().st_size
+    except OSError as exc:
         raise TrajectoryError(f"{path}: cannot read trajectory ({exc.__class__.__name__}: {exc})") from None
-    rows: list[tuple[float, ...]] = []
-    reader = csv.reader(text.splitlines())
+    if path.is_file() and size > MAX_TRAJECTORY_BYTES:
+        raise TrajectoryError(f"{path}: trajectory file is {size / 2**20:,.0f} MiB, more than the "
+                              f"{MAX_TRAJECTORY_BYTES / 2**20:,.0f} MiB a trajectory may take (thin its waypoints)")
+    table = _read_fast(path, scale)
+    if table is None:  # numpy refused the file, or it holds a bad value: find which line, and say why
+        table = _read_checked(path, scale)
+    if len(table) > MAX_WAYPOINTS:
+        raise TrajectoryError(f"{path}: more than {MAX_WAYPOINTS:,} waypoints (thin them)")
+    times, points = np.ascontiguousarray(table[:, 0]), np.ascontiguousarray(table[:, 1:])
+    _warn_if_milliseconds(path, times, points)
+    waypoints = Waypoints(times, points, source=str(path), units=units)
+    if box is not None:
+        waypoints.check_reach(box)
+    return waypoints
+
+
+def _cannot_read(path: Path, exc: BaseException) -> TrajectoryError:
+    return TrajectoryError(f"{path}: cannot read trajectory ({exc.__class__.__name__}: {exc})")
+
+
+def _rows(path: Path) -> Iterator[tuple[int, list[str]]]:
+    """(line number, stripped cells) of each row that is not blank, a ``#`` comment or the header row.
+
+    Raises:
+        TrajectoryError: the file cannot be read or decoded, or is not CSV (a stray quote).
+    """
     try:
-        numbered = list(enumerate(reader, start=1))
-    except csv.Error as exc:  # a stray quote makes one field of the rest of the file, past csv's field limit
-        raise TrajectoryError(f"{path}:{reader.line_num}: not CSV ({exc})") from None
-    for number, row in numbered:
-        cells = [c.strip() for c in row]
-        if not cells or cells == [""] or cells[0].startswith("#"):
-            continue
-        if not rows and tuple(c.lower() for c in cells) == TRAJECTORY_HEADER:
-            continue
+        # utf-8-sig: a spreadsheet's CSV starts with a byte-order mark, which made the header "not a number".
+        with path.open(encoding="utf-8-sig", newline="") as fh:
+            reader = csv.reader(fh)
+            first = True
+            try:
+                for row in reader:
+                    cells = [c.strip() for c in row]
+                    if not cells or cells == [""] or cells[0].startswith("#"):
+                        continue
+                    if first:
+                        first = False
+                        if tuple(c.lower() for c in cells) == TRAJECTORY_HEADER:
+                            continue
+                    yield reader.line_num, cells
+            except csv.Error as exc:  # a stray quote makes one field of the rest of the file, past csv's limit
+                raise TrajectoryError(f"{path}:{reader.line_num}: not CSV ({exc})") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise _cannot_read(path, exc) from None
+
+
+def _read_fast(path: Path, scale: float) -> np.ndarray | None:
+    """The (n, 4) table of a well-formed file (positions in metres) read by ``numpy.loadtxt``, or None for any
+    file :func:`_read_checked` must look at: one numpy refuses or with a value the checks refuse.
+
+    Python's csv module and a float per cell took 4.8 s and 700 MB for a million rows; this is ~0.7 s and the
+    table. Only the header is found line by line.
+    """
+    rows = _rows(path)
+    try:  # the first row of numbers; the lines before it are comments or the header, for numpy to skip
+        first = next(rows, None)
+    finally:
+        rows.close()  # closes the file now, not when the generator is collected
+    skip = 0 if first is None else first[0] - 1
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", UserWarning)  # "input contained no data": no waypoints, said below
+            table = np.loadtxt(path, dtype=np.float64, delimiter=",", comments="#", quotechar='"', skiprows=skip,
+                               ndmin=2, encoding="utf-8-sig", max_rows=MAX_WAYPOINTS + 1)
+    except (OSError, UnicodeDecodeError) as exc:
+        raise _cannot_read(path, exc) from None
+    except ValueError:
+        return None
+    if table.shape[0] == 0 or table.shape[1] != 4:
+        return None
+    table[:, 1:] *= scale
+    with np.errstate(over="ignore"):  # t from -1e308 to 1e308 increases, by more than a double holds
+        increasing = bool((np.diff(table[:, 0]) > 0).all())
+    if not (increasing and np.isfinite(table).all() and np.abs(table[:, 1:]).max() <= MAX_COORDINATE):
+        return None
+    return table
+
+
+def _read_checked(path: Path, scale: float) -> np.ndarray:
+    """Every row checked in turn, so the first bad one is named by its line; the (n, 4) table (positions in
+    metres) when none is bad (a value numpy does not read but Python does, as ``1_000``).
+
+    Raises:
+        TrajectoryError: the first bad row, or no rows.
+    """
+    values = array.array("d")
+    previous = -math.inf
+    for number, cells in _rows(path):
         if len(cells) != 4:
             raise TrajectoryError(f"{path}:{number}: expected 4 columns t,x,y,z, got {len(cells)}")
         try:
-            values = tuple(float(c) for c in cells)
+            row = [float(c) for c in cells]
         except ValueError:
-            raise TrajectoryError(f"{path}:{number}: not a number in {','.join(cells)!r}") from None
-        if not all(math.isfinite(v) for v in values):
-            raise TrajectoryError(f"{path}:{number}: non-finite value in {','.join(cells)!r}")
-        if any(abs(v) > MAX_COORDINATE for v in values[1:]):
-            raise TrajectoryError(f"{path}:{number}: a position beyond {MAX_COORDINATE:g} m in {','.join(cells)!r}")
-        if rows and values[0] <= rows[-1][0]:
-            raise TrajectoryError(f"{path}:{number}: t = {values[0]:g} s does not increase "
-                                  f"(previous {rows[-1][0]:g} s)")
-        rows.append(values)
-    if not rows:
+            raise TrajectoryError(f"{path}:{number}: not a number in {_shown(cells)}") from None
+        row[1:] = [v * scale for v in row[1:]]
+        if not all(math.isfinite(v) for v in row):
+            raise TrajectoryError(f"{path}:{number}: non-finite value in {_shown(cells)}")
+        if any(abs(v) > MAX_COORDINATE for v in row[1:]):
+            raise TrajectoryError(f"{path}:{number}: a position beyond {MAX_COORDINATE:g} m in {_shown(cells)}")
+        if row[0] <= previous:
+            raise TrajectoryError(f"{path}:{number}: t = {row[0]:g} s does not increase (previous {previous:g} s)")
+        previous = row[0]
+        values.extend(row)
+        if len(values) > 4 * MAX_WAYPOINTS:
+            raise TrajectoryError(f"{path}: more than {MAX_WAYPOINTS:,} waypoints (thin them)")
+    if not values:
         raise TrajectoryError(f"{path}: no waypoints (expected rows t,x,y,z)")
-    table = np.array(rows, dtype=np.float64)
-    times, points = table[:, 0].copy(), table[:, 1:].copy()
+    return np.frombuffer(values, dtype=np.float64).reshape(-1, 4)
 
-    def at(t: float) -> np.ndarray:
-        return np.array([np.interp(t, times, points[:, i]) for i in range(3)])
 
-    return at
+def _shown(cells: list[str], most: int = 80) -> str:
+    """A row as a message quotes it: a 5,000-digit number made a 5 kB "one-line" error."""
+    text = ",".join(cells)
+    return repr(text if len(text) <= most else text[:most] + "...")
+
+
+def _warn_if_milliseconds(path: Path, times: np.ndarray, points: np.ndarray) -> None:
+    """Warn about times that look like milliseconds: long, and never faster than a crawl."""
+    if len(times) < 2:
+        return
+    with np.errstate(over="ignore"):  # times from -1e308 to 1e308: an infinite gap, so no speed at all
+        span = float(times[-1] - times[0])
+        if not span > MS_SPAN_S:
+            return
+        moves = np.diff(points, axis=0)
+        peak = float((np.sqrt(np.einsum("ij,ij->i", moves, moves)) / np.diff(times)).max())
+    if MS_SLOWEST_PEAK / 1000 <= peak < MS_SLOWEST_PEAK:
+        log.warning("%s: the script runs %g s and the target moves at most %.3g mm/s: if its times are in "
+                    "milliseconds, divide them by 1000 (t is in seconds)", path, span, peak * 1e3)
