@@ -16,6 +16,7 @@ from pathlib import Path
 
 from cli.outputs import check_output_folder, claim_output_folder, replace_file
 from estimation.errors import TwinError, refused_number
+from twin.settings import MAX_WORKERS
 
 log = logging.getLogger(__name__)
 
@@ -61,10 +62,6 @@ def add_parser(sub) -> None:  # type: ignore[no-untyped-def]
     p.add_argument("--out", type=Path, required=True, help="output folder (new, empty or written by this command)")
     p.set_defaults(handler=run)
 
-
-#: Worker processes one sweep may start (each a Python with MuJoCo, ~200 MB): 100,000 were accepted. A sweep
-#: larger than a machine goes to a Dask cluster (--dask), whose own workers this does not count.
-MAX_WORKERS = 256
 
 
 def _floats(text: str, flag: str) -> tuple[float, ...]:

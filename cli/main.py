@@ -21,9 +21,10 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import NoReturn
 
-from cli.outputs import check_not_input, check_output_file, check_record_file, replace_file
+from cli.outputs import check_mesh_file, check_not_input, check_record_file, replace_file
 from estimation.errors import TwinError, refused_number
 from estimation.materials import MAX_DENSITY, MIN_DENSITY
+from twin.settings import MAX_RATE_HZ
 
 log = logging.getLogger("twin")
 
@@ -134,10 +135,6 @@ class _OneLineFormatter(logging.Formatter):
     def format(self, record: logging.LogRecord) -> str:
         return one_line(super().format(record))
 
-
-#: The loop's ceiling: one step of the smallest scene takes ~10 us, so faster asks only queue work (1e9 Hz grew
-#: memory without bound).
-MAX_RATE_HZ = 100_000.0
 
 #: What ``--mesh-out`` writes: the formats trimesh exports a triangle mesh to (it has no .xyz or .npy writer).
 MESH_SUFFIXES = (".stl", ".ply", ".obj")
@@ -291,7 +288,8 @@ def _parser() -> argparse.ArgumentParser:
                    metavar=("TX", "TY", "TZ", "QW", "QX", "QY", "QZ"),
                    help="a depth image's camera-to-world pose (metres; camera axes x right, y down, z forward), "
                         "once per depth image (default: identity, points in the camera frame)")
-    p.add_argument("--mesh-out", type=Path, help="write the reconstructed mesh (.stl, .ply, .obj)")
+    p.add_argument("--mesh-out", type=Path, help="write the reconstructed mesh (.stl, .ply, .obj); an existing "
+                   "file is replaced only if it is a mesh --mesh-out wrote")
     p.add_argument("--keep-strays", action="store_true",
                    help="keep clusters of points apart from the object, each under 1 %% of the points (by default "
                         "they are dropped as outliers, with a warning)")
@@ -311,12 +309,18 @@ def _parser() -> argparse.ArgumentParser:
     p = sub.add_parser("run", help="run the local twin loop, paced to real time")
     p.add_argument("scene", type=Path, help="scene TOML file or a built directory with scene.xml")
     p.add_argument("--duration", type=float, default=5.0, help="simulated seconds (default 5)")
-    p.add_argument("--rate", type=float, default=1000.0, help="loop rate, Hz (default 1000)")
+    p.add_argument("--rate", type=float, default=None,
+                   help="loop rate, Hz: a whole number of physics steps per iteration, so 1000 Hz divided by a whole "
+                        "number at the 1 ms step (1000, 500, 333.333, 250, ...; default one step per iteration: "
+                        "1000 Hz for a built scene, 1 / timestep for a folder's own model); --duration stays "
+                        "simulated seconds and real-time pacing real")
     p.add_argument("--viewer", action="store_true", help="open MuJoCo's passive viewer (needs a display)")
     p.add_argument("--script", type=Path, help="end-effector trajectory CSV: rows t,x,y,z (seconds, increasing; "
-                                               "metres, world frame), an optional header row t,x,y,z, '#' "
-                                               "comments; linear between rows, held after the last; "
-                                               "default: a push")
+                                               "metres or --units, world frame), an optional header row t,x,y,z, '#' "
+                                               "comments; linear between rows, held after the last; every target "
+                                               "within the operator's reach of the table; default: a push")
+    p.add_argument("--units", default="m", choices=["m", "cm", "mm"],
+                   help="units of the --script file's positions (default m)")
     p.add_argument("--no-realtime", action="store_true", help="run as fast as possible")
     p.add_argument("--json", action="store_true")
     _coacd_options(p)
@@ -357,9 +361,12 @@ def _parser() -> argparse.ArgumentParser:
     _record_option(p)
     operator = p.add_mutually_exclusive_group()
     operator.add_argument("--script", type=Path, help="operator targets from a trajectory CSV: rows t,x,y,z "
-                                                      "(seconds of twin time, increasing; metres, world frame), an "
-                                                      "optional header row t,x,y,z, '#' comments; linear between "
-                                                      "rows, held after the last")
+                                                      "(seconds of twin time, increasing; metres or --units, world "
+                                                      "frame), an optional header row t,x,y,z, '#' comments; linear "
+                                                      "between rows, held after the last; every target within the "
+                                                      "operator's reach of the table")
+    p.add_argument("--units", default="m", choices=["m", "cm", "mm"],
+                   help="units of the --script file's positions (default m)")
     operator.add_argument("--replay-operator", type=Path, metavar="RECORDING",
                           help="operator targets from a recording (.mcap), on the twin's time")
     operator.add_argument("--operator-topic", action="store_true",
@@ -372,6 +379,8 @@ def _parser() -> argparse.ArgumentParser:
     p = sub.add_parser("replay", help="re-run a recorded session headless on the simulated clock")
     p.add_argument("recording", type=Path, help="a .mcap file written by --record")
     p.add_argument("--script", type=Path, help="operator targets from this trajectory CSV (t,x,y,z) instead")
+    p.add_argument("--units", default="m", choices=["m", "cm", "mm"],
+                   help="units of the --script file's positions (default m)")
     p.add_argument("--scene", type=Path, help="scene TOML (default: the one in the recording)")
     p.add_argument("--delay", dest="delay_ms", type=float, help="one-way delay each way, ms")
     p.add_argument("--jitter", dest="jitter_ms", type=float, help="delay standard deviation, ms (at most delay/3)")
@@ -422,7 +431,7 @@ def _cmd_estimate(args: argparse.Namespace) -> int:
 
     scale = unit_scale(args.units)
     if args.mesh_out is not None:  # before the work, and before anything is written
-        check_output_file(args.mesh_out, args.views, "--mesh-out", suffixes=MESH_SUFFIXES)
+        check_mesh_file(args.mesh_out, args.views, "--mesh-out", suffixes=MESH_SUFFIXES)
     density, mat = resolve_density(args.material, args.density)
     name = None if mat is None else mat.name
     support = _support_plane(args.support_plane, scale)
@@ -790,12 +799,18 @@ def _trajectory(args: argparse.Namespace, twin):  # type: ignore[no-untyped-def]
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
+    from twin.loop import steps_per_iteration
+    from twin.model import DEFAULT_PHYSICS, model_reach_corners
+    from twin.runtime import OPERATOR_REACH
     from twin.sim import run_paced
     from twin.trajectory import load_trajectory
 
-    if args.duration <= 0 or args.rate <= 0:
+    if args.duration <= 0 or (args.rate is not None and args.rate <= 0):
         raise TwinError("--duration and --rate must be positive")
-    script = None if args.script is None else load_trajectory(args.script)  # before the build: a bad script costs nothing
+    if args.rate is not None and not Path(args.scene).is_dir():  # before the build (a folder's own timestep:
+        steps_per_iteration(args.rate, DEFAULT_PHYSICS.timestep)  # checked by run_paced)
+    # Before the build: a bad script costs nothing. Its reach is checked once the scene's table is known.
+    script = None if args.script is None else load_trajectory(args.script, units=args.units)
     with _open_rerun(args, "twin") as rlog:
         twin, built = _load_twin(args)
         with twin:
@@ -803,7 +818,11 @@ def _cmd_run(args: argparse.Namespace) -> int:
                 _log_built(rlog, built)
             else:
                 rlog.model_geometry(twin)
+            if script is not None:
+                script.check_reach(model_reach_corners(twin.model, OPERATOR_REACH))
             trajectory = (script or _trajectory(args, twin)) if twin.model.nmocap else None
+            if args.rate is None:  # one physics step an iteration, whatever the model's timestep
+                args.rate = 1.0 / float(twin.model.opt.timestep)
             start = {i: twin.pose(i) for i in twin.object_ids()}
             if args.viewer:
                 stats = _run_with_viewer(twin, args, trajectory)
@@ -954,7 +973,8 @@ def _cmd_replay(args: argparse.Namespace) -> int:
     network = network_from_options(delay_ms=args.delay_ms, jitter_ms=args.jitter_ms, loss_pct=args.loss_pct,
                                    seed=args.seed or 0)
     with _ReplayProgress() as progress:
-        result = replay(args.recording, script=args.script, scene=args.scene, network=network, seed=args.seed,
+        result = replay(args.recording, script=args.script, units=args.units, scene=args.scene, network=network,
+                        seed=args.seed,
                         duration=args.replay_duration, out=args.out, cache_dir=args.cache_dir, progress=progress)
     if result.summary["damage"]:
         print(f"twin replay: warning: {result.summary['damage']}", file=sys.stderr)
@@ -974,27 +994,23 @@ def _network_options(p: argparse.ArgumentParser, *, listen_default: str | None =
                    help=f"Zenoh endpoint to listen on{f' (default {listen_default})' if listen_default else ''}")
     p.add_argument("--zenoh-config", type=Path, help="a Zenoh JSON5 config (TLS, access control, routers)")
     p.add_argument("--insecure", action="store_true",
-                   help="allow --listen on a non-loopback address without TLS (anyone on that network can "
-                        "then read the scene and drive it)")
+                   help="allow listening on a non-loopback address without TLS, by --listen or the "
+                        "--zenoh-config file, and multicast scouting the file turns on (anyone on that network "
+                        "can then read the scene and drive it)")
     p.set_defaults(listen_default=listen_default, connect_default=connect_default)
 
 
 def _session(args: argparse.Namespace):  # type: ignore[no-untyped-def]
-    from sync.zenoh_transport import check_endpoint, exposed_without_tls, make_config, open_session
+    from sync.zenoh_transport import LOOPBACK_ANY_PORT, check_endpoint, make_config, open_session
 
-    for flag in ("listen", "connect"):  # first: a malformed endpoint is not an exposed one
+    for flag in ("listen", "connect"):  # first, to name the flag: a malformed endpoint is not an exposed one
         for endpoint in getattr(args, flag) or ():
             check_endpoint(endpoint, f"--{flag}", connect=flag == "connect")
-    exposed = exposed_without_tls(args.listen or [])
-    if exposed and not args.insecure:
-        raise TwinError(f"--listen {exposed[0]} is reachable from other machines in plain text; listen on a "
-                        f"tls/ endpoint (certificates in --zenoh-config) or pass --insecure")
-    if exposed:
-        log.warning("listening on %s without TLS: anyone on that network can read and drive this scene",
-                    ", ".join(exposed))
-    listen = args.listen or ([args.listen_default] if args.listen_default and not args.zenoh_config else None)
-    connect = args.connect or ([args.connect_default] if args.connect_default and not args.zenoh_config else None)
-    return open_session(make_config(listen=listen, connect=connect, config_file=args.zenoh_config))
+    # make_config knows the policy: loopback and scouting off where neither the flags nor the file say,
+    # and exposure (from the flags or the file) refused unless --insecure.
+    return open_session(make_config(listen=args.listen, connect=args.connect, config_file=args.zenoh_config,
+                                    insecure=args.insecure, listen_default=args.listen_default or LOOPBACK_ANY_PORT,
+                                    connect_default=args.connect_default))
 
 
 def _cmd_remote(args: argparse.Namespace) -> int:
@@ -1094,7 +1110,7 @@ def _run_local(args: argparse.Namespace, rlog) -> None:  # type: ignore[no-untyp
 
     trajectory = None  # before any session: a bad script or recording costs nothing
     if args.script is not None:
-        trajectory = load_trajectory(args.script)
+        trajectory = load_trajectory(args.script, units=args.units)  # its reach: once the remote's table is known
     elif args.replay_operator is not None:
         trajectory = recorded_trajectory(read_recording(args.replay_operator))
         if trajectory is None:
@@ -1111,6 +1127,7 @@ def _run_local(args: argparse.Namespace, rlog) -> None:  # type: ignore[no-untyp
         except (SyncError, ValueError) as exc:
             raise TwinError(str(exc)) from exc
         started = True
+        _check_operator_reach(args, trajectory, local.workspace)
         stats = local.run(args.duration, trajectory=trajectory, until=None if args.json else _arrivals(local))
         r, c = local.report, local.link.counters
         record = {"objects_synced": r.objects_synced, "pose_updates": r.pose_updates,
@@ -1147,8 +1164,20 @@ def _local_objects(local) -> list[dict]:  # type: ignore[no-untyped-def]
                           drift)
 
 
+def _check_operator_reach(args: argparse.Namespace, trajectory, box) -> None:  # type: ignore[no-untyped-def]
+    """Refuse a --script or --replay-operator target outside the workspace ``box`` (as live targets are dropped)."""
+    from sync.recording import read_recording
+    from twin.trajectory import Waypoints, check_reach
+
+    if isinstance(trajectory, Waypoints):
+        trajectory.check_reach(box)
+    elif args.replay_operator is not None:
+        times, points = read_recording(args.replay_operator).targets()
+        check_reach(times, points, box, source=str(args.replay_operator))
+
+
 def _cmd_demo(args: argparse.Namespace) -> int:
-    from cli.demo import run_demo
+    from cli.demo import check_demo_records, run_demo
 
     if args.duration <= 0:
         raise TwinError("--duration must be > 0")
@@ -1156,6 +1185,8 @@ def _cmd_demo(args: argparse.Namespace) -> int:
         from scenes.scenefile import load_scene
 
         load_scene(args.scene)  # a bad scene fails here with its own message, not in the remote process
+    if args.record is not None:  # the remote's file beside it too, before rerun starts writing
+        check_demo_records(args.record, tuple(_input_files(args)))
     with _open_rerun(args) as rlog:
         record = run_demo(duration=args.duration, scene_path=args.scene, progress=not args.json,
                           zenoh_config=None if args.zenoh_config is None else str(args.zenoh_config), rlog=rlog,

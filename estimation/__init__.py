@@ -23,6 +23,7 @@ _EXPORTS = {
     "CloudFileError": "estimation.errors",
     "MaterialError": "estimation.errors",
     "ReconstructionError": "estimation.errors",
+    "SettingsError": "estimation.errors",
     "TwinError": "estimation.errors",
     "METHODS": "estimation.estimate",
     "PhysicalEstimate": "estimation.estimate",

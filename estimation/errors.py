@@ -28,6 +28,11 @@ class ReconstructionError(TwinError, RuntimeError):
     """Surface reconstruction could not produce a usable solid from a valid cloud."""
 
 
+class SettingsError(TwinError, ValueError):
+    """An option or a settings field outside what it can mean (a seed, :mod:`twin.settings`' records); the
+    message names it and the value."""
+
+
 #: Significant digits that write any double exactly: the most a refused number takes.
 _MOST_DIGITS = 17
 

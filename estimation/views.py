@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import logging
 import math
+import numbers
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 
@@ -28,7 +29,7 @@ from estimation.cloud import check_count_and_range, check_sensor_origin
 from estimation.completion import ONE_SIDED, close_on_plane, honest_bounds, mean_view_direction
 from estimation.contracts import as_points
 from estimation.coverage import coverage
-from estimation.errors import CloudError, refused_number
+from estimation.errors import CloudError, SettingsError, refused_number
 from estimation.estimate import PhysicalEstimate, estimate
 from estimation.fusion import fuse_views, fused_cloud, oriented_normals
 from estimation.segmentation import (
@@ -385,10 +386,13 @@ def estimate_views(views: list[View], density: float, *, support: Plane | str | 
             ``"auto"`` (found in the data, else
             the horizontal plane through the lowest point) or None (no plane: nothing is cut or closed).
         material: recorded with the estimate.
-        seed: RANSAC's randomness (``"auto"``).
+        seed: RANSAC's and thinning's randomness (``"auto"``, over :data:`tolerances.VIEW_POINTS`): a whole
+            number >= 0, as numpy takes.
         keep_strays, progress: see :func:`estimation.estimate.estimate`.
 
     Raises:
+        TypeError: ``views`` not an iterable of :class:`View` records.
+        SettingsError: ``seed`` not a whole number >= 0.
         CloudError: a view without origin or with one beyond ``tolerances.MAX_COORDINATE_M``, a view with no
             points, fewer than ``tolerances.MIN_POINTS`` points in all or any beyond
             ``tolerances.MAX_COORDINATE_M``, a plane with most points below it, or too few object points left.
@@ -396,8 +400,20 @@ def estimate_views(views: list[View], density: float, *, support: Plane | str | 
     """
     from estimation.spacing import point_spacing, surface_noise
 
-    if isinstance(views, View) or not all(isinstance(v, View) for v in views):
-        raise TypeError("estimate_views takes a list of View records (View(points, origin) builds one)")
+    wrong = TypeError("estimate_views takes a list of View records (View(points, origin) builds one)")
+    if isinstance(views, View):
+        raise wrong
+    try:
+        views = list(views)  # once: a generator checked here would be empty below ("no view saw any point")
+    except TypeError:
+        raise wrong from None
+    if not all(isinstance(v, View) for v in views):
+        raise wrong
+    # numpy said "expected non-negative integer" for -1, and a SeedSequence TypeError for 1.5.
+    if isinstance(seed, bool) or not isinstance(seed, numbers.Integral) or seed < 0:
+        huge = isinstance(seed, numbers.Integral) and abs(int(seed)).bit_length() > 64  # repr of 5000 digits raises
+        shown = f"an integer of {abs(int(seed)).bit_length()} bits" if huge else repr(seed)
+        raise SettingsError(f"seed must be a whole number >= 0, got {shown[:40] + '...' if len(shown) > 40 else shown}")
     for k, view in enumerate(views):
         label = view.name or f"view {k + 1}"
         if view.origin is None:

@@ -42,7 +42,7 @@ from estimation.errors import TwinError
 from scenes.scenefile import SceneSpec
 from sync.netem import Conditions, LinkModel, Network
 from sync.recording import MAX_REPLAY_SECONDS
-from twin.runtime import DEFAULT_LOCAL, LocalSettings
+from twin.runtime import DEFAULT_LOCAL, MASS_SCALE_RANGE, LocalSettings
 
 #: Tasks :func:`run_experiment` knows.
 TASKS = ("push", "press")
@@ -213,10 +213,6 @@ class Row:
 
 assert tuple(f.name for f in fields(Row)) == COLUMNS
 
-
-#: Twin mass / true mass a condition may ask for: a twin a hundred times off is no twin, and far below it
-#: MuJoCo refuses the bodies (1e-300 made every step fail while the sweep went on).
-MASS_SCALE_RANGE = (0.01, 100.0)
 
 #: Task speed factors a condition may ask for: a task runs 1/speed times its length, so 0.05 makes a
 #: seconds-long push a minute or two of simulation, while 1e-6 asked for 62 GiB of trace; past 20 the

@@ -26,6 +26,7 @@ from sync.clock import SimClock
 from sync.inprocess import InProcessBus
 from sync.netem import LinkModel, Network
 from sync.recording import Recorder, RecordingTransport
+from twin.loop import check_duration
 from twin.runtime import DEFAULT_LOCAL, NO_OPERATOR_IO, Local, LocalSettings, OperatorSettings
 from twin.trajectory import Trajectory
 
@@ -46,12 +47,22 @@ class Headless:
     ``record`` (an ``.mcap`` path) records the session (:mod:`sync.recording`): both sides' wire
     messages, the operator's targets and force, and the remote's true poses, on the simulated clock;
     the file is finished by :meth:`close`. ``record_metadata`` adds entries to its session metadata.
+
+    Raises: TypeError (before any work): ``scene``, ``settings``, ``operator`` or ``network`` of the wrong
+    type. :class:`twin.settings.SettingsError`: ``points`` or ``epoch`` among ``remote_options`` out of range
+    (:func:`scenes.remote.check_remote_options`; nothing is recorded).
     """
 
     def __init__(self, scene: SceneSpec, *, settings: LocalSettings = DEFAULT_LOCAL,
                  sensor: Sensor | None = None, cache_dir: Path | None = None, network: Network | None = None,
                  record: str | Path | None = None, record_metadata: dict[str, object] | None = None,
                  operator: OperatorSettings = NO_OPERATOR_IO, **remote_options: object) -> None:
+        for name, value, kind, what in (("scene", scene, SceneSpec, "a SceneSpec (load_scene(path) reads one)"),
+                                        ("settings", settings, LocalSettings, "a LocalSettings"),
+                                        ("operator", operator, OperatorSettings, "an OperatorSettings"),
+                                        ("network", network, Network | None, "a sync.netem.Network or None")):
+            if not isinstance(value, kind):
+                raise TypeError(f"Headless: {name} must be {what}, got {type(value).__name__}")
         self.clock = SimClock()
         self.recorder = None if record is None else Recorder(record, clock=self.clock, metadata={
             **scene_metadata(scene), "side": "both", "command": "headless",
@@ -102,8 +113,13 @@ class Headless:
         self.clock.advance(self.dt)
 
     def run(self, duration: float, *, trajectory: Trajectory | None = None) -> None:
-        """Tick for ``duration`` simulated seconds; ``trajectory(t)`` is the operator's target at twin time t."""
-        for _ in range(round(duration / self.dt)):
+        """Tick for ``duration`` simulated seconds (to a whole physics step); ``trajectory(t)`` is the operator's
+        target at twin time t (None from it: no new target).
+
+        Raises:
+            LoopError: ``duration`` is not a finite number of seconds at least 0.
+        """
+        for _ in range(round(check_duration(duration) / self.dt)):
             self.tick(trajectory)
 
     def poses(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:

@@ -10,6 +10,7 @@ process with the twin.
 from __future__ import annotations
 
 import logging
+import numbers
 import queue
 import threading
 from collections import Counter
@@ -21,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from scenes.placement import check_placement
-from scenes.scenefile import ObjectSpec, SceneError, SceneSpec
+from scenes.scenefile import MAX_POINTS, MIN_POINTS, ObjectSpec, SceneError, SceneSpec
 from scenes.sensing import Sensor, SurfaceSensor, Track
 from scenes.sources import prepare_objects, reference_estimate, source_mesh
 from sync.clock import REAL_CLOCK, Clock
@@ -43,11 +44,12 @@ from sync.ratelimit import RateLimitedLog, TokenBucket
 from sync.recording import Recorder
 from sync.transport import Transport
 from twin.debuglog import OFF, DebugLog
-from twin.loop import LoopStats, run_loop
+from twin.loop import LoopStats, run_loop, steps_per_iteration
 from twin.model import add_object, remove_object
 from twin.objects import TwinObject
 from twin.poses import rotation
 from twin.runtime import OPERATOR_REACH, reach_box
+from twin.settings import SettingsError
 from twin.sim import Twin
 
 log = logging.getLogger(__name__)
@@ -80,6 +82,37 @@ SETTLED_SPEED = 1e-3
 STATE_QUERY_BURST, STATE_QUERY_RATE = 8, 1.0
 
 
+def check_remote_options(points: object, epoch: object) -> None:
+    """Refuse :class:`Remote`'s ``points`` and ``epoch`` before any work.
+
+    Raises:
+        SettingsError: ``points`` not None or a whole number from :data:`scenes.scenefile.MIN_POINTS` to
+            :data:`~scenes.scenefile.MAX_POINTS` (a scene file's and ``--points``' bounds: 10**9 allocated
+            7.45 GiB); ``epoch`` not None or a whole number from 0 to :data:`sync.messages.MAX_INT64` (what
+            the wire carries: a negative one had every message dropped by the twin, 2**70 failed to encode).
+    """
+    if points is not None and not _whole_in(points, MIN_POINTS, MAX_POINTS):
+        raise SettingsError(f"Remote: points must be None or a whole number from {MIN_POINTS} to {MAX_POINTS}, "
+                            f"got {_shown(points)}")
+    if epoch is not None and not _whole_in(epoch, 0, MAX_INT64):
+        raise SettingsError(f"Remote: epoch must be None or a whole number from 0 to 2**63 - 1 (the wire's range), "
+                            f"got {_shown(epoch)}")
+
+
+def _whole_in(value: object, low: int, high: int) -> bool:
+    """``value`` is a whole number (not a bool, which Python counts as one) from ``low`` to ``high``."""
+    return isinstance(value, numbers.Integral) and not isinstance(value, bool) and low <= value <= high
+
+
+def _shown(value: object) -> str:
+    """``value`` for a message: a huge integer by its size (repr of 5000 digits is an error itself), the rest
+    by a short repr."""
+    if isinstance(value, numbers.Integral) and abs(int(value)).bit_length() > 128:
+        return f"an integer of {abs(int(value)).bit_length()} bits"
+    text = repr(value)
+    return text[:40] + "..." if len(text) > 40 else text
+
+
 class Remote:
     """The remote scene C on a transport. ``run()`` steps it; everything else is message handling.
 
@@ -87,7 +120,8 @@ class Remote:
     it is queued and done by the loop between two steps, never during one.
 
     ``epoch`` numbers this run of the remote on the wire (default: the clock's stamp at start, so a
-    restarted remote has a larger one).
+    restarted remote has a larger one). ``points``: each object's cloud size (default: the scene file's).
+    Both are checked first (:func:`check_remote_options`: :class:`twin.settings.SettingsError`).
 
     Operator commands are taken by the rule the twin applies to device targets: newest ``(epoch, seq)`` wins,
     a mark lasting :data:`sync.ordering.MARK_EXPIRY` seconds after the last command taken (so with two twins
@@ -102,6 +136,7 @@ class Remote:
                  heartbeat_s: float = 0.2, cache_dir: Path | None = None, progress: bool = False,
                  publish: bool = True, keyframe_s: float = 1.0, settle_s: float = 3.0, epoch: int | None = None,
                  rlog: DebugLog = OFF, recorder: Recorder | None = None) -> None:
+        check_remote_options(points, epoch)
         self.scene = scene
         self.recorder = recorder  # gets the true poses at its truth rate (wrap the transport to log the wire)
         self.rlog = rlog
@@ -305,8 +340,9 @@ class Remote:
                                                          objects=len(self._objects)))
 
     def run(self, duration: float, *, rate: float = 1000.0, stop: threading.Event | None = None) -> LoopStats:
-        """Step for ``duration`` seconds of the clock (or until ``stop`` is set), ``rate`` iterations a second."""
-        substeps = max(1, round(1.0 / rate / self.twin.model.opt.timestep))
+        """Step for ``duration`` simulated seconds (or until ``stop`` is set), ``rate`` iterations a second of the
+        clock, each a whole number of physics steps (:func:`twin.loop.steps_per_iteration`; a LoopError else)."""
+        rate, substeps = steps_per_iteration(rate, float(self.twin.model.opt.timestep))
 
         def body() -> None:
             for _ in range(substeps):

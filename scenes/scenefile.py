@@ -22,8 +22,10 @@ A short example (SI units)::
 from __future__ import annotations
 
 import difflib
+import errno
 import json
 import math
+import os
 import re
 import sys
 from collections import Counter
@@ -297,17 +299,24 @@ def scene_data() -> Path:
     return Path(str(resources.files("scenes").joinpath("data"))).resolve()
 
 
-def load_scene(path: str | Path) -> SceneSpec:
+def load_scene(path: str | os.PathLike[str]) -> SceneSpec:
     """Read and validate a scene file.
 
     Raises:
-        SceneError: unreadable TOML, unknown keys, missing or duplicate ids, bad values, missing files.
+        TypeError: ``path`` is not a str or ``os.PathLike``.
+        SceneError: TOML text given for the path, a missing file (a dangling symlink or a symlink loop said so),
+            unreadable TOML, unknown keys, missing or duplicate ids, bad values, missing files.
     """
+    if not isinstance(path, str | os.PathLike):
+        raise TypeError(f"load_scene takes a path (str or os.PathLike), got {type(path).__name__}")
+    if isinstance(path, str) and _looks_like_toml(path):  # the whole text went into the "cannot read" line
+        raise SceneError("load_scene takes a path, got TOML text: "
+                         "use parse_scene(tomllib.loads(text), base=FOLDER)")
     path = Path(path)
     try:
         if not path.is_file():
             what = ("is a folder, not a scene file" if path.is_dir() else "is not a regular file (a device or a pipe?)"
-                    if path.exists() else "no such scene file")
+                    if path.exists() else _missing(path))
             raise SceneError(f"{path}: {what}")
         data = path.read_bytes()
     except OSError as exc:  # a name too long, a permission denied
@@ -318,6 +327,36 @@ def load_scene(path: str | Path) -> SceneSpec:
     except UnicodeDecodeError as exc:  # read_text() let it out as a traceback
         raise SceneError(f"{path}: not UTF-8 text, so not TOML ({exc.reason} at byte {exc.start})") from None
     return parse_scene(scene_document(text, str(path)), base=path.parent, path=path)
+
+
+#: The start of a one-line TOML document: a table header, or a key and "=" (bare or quoted).
+_TOML_START = re.compile(r'\s*(\[|[A-Za-z0-9_"\'-]+\s*=)')
+
+
+def _looks_like_toml(text: str) -> bool:
+    """``text`` is TOML rather than a path: several lines, or a ``key =`` start naming no file there is."""
+    if "\n" in text:
+        return True
+    if not _TOML_START.match(text):
+        return False
+    try:
+        return not os.path.lexists(text)
+    except (OSError, ValueError):  # a NUL, a name too long: no file either
+        return True
+
+
+def _missing(path: Path) -> str:
+    """Why ``path``, which is no file, is missing: a symlink loop and a dangling symlink read as absent."""
+    try:
+        path.stat()
+    except OSError as exc:
+        if exc.errno == errno.ELOOP:
+            return "symlink loop (a link leads back to itself)"
+        if path.is_symlink():
+            return f"a symlink to {os.readlink(path)}, which does not exist"
+    except ValueError:  # a NUL in the name
+        pass
+    return "no such scene file"
 
 
 def scene_document(text: str, where: str) -> dict:
@@ -338,17 +377,27 @@ def scene_document(text: str, where: str) -> dict:
         raise SceneError(f"{where}: nested too deeply to be a scene file") from None
 
 
-def parse_scene(doc: dict, *, base: Path = Path("."), path: Path | None = None) -> SceneSpec:
+def parse_scene(doc: dict, *, base: str | os.PathLike[str] = Path("."),
+                path: str | os.PathLike[str] | None = None) -> SceneSpec:
     """Validate a scene document (the parsed TOML) into a :class:`SceneSpec`.
 
     Types, lengths and ranges are checked by ``msgspec.convert`` against :class:`SceneDoc` (numbers are
     ints or floats, never booleans); then, in code, what a schema cannot say. Any problem is one
     :class:`SceneError` naming the object and the key.
 
+    ``base`` is the folder relative file names in ``doc`` start from; ``path`` the file it was read from
+    (None: none).
+
     Raises:
+        TypeError: ``base`` not a path, or ``path`` neither a path nor None.
         SceneError: unknown keys, missing or duplicate ids, wrong types, non-finite or out-of-range values,
             no or several sources, pose keys on a non-cloud, a matrix that is no rotation, missing files.
     """
+    if not isinstance(base, str | os.PathLike):
+        raise TypeError(f"parse_scene: base must be a folder path (str or os.PathLike), got {type(base).__name__}")
+    if path is not None and not isinstance(path, str | os.PathLike):
+        raise TypeError(f"parse_scene: path must be a file path or None, got {type(path).__name__}")
+    base, path = Path(base), None if path is None else Path(path)
     if not isinstance(doc, dict):
         raise SceneError(f"scene: expected a table, got {_kind(doc)}")
     try:

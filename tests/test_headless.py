@@ -614,3 +614,154 @@ def test_a_flood_the_loop_cannot_keep_up_with_is_dropped_and_counted_not_queued_
         assert local.link.counters.dropped_by_reason["inbox-full"] == 50
         session.run(0.05)  # the loop drains what was kept and runs on
         assert local.inbox.qsize() == 0
+
+
+def test_a_folder_at_the_recording_path_is_refused_before_the_session(cache, tmp_path):
+    """It raised IsADirectoryError at close, after the whole run, and left a hidden .partial beside it."""
+    from sync.recording import RecordingError
+
+    folder = tmp_path / "some_dir"
+    folder.mkdir()
+    with pytest.raises(RecordingError, match=r"some_dir: is a folder, not a recording file"):
+        Headless(load_scene(SMALL), cache_dir=cache, record=folder)
+    assert [p.name for p in tmp_path.iterdir()] == ["some_dir"] and not any(folder.iterdir())
+
+
+NAN = float("nan")
+
+
+@pytest.mark.parametrize(("field", "value", "message"), [
+    ("correction_tau", 0, r"^LocalSettings\.correction_tau must be > 0 and <= 60, got 0$"),  # ZeroDivisionError
+    ("correction_tau", -1, r"^LocalSettings\.correction_tau must be > 0 and <= 60, got -1$"),
+    ("correction_tau", NAN, r"^LocalSettings\.correction_tau must be a finite number, got nan$"),  # NaN poses
+    ("align_window", -1, r"^LocalSettings\.align_window must be >= 0 and <= 10, got -1$"),
+    ("align_window", 1e7, r"^LocalSettings\.align_window must be >= 0 and <= 10, got 1e\+07$"),  # 74.5 GiB
+    ("stale_after", NAN, r"^LocalSettings\.stale_after must be a finite number, got nan$"),
+    ("stale_after", 0, r"^LocalSettings\.stale_after must be > 0, got 0$"),
+    ("snap_distance", -1, r"^LocalSettings\.snap_distance must be >= 0, got -1$"),
+    ("snap_angle_deg", 270.0, r"^LocalSettings\.snap_angle_deg must be >= 0 and <= 180, got 270$"),
+    ("operator_deadband", NAN, r"^LocalSettings\.operator_deadband must be a finite number, got nan$"),
+    ("workers", -5, r"^LocalSettings\.workers must be >= 0 and <= 256, got -5$"),
+    ("workers", 2.0, r"^LocalSettings\.workers must be a whole number, got float 2\.0$"),
+    # 0, -1, NaN and 1e30 "succeeded" with no objects in the twin (one log line per object).
+    ("mass_scale", 0, r"^LocalSettings\.mass_scale must be >= 0\.01 and <= 100, got 0$"),
+    ("mass_scale", -1, r"^LocalSettings\.mass_scale must be >= 0\.01 and <= 100, got -1$"),
+    ("mass_scale", NAN, r"^LocalSettings\.mass_scale must be a finite number, got nan$"),
+    ("mass_scale", 1e30, r"^LocalSettings\.mass_scale must be >= 0\.01 and <= 100, got 1e\+30$"),
+    ("hold", None, r"^LocalSettings\.hold must be a HoldSettings, got NoneType None$"),
+    ("defer_touched", "yes", r"^LocalSettings\.defer_touched must be True or False, got str 'yes'$"),
+])
+def test_local_settings_refuse_what_the_twin_cannot_follow_with(field, value, message):
+    from estimation import SettingsError, TwinError
+
+    with pytest.raises(SettingsError, match=message) as caught:
+        replace(LocalSettings(), **{field: value})
+    assert isinstance(caught.value, TwinError) and isinstance(caught.value, ValueError)
+
+
+@pytest.mark.parametrize(("field", "value", "message"), [
+    ("force_rate", NAN, r"^OperatorSettings\.force_rate must be a finite number, got nan$"),
+    ("force_rate", -1, r"^OperatorSettings\.force_rate must be >= 0 and <= 100000, got -1$"),
+    ("force_rate", float("inf"), r"^OperatorSettings\.force_rate must be a finite number, got inf$"),
+    ("reach", -1, r"^OperatorSettings\.reach must be >= 0 and <= 10, got -1$"),
+    ("reach", NAN, r"^OperatorSettings\.reach must be a finite number, got nan$"),
+    ("listen", 1, r"^OperatorSettings\.listen must be True or False, got int 1$"),
+])
+def test_operator_settings_refuse_a_rate_or_reach_the_twin_cannot_use(field, value, message):
+    from estimation import SettingsError
+
+    with pytest.raises(SettingsError, match=message):
+        OperatorSettings(**{field: value})
+
+
+def test_the_mass_scale_range_is_one_definition_for_the_twin_and_the_experiments():
+    from scenes import experiment
+    from twin import runtime
+
+    assert experiment.MASS_SCALE_RANGE is runtime.MASS_SCALE_RANGE
+    low, high = runtime.MASS_SCALE_RANGE
+    assert LocalSettings(mass_scale=low).mass_scale == low and LocalSettings(mass_scale=high).mass_scale == high
+
+
+def test_settings_at_their_limits_still_run_a_session(cache):
+    settings = LocalSettings(align_window=0.0, correction_tau=1e-3, mass_scale=2.0, snap_angle_deg=180.0)
+    with Headless(load_scene(SMALL), cache_dir=cache, settings=settings, epoch=0,
+                  operator=OperatorSettings(force_rate=100_000.0, reach=10.0)) as session:
+        session.run(0.1, trajectory=_push(session))
+        assert sorted(session.local.objects) == ["can", "crate"]
+        assert session.local.report.forces_sent > 0
+
+
+@pytest.mark.parametrize(("options", "message"), [
+    # Every message of a negative epoch was dropped by the twin (an empty twin); 2**70 failed to encode.
+    ({"epoch": -1}, r"^Remote: epoch must be None or a whole number from 0 to 2\*\*63 - 1 \(the wire's range\), "
+                    r"got -1$"),
+    ({"epoch": 2**63}, r"got 9223372036854775808$"),
+    ({"epoch": 2**70}, r"got 1180591620717411303424$"),
+    ({"epoch": "x"}, r"got 'x'$"),
+    ({"epoch": True}, r"got True$"),
+    ({"points": 10**9}, r"^Remote: points must be None or a whole number from 100 to 10000000, got 1000000000$"),
+    ({"points": 0}, r"from 100 to 10000000, got 0$"),
+    ({"points": 5000.0}, r"from 100 to 10000000, got 5000\.0$"),
+])
+def test_remote_options_out_of_the_wires_range_are_refused_before_any_work(cache, options, message):
+    from estimation import SettingsError
+
+    with pytest.raises(SettingsError, match=message):
+        Headless(load_scene(SMALL), cache_dir=cache, **options)
+
+
+@pytest.mark.parametrize(("options", "message"), [
+    ({"settings": None}, r"^Headless: settings must be a LocalSettings, got NoneType$"),
+    ({"operator": {"listen": True}}, r"^Headless: operator must be an OperatorSettings, got dict$"),
+    ({"network": "x"}, r"^Headless: network must be a sync\.netem\.Network or None, got str$"),
+])
+def test_headless_names_a_wrong_argument_in_one_line(cache, options, message):
+    with pytest.raises(TypeError, match=message):
+        Headless(load_scene(SMALL), cache_dir=cache, **options)
+    with pytest.raises(TypeError, match=r"^Headless: scene must be a SceneSpec \(load_scene\(path\) reads one\), got str$"):
+        Headless(str(SMALL))
+
+
+def test_bad_durations_are_refused_and_every_loop_simulates_its_duration(cache):
+    from twin.loop import LoopError
+
+    with Headless(load_scene(SMALL), cache_dir=cache) as session:
+        for bad, message in ((-1.0, "at least 0, got -1"), (float("nan"), "got nan"), ("1", "got '1'")):
+            with pytest.raises(LoopError, match=f"^duration must be .*{message}$"):  # -1 ran nothing, silently
+                session.run(bad)
+        t0 = session.local.twin.time
+        session.run(0.1, trajectory=lambda t: None)  # None: no new target, as run_paced takes it
+        assert session.local.twin.time - t0 == pytest.approx(0.1)
+        # The remote's and the twin's own loops, on the simulated clock: 500 Hz is two steps an iteration.
+        remote_t0, local_t0, clock_t0 = session.remote.twin.time, session.local.twin.time, session.clock.now()
+        stats = session.remote.run(0.2, rate=500.0)
+        assert stats.steps == 100 and session.remote.twin.time - remote_t0 == pytest.approx(0.2)
+        assert session.clock.now() - clock_t0 == pytest.approx(0.2)
+        stats = session.local.run(0.2, rate=500.0)
+        assert stats.steps == 100 and session.local.twin.time - local_t0 == pytest.approx(0.2)
+        with pytest.raises(LoopError, match=r"^rate 700 Hz is not a whole number .* the nearest are 1000 and 500 Hz$"):
+            session.remote.run(1.0, rate=700.0)
+        with pytest.raises(LoopError, match=r"^rate 3000 Hz is faster than the physics"):
+            session.local.run(1.0, rate=3000.0)
+
+
+def test_a_replay_refuses_recorded_targets_out_of_reach(cache, tmp_path, capsys):
+    from cli.main import main
+    from cli.record import replay
+    from twin.trajectory import TrajectoryError
+
+    path = tmp_path / "far.mcap"
+    with Headless(load_scene(SMALL), cache_dir=cache, record=path) as session:
+        start = session.local.twin.data.mocap_pos[0].copy()
+        session.run(0.05, trajectory=lambda t: start if t < 0.02 else np.array([999.0, -999.0, 999.0]))
+    with pytest.raises(TrajectoryError, match=r"far.mcap: the target at t = 0.02\d* s, \(999, -999, 999\) m, is outside "
+                                              r"the operator's reach \(x -2.5 to 2.5, y -2.3 to 2.3, z 0 to 2.5 m\)$"):
+        replay(path, cache_dir=cache)  # replayed silently before
+    script = tmp_path / "mm.csv"
+    script.write_text("t,x,y,z\n0,-300,0,560\n0.05,-250,0,560\n")
+    assert main(["replay", str(path), "--script", str(script), "--cache-dir", str(cache)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.endswith("looks like millimetres: pass --units mm\n"), err
+    assert main(["replay", str(path), "--script", str(script), "--units", "mm", "--cache-dir", str(cache),
+                 "--json"]) == 0

@@ -143,3 +143,36 @@ def test_nlerp_of_a_stack_is_the_nlerp_of_each_row_the_short_way():
         np.testing.assert_allclose(stack[k], nlerp(a[k], b[k], 0.3), atol=1e-12)
         np.testing.assert_allclose(nlerp(a[k], -b[k], 1.0), nlerp(a[k], b[k], 1.0), atol=1e-12)  # -q is q
         assert angle_deg(nlerp(a[k], b[k], 0.5), b[k]) <= angle_deg(a[k], b[k]) / 2 + 1e-6
+
+
+@pytest.mark.parametrize(("field", "value", "message"), [
+    # A NaN threshold compares false: the hold pinned nothing, without a word.
+    ("distance", float("nan"), r"^HoldSettings\.distance must be a finite number, got nan$"),
+    ("distance", -0.001, r"^HoldSettings\.distance must be >= 0, got -0\.001$"),
+    ("angle_deg", 200.0, r"^HoldSettings\.angle_deg must be >= 0 and <= 180, got 200$"),
+    ("after", float("inf"), r"^HoldSettings\.after must be a finite number, got inf$"),
+    ("rest_speed", -1, r"^HoldSettings\.rest_speed must be >= 0, got -1$"),
+    ("rest_spin", "0.1", r"^HoldSettings\.rest_spin must be a number, got str '0\.1'$"),
+    ("quiet", None, r"^HoldSettings\.quiet must be a number, got NoneType None$"),
+    # 0 looked at every step but never pulled a pinned object back; -1 the same.
+    ("check_every", 0, r"^HoldSettings\.check_every must be > 0 and <= 1, got 0$"),
+    ("check_every", -1, r"^HoldSettings\.check_every must be > 0 and <= 1, got -1$"),
+    ("check_every", 5.0, r"^HoldSettings\.check_every must be > 0 and <= 1, got 5$"),
+    ("enabled", "no", r"^HoldSettings\.enabled must be True or False, got str 'no'$"),
+])
+def test_hold_settings_refuse_what_the_hold_cannot_mean(field, value, message):
+    from twin.settings import SettingsError
+
+    with pytest.raises(SettingsError, match=message):
+        HoldSettings(**{field: value})
+
+
+def test_hold_settings_at_their_limits_still_hold(built):
+    # 0 thresholds and the longest look are values the hold can use: an object straying at all is pinned.
+    settings = HoldSettings(distance=0.0, angle_deg=180.0, after=0.0, rest_speed=0.0, rest_spin=0.0, quiet=0.0,
+                            check_every=1.0)
+    with Twin(built.spec, built.model) as twin:
+        hold = Hold(settings)
+        pos, quat = twin.pose("crate")
+        hold.target("crate", pos + np.array([0.0, 0.0, 0.01]), quat, np.zeros(3), np.zeros(3), twin.time)
+        assert hold.apply(twin) == ["crate"]

@@ -391,3 +391,42 @@ def test_a_scene_path_that_is_a_folder_or_a_device_says_which(tmp_path):
         load_scene("/dev/null")
     with pytest.raises(SceneError, match=r"no such scene file$"):
         load_scene(tmp_path / "gone.toml")
+
+
+def test_toml_text_given_to_load_scene_says_to_parse_it():
+    """The whole text came back in a multi-line "cannot read ...: File name too long"."""
+    text = (Path(__file__).parent / "data" / "small.toml").read_text()
+    for toml in (text, 'name = "x"', "[table]"):
+        with pytest.raises(SceneError, match=r"^load_scene takes a path, got TOML text: "
+                                             r"use parse_scene\(tomllib\.loads\(text\), base=FOLDER\)$"):
+            load_scene(toml)
+
+
+def test_load_scene_names_a_path_that_is_no_path_in_one_line():
+    for path, kind in ((None, "NoneType"), (3, "int"), (b"small.toml", "bytes")):
+        with pytest.raises(TypeError, match=rf"^load_scene takes a path \(str or os\.PathLike\), got {kind}$"):
+            load_scene(path)  # type: ignore[arg-type]
+
+
+def test_a_scene_path_in_a_loop_of_links_or_to_nothing_says_so(tmp_path):
+    """A symlink loop was reported as "no such scene file"."""
+    (tmp_path / "a.toml").symlink_to("b.toml")
+    (tmp_path / "b.toml").symlink_to("a.toml")
+    (tmp_path / "gone.toml").symlink_to("nothing.toml")
+    with pytest.raises(SceneError, match=r"a\.toml: symlink loop \(a link leads back to itself\)$"):
+        load_scene(tmp_path / "a.toml")
+    with pytest.raises(SceneError, match=r"gone\.toml: a symlink to nothing\.toml, which does not exist$"):
+        load_scene(str(tmp_path / "gone.toml"))
+
+
+def test_parse_scene_takes_its_folder_as_a_string_too(tmp_path):
+    """base="str" was a TypeError (str / str)."""
+    import trimesh
+
+    trimesh.creation.box(extents=[0.1, 0.1, 0.1]).export(tmp_path / "m.stl")
+    doc = {"name": "x", "objects": [{"id": "a", "mesh": "m.stl"}]}
+    assert parse_scene(doc, base=str(tmp_path)).objects[0] == parse_scene(doc, base=tmp_path).objects[0]
+    with pytest.raises(TypeError, match=r"^parse_scene: base must be a folder path \(str or os\.PathLike\), got NoneType$"):
+        parse_scene(doc, base=None)  # type: ignore[arg-type]
+    with pytest.raises(TypeError, match=r"^parse_scene: path must be a file path or None, got int$"):
+        parse_scene(doc, base=tmp_path, path=3)  # type: ignore[arg-type]

@@ -588,3 +588,109 @@ def test_warnings_wait_for_success_and_only_the_first_few_are_kept(monkeypatch, 
     shown = [r.getMessage() for r in caplog.records]  # the log's records (pytest holds the handlers)
     assert sum(m.startswith("RuntimeWarning: overflow") for m in shown) == cli.MAX_HELD_WARNINGS, shown
     assert "5 more warnings" in shown, shown
+
+
+def test_a_closed_twin_refuses_to_step_or_change_and_closing_again_does_nothing(built):
+    """After close, step() stepped on and edit_async() started a compile thread nothing shut down."""
+    import threading
+
+    from twin.sim import TwinClosedError
+
+    def compile_threads() -> list[str]:
+        return [t.name for t in threading.enumerate() if t.name.startswith("twin-compile")]
+
+    twin = Twin(built.spec.copy())  # background: edits compile in a thread
+    twin.edit_async(lambda spec: None).result()
+    assert compile_threads()
+    twin.step(5)
+    twin.close()
+    assert not compile_threads() and twin.closed
+    t, qpos = twin.time, twin.data.qpos.copy()
+    refused = [twin.step, lambda: twin.step(10), lambda: twin.edit(lambda spec: None),
+               lambda: twin.edit_async(lambda spec: None), lambda: twin.remove("crate"),
+               lambda: twin.set_end_effector(np.zeros(3)), lambda: twin.set_pose("crate", np.zeros(3), np.ones(4)),
+               lambda: twin.set_velocity("crate", np.zeros(3), np.zeros(3)), twin.__enter__]
+    for call in refused:
+        with pytest.raises(TwinClosedError, match=r"^twin is closed$"):
+            call()
+    assert not compile_threads() and twin.edits_pending == 0
+    assert twin.time == t and np.array_equal(twin.data.qpos, qpos)
+    twin.close()  # idempotent
+    assert np.isfinite(twin.pose("crate")[0]).all()  # reading still works
+
+
+def test_the_twin_names_a_wrong_constructor_argument_in_one_line(built):
+    """Twin(None) was an AttributeError ('compile'), Twin(spec, "model") a multi-line pybind TypeError."""
+    for args, message in (((None,), r"^Twin: spec must be a mujoco\.MjSpec, got NoneType$"),
+                          (("scene.xml",), r"^Twin: spec must be a mujoco\.MjSpec, got str$"),
+                          ((built.spec, "model"), r"^Twin: model must be a mujoco\.MjModel or None, got str$")):
+        with pytest.raises(TypeError, match=message):
+            Twin(*args)
+
+
+@pytest.mark.parametrize("rate", [1000.0, 500.0, 1000 / 3, 333.333, 0.5])
+def test_a_paced_run_simulates_its_duration_and_keeps_to_its_clock(built, rate):
+    from sync.clock import SimClock
+
+    # Paced against a simulated clock, so the pacing is checked without timing anything: each iteration's
+    # deadline is 1/rate of clock time after the last, and it must cover 1/rate of simulated time.
+    clock = SimClock()
+    duration = 4.0 if rate < 1 else 0.3
+    with Twin(built.spec, built.model) as twin:
+        stats = run_paced(twin, duration, rate, clock=clock)
+        assert twin.time == pytest.approx(duration, abs=1e-9)
+    assert stats.steps == round(duration * rate) and clock.now() == pytest.approx(duration, abs=1e-9)
+
+
+@pytest.mark.parametrize(("rate", "message"), [
+    (700.0, r"^rate 700 Hz is not a whole number of 1 ms physics steps per iteration: use 1000 Hz divided by a "
+            r"whole number \(1000, 500, 333.333, 250, ...\); the nearest are 1000 and 500 Hz$"),
+    (3000.0, r"^rate 3000 Hz is faster than the physics: .* 1000 Hz at most; the rates that work are"),
+    (100000.0, r"^rate 100000 Hz is faster than the physics"),
+    (0, r"^rate must be a finite number of Hz above 0, got 0$"),
+    (-1, r"^rate must be a finite number of Hz above 0, got -1$"),
+    (float("nan"), r"^rate must be a finite number of Hz above 0, got nan$"),
+    (float("inf"), r"^rate must be a finite number of Hz above 0, got inf$"),
+    ("1000", r"^rate must be a number of Hz, got '1000'$"),
+    (1e-320, r"^rate .* Hz is too slow for any loop"),
+])
+def test_rates_that_are_not_whole_physics_steps_are_refused(built, rate, message):
+    from estimation.errors import TwinError
+    from twin.loop import LoopError
+
+    with Twin(built.spec, built.model) as twin, pytest.raises(LoopError, match=message) as err:
+        run_paced(twin, 1.0, rate, realtime=False)
+    assert isinstance(err.value, TwinError) and isinstance(err.value, ValueError) and twin.time == 0
+
+
+@pytest.mark.parametrize(("duration", "message"), [
+    ("1", r"^duration must be a number of seconds, got '1'$"),
+    (True, r"^duration must be a number of seconds, got True$"),
+    (-1.0, r"^duration must be a finite number of seconds, at least 0, got -1$"),
+    (float("nan"), r"^duration must be a finite number of seconds, at least 0, got nan$"),
+    (float("inf"), r"^duration must be a finite number of seconds, at least 0, got inf$"),
+    (0.0004, r"^duration 0.0004 s is shorter than one iteration at 1000 Hz \(0.001 s each\): nothing would run$"),
+])
+def test_bad_durations_are_refused(built, duration, message):
+    from twin.loop import LoopError
+
+    with Twin(built.spec, built.model) as twin, pytest.raises(LoopError, match=message):
+        run_paced(twin, duration, 1000.0, realtime=False)
+
+
+def test_a_trajectory_returning_none_sets_no_new_target(built):
+    with Twin(built.spec, built.model) as twin:
+        start = twin.data.mocap_pos[0].copy()
+        run_paced(twin, 0.05, 1000.0, trajectory=lambda t: None, realtime=False)  # was "must be 3 finite numbers"
+        assert np.array_equal(twin.data.mocap_pos[0], start) and twin.time == pytest.approx(0.05)
+
+
+def test_cli_run_simulates_duration_seconds_at_any_rate_it_takes(capsys):
+    for rate in ("500", "1000"):
+        assert main(["run", str(SMALL), "--duration", "1", "--rate", rate, "--no-realtime", "--json"]) == 0
+        record = json.loads(capsys.readouterr().out)
+        assert record["sim_time_s"] == pytest.approx(1.0) and record["steps"] == int(rate)
+    for rate in ("700", "3000"):  # 0.7 s and 3 s simulated before, 3x the wall clock in real time at 3000
+        assert main(["run", str(SMALL), "--duration", "1", "--rate", rate, "--no-realtime"]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and "1000 Hz divided by a whole number (1000, 500, 333.333, 250, ...)" in err, err

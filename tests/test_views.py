@@ -5,6 +5,7 @@ two-camera ray-cast scan (scenes/cameras.py, Kinect noise) of an L-bracket on a 
 from __future__ import annotations
 
 import json
+import re
 
 import numpy as np
 import pytest
@@ -814,3 +815,33 @@ def test_a_sparse_table_does_not_cut_away_the_object_standing_on_it():
                             support=plane_from_abcd([0, 0, 1, 0]))
     seen = int((cube[:, 2] > 0.003).sum())  # the cube's points above any noise band of the table
     assert result.object_points >= seen
+
+
+def test_views_may_come_from_a_generator_or_a_tuple():
+    """A generator was used up by the type check: "no view saw any point of the object"."""
+    points, origin = _ball_view()
+    volume = estimate_views([View(points, origin)], 1000.0, support="auto").estimate.volume
+    assert estimate_views((View(p, o) for p, o in [(points, origin)]), 1000.0, support="auto").estimate.volume == volume
+    assert estimate_views((View(points, origin),), 1000.0, support="auto").estimate.volume == volume
+    with pytest.raises(TypeError, match=r"^estimate_views takes a list of View records"):
+        estimate_views(5, 1000.0)  # not iterable at all
+
+
+@pytest.mark.parametrize(("seed", "shown"), [
+    (-1, "-1"),  # numpy: "expected non-negative integer"
+    (1.5, "1.5"),  # numpy: a SeedSequence TypeError
+    ("x", "'x'"),
+    (True, "True"),
+    pytest.param(-(2**5000), "an integer of 5001 bits", id="huge"),  # its repr is past Python's 4300 digits
+])
+def test_a_seed_numpy_cannot_take_is_one_line_naming_it(seed, shown):
+    from estimation import SettingsError
+
+    with pytest.raises(SettingsError, match=rf"^seed must be a whole number >= 0, got {re.escape(shown)}$"):
+        estimate_views([View(*_ball_view())], 1000.0, support="auto", seed=seed)
+
+
+def test_any_whole_seed_numpy_takes_is_taken():
+    points, origin = _ball_view()
+    for seed in (0, np.int64(7), 2**70):
+        assert estimate_views([View(points, origin)], 1000.0, support="auto", seed=seed).estimate.volume > 0

@@ -16,6 +16,8 @@ from estimation.lazyexports import lazy_exports
 _EXPORTS = {
     "Twin": "twin.sim",
     "run_paced": "twin.sim",
+    "TwinClosedError": "twin.sim",
+    "SettingsError": "twin.settings",
     "TwinObject": "twin.objects",
     "object_at_estimate": "twin.objects",
     "PhysicsSettings": "twin.model",
@@ -32,6 +34,8 @@ _EXPORTS = {
     "SyncError": "twin.runtime",
     "HoldSettings": "twin.hold",
     "LoopStats": "twin.loop",
+    "LoopError": "twin.loop",
+    "Waypoints": "twin.trajectory",
     "load_trajectory": "twin.trajectory",
     "push_trajectory": "twin.trajectory",
     "TrajectoryError": "twin.trajectory",

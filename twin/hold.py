@@ -22,6 +22,7 @@ import numpy as np
 from twin.contacts import contact_component, geom_roots
 from twin.model import EE_BODY, free_joint
 from twin.poses import blend
+from twin.settings import check_number, check_type
 
 
 @dataclass(frozen=True)
@@ -48,6 +49,25 @@ class HoldSettings:
     quiet: float = 0.1
     check_every: float = 0.005
 
+    def __post_init__(self) -> None:
+        """Refuse what the hold cannot mean: NaN compares false, so a NaN threshold pinned nothing without a word.
+
+        Raises:
+            SettingsError: ``enabled`` not a bool; a distance, speed or time negative, NaN or infinite; an angle
+                outside [0, 180]; ``check_every`` not in (0, :data:`MAX_CHECK_EVERY`].
+        """
+        check_type(self, "enabled", bool, "True or False")
+        # Any finite size or time means something (a large one: never pinned, or pinned at once): no upper bound.
+        for name in ("distance", "after", "rest_speed", "rest_spin", "quiet"):
+            check_number(self, name)
+        check_number(self, "angle_deg", high=180.0)  # two orientations are at most 180 degrees apart
+        # 0 looked at every step but never pulled a pinned object back (each look's share of tau was 0).
+        check_number(self, "check_every", low_ok=False, high=MAX_CHECK_EVERY)
+
+
+#: The longest ``check_every``, seconds: a push lasts a fraction of a second, and looks further apart than this
+#: miss whole pushes, so the hold would pin an object the operator is moving.
+MAX_CHECK_EVERY = 1.0
 
 DEFAULT_HOLD = HoldSettings()
 

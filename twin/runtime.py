@@ -30,6 +30,7 @@ from __future__ import annotations
 import logging
 import math
 import multiprocessing as mp
+import os
 import queue
 from collections import Counter
 from concurrent.futures import Future, ProcessPoolExecutor
@@ -69,7 +70,7 @@ from twin.debuglog import OFF, DebugLog, display_subset
 from twin.decompose import DEFAULT_SETTINGS, CoacdSettings
 from twin.history import CORRECTION, STATE, History
 from twin.hold import DEFAULT_HOLD, Hold, HoldSettings
-from twin.loop import LoopStats, run_loop
+from twin.loop import LoopStats, run_loop, steps_per_iteration
 from twin.model import (
     RESERVED_IDS,
     SCENE_REACH,
@@ -84,6 +85,7 @@ from twin.model import (
 from twin.objects import DEFAULT_FRICTION, TwinObject, lowest_point, object_at_estimate
 from twin.poses import from_rotvec, quat_conj, quat_mul, quat_product, rotation, to_rotvec
 from twin.samples import Samples
+from twin.settings import MAX_RATE_HZ, MAX_WORKERS, check_number, check_type
 from twin.sim import Twin
 from twin.trajectory import Trajectory
 from twin.workers import background_worker
@@ -129,6 +131,46 @@ class LocalSettings:
     mass_scale: float = 1.0
     defer_touched: bool = True
 
+    def __post_init__(self) -> None:
+        """Refuse what the twin cannot follow a remote with, before a session starts.
+
+        Raises:
+            SettingsError: a time, distance or angle NaN, infinite, negative or past its bound below (0 for
+                ``stale_after`` and ``correction_tau``); ``workers`` not a whole number from 0 to
+                :data:`twin.settings.MAX_WORKERS`; ``mass_scale`` outside :data:`MASS_SCALE_RANGE`; ``hold``,
+                ``coacd``, ``cache_dir`` or ``defer_touched`` of the wrong type.
+        """
+        # Any finite silence means something (a long one: the link is never marked stale).
+        check_number(self, "stale_after", low_ok=False)
+        # 0 divided by zero; a time constant past MAX_CORRECTION_TAU leaves corrections unfinished for ever.
+        check_number(self, "correction_tau", low_ok=False, high=MAX_CORRECTION_TAU)
+        check_number(self, "align_window", high=MAX_ALIGN_WINDOW)  # 0: compare with C' now
+        # Any finite distance means something (past the scene's size: never snap, never publish).
+        check_number(self, "snap_distance")
+        check_number(self, "operator_deadband")
+        check_number(self, "snap_angle_deg", high=180.0)  # two orientations are at most 180 degrees apart
+        check_number(self, "workers", high=MAX_WORKERS, whole=True)
+        low, high = MASS_SCALE_RANGE
+        check_number(self, "mass_scale", low=low, high=high)
+        check_type(self, "hold", HoldSettings, "a HoldSettings")
+        check_type(self, "coacd", CoacdSettings, "a CoacdSettings")
+        check_type(self, "cache_dir", (str, os.PathLike, type(None)), "a folder path or None")
+        check_type(self, "defer_touched", bool, "True or False")
+
+
+#: Twin mass / true mass ``LocalSettings.mass_scale`` and an experiment's conditions may ask for: a twin a
+#: hundred times off is no twin, and far below it MuJoCo refuses the bodies (1e-300 made every step fail
+#: while the sweep went on; 0 or a negative one left the twin empty, an error logged per object).
+MASS_SCALE_RANGE = (0.01, 100.0)
+
+#: The longest ``LocalSettings.correction_tau``, seconds: a blend slower than a minute never lands between
+#: the remote's keyframes (one a second), so the twin would follow nothing.
+MAX_CORRECTION_TAU = 60.0
+
+#: The longest ``LocalSettings.align_window``, seconds: ten times the default, past any round trip a twin can
+#: be operated through. The history keeps 200 bytes per object per step: 10 s at 1 kHz is 2 MB an object
+#: (1e7 s asked for 74.5 GiB at once).
+MAX_ALIGN_WINDOW = 10.0
 
 DEFAULT_LOCAL = LocalSettings()
 
@@ -158,6 +200,18 @@ class OperatorSettings:
     listen: bool = False
     force_rate: float = 0.0
     reach: float = OPERATOR_REACH
+
+    def __post_init__(self) -> None:
+        """Refuse a rate or reach the twin cannot use (NaN published no force and took no target, unsaid).
+
+        Raises:
+            SettingsError: ``listen`` not a bool; ``force_rate`` outside 0 .. :data:`twin.settings.MAX_RATE_HZ`; ``reach``
+                outside 0 .. :data:`twin.model.SCENE_REACH`.
+        """
+        check_type(self, "listen", bool, "True or False")
+        check_number(self, "force_rate", high=MAX_RATE_HZ)
+        # Targets beyond the scene's own reach are beyond every object the twin keeps (poses there are dropped).
+        check_number(self, "reach", high=SCENE_REACH)
 
 
 NO_OPERATOR_IO = OperatorSettings()
@@ -377,13 +431,17 @@ class Local:
 
         ``trajectory(t) -> (3,)`` is the operator's end-effector target at twin time t (None: hold).
         On a real clock the loop waits on incoming messages between steps, so a pose correction is
-        applied when it arrives, not at the next step.
+        applied when it arrives, not at the next step. Each of the ``rate`` iterations a second is a whole
+        number of :meth:`iterate` calls, one physics step each (:func:`twin.loop.steps_per_iteration`), so
+        ``duration`` is simulated seconds too.
         """
+        rate, steps = steps_per_iteration(rate, float(self.twin.model.opt.timestep))
 
         def body() -> None:
             busy = self.adding
             t0 = self.clock.now()
-            self.iterate(trajectory)
+            for _ in range(steps):
+                self.iterate(trajectory)
             if busy:
                 self.report.worst_step_while_adding = max(self.report.worst_step_while_adding, self.clock.now() - t0)
 

@@ -11,15 +11,20 @@ from concurrent.futures import Future, ThreadPoolExecutor
 
 import numpy as np
 
+from estimation.errors import TwinError
 from sync.clock import REAL_CLOCK, Clock
 from sync.messages import MAX_ANGULAR_SPEED, MAX_COORDINATE, MAX_SPEED
 from twin.debuglog import OFF, DebugLog
-from twin.loop import LoopStats, run_loop
+from twin.loop import LoopStats, run_loop, steps_per_iteration
 from twin.model import EE_BODY, EE_TARGET, add_object, free_joint, remove_object
 from twin.objects import TwinObject
 from twin.trajectory import Trajectory
 
 log = logging.getLogger(__name__)
+
+
+class TwinClosedError(TwinError, RuntimeError):
+    """A closed :class:`Twin` was asked to step or change."""
 
 
 class Twin:
@@ -37,11 +42,29 @@ class Twin:
     second thread runs on the same ``mjData`` at the same time and corrupts it (a segfault in practice).
     One thread steps and edits a twin; others hand it work (:meth:`edit_async`, or a queue drained by the
     loop as :class:`scenes.remote.Remote` and :class:`twin.runtime.Local` do).
+
+    After :meth:`close`, stepping, editing and the setters raise :class:`TwinClosedError`; reading (poses,
+    time) still works, and closing again does nothing.
     """
 
     def __init__(self, spec, model=None, *, background: bool = True) -> None:  # type: ignore[no-untyped-def]
+        """
+        Args:
+            spec: the scene's ``mujoco.MjSpec``; later edits copy it.
+            model: ``spec`` compiled (None: compiled here).
+            background: compile :meth:`edit_async` edits in a thread (see the class).
+
+        Raises:
+            TypeError: ``spec`` not an ``MjSpec``, or ``model`` neither None nor an ``MjModel``.
+        """
         import mujoco
 
+        # Checked here: None was an AttributeError ('compile'), a wrong model a multi-line pybind TypeError.
+        if not isinstance(spec, mujoco.MjSpec):
+            raise TypeError(f"Twin: spec must be a mujoco.MjSpec, got {type(spec).__name__}")
+        if model is not None and not isinstance(model, mujoco.MjModel):
+            raise TypeError(f"Twin: model must be a mujoco.MjModel or None, got {type(model).__name__}")
+        self._closed = False
         self.spec = spec
         self.model = model if model is not None else spec.compile()
         self.data = mujoco.MjData(self.model)
@@ -58,16 +81,28 @@ class Twin:
         self._index_of, self._index = None, {}  # joint() look-ups of this model
 
     def __enter__(self) -> Twin:
+        self._check_open()
         return self
 
     def __exit__(self, *exc: object) -> None:
         self.close()
 
     def close(self) -> None:
-        """Stop the background compiler (pending edits are dropped)."""
+        """Stop the background compiler (pending edits are dropped); from now on the twin only reads. Idempotent."""
+        self._closed = True
         if self._editor is not None:
             self._editor.shutdown(wait=True, cancel_futures=True)
             self._editor = None
+        self._pending.clear()
+
+    @property
+    def closed(self) -> bool:
+        return self._closed
+
+    def _check_open(self) -> None:
+        """Raises: TwinClosedError: :meth:`close` was called."""
+        if self._closed:
+            raise TwinClosedError("twin is closed")
 
     @property
     def time(self) -> float:
@@ -82,9 +117,12 @@ class Twin:
 
         Raises:
             ValueError: ``n`` is not a whole number >= 0 (0 steps nothing).
+            TwinClosedError: the twin is closed.
         """
         import mujoco
 
+        if self._closed:  # the 1 kHz path: one attribute test, not a call
+            raise TwinClosedError("twin is closed")
         # bool is an int to Python, and mj_step takes -1 or 2.5 without a word and steps nothing.
         if not isinstance(n, numbers.Integral) or isinstance(n, bool) or n < 0:
             raise ValueError(f"step count n must be a whole number >= 0, got {n!r}")
@@ -135,8 +173,9 @@ class Twin:
 
         Raises:
             LookupError: the scene has no end effector. ValueError: not 3 finite numbers within
-                :data:`sync.messages.MAX_COORDINATE` of the origin.
+                :data:`sync.messages.MAX_COORDINATE` of the origin. TwinClosedError: the twin is closed.
         """
+        self._check_open()
         if self._mocap is None:
             raise LookupError("this scene has no end effector")
         self.data.mocap_pos[self._mocap] = _vector(position, 3, MAX_COORDINATE, "end-effector target", "m")
@@ -228,8 +267,10 @@ class Twin:
         """Apply ``edit(spec)`` and swap the compiled model in now. Do not call while edits are pending.
 
         Raises:
+            TwinClosedError: the twin is closed.
             whatever ``edit`` or the compiler raised; the twin keeps its model and spec.
         """
+        self._check_open()
         spec, model = self._compile_edit(edit)
         self.spec = spec
         self._swap(model)
@@ -242,7 +283,11 @@ class Twin:
         body's state as it is at that moment; ``then()`` runs right after the swap (e.g. to set a pose).
         If the edit or the compile fails, nothing is swapped, ``failed(exc)`` is called from :meth:`poll`,
         and later edits start from the last spec that compiled. Edits apply in submission order.
+
+        Raises:
+            TwinClosedError: the twin is closed (a new compile thread would outlive it).
         """
+        self._check_open()
         if not self.background:
             future: Future = Future()
             try:
@@ -317,7 +362,9 @@ class Twin:
             KeyError: no such object. ValueError: ``linear`` or ``angular`` not 3 finite numbers, or faster
                 than :data:`sync.messages.MAX_SPEED` m/s or :data:`~sync.messages.MAX_ANGULAR_SPEED` rad/s
                 (what the wire takes: 1e300 m/s went into MuJoCo's state and blew the step up).
+            TwinClosedError: the twin is closed.
         """
+        self._check_open()
         adr, xmat = self._dof(object_id)
         what = f"object {object_id!r}: "
         linear = _vector(linear, 3, MAX_SPEED, what + "linear velocity", "m/s", norm=True)
@@ -345,9 +392,11 @@ class Twin:
             KeyError: no such object. ValueError: ``position`` not 3 finite numbers within
                 :data:`sync.messages.MAX_COORDINATE` of the origin, or ``quat`` not 4 finite numbers with a
                 non-zero norm.
+            TwinClosedError: the twin is closed.
         """
         import mujoco
 
+        self._check_open()
         _, adr, _ = self.joint(object_id)
         position = _vector(position, 3, MAX_COORDINATE, f"object {object_id!r}: position", "m")
         quat = np.asarray(quat, dtype=np.float64)
@@ -421,15 +470,23 @@ def run_paced(twin: Twin, duration: float, rate: float, *, trajectory: Trajector
               clock: Clock = REAL_CLOCK, realtime: bool = True, rlog: DebugLog = OFF) -> LoopStats:
     """Step ``twin`` at ``rate`` Hz for ``duration`` simulated seconds (:func:`twin.loop.run_loop`).
 
-    Each iteration moves the end effector along ``trajectory(t) -> (3,)`` (if given), steps the physics
-    enough to cover 1/rate of simulated time, and, when ``realtime``, waits for the next deadline. A step
-    that ends after its deadline counts as missed. Poses and force go to ``rlog`` at its own rate.
+    Each iteration moves the end effector along ``trajectory(t) -> (3,)`` (if given; None from it: no new
+    target, as :class:`twin.runtime.Local` takes it), steps the physics 1/rate seconds (a whole number of
+    steps: :func:`twin.loop.steps_per_iteration`), and, when ``realtime``, waits for the next deadline, so
+    simulated time keeps to the wall clock. A step that ends after its deadline counts as missed. Poses and
+    force go to ``rlog`` at its own rate.
+
+    Raises:
+        LoopError: a duration that is not a finite number at least 0, or a rate that is not 1 / (k * timestep)
+            for a whole k (1000, 500, 333.333 ... Hz at 1 ms).
     """
-    substeps = max(1, round(1.0 / rate / twin.model.opt.timestep))
+    rate, substeps = steps_per_iteration(rate, float(twin.model.opt.timestep))
 
     def body() -> None:
         if trajectory is not None:
-            twin.set_end_effector(trajectory(twin.time))
+            target = trajectory(twin.time)
+            if target is not None:
+                twin.set_end_effector(target)
         twin.step(substeps)
         if rlog.due(twin.time):
             rlog.frame(twin)
