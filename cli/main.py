@@ -654,7 +654,7 @@ def _coacd_settings(args: argparse.Namespace):  # type: ignore[no-untyped-def]
     settings = CoacdSettings(threshold=args.threshold, max_convex_hull=args.max_hulls)
     if settings.threshold < FAST_THRESHOLD:
         print(f"twin {args.command}: warning: --threshold {settings.threshold:g} is below {FAST_THRESHOLD:g}, where "
-              f"CoACD slows sharply (a 2,300-face torus: 2 s at 0.02, 60 s at 0.01); each concave object may take "
+              f"CoACD slows sharply (a 2,300-face torus: 2 s at 0.02, 40 s at 0.01); each concave object may take "
               f"minutes", file=sys.stderr)
     return settings
 

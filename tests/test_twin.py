@@ -425,7 +425,7 @@ def test_build_warns_up_front_of_a_slow_coacd_threshold_and_reports_each_object(
     assert main(["build", str(SMALL), "--out", str(tmp_path / "slow"), "--threshold", f"{slow:g}"]) == 0
     err = capsys.readouterr().err.splitlines()
     assert err[0] == (f"twin build: warning: --threshold {slow:g} is below {FAST_THRESHOLD:g}, where CoACD slows sharply "
-                      f"(a 2,300-face torus: 2 s at 0.02, 60 s at 0.01); each concave object may take minutes")
+                      f"(a 2,300-face torus: 2 s at 0.02, 40 s at 0.01); each concave object may take minutes")
     assert err[1] == "building 'small': 2 objects"
     # A line per object as it is built, whole (not wrapped at 80 columns, as a pipe had it).
     assert sorted(line.split(":")[0] for line in err[2:4]) == ["[1/2] crate", "[2/2] can"]

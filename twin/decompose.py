@@ -99,11 +99,11 @@ class CoacdSettingsError(TwinError, ValueError):
 #: The settings used when none are given.
 DEFAULT_SETTINGS = CoacdSettings()
 
-#: The smallest ``threshold`` at which CoACD stays fast: below it CoACD's search takes many times longer. Wall
-#: seconds, one core, these settings otherwise, on ``trimesh.creation.torus(0.05, 0.02, major_sections=48,
-#: minor_sections=24)`` (2,304 faces, concavity 0.24): threshold 0.08 (the default) 0.8 s, 0.05 1.0 s,
-#: 0.03 1.3 s, 0.02 1.9 s, 0.015 7.1 s, 0.012 16 s, 0.01 60 s; 16 hulls (the cap) from 0.02 down, so the
-#: time below 0.02 buys no more of them. A scene's concave objects each pay it.
+#: The smallest ``threshold`` at which CoACD stays fast: below it CoACD's search takes many times longer.
+#: ``bench/coacd_threshold.py`` (a 2,304-face torus, these settings otherwise; ``bench/results/coacd_threshold.txt``):
+#: wall seconds 0.9 at the default 0.08, 1.2 at 0.03, 1.9 at 0.02, 3.8 at 0.015, 9.7 at 0.012, 39.7 at 0.01
+#: (43x the default); 16 hulls (the cap) from 0.02 down, so the time below 0.02 buys no more of them. A
+#: scene's concave objects each pay it.
 FAST_THRESHOLD = 0.02
 
 
