@@ -165,15 +165,13 @@ def check_args(args: argparse.Namespace) -> None:
         TwinError: a non-finite or out-of-range number, a non-finite --viewpoint, or a --rerun save path
             whose folder does not exist or cannot be written.
     """
+    from estimation.contracts import check_number  # here: numpy, which --help does not need
+
     for attr, (flag, low, low_ok, high) in _NUMBERS.items():
         value = getattr(args, attr, None)
         if value is None:
             continue
-        if not math.isfinite(value):
-            raise TwinError(f"{flag} must be a finite number, got {value}")
-        if value < low or (value == low and not low_ok) or value > high:
-            bounds = f"{'>=' if low_ok else '>'} {low:g}" + (f" and <= {high:g}" if math.isfinite(high) else "")
-            raise TwinError(f"{flag} must be {bounds}, got {refused_number(value, low, high)}")
+        check_number(value, flag, low=low, low_ok=low_ok, high=high, error=TwinError)
     for viewpoint in getattr(args, "viewpoint", None) or ():  # once per view
         if not all(math.isfinite(x) for x in viewpoint):
             raise TwinError(f"--viewpoint must be three finite numbers, got {viewpoint}")
@@ -805,8 +803,6 @@ def _cmd_run(args: argparse.Namespace) -> int:
     from twin.sim import run_paced
     from twin.trajectory import load_trajectory
 
-    if args.duration <= 0 or (args.rate is not None and args.rate <= 0):
-        raise TwinError("--duration and --rate must be positive")
     if args.rate is not None and not Path(args.scene).is_dir():  # before the build (a folder's own timestep:
         steps_per_iteration(args.rate, DEFAULT_PHYSICS.timestep)  # checked by run_paced)
     # Before the build: a bad script costs nothing. Its reach is checked once the scene's table is known.
@@ -871,7 +867,8 @@ def _run_with_viewer(twin, args, trajectory):  # type: ignore[no-untyped-def]
     with mujoco.viewer.launch_passive(twin.model, twin.data) as handle:
         stats = None
         while handle.is_running() and (stats is None or twin.time < args.duration):
-            stats = run_paced(twin, 1.0 / 60, args.rate, trajectory=trajectory)
+            # A 60 Hz frame, or one iteration where the loop runs slower: a shorter frame would run none.
+            stats = run_paced(twin, max(1.0 / 60, 1.0 / args.rate), args.rate, trajectory=trajectory)
             handle.sync()
     return stats
 

@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+import math
+import numbers
+
 import numpy as np
 
 from estimation import tolerances as tol
-from estimation.errors import CloudError, refused_number
+from estimation.errors import CloudError, TwinError, refused_number
 
 
 def as_points(array: object, name: str = "points", *, allow_nonfinite: bool = False, min_rows: int = 0) -> np.ndarray:
@@ -88,3 +91,46 @@ def unit_quaternion(wxyz: object, name: str = "quaternion") -> np.ndarray:
         raise CloudError(f"{name} must have norm 1 (within {tol.QUAT_NORM_TOLERANCE:g}), got "
                          f"{refused_number(norm, 1 - tol.QUAT_NORM_TOLERANCE, 1 + tol.QUAT_NORM_TOLERANCE, digits=4)}")
     return q / norm
+
+
+def check_number(value: object, label: str, *, low: float = 0.0, low_ok: bool = True, high: float = math.inf,
+                 whole: bool = False, error: type[TwinError] = CloudError) -> float:
+    """``value`` as a float if it is a finite number from ``low`` to ``high``, else ``error`` naming ``label``.
+
+    The one range check of settings records, loop rates, remote options and command-line numbers. Huge Python
+    integers are refused by size, not converted: ``float(10**400)`` raises OverflowError.
+
+    Args:
+        value: what came.
+        label: how the message names it (a field, a flag).
+        low, low_ok: the smallest value, and whether ``low`` itself is allowed.
+        high: the largest value allowed (inf: any finite number).
+        whole: it counts something (a whole number, not a bool).
+        error: the error type to raise (a :class:`TwinError`).
+
+    Raises:
+        ``error``: not a number (a bool, a string, None), not whole when ``whole``, NaN or infinite, or outside
+            the range.
+    """
+    kind = numbers.Integral if whole else numbers.Real
+    if isinstance(value, bool) or not isinstance(value, kind):
+        raise error(f"{label} must be a {'whole number' if whole else 'number'}, got {type(value).__name__} "
+                    f"{shown(value)}")
+    bounds = f"{'>=' if low_ok else '>'} {low:g}" + (f" and <= {high:g}" if math.isfinite(high) else "")
+    if isinstance(value, numbers.Integral) and abs(int(value)) > 2**1023:  # past any float: past any bound
+        raise error(f"{label} must be {bounds}, got {shown(value)}")
+    number = float(value)
+    if not math.isfinite(number):
+        raise error(f"{label} must be a finite number, got {number}")
+    if number < low or (number == low and not low_ok) or number > high:
+        raise error(f"{label} must be {bounds}, got {value if whole else refused_number(number, low, high)}")
+    return number
+
+
+def shown(value: object) -> str:
+    """``value`` for a one-line message: a short repr (a megabyte string stays out of the line), a huge integer
+    by its size (the repr of 5000 digits is an error itself)."""
+    if isinstance(value, numbers.Integral) and not isinstance(value, bool) and abs(int(value)).bit_length() > 128:
+        return f"an integer of {abs(int(value)).bit_length()} bits"
+    text = repr(value)
+    return text[:40] + "..." if len(text) > 40 else text

@@ -27,7 +27,7 @@ from estimation import tolerances as tol
 from estimation.carving import DepthView
 from estimation.cloud import check_count_and_range, check_sensor_origin
 from estimation.completion import ONE_SIDED, close_on_plane, honest_bounds, mean_view_direction
-from estimation.contracts import as_points
+from estimation.contracts import as_points, shown
 from estimation.coverage import coverage
 from estimation.errors import CloudError, SettingsError, refused_number
 from estimation.estimate import PhysicalEstimate, estimate
@@ -411,9 +411,7 @@ def estimate_views(views: list[View], density: float, *, support: Plane | str | 
         raise wrong
     # numpy said "expected non-negative integer" for -1, and a SeedSequence TypeError for 1.5.
     if isinstance(seed, bool) or not isinstance(seed, numbers.Integral) or seed < 0:
-        huge = isinstance(seed, numbers.Integral) and abs(int(seed)).bit_length() > 64  # repr of 5000 digits raises
-        shown = f"an integer of {abs(int(seed)).bit_length()} bits" if huge else repr(seed)
-        raise SettingsError(f"seed must be a whole number >= 0, got {shown[:40] + '...' if len(shown) > 40 else shown}")
+        raise SettingsError(f"seed must be a whole number >= 0, got {shown(seed)}")
     for k, view in enumerate(views):
         label = view.name or f"view {k + 1}"
         if view.origin is None:

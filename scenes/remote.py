@@ -21,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
+from estimation.contracts import shown
 from scenes.placement import check_placement
 from scenes.scenefile import MAX_POINTS, MIN_POINTS, ObjectSpec, SceneError, SceneSpec
 from scenes.sensing import Sensor, SurfaceSensor, Track
@@ -93,24 +94,15 @@ def check_remote_options(points: object, epoch: object) -> None:
     """
     if points is not None and not _whole_in(points, MIN_POINTS, MAX_POINTS):
         raise SettingsError(f"Remote: points must be None or a whole number from {MIN_POINTS} to {MAX_POINTS}, "
-                            f"got {_shown(points)}")
+                            f"got {shown(points)}")
     if epoch is not None and not _whole_in(epoch, 0, MAX_INT64):
         raise SettingsError(f"Remote: epoch must be None or a whole number from 0 to 2**63 - 1 (the wire's range), "
-                            f"got {_shown(epoch)}")
+                            f"got {shown(epoch)}")
 
 
 def _whole_in(value: object, low: int, high: int) -> bool:
     """``value`` is a whole number (not a bool, which Python counts as one) from ``low`` to ``high``."""
     return isinstance(value, numbers.Integral) and not isinstance(value, bool) and low <= value <= high
-
-
-def _shown(value: object) -> str:
-    """``value`` for a message: a huge integer by its size (repr of 5000 digits is an error itself), the rest
-    by a short repr."""
-    if isinstance(value, numbers.Integral) and abs(int(value)).bit_length() > 128:
-        return f"an integer of {abs(int(value)).bit_length()} bits"
-    text = repr(value)
-    return text[:40] + "..." if len(text) > 40 else text
 
 
 class Remote:

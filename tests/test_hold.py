@@ -159,6 +159,8 @@ def test_nlerp_of_a_stack_is_the_nlerp_of_each_row_the_short_way():
     ("check_every", -1, r"^HoldSettings\.check_every must be > 0 and <= 1, got -1$"),
     ("check_every", 5.0, r"^HoldSettings\.check_every must be > 0 and <= 1, got 5$"),
     ("enabled", "no", r"^HoldSettings\.enabled must be True or False, got str 'no'$"),
+    # Past the float range: float() of it raised OverflowError, not this.
+    ("distance", 10**400, r"^HoldSettings\.distance must be >= 0, got an integer of 1329 bits$"),
 ])
 def test_hold_settings_refuse_what_the_hold_cannot_mean(field, value, message):
     from twin.settings import SettingsError

@@ -653,6 +653,7 @@ def test_a_paced_run_simulates_its_duration_and_keeps_to_its_clock(built, rate):
     (float("inf"), r"^rate must be a finite number of Hz above 0, got inf$"),
     ("1000", r"^rate must be a number of Hz, got '1000'$"),
     (1e-320, r"^rate .* Hz is too slow for any loop"),
+    (10**400, r"^rate must be a finite number of Hz above 0, got an integer of 1329 bits$"),  # was OverflowError
 ])
 def test_rates_that_are_not_whole_physics_steps_are_refused(built, rate, message):
     from estimation.errors import TwinError
@@ -669,6 +670,7 @@ def test_rates_that_are_not_whole_physics_steps_are_refused(built, rate, message
     (-1.0, r"^duration must be a finite number of seconds, at least 0, got -1$"),
     (float("nan"), r"^duration must be a finite number of seconds, at least 0, got nan$"),
     (float("inf"), r"^duration must be a finite number of seconds, at least 0, got inf$"),
+    (10**400, r"^duration must be a finite number of seconds, at least 0, got an integer of 1329 bits$"),
     (0.0004, r"^duration 0.0004 s is shorter than one iteration at 1000 Hz \(0.001 s each\): nothing would run$"),
 ])
 def test_bad_durations_are_refused(built, duration, message):

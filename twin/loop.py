@@ -16,6 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from estimation.contracts import shown
 from estimation.errors import TwinError
 from sync.clock import REAL_CLOCK, Clock
 from twin.samples import Samples
@@ -39,9 +40,9 @@ def check_duration(duration: object) -> float:
     """
     if isinstance(duration, bool) or not isinstance(duration, numbers.Real):
         raise LoopError(f"duration must be a number of seconds, got {duration!r}")
-    value = float(duration)
+    value = _float(duration)
     if not math.isfinite(value) or value < 0:
-        raise LoopError(f"duration must be a finite number of seconds, at least 0, got {value:g}")
+        raise LoopError(f"duration must be a finite number of seconds, at least 0, got {_said(duration, value)}")
     return value
 
 
@@ -53,10 +54,23 @@ def check_rate(rate: object) -> float:
     """
     if isinstance(rate, bool) or not isinstance(rate, numbers.Real):
         raise LoopError(f"rate must be a number of Hz, got {rate!r}")
-    value = float(rate)
+    value = _float(rate)
     if not math.isfinite(value) or value <= 0:
-        raise LoopError(f"rate must be a finite number of Hz above 0, got {value:g}")
+        raise LoopError(f"rate must be a finite number of Hz above 0, got {_said(rate, value)}")
     return value
+
+
+def _float(value: numbers.Real) -> float:
+    """``value`` as a float; inf for an integer past the float range (``float(10**400)`` raises OverflowError)."""
+    try:
+        return float(value)
+    except OverflowError:
+        return math.inf if value > 0 else -math.inf
+
+
+def _said(value: object, number: float) -> str:
+    """How a refused ``value`` (``number`` as a float) is shown: ``:g``, or a huge integer by its size."""
+    return shown(value) if math.isinf(number) and isinstance(value, numbers.Integral) else f"{number:g}"
 
 
 def steps_per_iteration(rate: float, timestep: float) -> tuple[float, int]:

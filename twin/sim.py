@@ -123,8 +123,9 @@ class Twin:
 
         if self._closed:  # the 1 kHz path: one attribute test, not a call
             raise TwinClosedError("twin is closed")
-        # bool is an int to Python, and mj_step takes -1 or 2.5 without a word and steps nothing.
-        if not isinstance(n, numbers.Integral) or isinstance(n, bool) or n < 0:
+        # bool is an int to Python, and mj_step takes -1 or 2.5 without a word and steps nothing. A plain int
+        # is asked about first: this is the 1 kHz path.
+        if (type(n) is not int and (not isinstance(n, numbers.Integral) or isinstance(n, bool))) or n < 0:
             raise ValueError(f"step count n must be a whole number >= 0, got {n!r}")
         d = self.data
         if not self._finite():  # a bad write since the last step: catch it before the solver spreads it
