@@ -145,7 +145,7 @@ _NUMBERS: dict[str, tuple[str, float, bool, float]] = {
     "rate": ("--rate", 0.0, False, MAX_RATE_HZ),
     "stale_after": ("--stale-after", 0.0, False, math.inf),
     "deadband_mm": ("--deadband-mm", 0.0, True, math.inf),
-    "deadband_deg": ("--deadband-deg", 0.0, True, math.inf),
+    "deadband_deg": ("--deadband-deg", 0.0, True, 180.0),  # two orientations are at most 180 degrees apart
     "rerun_rate": ("--rerun-rate", 0.0, False, math.inf),
     "threshold": ("--threshold", 0.0, False, 1.0),  # CoACD's range (it aborts the process past 1)
     "density": ("--density", MIN_DENSITY, True, MAX_DENSITY),  # what scene files and the wire take

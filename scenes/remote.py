@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from estimation.contracts import shown
+from estimation.contracts import check_number, shown
 from scenes.placement import check_placement
 from scenes.scenefile import MAX_POINTS, MIN_POINTS, ObjectSpec, SceneError, SceneSpec
 from scenes.sensing import Sensor, SurfaceSensor, Track
@@ -64,6 +64,15 @@ class Deadband:
     position: float = 0.001
     angle_deg: float = 0.5
 
+    def __post_init__(self) -> None:
+        """Refuse a deadband no pose can be compared with (a NaN one compared false: every step published).
+
+        Raises:
+            SettingsError: ``position`` not a finite number >= 0 (metres), ``angle_deg`` not one from 0 to 180.
+        """
+        check_number(self.position, "Deadband.position", error=SettingsError)
+        check_number(self.angle_deg, "Deadband.angle_deg", high=180.0, error=SettingsError)
+
 
 @dataclass(frozen=True)
 class _Truth:
@@ -83,14 +92,18 @@ SETTLED_SPEED = 1e-3
 STATE_QUERY_BURST, STATE_QUERY_RATE = 8, 1.0
 
 
-def check_remote_options(points: object, epoch: object) -> None:
-    """Refuse :class:`Remote`'s ``points`` and ``epoch`` before any work.
+def check_remote_options(points: object, epoch: object, *, heartbeat_s: object = 0.2, keyframe_s: object = 1.0,
+                         settle_s: object = 3.0) -> None:
+    """Refuse :class:`Remote`'s ``points``, ``epoch`` and periods before any work.
 
     Raises:
         SettingsError: ``points`` not None or a whole number from :data:`scenes.scenefile.MIN_POINTS` to
             :data:`~scenes.scenefile.MAX_POINTS` (a scene file's and ``--points``' bounds: 10**9 allocated
             7.45 GiB); ``epoch`` not None or a whole number from 0 to :data:`sync.messages.MAX_INT64` (what
-            the wire carries: a negative one had every message dropped by the twin, 2**70 failed to encode).
+            the wire carries: a negative one had every message dropped by the twin, 2**70 failed to encode);
+            ``heartbeat_s``, ``keyframe_s`` or ``settle_s`` not a finite number of seconds >= 0 (0: every step,
+            no keyframes, no settling; a NaN heartbeat compared false and never beat, so the twin called the
+            link stale).
     """
     if points is not None and not _whole_in(points, MIN_POINTS, MAX_POINTS):
         raise SettingsError(f"Remote: points must be None or a whole number from {MIN_POINTS} to {MAX_POINTS}, "
@@ -98,6 +111,8 @@ def check_remote_options(points: object, epoch: object) -> None:
     if epoch is not None and not _whole_in(epoch, 0, MAX_INT64):
         raise SettingsError(f"Remote: epoch must be None or a whole number from 0 to 2**63 - 1 (the wire's range), "
                             f"got {shown(epoch)}")
+    for name, value in (("heartbeat_s", heartbeat_s), ("keyframe_s", keyframe_s), ("settle_s", settle_s)):
+        check_number(value, f"Remote: {name}", error=SettingsError)
 
 
 def _whole_in(value: object, low: int, high: int) -> bool:
@@ -128,7 +143,7 @@ class Remote:
                  heartbeat_s: float = 0.2, cache_dir: Path | None = None, progress: bool = False,
                  publish: bool = True, keyframe_s: float = 1.0, settle_s: float = 3.0, epoch: int | None = None,
                  rlog: DebugLog = OFF, recorder: Recorder | None = None) -> None:
-        check_remote_options(points, epoch)
+        check_remote_options(points, epoch, heartbeat_s=heartbeat_s, keyframe_s=keyframe_s, settle_s=settle_s)
         self.scene = scene
         self.recorder = recorder  # gets the true poses at its truth rate (wrap the transport to log the wire)
         self.rlog = rlog

@@ -703,12 +703,29 @@ def test_settings_at_their_limits_still_run_a_session(cache):
     ({"points": 10**9}, r"^Remote: points must be None or a whole number from 100 to 10000000, got 1000000000$"),
     ({"points": 0}, r"from 100 to 10000000, got 0$"),
     ({"points": 5000.0}, r"from 100 to 10000000, got 5000\.0$"),
+    # A NaN heartbeat compared false and never beat: the twin called the link stale.
+    ({"heartbeat_s": float("nan")}, r"^Remote: heartbeat_s must be a finite number, got nan$"),
+    ({"keyframe_s": -1.0}, r"^Remote: keyframe_s must be >= 0, got -1$"),
+    ({"settle_s": float("inf")}, r"^Remote: settle_s must be a finite number, got inf$"),
 ])
 def test_remote_options_out_of_the_wires_range_are_refused_before_any_work(cache, options, message):
     from estimation import SettingsError
 
     with pytest.raises(SettingsError, match=message):
         Headless(load_scene(SMALL), cache_dir=cache, **options)
+
+
+@pytest.mark.parametrize(("position", "angle_deg", "message"), [
+    (float("nan"), 0.5, r"^Deadband\.position must be a finite number, got nan$"),
+    (-0.001, 0.5, r"^Deadband\.position must be >= 0, got -0\.001$"),
+    (0.001, 200.0, r"^Deadband\.angle_deg must be >= 0 and <= 180, got 200$"),
+])
+def test_a_deadband_no_pose_can_be_compared_with_is_refused(position, angle_deg, message):
+    from estimation import SettingsError
+    from scenes.remote import Deadband
+
+    with pytest.raises(SettingsError, match=message):
+        Deadband(position, angle_deg)
 
 
 @pytest.mark.parametrize(("options", "message"), [
