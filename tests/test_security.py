@@ -397,14 +397,14 @@ def test_a_flood_of_garbage_and_stale_poses_is_counted_and_the_twin_runs_on(tmp_
     (["local", "--connect", "tcp/127.0.0.1:0"], r"--connect 'tcp/127\.0\.0\.1:0': port 0 means any free port"),
     (["local", "--listen", "tcp/300.1.1.1:0"], r"--listen 'tcp/300\.1\.1\.1:0': '300\.1\.1\.1' is not an IPv4"),
 ])
-def test_bad_endpoints_are_one_line_errors_naming_them(argv, message, capsys):
+def test_bad_endpoints_are_one_line_errors_naming_them(argv, message, capsys, monkeypatch):
+    reached = _stop_before_opening(monkeypatch)
     from cli.main import main
 
-    t0 = time.perf_counter()
     assert main(argv) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and re.search(message, err), err
-    assert time.perf_counter() - t0 < 5  # refused at once, no session waiting for a peer
+    assert reached == []  # refused before any session opens: none waits for a peer at a malformed address
 
 
 @pytest.mark.parametrize(("endpoint", "host", "port"), [
@@ -535,11 +535,10 @@ def test_a_zenoh_config_exposing_the_session_needs_insecure(text, message, warni
     reached = _stop_before_opening(monkeypatch)  # and so no test here listens beyond loopback, even failing
     from cli.main import main
 
-    t0 = time.perf_counter()
     assert main(["local", "--zenoh-config", str(file)]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and re.search(message, err), err
-    assert reached == [] and time.perf_counter() - t0 < 5  # refused before any session
+    assert reached == []  # refused before any session
     assert not any(warning in r.getMessage() for r in caplog.records)
 
     assert main(["local", "--zenoh-config", str(file), "--insecure"]) == 2  # let through to the stop, warned
