@@ -998,16 +998,15 @@ def _network_options(p: argparse.ArgumentParser, *, listen_default: str | None =
 
 
 def _session(args: argparse.Namespace):  # type: ignore[no-untyped-def]
-    from sync.zenoh_transport import LOOPBACK_ANY_PORT, check_endpoint, make_config, open_session
+    from sync.zenoh_transport import LOOPBACK_ANY_PORT, make_config, open_session
 
-    for flag in ("listen", "connect"):  # first, to name the flag: a malformed endpoint is not an exposed one
-        for endpoint in getattr(args, flag) or ():
-            check_endpoint(endpoint, f"--{flag}", connect=flag == "connect")
-    # make_config knows the policy: loopback and scouting off where neither the flags nor the file say,
-    # and exposure (from the flags or the file) refused unless --insecure.
+    # make_config knows the policy: every endpoint checked and its host resolved, the flags' first (named as
+    # the flags); loopback and scouting off where neither the flags nor the file say; and exposure (from the
+    # flags or the file) refused unless --insecure.
     return open_session(make_config(listen=args.listen, connect=args.connect, config_file=args.zenoh_config,
                                     insecure=args.insecure, listen_default=args.listen_default or LOOPBACK_ANY_PORT,
-                                    connect_default=args.connect_default))
+                                    connect_default=args.connect_default, listen_name="--listen",
+                                    connect_name="--connect"))
 
 
 def _cmd_remote(args: argparse.Namespace) -> int:

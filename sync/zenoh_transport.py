@@ -7,6 +7,9 @@ says so. A config file (Zenoh's JSON5) is where TLS, access control and routers 
 "Beyond one machine"); what it leaves out of those defaults gets them too, and ``listen``/``connect`` given
 here override its endpoints. :func:`make_config` is the one place that knows this policy: the effective
 listen endpoints and scouting, file or not, must stay on this machine or be TLS unless ``insecure``.
+Host names in endpoints are resolved when they are checked (:func:`check_endpoint`), within
+:data:`RESOLVE_TIMEOUT`: Zenoh retries a name that does not resolve for as long as a session waits, and a
+listen endpoint's name is judged by the addresses it stands for.
 """
 
 from __future__ import annotations
@@ -15,7 +18,7 @@ import json
 import logging
 import re
 import socket
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 from estimation.errors import TwinError
@@ -42,22 +45,39 @@ def free_port() -> int:
 def exposed_without_tls(endpoints: list[str]) -> list[str]:
     """The ``endpoints`` another machine could reach in plain text: not loopback, and not ``tls/``/``quic/``.
 
-    ``tcp/127.0.0.1:7447``, ``tcp/localhost:7447`` and ``tcp/[::1]:7447`` stay on this machine; ``tcp/0.0.0.0``,
-    ``tcp/[::]`` or an interface's address do not. An endpoint :func:`parse_endpoint` refuses, or one of a
-    protocol without a host (a serial line, a vsock), counts as exposed: only a known loopback host is not.
+    ``tcp/127.0.0.1:7447`` and ``tcp/[::1]:7447`` stay on this machine; ``tcp/0.0.0.0``, ``tcp/[::]`` or an
+    interface's address do not. A host name is judged by the addresses it resolves to, all of which must be
+    loopback (``tcp/localhost:7447`` usually is; a name that also resolves to a public address is not). An
+    endpoint :func:`check_endpoint` refuses (a host that does not resolve included), or one of a protocol
+    without a host (a serial line, a vsock), counts as exposed: only a known loopback host is not.
     """
     exposed = []
     for endpoint in endpoints:
         try:
-            parsed = parse_endpoint(endpoint)
+            checked = check_endpoint(endpoint)
         except SessionError:
             exposed.append(endpoint)
             continue
-        host = (parsed.host or "").lower()
-        if parsed.protocol in ("tls", "quic") or host == "localhost" or host == "::1" or host.startswith("127."):
-            continue
-        exposed.append(endpoint)
+        if _exposes(checked):
+            exposed.append(endpoint)
     return exposed
+
+
+def _exposes(checked: Endpoint) -> bool:
+    """Whether another machine could reach ``checked`` (from :func:`check_endpoint`) in plain text."""
+    import ipaddress
+
+    if checked.protocol in ("tls", "quic"):
+        return False
+    if checked.host is None or not checked.addresses:
+        return True
+    for address in checked.addresses:
+        ip = ipaddress.ip_address(address)
+        if isinstance(ip, ipaddress.IPv6Address) and ip.ipv4_mapped is not None:  # ::ffff:127.0.0.1
+            ip = ip.ipv4_mapped
+        if not ip.is_loopback:  # 0.0.0.0 and :: are every interface, not loopback
+            return True
+    return False
 
 
 #: Zenoh link protocols whose address is HOST:PORT.
@@ -72,6 +92,12 @@ _LABEL = re.compile(r"[A-Za-z0-9_](?:[A-Za-z0-9_-]{0,61}[A-Za-z0-9_])?")
 #: The longest host name DNS carries, characters.
 _MAX_HOST_NAME = 253
 
+#: Longest wait for a host name to resolve, seconds: the system resolver's own wait for one DNS server before
+#: it tries the next (resolv.conf(5), ``timeout``, default 5 s). A name not resolved by then has a server that
+#: does not answer, and the resolver would go on for attempts x servers x that; the command (and ``twin local``'s
+#: 10 s wait for a remote) with it.
+RESOLVE_TIMEOUT = 5.0
+
 
 @dataclass(frozen=True)
 class Endpoint:
@@ -82,12 +108,14 @@ class Endpoint:
         address: what follows the protocol, without metadata and config.
         host: for HOST:PORT protocols, the IP address or name, IPv6 without its brackets; else None.
         port: for HOST:PORT protocols, 0 to 65535 (0: any free port, for listening); else None.
+        addresses: the IP addresses ``host`` stands for, once :func:`check_endpoint` has resolved it; else ().
     """
 
     protocol: str
     address: str
     host: str | None = None
     port: int | None = None
+    addresses: tuple[str, ...] = ()
 
 
 def parse_endpoint(endpoint: str, what: str = "endpoint") -> Endpoint:
@@ -145,16 +173,58 @@ def _host_problem(host: str) -> str | None:
     return None
 
 
-def check_endpoint(endpoint: str, what: str = "endpoint", *, connect: bool = False) -> None:
-    """Refuse an endpoint :func:`parse_endpoint` refuses, and, to ``connect`` to, port 0 (no one listens there).
+def check_endpoint(endpoint: str, what: str = "endpoint", *, connect: bool = False) -> Endpoint:
+    """Refuse an endpoint :func:`parse_endpoint` refuses, one whose host does not resolve (within
+    :data:`RESOLVE_TIMEOUT`), and, to ``connect`` to, port 0 (no one listens there).
+
+    Returns:
+        The endpoint, split, with ``addresses`` its host resolves to (an IP address stands for itself).
 
     Raises:
-        SessionError: naming ``what`` and the endpoint, and the expected form.
+        SessionError: naming ``what`` and the endpoint, and what is wrong (the expected form, or the host and
+            the resolver's reason).
     """
     parsed = parse_endpoint(endpoint, what)
     if connect and parsed.port == 0:
         raise SessionError(f"{what} {endpoint!r}: port 0 means any free port, for listening; connect to the port "
                            f"a peer listens on")
+    if parsed.host is None:
+        return parsed
+    return replace(parsed, addresses=_resolve(parsed.host, f"{what} {endpoint!r}"))
+
+
+def _resolve(host: str, said: str) -> tuple[str, ...]:
+    """The IP addresses ``host`` (an address, or a name :func:`parse_endpoint` accepted) stands for, in the
+    resolver's order; ``said`` starts the error."""
+    import ipaddress
+    import threading
+
+    try:
+        return (str(ipaddress.ip_address(host)),)  # no resolver for an address
+    except ValueError:
+        pass
+    outcome: list[object] = []
+
+    def lookup() -> None:
+        try:
+            outcome.append(socket.getaddrinfo(host, None, type=socket.SOCK_STREAM))
+        except (OSError, UnicodeError) as exc:  # socket.gaierror; an IDNA-invalid name raises UnicodeError
+            outcome.append(exc)
+
+    # getaddrinfo takes no timeout: it runs on a daemon thread, left to finish on its own if it outlasts ours.
+    thread = threading.Thread(target=lookup, name=f"resolve {host}", daemon=True)
+    thread.start()
+    thread.join(RESOLVE_TIMEOUT)
+    if not outcome:
+        raise SessionError(f"{said}: host {host!r} did not resolve within {RESOLVE_TIMEOUT:g} s")
+    found = outcome[0]
+    if isinstance(found, BaseException):
+        reason = found.strerror if isinstance(found, OSError) and found.strerror else str(found)
+        raise SessionError(f"{said}: host {host!r} does not resolve ({reason})")
+    addresses = tuple(dict.fromkeys(str(info[4][0]) for info in found))  # type: ignore[attr-defined]
+    if not addresses:
+        raise SessionError(f"{said}: host {host!r} does not resolve (no addresses)")
+    return addresses
 
 
 def _zenoh_error(exc: Exception) -> str:
@@ -172,8 +242,9 @@ def _zenoh_error(exc: Exception) -> str:
 
 def make_config(*, listen: list[str] | None = None, connect: list[str] | None = None,
                 config_file: str | Path | None = None, mode: str = "peer", insecure: bool = False,
-                listen_default: str = LOOPBACK_ANY_PORT,
-                connect_default: str | None = None):  # type: ignore[no-untyped-def]
+                listen_default: str = LOOPBACK_ANY_PORT, connect_default: str | None = None,
+                listen_name: str = "listen endpoint",
+                connect_name: str = "connect endpoint"):  # type: ignore[no-untyped-def]
     """A ``zenoh.Config``: the file's settings (if any), the safe defaults for what it leaves out, then the
     endpoints given here; refused if it would expose the session in plain text, unless ``insecure``.
 
@@ -191,18 +262,29 @@ def make_config(*, listen: list[str] | None = None, connect: list[str] | None = 
         insecure: allow exposure (below), with a warning (the CLI's ``--insecure``).
         listen_default: where to listen when neither ``listen`` nor the file says.
         connect_default: where to connect when neither ``connect`` nor the file says, or None.
+        listen_name, connect_name: what errors call ``listen`` and ``connect`` (and the defaults), e.g. the
+            CLI's flags, '--listen' and '--connect'.
 
     Raises:
-        SessionError: the file is missing or Zenoh refuses it; an endpoint, given here or in the file,
-            that :func:`check_endpoint` refuses; or, unless ``insecure``, exposure: an effective listen
-            endpoint :func:`exposed_without_tls` names, or multicast scouting the file turns on (it
-            announces the session to the whole network and joins whoever answers).
+        SessionError: the file is missing or Zenoh refuses it; an endpoint, given here, in the file or as a
+            default, that :func:`check_endpoint` refuses (a host that does not resolve included); or, unless
+            ``insecure``, exposure: an effective listen endpoint :func:`exposed_without_tls` would name (each
+            endpoint is resolved once, here), or multicast scouting the file turns on (it announces the
+            session to the whole network and joins whoever answers).
     """
     import zenoh
 
-    for what, endpoints, connecting in (("listen endpoint", listen, False), ("connect endpoint", connect, True)):
+    listening: dict[str, Endpoint] = {}  # every listen endpoint checked, with the addresses it resolved to
+
+    def check(endpoints: list[str] | None, what: str, connecting: bool) -> None:
         for endpoint in endpoints or ():
-            check_endpoint(endpoint, what, connect=connecting)
+            checked = check_endpoint(endpoint, what, connect=connecting)
+            if not connecting:
+                listening[endpoint] = checked
+
+    # The caller's endpoints first: a malformed one is named as given, before the file is read.
+    check(listen, listen_name, False)
+    check(connect, connect_name, True)
     source = "" if config_file is None else f"zenoh config {config_file}: "
     if config_file is not None:
         path = Path(config_file)
@@ -221,10 +303,8 @@ def make_config(*, listen: list[str] | None = None, connect: list[str] | None = 
     if json.loads(conf.get_json("listen/endpoints")) == json.loads(zenoh.Config().get_json("listen/endpoints")):
         file_listen = None
     file_connect = _mode_endpoints(conf, "connect/endpoints", file_mode) or None
-    for what, endpoints, connecting in (("listen endpoint", file_listen, False),
-                                        ("connect endpoint", file_connect, True)):
-        for endpoint in endpoints or ():
-            check_endpoint(endpoint, f"{source}{what}", connect=connecting)
+    check(file_listen, f"{source}listen endpoint", False)
+    check(file_connect, f"{source}connect endpoint", True)
     multicast = json.loads(conf.get_json("scouting/multicast/enabled"))
     for key in ("scouting/multicast/enabled", "scouting/gossip/enabled"):
         if json.loads(conf.get_json(key)) is None:  # not in the file: off, as without one
@@ -233,12 +313,16 @@ def make_config(*, listen: list[str] | None = None, connect: list[str] | None = 
     effective_listen = listen if listen is not None else file_listen if file_listen is not None else [listen_default]
     effective_connect = connect if connect is not None else file_connect or ([connect_default] if connect_default
                                                                              else None)
-    exposed = exposed_without_tls(effective_listen)
+    if listen is None and file_listen is None:
+        check([listen_default], listen_name, False)
+    if connect is None and not file_connect and connect_default:
+        check([connect_default], connect_name, True)
+    exposed = [endpoint for endpoint in effective_listen if _exposes(listening[endpoint])]
     if not insecure:
         if exposed:
-            said = source if listen is None and file_listen is not None else ""
-            raise SessionError(f"{said}listen endpoint {exposed[0]!r} is reachable from other machines in plain "
-                               f"text; listen on a tls/ endpoint (certificates in a zenoh config) or pass --insecure")
+            said = f"{source}listen endpoint" if listen is None and file_listen is not None else listen_name
+            raise SessionError(f"{said} {exposed[0]!r} is reachable from other machines in plain text; listen on "
+                               f"a tls/ endpoint (certificates in a zenoh config) or pass --insecure")
         if multicast:
             raise SessionError(f"{source}scouting/multicast/enabled is true: it announces this session to every "
                                f"machine on the network in plain text; remove it or pass --insecure")

@@ -34,6 +34,7 @@ REMOTE_CN = "tactile-twin-remote"  # the names the configs' access_control subje
 TWIN_CN = "tactile-twin-twin"
 #: Every certificate path in the shipped configs starts with this (relative to the working folder).
 CERT_PREFIX = "configs/certs/"
+SMALL_SCENE = str(Path(__file__).parent / "data" / "small.toml")
 
 
 # -- certificates and configs -----------------------------------------------------------------------
@@ -412,12 +413,114 @@ def test_bad_endpoints_are_one_line_errors_naming_them(argv, message, capsys, mo
     ("tls/router-1.example.org.:7447", "router-1.example.org.", 7447), ("udp/[::]:7447?rel=0#iface=lo", "::", 7447),
     ("unixsock-stream//tmp/zenoh.sock", None, None),
 ])
-def test_good_endpoints_parse_into_their_parts(endpoint, host, port):
+def test_good_endpoints_parse_into_their_parts(endpoint, host, port, monkeypatch):
     from sync.zenoh_transport import check_endpoint, parse_endpoint
 
+    _fake_dns(monkeypatch, {"router-1.example.org.": ["192.0.2.1"]})  # this machine has no DNS
     parsed = parse_endpoint(endpoint)
     assert (parsed.protocol, parsed.host, parsed.port) == (endpoint.split("/")[0], host, port)
     check_endpoint(endpoint, "--listen")  # raises nothing
+
+
+# -- host names: resolved where endpoints are checked ---------------------------------------------------
+
+def _fake_dns(monkeypatch, names: dict[str, list[str]], *, delay: float = 0.0) -> list[str]:  # type: ignore[no-untyped-def]
+    """Answer ``names`` (name -> addresses) from a fake resolver, after ``delay`` seconds; other hosts as the
+    system does. Returns the hosts asked, in order."""
+    import socket
+
+    real, asked = socket.getaddrinfo, []
+
+    def getaddrinfo(host, port, *args, **kwargs):  # type: ignore[no-untyped-def]
+        asked.append(host)
+        if host not in names:
+            return real(host, port, *args, **kwargs)
+        time.sleep(delay)
+        return [(socket.AF_INET6 if ":" in a else socket.AF_INET, socket.SOCK_STREAM, 6, "",
+                 (a, port or 0, 0, 0) if ":" in a else (a, port or 0)) for a in names[host]]
+
+    monkeypatch.setattr(socket, "getaddrinfo", getaddrinfo)
+    return asked
+
+
+# RFC 6761: names under .invalid never resolve, with or without a network.
+@pytest.mark.parametrize(("argv", "message"), [
+    (["local", "--connect", "tcp/nosuchhost.invalid:7447"],
+     r"^twin local: error: --connect 'tcp/nosuchhost\.invalid:7447': host 'nosuchhost\.invalid' does not resolve \("),
+    (["remote", SMALL_SCENE, "--listen",
+      "tcp/nosuchhost.invalid:0", "--insecure"],
+     r"^twin remote: error: --listen 'tcp/nosuchhost\.invalid:0': host 'nosuchhost\.invalid' does not resolve"),
+    (["remote", SMALL_SCENE, "--listen", "tcp/nosuchhost.invalid:0"],  # not "exposed": it is nowhere
+     r"--listen 'tcp/nosuchhost\.invalid:0': host 'nosuchhost\.invalid' does not resolve"),
+])
+def test_a_host_name_that_does_not_resolve_is_refused_at_once_naming_the_flag(argv, message, capsys, monkeypatch):
+    reached = _stop_before_opening(monkeypatch)
+    from cli.main import main
+
+    t0 = time.monotonic()
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and re.search(message, err), err
+    assert reached == [] and time.monotonic() - t0 < 5  # it waited 10 s for a session before
+
+
+@pytest.mark.parametrize("key", ["connect", "listen"])
+def test_a_host_name_in_a_zenoh_config_that_does_not_resolve_is_refused(key, tmp_path, monkeypatch, capsys):
+    file = tmp_path / "names.json5"
+    file.write_text(f'{{ {key}: {{ endpoints: ["tcp/nosuchhost.invalid:7447"] }} }}')
+    reached = _stop_before_opening(monkeypatch)
+    from cli.main import main
+
+    assert main(["local", "--zenoh-config", str(file), "--insecure"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and re.search(
+        rf"zenoh config \S+: {key} endpoint 'tcp/nosuchhost\.invalid:7447': host 'nosuchhost\.invalid' does not "
+        rf"resolve", err), err
+    assert reached == []
+
+
+@pytest.mark.parametrize(("addresses", "exposed"), [
+    (["127.0.0.1"], False), (["127.0.1.1"], False), (["::1", "127.0.0.1"], False),  # /etc/hosts' own names
+    (["192.0.2.7"], True), (["127.0.0.1", "192.0.2.7"], True), (["2001:db8::7"], True),
+])
+def test_a_listen_host_name_is_judged_by_the_addresses_it_resolves_to(addresses, exposed, monkeypatch, capsys):
+    from sync.zenoh_transport import exposed_without_tls
+
+    _fake_dns(monkeypatch, {"twin-host.test": addresses, "localhost": addresses})
+    for endpoint in ("tcp/twin-host.test:7447", "tcp/localhost:7447"):  # "localhost" is a name like any other
+        assert bool(exposed_without_tls([endpoint])) is exposed, endpoint
+    reached = _stop_before_opening(monkeypatch)
+    from cli.main import main
+
+    assert main(["remote", SMALL_SCENE, "--listen", "tcp/twin-host.test:0"]) == 2
+    err = capsys.readouterr().err
+    if exposed:
+        assert reached == [] and re.search(r"--listen 'tcp/twin-host\.test:0' is reachable from other machines in "
+                                           r"plain text; .* or pass --insecure", err), err
+    else:
+        assert "stopped before opening (test)" in err and len(reached) == 1, err
+
+
+def test_each_endpoint_is_resolved_once(monkeypatch, capsys):
+    asked = _fake_dns(monkeypatch, {"twin-host.test": ["127.0.0.1"], "remote-host.test": ["127.0.0.1"]})
+    reached = _stop_before_opening(monkeypatch)
+    from cli.main import main
+
+    assert main(["local", "--listen", "tcp/twin-host.test:0", "--connect", "tcp/remote-host.test:7447"]) == 2
+    assert len(reached) == 1, capsys.readouterr().err
+    assert sorted(asked) == ["remote-host.test", "twin-host.test"]
+
+
+def test_resolving_a_host_name_is_bounded(monkeypatch):
+    import sync.zenoh_transport as zt
+
+    monkeypatch.setattr(zt, "RESOLVE_TIMEOUT", 0.2)
+    _fake_dns(monkeypatch, {"slow.test": ["127.0.0.1"]}, delay=2.0)  # a DNS server that does not answer
+    t0 = time.monotonic()
+    with pytest.raises(zt.SessionError, match=r"^--connect 'tcp/slow\.test:7447': host 'slow\.test' did not "
+                                              r"resolve within 0\.2 s$"):
+        zt.make_config(connect=["tcp/slow.test:7447"], connect_name="--connect")
+    assert time.monotonic() - t0 < 1.5
 
 
 def test_a_bad_zenoh_config_is_one_line_with_its_position(tmp_path, capsys):
@@ -431,9 +534,6 @@ def test_a_bad_zenoh_config_is_one_line_with_its_position(tmp_path, capsys):
 
 
 # -- what a zenoh config leaves open ------------------------------------------------------------------
-
-SMALL_SCENE = str(Path(__file__).parent / "data" / "small.toml")
-
 
 def _own_sockets() -> list[tuple[str, str]]:
     """This process's listening TCP and bound UDP sockets, as (table, hex local address) from /proc/net."""
