@@ -721,7 +721,10 @@ def from_mesh(vertices: np.ndarray, faces: np.ndarray, density: float, *,
     saying its volume is not a solid's (half a box's faces gave half its volume, without a word). A closed mesh
     whose closed parts overlap is the union of its parts: its record's surface and mass properties are the
     union's, with a warning (the sum over the faces counted the shared space twice); nested shells, a hollow
-    object's outer shell and its inward-facing inner one, are the hollow solid they bound, as before.
+    object's outer shell and its inward-facing inner one, are the hollow solid they bound, as before. A part
+    facing inward that lies in no solid (apart from the rest, or inside a cavity) is no cavity but a part wound
+    inside out: it counts turned outward, with a warning (its volume was subtracted); so does a whole mesh wound
+    inside out.
 
     Args:
         vertices: (v, 3) float64, metres.
@@ -735,22 +738,34 @@ def from_mesh(vertices: np.ndarray, faces: np.ndarray, density: float, *,
         MaterialError: as :func:`estimate`.
     """
     from estimation.contracts import as_faces
-    from estimation.meshparts import overlap_union
+    from estimation.meshparts import overlap_union, turned_outward
 
     check_density(density)
     vertices = as_points(vertices, "mesh vertices")
     check_range(vertices, "mesh vertices")
     faces = as_faces(faces, len(vertices), "mesh faces")
     t0 = time.perf_counter()
-    try:
-        props = mass_properties(vertices, faces, density)
-    except ReconstructionError:  # the CloudError this docstring promised (mass_properties' error came through)
-        raise CloudError("mesh encloses no volume (open, empty or inside-out)") from None
     merged = _merged(vertices, faces)
     watertight = _is_closed(merged)
     warnings: tuple[str, ...] = () if watertight else (
         "the mesh is not closed and consistently wound: its volume is a signed sum over its faces, not a solid's",)
-    overlap = overlap_union(np.asarray(merged.vertices), np.asarray(merged.faces, dtype=np.int64)) if watertight else None
+    merged_vertices, merged_faces = np.asarray(merged.vertices), np.asarray(merged.faces, dtype=np.int64)
+    # Before the sum over the faces: an inside-out part subtracted its volume (one alone gave none at all).
+    turned = turned_outward(merged_vertices, merged_faces) if watertight else None
+    if turned is not None:
+        merged_faces = turned.faces
+        vertices, faces = merged_vertices, merged_faces
+        said = "the mesh is wound inside out (its faces face inward)" if turned.total == 1 else (
+            f"{turned.parts} of the mesh's {turned.total} closed parts "
+            + ("is wound inside out (its faces face inward, but it lies in no solid, so it is no cavity)"
+               if turned.parts == 1 else
+               "are wound inside out (their faces face inward, but they lie in no solid, so they are no cavities)"))
+        warnings += (f"{said}: counted turned outward ({turned.volume:.3g} m^3)",)
+    try:
+        props = mass_properties(vertices, faces, density)
+    except ReconstructionError:  # the CloudError this docstring promised (mass_properties' error came through)
+        raise CloudError("mesh encloses no volume (open, empty or inside-out)") from None
+    overlap = overlap_union(merged_vertices, merged_faces) if watertight else None
     if overlap is not None and overlap.vertices is not None and overlap.faces is not None:
         vertices, faces = overlap.vertices, overlap.faces
         props = mass_properties(vertices, faces, density)

@@ -4,9 +4,14 @@ A mesh may hold several closed parts: an assembly exported as one file, a handle
 hollow object's outer shell with an inward-facing inner one. The signed sum over its faces (``inertia``) integrates
 the winding number: right where shells nest (a cavity counts +1 - 1 = 0) or lie apart, but where two outward parts
 overlap, the space they share counts twice. The solid such a mesh means is wherever some part is: the union of its
-parts, each with the cavities inside it, which ``manifold3d`` computes on float64 vertices.
+parts, each with the cavities inside it, which ``manifold3d`` computes on float64 vertices (:func:`overlap_union`).
 
-Finding the parts costs one pass over the faces; nothing else is done unless outward parts' bounding boxes overlap.
+An inward-facing part is a cavity only where it lies in solid; elsewhere (apart from every other part, or inside
+another cavity) it would count space less than nothing: it is a part wound inside out, and is turned outward
+(:func:`turned_outward`).
+
+Finding the parts costs one pass over the faces (each function makes its own); nothing else is done unless a part
+faces inward or outward parts' bounding boxes overlap.
 """
 
 from __future__ import annotations
@@ -44,6 +49,23 @@ class Overlap:
     unresolved: str = ""
 
 
+@dataclass(frozen=True)
+class Turned:
+    """A mesh's parts wound inside out, turned outward.
+
+    Attributes:
+        faces: (f, 3) int64, the mesh's faces with each inside-out part's turned (its rows reversed).
+        parts: how many parts were turned.
+        total: the mesh's closed parts.
+        volume: m^3 the turned parts enclose.
+    """
+
+    faces: np.ndarray
+    parts: int
+    total: int
+    volume: float
+
+
 def part_labels(faces: np.ndarray, vertex_count: int) -> np.ndarray:
     """(f,) int: which part each face belongs to, numbered from 0, parts joined through shared vertices.
 
@@ -64,6 +86,97 @@ def part_labels(faces: np.ndarray, vertex_count: int) -> np.ndarray:
     return np.unique(by_face, return_inverse=True)[1].astype(np.int64)  # vertices no face uses are no part
 
 
+@dataclass(frozen=True)
+class _Parts:
+    """A mesh's parts: each one's faces (a run of ``order``), bounds and signed volume."""
+
+    count: int
+    order: np.ndarray  # (f,) face indices, sorted by part
+    starts: np.ndarray  # (count,) where each part's run of ``order`` starts
+    ends: np.ndarray  # (count,) and ends
+    low: np.ndarray  # (count, 3) metres, each part's bounding box
+    high: np.ndarray
+    volumes: np.ndarray  # (count,) m^3, signed: negative for an inward-facing part
+
+    def faces_of(self, faces: np.ndarray, parts: list[int]) -> np.ndarray:
+        return faces[np.concatenate([self.order[self.starts[p]:self.ends[p]] for p in parts])]
+
+
+def _parts(vertices: np.ndarray, faces: np.ndarray) -> _Parts:
+    labels = part_labels(faces, len(vertices))
+    count = int(labels.max(initial=0)) + 1
+    tri = vertices[faces]
+    # Per-part bounds over sorted runs of faces: one reduceat, no loop over the parts.
+    order = np.argsort(labels, kind="stable")
+    starts = np.flatnonzero(np.r_[True, np.diff(labels[order]) != 0])
+    low = np.minimum.reduceat(tri.min(axis=1)[order], starts, axis=0)
+    high = np.maximum.reduceat(tri.max(axis=1)[order], starts, axis=0)
+    # The centroid as apex: each closed part's volume is the same from any apex, and rounding least from near.
+    volumes = np.bincount(labels, weights=signed_volumes(tri - vertices.mean(axis=0)), minlength=count)
+    return _Parts(count, order, starts, np.r_[starts[1:], len(order)], low, high, volumes)
+
+
+def turned_outward(vertices: np.ndarray, faces: np.ndarray) -> Turned | None:
+    """The mesh with each part wound inside out turned outward; None when no part is.
+
+    A part facing inward (its signed volume negative) is a cavity when the space around it is solid: when the
+    parts holding it (a part holds another when their solids' intersection is all of the other's, to
+    ``tol.MESH_OVERLAP_SHARE``) count at least 1, each outward one +1 and each cavity -1, the winding number just
+    outside it. A hollow object's inner shell lies in its outer one (1): a cavity. A part that no part holds
+    (0), or one inside a cavity (1 - 1 = 0), would make the space it bounds count less than nothing: it is a
+    solid wound the wrong way, and is turned. Parts are judged largest first, so whatever holds a part has been
+    judged before it (a part is smaller than what holds it). Outward parts are taken as they are: one inside
+    another overlaps it (:func:`overlap_union`).
+
+    Args:
+        vertices: (v, 3) float64, metres.
+        faces: (f, 3) int64, a closed, consistently wound mesh with duplicate vertices merged.
+
+    Returns:
+        The turned faces and what was turned, or None when no part faces inward where it cannot be a cavity (or
+        manifold3d refuses it as not closed, so that whether a part holds it is not known).
+    """
+    if not len(faces):  # trimesh calls no faces closed; nothing to turn
+        return None
+    parts = _parts(vertices, faces)
+    if not (parts.volumes < 0).any():
+        return None
+    sign = np.sign(parts.volumes)
+    solids: dict[int, object] = {}
+
+    def solid(part: int):  # type: ignore[no-untyped-def]  # the part's solid, whichever way it was wound
+        if part not in solids:
+            own = parts.faces_of(faces, [part])
+            solids[part] = _solid(vertices, own if parts.volumes[part] > 0 else own[:, ::-1])
+        return solids[part]
+
+    turned = []
+    for part in np.argsort(-np.abs(parts.volumes), kind="stable"):
+        part = int(part)
+        if parts.volumes[part] >= 0:
+            continue
+        boxes = ((parts.low <= parts.low[part]) & (parts.high[part] <= parts.high)).all(axis=1)
+        boxes[part] = False
+        around = 0.0
+        if boxes.any():
+            inside = solid(part)
+            holders = [solid(int(other)) for other in np.flatnonzero(boxes)]
+            if inside is None or any(outer is None for outer in holders):
+                continue  # manifold3d refused one: whether it is held is not known, so it is left as it is
+            around = sum(sign[other] for other, outer in zip(np.flatnonzero(boxes), holders, strict=True)
+                         if _holds(outer, inside))
+        if around < 1:
+            sign[part] = 1.0
+            turned.append(part)
+    if not turned:
+        return None
+    out = faces.copy()
+    for part in turned:
+        rows = parts.order[parts.starts[part]:parts.ends[part]]
+        out[rows] = faces[rows, ::-1]
+    return Turned(out, len(turned), parts.count, float(-parts.volumes[turned].sum()))
+
+
 def overlap_union(vertices: np.ndarray, faces: np.ndarray) -> Overlap | None:
     """The union of the closed parts of a mesh when outward ones overlap, else None (the signed sum is right).
 
@@ -77,21 +190,13 @@ def overlap_union(vertices: np.ndarray, faces: np.ndarray) -> Overlap | None:
     Returns:
         None for one part, for parts whose bounding boxes do not overlap, and for parts whose solids do not
         overlap though their boxes do (a rod through a ring, a ball in a cavity). Where the union cannot be
-        formed (an inward part inside no outward part, a part manifold3d refuses) the record says why, without
-        a surface: whether the parts overlap is then not known.
+        formed (an inward part inside no outward part, which :func:`turned_outward` turns first; a part
+        manifold3d refuses) the record says why, without a surface: whether the parts overlap is then not known.
     """
-    labels = part_labels(faces, len(vertices))
-    count = int(labels.max(initial=0)) + 1
-    if count == 1:
+    parts = _parts(vertices, faces)
+    if parts.count == 1:
         return None
-    tri = vertices[faces]
-    # Per-part bounds over sorted runs of faces: one reduceat, no loop over the parts.
-    order = np.argsort(labels, kind="stable")
-    starts = np.flatnonzero(np.r_[True, np.diff(labels[order]) != 0])
-    low = np.minimum.reduceat(tri.min(axis=1)[order], starts, axis=0)
-    high = np.maximum.reduceat(tri.max(axis=1)[order], starts, axis=0)
-    # The centroid as apex: each closed part's volume is the same from any apex, and rounding least from near.
-    volumes = np.bincount(labels, weights=signed_volumes(tri - vertices.mean(axis=0)), minlength=count)
+    low, high, volumes = parts.low, parts.high, parts.volumes
     outward = np.flatnonzero(volumes > 0)
     touching = _overlapping_boxes(low[outward], high[outward])
     if not touching.any():
@@ -99,19 +204,20 @@ def overlap_union(vertices: np.ndarray, faces: np.ndarray) -> Overlap | None:
 
     import manifold3d
 
-    ends = np.r_[starts[1:], len(order)]
-
-    def faces_of(parts: list[int]) -> np.ndarray:  # each part's faces are one run of ``order``
-        return faces[np.concatenate([order[starts[p]:ends[p]] for p in parts])]
+    def faces_of(members: list[int]) -> np.ndarray:  # each part's faces are one run of ``order``
+        return parts.faces_of(faces, members)
 
     homes: dict[int, list[int]] = {int(part): [int(part)] for part in outward}
     for cavity in np.flatnonzero(volumes < 0):
         # The smallest outward part whose box holds the cavity's and whose solid holds the cavity turned outward.
         around = outward[((low[outward] <= low[cavity]) & (high[cavity] <= high[outward])).all(axis=1)]
         turned = _solid(vertices, faces_of([int(cavity)])[:, ::-1])
+        if turned is None:
+            return Overlap(len(outward), int(touching.sum()), float("nan"), None, None,
+                           unresolved="manifold3d refused a part as not closed")
         home = next((int(part) for part in around[np.argsort(volumes[around])]
-                     if turned is not None and _holds(_solid(vertices, faces_of([int(part)])), turned)), None)
-        if home is None:
+                     if _holds(_solid(vertices, faces_of([int(part)])), turned)), None)
+        if home is None:  # turned_outward turns such a part first
             return Overlap(len(outward), int(touching.sum()), float("nan"), None, None,
                            unresolved="an inward-facing part lies inside no outward part (inside out?)")
         homes[home].append(int(cavity))

@@ -553,10 +553,13 @@ def test_from_mesh_checks_its_mesh_and_says_when_it_is_not_closed():
     assert whole.watertight and whole.warnings == () and whole.volume == pytest.approx(2.4e-4)
     half = from_mesh(v, f[:6], 1000.0)
     assert not half.watertight and any("not closed" in w for w in half.warnings)
+    # Closed but inside out: turned and said (tests/test_mass_properties.py); it was "mesh encloses no volume".
+    turned = from_mesh(v, f[:, ::-1], 1000.0)
+    assert turned.volume == pytest.approx(2.4e-4) and any("inside out" in w for w in turned.warnings)
     for vertices, faces, said in [(np.vstack([v, [np.nan] * 3]), f, "mesh vertices: contains NaN"),
                                   (v * 1e200, f, "beyond the 10000 m"), (v, f + 100, "vertex indices must be 0 to 7"),
                                   (v, f.astype(float), "whole vertex indices"), (v[:, :2], f, "expected shape (n, 3)"),
                                   # the CloudError the docstring promised (a ReconstructionError came through)
-                                  (v, f[:, ::-1], "mesh encloses no volume"), (v, f[:0], "mesh encloses no volume")]:
+                                  (v, f[:0], "mesh encloses no volume")]:
         with pytest.raises(CloudError, match=re.escape(said)):
             from_mesh(vertices, faces, 1000.0)

@@ -201,12 +201,82 @@ def test_a_hollow_mesh_of_nested_shells_is_estimated_as_before():
     np.testing.assert_array_equal(result.faces, faces)
 
 
-def test_overlapping_parts_whose_union_cannot_be_formed_are_summed_and_said():
-    # An inside-out part beside two overlapping cubes: no outward part holds it, so the solid is not known; the
-    # signed sum stands (1.5e-3 + 0.5e-3 - 8e-6 m^3), and the warning says it may count shared space twice.
+def test_an_inside_out_part_beside_overlapping_parts_is_turned_and_joins_their_union():
+    # An inside-out part beside two overlapping cubes: no part holds it, so it is no cavity but a cube wound the
+    # wrong way. The union was not formed ("an inward-facing part lies inside no outward part") and the signed
+    # sum stood, 1.5e-3 + 0.5e-3 - 8e-6 m^3: the shared space twice, the small cube less than nothing.
     parts = (_box((0.1, 0.1, 0.1)), _box((0.1, 0.1, 0.1), (0.05, 0, 0)), _box((0.02, 0.02, 0.02), (1, 0, 0), inward=True))
     vertices, faces = _parts(*parts)
     result = from_mesh(vertices, faces, 1000.0)
-    assert result.volume == pytest.approx(2e-3 - 8e-6, rel=1e-12)
-    assert len(result.warnings) == 1 and "may overlap" in result.warnings[0]
-    assert "an inward-facing part lies inside no outward part" in result.warnings[0]
+    assert result.volume == pytest.approx(1.5e-3 + 8e-6, rel=1e-12)
+    assert len(result.warnings) == 2 and "wound inside out" in result.warnings[0], result.warnings
+    assert result.warnings[1].startswith("closed parts of the mesh overlap (2 of its 3 parts)")
+
+
+# Exact mass properties of parts put together, for the tests below: each box's own inertia about its centre is
+# m (b^2 + c^2, a^2 + c^2, a^2 + b^2) / 12, moved to the common centre of mass by the parallel axis theorem; a
+# cavity counts with negative mass.
+
+def _exact(*boxes: tuple[tuple[float, float, float], tuple[float, float, float], int], density: float = 1000.0):
+    """(volume, centre of mass, inertia about it) of ``boxes`` given as (extents, centre, +1 solid or -1 cavity)."""
+    volume = sum(sign * float(np.prod(ext)) for ext, _, sign in boxes)
+    masses = [sign * density * float(np.prod(ext)) for ext, _, sign in boxes]
+    com = sum(m * np.asarray(at) for m, (_, at, _) in zip(masses, boxes, strict=True)) / (density * volume)
+    inertia = np.zeros((3, 3))
+    for m, (ext, at, _) in zip(masses, boxes, strict=True):
+        a2 = np.square(ext)
+        d = np.asarray(at) - com
+        inertia += m / 12 * np.diag([a2[1] + a2[2], a2[0] + a2[2], a2[0] + a2[1]])
+        inertia += m * (d @ d * np.eye(3) - np.outer(d, d))
+    return volume, com, inertia
+
+
+def _check_exact(result, boxes) -> None:  # type: ignore[no-untyped-def]
+    volume, com, inertia = _exact(*boxes)
+    assert result.volume == pytest.approx(volume, rel=1e-12)
+    assert result.mass.mass == pytest.approx(1000.0 * volume, rel=1e-12)
+    np.testing.assert_allclose(result.mass.center_of_mass, com, rtol=0, atol=1e-14)
+    np.testing.assert_allclose(result.mass.inertia, inertia, rtol=0, atol=1e-12 * np.abs(inertia).max())
+    # The record's surface is the solid counted: its own sum over faces gives the same volume.
+    assert mass_properties(result.vertices, result.faces, 1000.0).volume == pytest.approx(volume, rel=1e-12)
+
+
+def test_a_separate_inside_out_part_is_counted_turned_outward_and_said():
+    # A 10 cm cube and, a metre away, a 2 x 4 x 6 cm box wound inside out: nothing holds the box, so it is no
+    # cavity. Its volume was subtracted (1e-3 - 4.8e-5 m^3), the centre of mass pushed away from it, silently.
+    cube, brick = ((0.1, 0.1, 0.1), (0.0, 0.0, 0.0)), ((0.02, 0.04, 0.06), (1.0, 0.2, -0.1))
+    result = from_mesh(*_parts(_box(*cube), _box(*brick, inward=True)), 1000.0)
+    _check_exact(result, [(*cube, 1), (*brick, 1)])
+    assert result.watertight and len(result.warnings) == 1, result.warnings
+    assert re.fullmatch(r"1 of the mesh's 2 closed parts is wound inside out \(its faces face inward, but it lies "
+                        r"in no solid, so it is no cavity\): counted turned outward \(4\.8e-05 m\^3\)",
+                        result.warnings[0]), result.warnings[0]
+
+
+def test_an_inside_out_part_nested_in_another_stays_a_cavity():
+    # The same box inside the cube, off centre: a hollow cube, its cavity 4.8e-5 m^3; no warning.
+    cube, cavity = ((0.1, 0.1, 0.1), (0.0, 0.0, 0.0)), ((0.02, 0.04, 0.06), (0.02, -0.01, 0.005))
+    vertices, faces = _parts(_box(*cube), _box(*cavity, inward=True))
+    result = from_mesh(vertices, faces, 1000.0)
+    _check_exact(result, [(*cube, 1), (*cavity, -1)])
+    assert result.warnings == ()
+    np.testing.assert_array_equal(result.faces, faces)
+
+
+def test_an_inside_out_part_in_a_cavity_is_a_solid_in_it():
+    # A cube with a 6 cm cavity, and in the cavity a 2 cm cube wound inside out: the space around it is air (the
+    # shell's +1 and the cavity's -1), so it is no cavity of a cavity but a solid wound the wrong way: it
+    # rattles in the cavity. It was a second cavity, the space inside it counted -1.
+    cube, cavity, rattle = ((0.1,) * 3, (0.0,) * 3), ((0.06,) * 3, (0.0,) * 3), ((0.02,) * 3, (0.01, 0.0, -0.01))
+    result = from_mesh(*_parts(_box(*cube), _box(*cavity, inward=True), _box(*rattle, inward=True)), 1000.0)
+    _check_exact(result, [(*cube, 1), (*cavity, -1), (*rattle, 1)])
+    assert len(result.warnings) == 1 and "1 of the mesh's 3 closed parts is wound inside out" in result.warnings[0]
+
+
+def test_a_mesh_wound_inside_out_whole_is_counted_turned_outward():
+    # One part, every face inward: the same rule (no part holds it); it was "mesh encloses no volume".
+    box = ((0.1, 0.06, 0.04), (0.3, 0.0, 0.0))
+    result = from_mesh(*_parts(_box(*box, inward=True)), 1000.0)
+    _check_exact(result, [(*box, 1)])
+    assert result.warnings == ("the mesh is wound inside out (its faces face inward): counted turned outward "
+                               "(0.00024 m^3)",)
