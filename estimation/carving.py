@@ -480,9 +480,11 @@ def silhouette_reach(points: np.ndarray, origins: np.ndarray, normals: np.ndarra
     along its surface away from its camera (the ray's direction in the tangent plane) and across the ray
     (tangent too, either way), each ``SILHOUETTE_PIXELS`` of that camera's pixel pitch long on the surface.
 
-    A pixel spans range / fx across the ray, and that over the cosine of the incidence along it: a box's
+    A pixel spans range / f across the ray, and that over the cosine of the incidence along it: a box's
     top seen from 30 degrees above the level reaches 2 pitches past its last row, away from the camera;
-    its front face reaches 1.15 pitches down, not back. Along the ray, no further than a level surface
+    its front face reaches 1.15 pitches down, not back. f is the focal length in the direction the reach
+    runs in the image: fx along its rows, fy down its columns, between the two for others (square pixels:
+    one f), so that each reach is ``SILHOUETTE_PIXELS`` long in the image whatever the pixels' aspect. Along the ray, no further than a level surface
     would (past a ball's limb) nor than 1 / ``GRAZING_COSINE`` pitches. NaN rows where a point has no
     origin or normal, or its origin is none of the ``views``' camera centres (to 1 mm).
 
@@ -497,7 +499,8 @@ def silhouette_reach(points: np.ndarray, origins: np.ndarray, normals: np.ndarra
     if not len(views) or not len(pts):
         return out
     centres = np.array([np.asarray(v.position, dtype=np.float64) for v in views])
-    focal = np.array([min(v.intrinsics.fx, v.intrinsics.fy) for v in views])
+    rotations = np.array([np.asarray(v.rotation, dtype=np.float64) for v in views])
+    focal = np.array([(v.intrinsics.fx, v.intrinsics.fy) for v in views])
     org = np.asarray(origins, dtype=np.float64)
     ok = np.isfinite(org).all(axis=1) & np.isfinite(normals).all(axis=1)
     gap = np.linalg.norm(np.where(ok[:, None], org, 0.0)[:, None, :] - centres[None], axis=2)
@@ -507,7 +510,8 @@ def silhouette_reach(points: np.ndarray, origins: np.ndarray, normals: np.ndarra
     rng = np.linalg.norm(ray, axis=1)
     ray /= np.maximum(rng, 1e-12)[:, None]
     n = np.asarray(normals, dtype=np.float64)[ok]
-    pitch = SILHOUETTE_PIXELS * rng / focal[which[ok]]
+    seen_by = which[ok]
+    pitch = SILHOUETTE_PIXELS * rng
     cosine = np.abs(np.einsum("ij,ij->i", ray, n))
     along = ray - np.einsum("ij,ij->i", ray, n)[:, None] * n
     across = np.cross(n, ray)
@@ -521,9 +525,32 @@ def silhouette_reach(points: np.ndarray, origins: np.ndarray, normals: np.ndarra
     # No further than on a level surface seen along the same ray: past a ball's or a lying can's limb the
     # incidence nears 90 degrees, but the surface curves away from the next ray instead of running on.
     level = np.abs(ray @ up)
-    out[ok, 0] = along * (pitch / np.maximum(np.maximum(cosine, level), GRAZING_COSINE))[:, None]
-    out[ok, 1] = across * pitch[:, None]
+    rot = rotations[seen_by]
+    cam = np.einsum("nji,nj->ni", rot, pts[ok] - centres[seen_by])  # camera frame
+    fx, fy = focal[seen_by, 0], focal[seen_by, 1]
+    f_along = _focal_towards(along, cam, rot, fx, fy)
+    f_across = _focal_towards(across, cam, rot, fx, fy)
+    out[ok, 0] = along * (pitch / f_along / np.maximum(np.maximum(cosine, level), GRAZING_COSINE))[:, None]
+    out[ok, 1] = across * (pitch / f_across)[:, None]
     return out
+
+
+def _focal_towards(direction: np.ndarray, cam: np.ndarray, rotation: np.ndarray, fx: np.ndarray,
+                   fy: np.ndarray) -> np.ndarray:
+    """(n,) pixels per unit of angle in the image direction a step along ``direction`` takes from ``cam``:
+    ``hypot(fx a, fy b) / hypot(a, b)`` for that direction (a, b) (the pinhole projection's derivative), between
+    fx and fy; min(fx, fy) for a step along the ray (it moves nothing in the image).
+
+    Args:
+        direction: (n, 3) world frame, unit. cam: (n, 3) metres, each point in its camera's frame.
+        rotation: (n, 3, 3) each point's camera-to-world rotation. fx, fy: (n,) that camera's, pixels.
+    """
+    d = np.einsum("nji,nj->ni", rotation, direction)  # camera frame
+    a = d[:, 0] * cam[:, 2] - cam[:, 0] * d[:, 2]
+    b = d[:, 1] * cam[:, 2] - cam[:, 1] * d[:, 2]
+    size = np.hypot(a, b)
+    moves = size > 0
+    return np.where(moves, np.hypot(fx * a, fy * b) / np.where(moves, size, 1.0), np.minimum(fx, fy))
 
 
 def _mark_reach(shadow: np.ndarray, carving: Carving, points: np.ndarray, reach: np.ndarray) -> None:

@@ -59,6 +59,13 @@ MIN_DEPTH_SCALE = 1e-6
 #: 0.01 degree one, past any lens we will see; outside, rays reach 1e300 m or all pixels collapse to one.
 FOCAL_RANGE_PX = (1.0, 1e6)
 
+#: Largest fx / fy (or fy / fx) taken: how far from square a pixel may be. Depth cameras have square pixels
+#: (RealSense and Kinect calibrations give fx and fy within 1 % of each other); the most anisotropic pixels
+#: imaging uses are 2:1 (a 2x anamorphic lens, or 1 x 2 binning on a sensor; video's non-square pixels, ITU-R
+#: BT.601's 10:11 to HDV's 4:3, are nearer 1). 4 takes both at once; past it the numbers are a typo (a digit too
+#: many or too few is 10-fold), not a camera. Below it the back-projection is exact for any fx, fy.
+MAX_PIXEL_ASPECT = 4.0
+
 #: PNG colour types (the IHDR byte) by name; 0, greyscale, is the one that holds depth.
 PNG_COLOUR_TYPES = {0: "greyscale", 2: "RGB", 3: "palette", 4: "greyscale with alpha", 6: "RGBA"}
 
@@ -168,8 +175,8 @@ def intrinsics(fx: float, fy: float, cx: float, cy: float, *, width: int, height
     """Intrinsics in OpenCV's convention (pixel centres at integers) checked against the image size.
 
     Raises:
-        CloudError: non-finite focal lengths or ones outside ``FOCAL_RANGE_PX``, a principal point outside the
-            image.
+        CloudError: non-finite focal lengths, ones outside ``FOCAL_RANGE_PX`` or more than ``MAX_PIXEL_ASPECT``
+            times each other, a principal point outside the image.
     """
     values = (fx, fy, cx, cy)
     if not all(np.isfinite(v) for v in values):
@@ -178,6 +185,9 @@ def intrinsics(fx: float, fy: float, cx: float, cy: float, *, width: int, height
     if not (low <= fx <= high and low <= fy <= high):
         raise CloudError(f"focal lengths must be {low:g} to {high:g} pixels, got fx {refused_number(fx, low, high)}, "
                          f"fy {refused_number(fy, low, high)}")
+    if (ratio := max(fx, fy) / min(fx, fy)) > MAX_PIXEL_ASPECT:
+        raise CloudError(f"focal lengths fx {fx:g} and fy {fy:g} differ {ratio:.4g}-fold: pixels that far from square "
+                         f"are no camera's (at most {MAX_PIXEL_ASPECT:g}:1); a typo?")
     if not (0 <= cx <= width and 0 <= cy <= height):
         raise CloudError(f"principal point ({refused_number(cx, 0, width)}, {refused_number(cy, 0, height)}) lies "
                          f"outside the {width}x{height} image (intrinsics "

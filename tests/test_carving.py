@@ -72,6 +72,35 @@ def test_a_point_reaches_past_itself_what_its_camera_pixel_spans_on_its_own_surf
     assert np.isnan(silhouette_reach(at[:1], camera[None] + 0.01, level[None], [view], level)).all()
 
 
+@pytest.mark.parametrize(("fx", "fy"), [(400.0, 100.0), (100.0, 400.0), (250.0, 250.0)])
+def test_a_points_reach_spans_one_pixel_in_its_image_whatever_the_pixels_aspect(fx, fy):
+    # Non-square pixels (fx != fy) span range / fx across the image's columns and range / fy along its rows:
+    # each reach, projected back into the camera that saw the point, is SILHOUETTE_PIXELS long there, in every
+    # direction (min(fx, fy) made a reach along the fine axis fx / fy pixels long, 4 of them here).
+    from estimation.carving import DepthView
+    from estimation.fusion import Intrinsics
+
+    view = DepthView(np.zeros((2, 2)), 0.0, Intrinsics(fx, fy, 1.0, 1.0, 2, 2), np.eye(3), np.zeros(3))
+    rng = np.random.default_rng(0)
+    at = np.c_[rng.uniform(-0.03, 0.03, (40, 2)), np.ones(40)]  # near the optical axis (+z), 1 m away
+    normals = -at / np.linalg.norm(at, axis=1, keepdims=True) + rng.uniform(-0.6, 0.6, (40, 3))
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    up = np.array([0.0, -1.0, 0.0])  # the camera's y is down
+    ray = at / np.linalg.norm(at, axis=1, keepdims=True)
+    cosine = np.abs(np.einsum("ij,ij->i", ray, normals))
+    assert (cosine > np.maximum(np.abs(ray @ up), 0.25)).all()  # the reach along is pitch / cosine
+
+    reach = silhouette_reach(at, np.zeros_like(at), normals, [view], up)
+
+    def pixel(p: np.ndarray) -> np.ndarray:
+        return np.c_[fx * p[:, 0] / p[:, 2], fy * p[:, 1] / p[:, 2]]
+
+    for k in range(2):  # along the surface away from the camera, and across the ray
+        spans = np.linalg.norm(pixel(at + reach[:, k]) - pixel(at), axis=1)
+        # Near the axis and a pixel long, the image is its own tangent plane to within 1 %.
+        np.testing.assert_allclose(spans, SILHOUETTE_PIXELS, rtol=0.01)
+
+
 @pytest.mark.parametrize("count", [2, 3])
 def test_the_carved_solid_holds_the_object_and_not_much_more(count: int):
     scan = _scan(count)

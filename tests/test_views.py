@@ -412,6 +412,10 @@ def test_bad_depth_frames_are_one_line_errors(capsys, tmp_path, name, write, mes
     (["--intrinsics", "0", "50", "19.5", "14.5"], r"focal lengths must be 1 to 1e\+06 pixels"),
     (["--intrinsics", "1e-300", "1e-300", "19.5", "14.5"], r"focal lengths must be 1 to 1e\+06 pixels"),
     (["--intrinsics", "1e300", "50", "19.5", "14.5"], r"focal lengths must be 1 to 1e\+06 pixels"),
+    # fx / fy = 105: a typo (a digit too many); no camera's pixels are 105 times as tall as wide. Was accepted.
+    (["--intrinsics", "5250", "50", "19.5", "14.5"],
+     r"focal lengths fx 5250 and fy 50 differ 105-fold: pixels that far from square are no camera's"),
+    (["--intrinsics", "50", "501", "19.5", "14.5"], r"fx 50 and fy 501 differ 10\.02-fold"),
     (["--intrinsics", "50", "50", "19.5", "14.5", "--depth-scale", "1000"], r"inverse"),
     # was ignored: the image read in millimetres, as if --units mm applied to it or did nothing
     (["--intrinsics", "50", "50", "19.5", "14.5", "--units", "mm"], r"--units is for point files"),
@@ -755,6 +759,31 @@ def test_a_depth_image_past_the_pixel_cap_is_thinned_to_the_same_points(caplog):
     thin, _, stride = coarsened(row, intrinsics(100.0, 100.0, 20_000.0, 0.5, width=40_000, height=1),
                                 max_pixels=5_000)
     assert stride == 8 and thin.size == 5_000
+
+
+def test_non_square_pixels_back_project_where_the_square_ones_they_came_from_do():
+    # Every 2nd column (or row) of a frame is the frame of a camera whose pixels are twice as wide (tall):
+    # fx (fy) halves, the principal point with it. Each kept pixel must land where it did in the whole frame,
+    # up to the bound on fx / fy, which still takes a 2x anamorphic lens on 2x binning (4:1) and no more.
+    from estimation.depthimage import MAX_PIXEL_ASPECT, intrinsics
+    from estimation.fusion import depth_to_points
+
+    rng = np.random.default_rng(1)
+    depth = rng.uniform(0.5, 1.5, size=(120, 160))
+    camera = intrinsics(300.0, 300.0, 79.3, 60.2, width=160, height=120)  # OpenCV's cx, cy
+    rot, pos = np.eye(3), np.array([0.1, -0.2, 0.3])
+    whole, _ = depth_to_points(depth, camera, rot, pos)
+    whole = whole.reshape(120, 160, 3)
+    for stride_x, stride_y in ((2, 1), (1, 2), (4, 1), (1, 4)):
+        thin = depth[::stride_y, ::stride_x]
+        grid = intrinsics(300.0 / stride_x, 300.0 / stride_y, 79.3 / stride_x, 60.2 / stride_y,
+                          width=thin.shape[1], height=thin.shape[0])
+        points, _ = depth_to_points(thin, grid, rot, pos)
+        expected = whole[::stride_y, ::stride_x].reshape(-1, 3)
+        np.testing.assert_allclose(points, expected, rtol=0, atol=1e-12)
+    assert MAX_PIXEL_ASPECT == 4.0
+    with pytest.raises(CloudError, match=r"^focal lengths fx 75 and fy 300.1 differ 4\.001-fold"):
+        intrinsics(75.0, 300.1, 79.3, 60.2, width=160, height=120)
 
 
 @pytest.mark.parametrize("sigma", [0.0005, 0.0002, 0.0])
