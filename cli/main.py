@@ -267,7 +267,7 @@ def _parser() -> argparse.ArgumentParser:
     dens.add_argument("--density", type=float, help="kg/m^3")
     dens.add_argument("--material", help="a name or alias from the material table (e.g. wood_oak, PLA, "
                                           "aluminum; list: twin materials)")
-    p.add_argument("--units", default="m", choices=["m", "cm", "mm"], help="units of the file (default m)")
+    _units_option(p, "the file")
     p.add_argument("--method", default="auto", choices=["auto", "obb", "hull", "surface"])
     p.add_argument("--viewpoint", type=float, nargs=3, metavar=("X", "Y", "Z"), action="append",
                    help="sensor position (file units) to orient estimated normals towards; once per VIEW, in "
@@ -317,8 +317,7 @@ def _parser() -> argparse.ArgumentParser:
                                                "metres or --units, world frame), an optional header row t,x,y,z, '#' "
                                                "comments; linear between rows, held after the last; every target "
                                                "within the operator's reach of the table; default: a push")
-    p.add_argument("--units", default="m", choices=["m", "cm", "mm"],
-                   help="units of the --script file's positions (default m)")
+    _units_option(p, "the --script file's positions")
     p.add_argument("--no-realtime", action="store_true", help="run as fast as possible")
     p.add_argument("--json", action="store_true")
     _coacd_options(p)
@@ -363,8 +362,7 @@ def _parser() -> argparse.ArgumentParser:
                                                       "frame), an optional header row t,x,y,z, '#' comments; linear "
                                                       "between rows, held after the last; every target within the "
                                                       "operator's reach of the table")
-    p.add_argument("--units", default="m", choices=["m", "cm", "mm"],
-                   help="units of the --script file's positions (default m)")
+    _units_option(p, "the --script file's positions")
     operator.add_argument("--replay-operator", type=Path, metavar="RECORDING",
                           help="operator targets from a recording (.mcap), on the twin's time")
     operator.add_argument("--operator-topic", action="store_true",
@@ -377,8 +375,7 @@ def _parser() -> argparse.ArgumentParser:
     p = sub.add_parser("replay", help="re-run a recorded session headless on the simulated clock")
     p.add_argument("recording", type=Path, help="a .mcap file written by --record")
     p.add_argument("--script", type=Path, help="operator targets from this trajectory CSV (t,x,y,z) instead")
-    p.add_argument("--units", default="m", choices=["m", "cm", "mm"],
-                   help="units of the --script file's positions (default m)")
+    _units_option(p, "the --script file's positions")
     p.add_argument("--scene", type=Path, help="scene TOML (default: the one in the recording)")
     p.add_argument("--delay", dest="delay_ms", type=float, help="one-way delay each way, ms")
     p.add_argument("--jitter", dest="jitter_ms", type=float, help="delay standard deviation, ms (at most delay/3)")
@@ -873,6 +870,12 @@ def _run_with_viewer(twin, args, trajectory):  # type: ignore[no-untyped-def]
     return stats
 
 
+def _units_option(p: argparse.ArgumentParser, what: str) -> None:
+    """``--units``: the length unit of ``what`` (the names of :data:`estimation.units.UNIT_SCALE`, written out:
+    importing it loads numpy, which ``--help`` does not need)."""
+    p.add_argument("--units", default="m", choices=["m", "cm", "mm"], help=f"units of {what} (default m)")
+
+
 def _sensor_option(p: argparse.ArgumentParser) -> None:
     p.add_argument("--sensor", choices=["surface", "cameras"], default="surface",
                    help="what the remote publishes: 'surface' (default: whole true surfaces, simulator poses) or "
@@ -1096,20 +1099,21 @@ def _cmd_local(args: argparse.Namespace) -> int:
 
 
 def _run_local(args: argparse.Namespace, rlog) -> None:  # type: ignore[no-untyped-def]
-    from cli.record import open_recorder, recorded_trajectory, recording_transport
+    from cli.record import open_recorder, recorded_targets, recording_transport
     from sync.clock import REAL_CLOCK
     from sync.recording import read_recording
     from sync.zenoh_transport import ZenohTransport
     from twin.hold import HoldSettings
     from twin.runtime import Local, LocalSettings, OperatorSettings, SyncError
-    from twin.trajectory import load_trajectory
+    from twin.trajectory import HeldTargets, Waypoints, load_trajectory
 
-    trajectory = None  # before any session: a bad script or recording costs nothing
+    # Before any session: a bad script or recording costs nothing. Its reach: once the remote's table is known.
+    trajectory: Waypoints | HeldTargets | None = None
     if args.script is not None:
-        trajectory = load_trajectory(args.script, units=args.units)  # its reach: once the remote's table is known
+        trajectory = load_trajectory(args.script, units=args.units)
     elif args.replay_operator is not None:
-        trajectory = recorded_trajectory(read_recording(args.replay_operator))
-        if trajectory is None:
+        trajectory = recorded_targets(read_recording(args.replay_operator))  # read and decoded once
+        if not len(trajectory.times):
             raise TwinError(f"{args.replay_operator}: the recording has no operator targets")
     session = _session(args)
     recorder = open_recorder(args.record, clock=REAL_CLOCK, command="local", side="twin", scene_name=args.scene or "")
@@ -1123,7 +1127,8 @@ def _run_local(args: argparse.Namespace, rlog) -> None:  # type: ignore[no-untyp
         except (SyncError, ValueError) as exc:
             raise TwinError(str(exc)) from exc
         started = True
-        _check_operator_reach(args, trajectory, local.workspace)
+        if trajectory is not None:  # outside the workspace, as live targets are dropped
+            trajectory.check_reach(local.workspace)
         stats = local.run(args.duration, trajectory=trajectory, until=None if args.json else _arrivals(local))
         r, c = local.report, local.link.counters
         record = {"objects_synced": r.objects_synced, "pose_updates": r.pose_updates,
@@ -1158,18 +1163,6 @@ def _local_objects(local) -> list[dict]:  # type: ignore[no-untyped-def]
              if (r := local.remote_pose(i)) is not None}
     return object_records(local.report, body_masses(local.twin.model, ids), {i: local.twin.pose(i) for i in ids},
                           drift)
-
-
-def _check_operator_reach(args: argparse.Namespace, trajectory, box) -> None:  # type: ignore[no-untyped-def]
-    """Refuse a --script or --replay-operator target outside the workspace ``box`` (as live targets are dropped)."""
-    from sync.recording import read_recording
-    from twin.trajectory import Waypoints, check_reach
-
-    if isinstance(trajectory, Waypoints):
-        trajectory.check_reach(box)
-    elif args.replay_operator is not None:
-        times, points = read_recording(args.replay_operator).targets()
-        check_reach(times, points, box, source=str(args.replay_operator))
 
 
 def _cmd_demo(args: argparse.Namespace) -> int:

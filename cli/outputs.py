@@ -38,9 +38,8 @@ def check_not_input(output: Path, inputs: Iterable[Path | None], flag: str) -> N
 
 
 def check_output_file(path: Path, inputs: Iterable[Path | None], flag: str, *, suffixes: Iterable[str]) -> None:
-    """Refuse an output file before any work: one of the inputs, a format not among ``suffixes``, a folder that
-    does not exist, or an existing path that is not a regular file (a FIFO or a device, which the file moved
-    into place would delete; a folder).
+    """Refuse an output file before any work: one of the inputs, a format not among ``suffixes``, or a folder
+    that does not exist. What may stand at the path is the output's own check (:func:`check_mesh_file`).
 
     Raises:
         TwinError: naming the flag, the file and why.
@@ -52,8 +51,6 @@ def check_output_file(path: Path, inputs: Iterable[Path | None], flag: str, *, s
         raise TwinError(f"{flag} {path}: unknown format {named}; use one of {', '.join(suffixes)}")
     if not path.parent.is_dir():
         raise TwinError(f"{flag} {path}: the folder {path.parent} does not exist")
-    if path.exists() and not path.is_file():
-        raise TwinError(f"{flag} {path}: exists and is not a regular file; refusing to replace it")
 
 
 def check_creatable(out: Path, flag: str = "--out") -> None:
@@ -114,10 +111,10 @@ def replace_file(path: Path, write: Callable[[Path], object]) -> None:
     What stood at ``path`` is replaced, not written through: a symbolic link planted in an output folder
     (``summary.json`` -> a user's file elsewhere) had that file overwritten by the next run. A failed
     ``write`` leaves ``path`` as it was and no temporary file behind. The file gets the permissions a plain
-    ``open()`` would have given it, not ``mkstemp``'s 0600 (:func:`sync.recording.hidden_sibling`, which
+    ``open()`` would have given it, not ``mkstemp``'s 0600 (:func:`sync.replacing.hidden_sibling`, which
     recordings use too).
     """
-    from sync.recording import hidden_sibling
+    from sync.replacing import hidden_sibling
 
     fd, tmp = hidden_sibling(path, path.suffix)
     os.close(fd)
@@ -148,19 +145,12 @@ def check_record_file(path: Path, inputs: Iterable[Path | None], flag: str = "--
 _PLY_MARK, _OBJ_MARK = b"comment https://github.com/mikedh/trimesh\n", b"# https://github.com/mikedh/trimesh\n"
 
 
-def written_mesh(path: Path) -> bool:
-    """Whether ``path`` is empty or a mesh as ``--mesh-out`` writes it: a binary STL with a zeroed header whose
-    triangle count matches its size, a PLY or OBJ carrying trimesh's comment. A user's CAD export (an STL
-    header naming its tool, an ASCII STL) and any other file are not."""
-    try:
-        size = path.stat().st_size
-        with path.open("rb") as f:
-            head = f.read(512)
-    except OSError:
-        return False
-    if size == 0:  # nothing of a user's is lost (as for --rerun save)
-        return True
-    suffix = path.suffix.lower()
+def written_mesh(suffix: str, head: bytes, size: int) -> bool:
+    """Whether a non-empty file of ``size`` bytes starting with ``head`` (its first
+    :data:`sync.replacing.HEAD_BYTES`) is a mesh as ``--mesh-out`` writes it in the format ``suffix`` names: a
+    binary STL with a zeroed header whose triangle count matches its size, a PLY or OBJ carrying trimesh's comment.
+    A user's CAD export (an STL header naming its tool, an ASCII STL) and any other file are not."""
+    suffix = suffix.lower()
     if suffix == ".stl":
         return (len(head) >= 84 and head[:80] == bytes(80)
                 and size == 84 + 50 * int.from_bytes(head[80:84], "little"))
@@ -172,14 +162,20 @@ def written_mesh(path: Path) -> bool:
 
 
 def check_mesh_file(path: Path, inputs: Iterable[Path | None], flag: str, *, suffixes: Iterable[str]) -> None:
-    """:func:`check_output_file`, and refuse an existing file that is not a mesh this command wrote
-    (:func:`written_mesh`): the rule ``--record`` and ``--rerun save`` follow, a file of the output's own kind
-    is replaced and any other is the user's.
+    """:func:`check_output_file`, and refuse what an output may not replace (:func:`sync.replacing.found_at`):
+    a folder, a device or pipe, or an existing file that is neither empty nor a mesh this command wrote
+    (:func:`written_mesh`); the rule ``--record`` and ``--rerun save`` follow.
 
     Raises:
         TwinError: naming the flag, the file and why.
     """
-    check_output_file(path, inputs, flag, suffixes=suffixes)
-    if path.is_file() and not written_mesh(path):
-        raise TwinError(f"{flag} {path}: exists and is not a mesh this command wrote; refusing to replace it")
+    from sync.replacing import found_at
 
+    check_output_file(path, inputs, flag, suffixes=suffixes)
+    found = found_at(path, lambda head, size: written_mesh(path.suffix, head, size))
+    if found.kind == "unchecked":
+        raise TwinError(f"{flag} {path}: cannot check it ({found.error})")
+    if found.kind in ("folder", "special"):  # the mesh moved into place would delete a FIFO or device node
+        raise TwinError(f"{flag} {path}: exists and is not a regular file; refusing to replace it")
+    if not found.replaceable:
+        raise TwinError(f"{flag} {path}: exists and is not a mesh this command wrote; refusing to replace it")

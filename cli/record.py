@@ -33,7 +33,7 @@ from sync.recording import (
     read_recording,
 )
 from sync.transport import Transport
-from twin.trajectory import Trajectory
+from twin.trajectory import HeldTargets, Waypoints
 
 log = logging.getLogger(__name__)
 
@@ -67,15 +67,16 @@ def recording_transport(transport: Transport, recorder: Recorder | None, side: s
     return transport if recorder is None else RecordingTransport(transport, recorder, side)
 
 
-def recorded_trajectory(recording: Recording) -> Trajectory | None:
-    """The operator's recorded targets as a trajectory of twin time (None if the recording has none): each
-    held from the time it was applied, as recorded (:func:`twin.trajectory.held_trajectory`)."""
-    from twin.trajectory import held_trajectory
+def recorded_targets(recording: Recording) -> HeldTargets:
+    """The operator's recorded targets, decoded once (:meth:`sync.recording.Recording.targets`), as a trajectory
+    of twin time: each held from the time it was applied, as recorded. Empty (``times`` of length 0, never a
+    target) if the recording has none.
 
+    Raises:
+        RecordingError: a malformed target record.
+    """
     times, points = recording.targets()
-    if len(times) == 0:
-        return None
-    return held_trajectory(times, points, start_time=float(times[0]))
+    return HeldTargets(times, points, source=str(recording.path))
 
 
 def recorded_scene(recording: Recording):  # type: ignore[no-untyped-def]
@@ -196,29 +197,29 @@ def replay(path: str | Path, *, script: Path | None = None, units: str = "m", sc
 
     from scenes.headless import Headless
     from scenes.scenefile import load_scene
-    from twin.model import reach_corners
+    from twin.model import scene_reach_corners
     from twin.runtime import OPERATOR_REACH
-    from twin.trajectory import check_reach, load_trajectory
+    from twin.trajectory import load_trajectory
 
     recording = read_recording(path)
     if recording.damage:
         log.info("%s", recording.damage)  # the summary's "damage"; `twin replay` prints it once, as a warning
     spec = load_scene(scene) if scene is not None else recorded_scene(recording)
-    trajectory = load_trajectory(script, units=units) if script is not None else recorded_trajectory(recording)
-    # The box the twin drops live device targets outside of (Local.workspace, from the scene the remote announces).
-    table, ee = spec.table, spec.end_effector
-    box = reach_corners(None if table is None else table.size, 0.0 if table is None else table.height,
-                        (0.0, 0.0, 0.0) if ee is None else ee.position, OPERATOR_REACH)
+    trajectory: Waypoints | HeldTargets | None
     if script is not None:
-        trajectory.check_reach(box)  # type: ignore[union-attr]
-    elif trajectory is not None:
-        check_reach(*recording.targets(), box, source=str(recording.path))
+        recorded, trajectory = None, load_trajectory(script, units=units)
+    else:
+        recorded = recorded_targets(recording)  # decoded once: the trajectory, its reach, the duration, the summary
+        trajectory = recorded if len(recorded.times) else None
+    if trajectory is not None:
+        # The box the twin drops live device targets outside of (Local.workspace, from the scene the remote announces).
+        trajectory.check_reach(scene_reach_corners(spec.table, spec.end_effector, OPERATOR_REACH))
     if network is None:
         network = recorded_network(recording)
     if network is not None and seed is not None:
         network = replace(network, seed=seed)
     asked = duration is not None
-    duration = _recorded_duration(recording) if duration is None else duration
+    duration = _recorded_duration(recording, recorded) if duration is None else duration
     if duration > MAX_REPLAY_SECONDS:
         what = (f"--duration {refused_number(duration, MAX_REPLAY_SECONDS)} s is" if asked else
                 f"{recording.path}: the recorded session runs {refused_number(duration, MAX_REPLAY_SECONDS, digits=7)} s,")
@@ -259,7 +260,8 @@ def replay(path: str | Path, *, script: Path | None = None, units: str = "m", sc
         twin = {i: np.concatenate(p) for i, p in session.poses().items()}
         remote = {i: np.concatenate(session.remote.twin.pose(i)) for i in session.remote._objects}
         report = session.local.report
-    summary = _summary(recording, spec, duration, built, run_s, twin, remote, last, gaps, report, network, script)
+    summary = _summary(recording, spec, duration, built, run_s, twin, remote, last, gaps, report, network, script,
+                       trajectory is not None)
     if out is not None:
         from cli.main import to_json
 
@@ -268,12 +270,13 @@ def replay(path: str | Path, *, script: Path | None = None, units: str = "m", sc
     return ReplayResult(summary, twin, remote)
 
 
-def _recorded_duration(recording: Recording) -> float:
-    """Twin seconds the recorded session ran: from its end record, else its last target, else its truth."""
+def _recorded_duration(recording: Recording, recorded: HeldTargets | None) -> float:
+    """Twin seconds the recorded session ran: from its end record, else its last target, else its truth.
+    ``recorded``: its targets as :func:`recorded_targets` decoded them (None: not decoded, a script replaced them)."""
     end = recording.end_time()
     if end is not None:
         return end
-    times, _ = recording.targets()
+    times = recording.targets()[0] if recorded is None else recorded.times
     if len(times):
         return float(times[-1]) + 1e-3
     spans = [t[-1] - t[0] for t, _, _ in recording.truth().values() if len(t)]
@@ -291,7 +294,7 @@ def _truth_gaps(session, truth, t: float, gaps: dict[str, list[float]], last: di
 
 
 def _summary(recording, spec, duration, built, run_s, twin, remote, last, gaps, report,  # type: ignore[no-untyped-def]
-             network, script) -> dict:
+             network, script, operated: bool) -> dict:
     div = np.concatenate([np.asarray(g) for g in report.divergence.values()] or [np.zeros(0)]) * 1e3
     truth_gap = np.concatenate([np.asarray(g) for g in gaps.values()] or [np.zeros(0)]) * 1e3
     final_vs_truth = {  # at the last ground-truth sample this replay reached (the remote's time)
@@ -308,7 +311,7 @@ def _summary(recording, spec, duration, built, run_s, twin, remote, last, gaps, 
         "recording": str(recording.path),
         "damage": recording.damage,
         "scene": spec.name,
-        "operator": "script" if script is not None else ("recorded" if recording.targets()[0].size else "none"),
+        "operator": "script" if script is not None else ("recorded" if operated else "none"),
         "network": None if network is None else {"uplink": _conditions(network.uplink),
                                                  "downlink": _conditions(network.downlink), "seed": network.seed},
         "duration_s": duration,

@@ -126,14 +126,14 @@ class RecordedTask:
 
     def plan(self, speed: float = 1.0):  # type: ignore[no-untyped-def]
         """``(trajectory(t), duration)`` from t = 0, times divided by ``speed`` (as :func:`plan_task`)."""
-        from twin.trajectory import held_trajectory
+        from twin.trajectory import HeldTargets
 
         times = (np.asarray(self.times, float) - float(self.times[0])) / speed
         seconds = float(times[-1]) + self.settle
         if seconds > MAX_REPLAY_SECONDS:  # a 1.4 kB recording of two targets an hour apart, at speed 0.05: 20 h
             raise ExperimentError(f"the recorded targets span {times[-1] * speed:.7g} s, a {seconds:.7g} s session at "
                                   f"speed {speed:g}: more than a replay runs (at most {MAX_REPLAY_SECONDS:g} s)")
-        return held_trajectory(times, self.points), seconds
+        return HeldTargets(times, np.asarray(self.points, float)), seconds
 
 
 @dataclass(frozen=True)

@@ -51,7 +51,7 @@ from twin.model import (
     PhysicsSettings,
     TableSpec,
     new_spec,
-    reach_corners,
+    scene_reach_corners,
 )
 
 if sys.version_info >= (3, 11):
@@ -428,8 +428,7 @@ def parse_scene(doc: dict, *, base: str | os.PathLike[str] = Path("."),
                          f"({', '.join(sorted(RESERVED_IDS))}); rename them")
     # Without a declared workspace, the twin's default box: SCENE_REACH around the table (an object 999 m off
     # was built, then dropped).
-    low, high = workspace or reach_corners(None if table is None else table.size,
-                                           0.0 if table is None else table.height, ee.position, SCENE_REACH)
+    low, high = workspace or scene_reach_corners(table, ee, SCENE_REACH)
     _check_inside(objects, (tuple(np.asarray(low).tolist()), tuple(np.asarray(high).tolist())))
     return SceneSpec(name=scene.name, objects=objects, table=table, end_effector=ee, path=path, workspace=workspace)
 

@@ -45,7 +45,6 @@ import math
 import os
 import queue
 import struct
-import tempfile
 import threading
 import zlib
 from collections import Counter
@@ -58,6 +57,7 @@ import numpy as np
 from estimation.errors import TwinError
 from sync.clock import Clock
 from sync.messages import MAX_COORDINATE, QUAT_NORM_TOLERANCE, peek_stamp
+from sync.replacing import found_at, hidden_sibling
 from sync.transport import Answer, OnSample, Transport
 
 log = logging.getLogger(__name__)
@@ -107,7 +107,8 @@ MAX_REPLAY_SECONDS = 3600.0
 #: clock starts after the recorder's, and a step or a late final record is far below a second.
 RECORDED_TIME_SLACK_S = 1.0
 
-#: The first bytes of every MCAP file: an existing file without them is not a recording a recorder may replace.
+#: The first bytes of every MCAP file: a non-empty existing file without them is not a recording a recorder may
+#: replace (:func:`check_record_destination`).
 MCAP_MAGIC = b"\x89MCAP0\r\n"
 
 WIRE_SCHEMA = "tactile_twin.wire"
@@ -164,8 +165,8 @@ class Recorder:
         truth_rate: ground-truth and force samples per second of the sampled side's time.
 
     Raises:
-        RecordingError: ``path`` is a folder, a device or pipe, or an existing file that is not an MCAP
-            recording (:func:`check_record_destination`), or the file cannot be created.
+        RecordingError: ``path`` is a folder, a device or pipe, or an existing file that is neither empty nor an
+            MCAP recording (:func:`check_record_destination`), or the file cannot be created.
     """
 
     def __init__(self, path: str | Path, *, clock: Clock, metadata: Mapping[str, object] | None = None,
@@ -690,55 +691,22 @@ def check_recording_file(path: Path) -> None:
 
 
 def check_record_destination(path: Path, label: str | None = None) -> None:
-    """Refuse a path a recording must not be renamed onto: a folder, a device, pipe or socket, or an existing
-    file that is not an MCAP recording (a user's own file, which the recording would replace).
+    """Refuse a path a recording must not be renamed onto (:func:`sync.replacing.found_at`): a folder, a device,
+    pipe or socket, or an existing file that is neither empty nor an MCAP recording (a user's own file, which
+    the recording would replace).
 
     ``label`` starts the error (default: ``path``), e.g. ``"--record x.mcap"``.
 
     Raises:
         RecordingError: naming the path and why.
     """
-    import stat
-
-    label = str(path) if label is None else label
-    try:
-        mode = path.stat().st_mode
-    except FileNotFoundError:
-        return
-    except OSError as exc:  # a loop of links, a name too long, a folder we may not enter
-        raise RecordingError(f"{label}: cannot check it ({exc.strerror or exc})") from None
-    if stat.S_ISDIR(mode):
-        raise RecordingError(f"{label}: is a folder, not a recording file")
-    if not stat.S_ISREG(mode):  # the rename would delete the FIFO or device node
-        raise RecordingError(f"{label}: not a regular file")
-    try:
-        with path.open("rb") as f:
-            head = f.read(len(MCAP_MAGIC))
-    except OSError as exc:
-        raise RecordingError(f"{label}: cannot read it ({exc.strerror or exc})") from None
-    if head != MCAP_MAGIC:
-        raise RecordingError(f"{label}: exists and is not an MCAP recording; refusing to replace it")
-
-
-def hidden_sibling(path: Path, suffix: str) -> tuple[int, Path]:
-    """Create ``.<name>.<random><suffix>`` beside ``path``, to be written and then renamed onto ``path``; return
-    its open descriptor and path. It gets the permissions a plain ``open()`` would give a new file (0666 less
-    the umask), not ``mkstemp``'s 0600: the renamed file would otherwise replace an earlier file's 0644 with
-    0600. The one way the project makes such files (:func:`cli.outputs.replace_file` too).
-
-    Raises:
-        OSError: the file cannot be created.
-    """
-    fd, name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=suffix, dir=path.parent)
-    try:
-        umask = os.umask(0)
-        os.umask(umask)
-        os.fchmod(fd, 0o666 & ~umask)
-    except BaseException:
-        os.close(fd)
-        Path(name).unlink(missing_ok=True)
-        raise
-    return fd, Path(name)
+    found = found_at(path, lambda head, _size: head.startswith(MCAP_MAGIC))
+    if not found.replaceable:
+        why = {"unchecked": f"cannot check it ({found.error})", "folder": "is a folder, not a recording file",
+               "special": "not a regular file",  # the rename would delete the FIFO or device node
+               "unreadable": f"cannot read it ({found.error})",
+               "other": "exists and is not an MCAP recording; refusing to replace it"}[found.kind]
+        raise RecordingError(f"{path if label is None else label}: {why}")
 
 
 def _check_total(path: Path, total: int) -> None:

@@ -207,3 +207,45 @@ def test_twin_local_refuses_a_script_beyond_the_remote_table_and_reads_units(end
                                                    "z 0 to 2.5 m): looks like millimetres: pass --units mm"), err
         assert main(["local", "--connect", endpoint, "--duration", "0.5", "--script", str(script), "--units", "mm",
                      "--json"]) == 0
+
+
+def _targets_recording(path, targets):  # type: ignore[no-untyped-def]
+    """A recording holding only operator targets ``[(twin time s, (x, y, z) m), ...]``: what --replay-operator reads."""
+    from sync.clock import SimClock
+    from sync.recording import Recorder
+
+    with Recorder(path, clock=SimClock()) as r:
+        for t, position in targets:
+            r.target(t, np.array(position, dtype=float))
+    return path
+
+
+def test_twin_local_replays_a_recorded_operator_read_once_and_refuses_one_beyond_the_table(endpoint, cache, tmp_path,
+                                                                                           capsys, monkeypatch):
+    """--replay-operator read the recording twice (the trajectory, then its reach); one read, one decode now."""
+    import sync.recording
+    from cli.main import main
+
+    far = _targets_recording(tmp_path / "far.mcap", [(0.0, (-0.3, 0.0, 0.56)), (0.02, (999.0, -999.0, 999.0))])
+    near = _targets_recording(tmp_path / "near.mcap", [(0.0, (-0.3, 0.0, 0.56)), (0.5, (-0.2, 0.0, 0.55))])
+    reads, decodes = Counter(), Counter()
+    read, targets = sync.recording.read_recording, sync.recording.Recording.targets
+
+    def counted_read(path):  # type: ignore[no-untyped-def]
+        reads[str(path)] += 1
+        return read(path)
+
+    def counted_targets(self):  # type: ignore[no-untyped-def]
+        decodes[str(self.path)] += 1
+        return targets(self)
+
+    monkeypatch.setattr(sync.recording, "read_recording", counted_read)
+    monkeypatch.setattr(sync.recording.Recording, "targets", counted_targets)
+    with running_remote(endpoint, cache):
+        assert main(["local", "--connect", endpoint, "--duration", "0.5", "--replay-operator", str(far)]) == 2
+        err = capsys.readouterr().err
+        line = [x for x in err.splitlines() if "error" in x]
+        assert len(line) == 1 and line[0].endswith(f"{far}: the target at t = 0.02 s, (999, -999, 999) m, is outside "
+                                                   "the operator's reach (x -2.5 to 2.5, y -2.3 to 2.3, z 0 to 2.5 m)"), err
+        assert main(["local", "--connect", endpoint, "--duration", "0.5", "--replay-operator", str(near), "--json"]) == 0
+    assert reads == {str(far): 1, str(near): 1} and decodes == {str(far): 1, str(near): 1}

@@ -377,3 +377,48 @@ def test_mesh_out_replaces_only_a_mesh_it_wrote(tmp_path, capsys):
     assert main(["estimate", str(cloud), "--method", "hull", "--mesh-out", str(empty)]) == 0
     assert len(trimesh.load_mesh(empty).faces) > 0
     assert not [p.name for p in tmp_path.iterdir() if p.name.startswith(".")]
+
+
+def _own_file(path: Path) -> None:
+    """A file of ``path``'s output kind, as its writer makes it: a recording, a rerun file, a mesh."""
+    if path.suffix == ".mcap":
+        from sync.clock import SimClock
+        from sync.recording import Recorder
+
+        with Recorder(path, clock=SimClock()) as r:
+            r.target(0.0, np.zeros(3))
+    elif path.suffix == ".rrd":
+        path.write_bytes(b"RRF2" + bytes(60))
+    else:
+        path.write_bytes(trimesh.creation.box().export(file_type="stl"))
+
+
+@pytest.mark.parametrize("suffix", [".mcap", ".rrd", ".stl"])
+def test_recordings_rerun_files_and_meshes_replace_only_their_own_by_one_rule(tmp_path, suffix):
+    """Three copies of "may this output replace what stands there" had drifted: an empty .mcap was refused where an
+    empty .rrd or mesh was replaced, and a path that could not be looked at was refused only for recordings (a
+    mesh or rerun file went ahead, or was a traceback). One rule now (:func:`sync.replacing.found_at`)."""
+    import os
+
+    from cli.outputs import check_mesh_file
+    from estimation.errors import TwinError
+    from sync.recording import check_record_destination
+    from twin.rerunlog import parse_target
+
+    check = {".mcap": check_record_destination, ".rrd": lambda p: parse_target(["save", str(p)]),
+             ".stl": lambda p: check_mesh_file(p, (), "--mesh-out", suffixes=(".stl",))}[suffix]
+    missing, empty, own = (tmp_path / f"{name}{suffix}" for name in ("missing", "empty", "own"))
+    empty.touch()
+    _own_file(own)
+    for path in (missing, empty, own):
+        check(path)  # replaced: nothing of a user's is lost
+    notes, folder, fifo, loop = (tmp_path / f"{name}{suffix}" for name in ("notes", "folder", "fifo", "loop"))
+    notes.write_text("precious\n")
+    folder.mkdir()
+    os.mkfifo(fifo)  # not opened: reading it would block
+    loop.symlink_to(loop.name)
+    for path, words in ((notes, "exists and is not"), (folder, "folder|not a regular file|exists and is not"),
+                        (fifo, "not a regular file|exists and is not"), (loop, "cannot check it")):
+        with pytest.raises(TwinError, match=words):
+            check(path)
+    assert notes.read_text() == "precious\n" and folder.is_dir() and fifo.is_fifo()

@@ -23,6 +23,7 @@ from sync.recording import (
     TARGET_TOPIC,
     TRUTH_TOPIC,
     Recorder,
+    Recording,
     RecordingError,
     read_recording,
 )
@@ -86,10 +87,14 @@ def test_a_recording_reads_back_with_every_channel_in_order(recorded):
     assert np.allclose(np.linalg.norm(truth["crate"][2], axis=1), 1.0)
 
 
-def test_a_replay_is_bit_identical_twice_and_to_the_recorded_session(recorded, cache):
+def test_a_replay_is_bit_identical_twice_and_to_the_recorded_session(recorded, cache, monkeypatch):
     path, twin, remote = recorded
+    decodes = []
+    targets = Recording.targets
+    monkeypatch.setattr(Recording, "targets", lambda self: decodes.append(self.path) or targets(self))
     first = replay(path, cache_dir=cache)
     second = replay(path, cache_dir=cache)
+    assert decodes == [path, path]  # once a replay: the trajectory, its reach and the summary were three decodes
     assert sorted(first.twin_poses) == ["can", "crate"]
     for object_id in first.twin_poses:
         assert first.twin_poses[object_id].tobytes() == second.twin_poses[object_id].tobytes()

@@ -158,3 +158,27 @@ def test_without_a_declared_workspace_an_object_outside_the_default_box_is_refus
     else:
         with pytest.raises(SceneError, match=r"^object 'a': position .* lies outside the workspace"):
             parse_scene(doc)
+
+
+@pytest.mark.parametrize("doc", [
+    {"name": "x", "table": {"size": [1.0, 0.6, 0.04], "height": 0.75}, "end_effector": {"position": [0.1, -0.4, 0.9]}},
+    {"name": "x", "end_effector": {"position": [0.3, 0.2, 0.4]}},  # no table: around the end effector
+])
+def test_a_scene_specs_boxes_are_the_ones_the_twin_takes_from_the_remotes_announcement(doc):
+    """The operator's reach (a replay's targets) and the scene's box (a scene file's objects) come from the scene
+    spec (twin.model.scene_reach_corners, once copied in cli/record.py and scenes/scenefile.py); the twin computes
+    them from the SceneInfo the remote announces (twin.runtime.reach_box). They must be one box."""
+    from types import SimpleNamespace
+
+    from scenes.remote import Remote
+    from sync.clock import SimClock
+    from twin.model import SCENE_REACH, scene_reach_corners
+    from twin.runtime import OPERATOR_REACH, reach_box
+
+    scene = parse_scene(doc)
+    for spec in (scene, replace(scene, end_effector=None)):  # a spec built in code may have none: the origin
+        info = Remote._scene_info(SimpleNamespace(scene=spec, clock=SimClock()))  # type: ignore[arg-type]
+        for reach in (OPERATOR_REACH, SCENE_REACH):
+            for mine, twins in zip(scene_reach_corners(spec.table, spec.end_effector, reach), reach_box(info, reach),
+                                   strict=True):
+                np.testing.assert_array_equal(mine, twins)

@@ -193,3 +193,36 @@ def test_too_large_files_and_too_many_waypoints_are_refused(tmp_path, monkeypatc
 def test_a_huge_value_is_quoted_short(tmp_path):
     with pytest.raises(TrajectoryError, match=r"path.csv:1: non-finite value in '0,1{78}\.\.\.'$"):
         load_trajectory(_write(tmp_path, "0," + "1" * 5000 + ",0,0.56\n"))
+
+
+def test_held_targets_hold_each_target_until_the_next_and_check_their_reach():
+    """A recorded operator (--replay-operator, twin replay): the trajectory and its reach check from one decode."""
+    from twin.trajectory import HeldTargets
+
+    held = HeldTargets(np.array([0.5, 1.0]), np.array([[0.1, 0.0, 0.6], [0.2, 0.0, 0.6]]), source="rec.mcap")
+    assert held(0.0) is None and held(0.4999) is not None  # half a millisecond early: a float sum of steps
+    np.testing.assert_array_equal(held(0.7), [0.1, 0.0, 0.6])
+    np.testing.assert_array_equal(held(99.0), [0.2, 0.0, 0.6])
+    held.check_reach(SMALL_BOX)
+    far = HeldTargets(np.array([0.0, 0.02]), np.array([[0.1, 0.0, 0.6], [999.0, 0.0, 0.6]]), source="rec.mcap")
+    with pytest.raises(TrajectoryError, match=r"^rec.mcap: the target at t = 0.02 s, \(999, 0, 0.6\) m, is outside "
+                                              r"the operator's reach \(x -2.5 to 2.5, y -2.3 to 2.3, z 0 to 2.5 m\)$"):
+        far.check_reach(SMALL_BOX)  # no --units hint: a recording is in metres
+    never = HeldTargets(np.zeros(0), np.zeros((0, 3)))
+    assert never(1.0) is None
+    never.check_reach(SMALL_BOX)
+
+
+def test_every_units_option_takes_the_unit_table():
+    """--units was written out on four parsers (one helper now): each must offer exactly the units read."""
+    import argparse
+
+    from cli.main import _parser
+    from estimation.units import UNIT_SCALE
+
+    sub = next(a for a in _parser()._actions if isinstance(a, argparse._SubParsersAction))
+    units = {name: a for name, p in sub.choices.items() for a in p._actions if "--units" in a.option_strings}
+    assert sorted(units) == ["estimate", "local", "replay", "run"]
+    for name, action in units.items():
+        assert action.choices == list(UNIT_SCALE) and action.default == "m", name
+        assert action.help.startswith("units of ") and action.help.endswith(" (default m)"), name

@@ -96,6 +96,16 @@ def reach_corners(table_size: Sequence[float] | None, table_height: float, ee_po
     return np.array([-half[0], -half[1], 0.0]), np.array([half[0], half[1], table_height + reach])
 
 
+def scene_reach_corners(table: TableSpec | None, end_effector: EndEffectorSpec | None,
+                        reach: float) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`reach_corners` of a scene's table and end effector, read as the remote announces them
+    (:class:`sync.messages.SceneInfo`, which :func:`twin.runtime.reach_box` takes): without a table, the box
+    around the end effector's start; without an end effector, around the origin. The one place a scene spec
+    becomes a box: the operator's reach (a replay's targets) and the scene's (a scene file's objects)."""
+    return reach_corners(None if table is None else table.size, 0.0 if table is None else table.height,
+                         (0.0, 0.0, 0.0) if end_effector is None else end_effector.position, reach)
+
+
 def model_reach_corners(model, reach: float) -> tuple[np.ndarray, np.ndarray]:  # type: ignore[no-untyped-def]
     """:func:`reach_corners` of a compiled scene (:func:`new_spec`'s ``table`` geom and :data:`EE_TARGET` body;
     a built folder's scene.xml), the box :class:`twin.runtime.Local` takes from the remote's announcement."""

@@ -44,6 +44,7 @@ import numpy as np
 
 from estimation import PhysicalEstimate
 from estimation.errors import TwinError
+from sync.replacing import found_at
 from twin.debuglog import display_subset
 from twin.model import COLLISION_GROUP, VISUAL_GROUP, hull_colour
 from twin.poses import rotation, to_xyzw
@@ -93,18 +94,9 @@ class RerunTarget:
     rate_hz: float = DEFAULT_RATE_HZ
 
 
-#: How a rerun recording file starts (its stream header: "RRF" and a format version digit).
+#: How a rerun recording file starts (its stream header: "RRF" and a format version digit): a non-empty existing
+#: file without it is not one ``--rerun save`` may replace (:func:`sync.replacing.found_at`).
 RRD_MAGIC = b"RRF"
-
-
-def _is_rrd(path: Path) -> bool:
-    """Whether ``path`` starts as a rerun recording does (an empty file counts: nothing of a user's is lost)."""
-    try:
-        with path.open("rb") as f:
-            head = f.read(len(RRD_MAGIC))
-    except OSError:
-        return False
-    return head in (b"", RRD_MAGIC)
 
 
 def parse_target(words: list[str], rate_hz: float = DEFAULT_RATE_HZ) -> RerunTarget:
@@ -125,7 +117,10 @@ def parse_target(words: list[str], rate_hz: float = DEFAULT_RATE_HZ) -> RerunTar
             raise TwinError(f"--rerun save: {path} should end in .rrd")
         if not path.parent.resolve().is_dir():
             raise TwinError(f"--rerun save: directory {path.parent} does not exist")
-        if path.exists() and (not path.is_file() or not _is_rrd(path)):
+        found = found_at(path, lambda head, _size: head.startswith(RRD_MAGIC))
+        if found.kind == "unchecked":
+            raise TwinError(f"--rerun save: {path}: cannot check it ({found.error})")
+        if not found.replaceable:
             raise TwinError(f"--rerun save: {path} exists and is not a rerun recording; refusing to replace it")
         return RerunTarget("save", str(path), rate_hz)
     if mode == "connect" and len(rest) <= 1:

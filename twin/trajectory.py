@@ -56,22 +56,38 @@ def push_trajectory(start: np.ndarray, end: np.ndarray, duration: float, *, star
     return at
 
 
-def held_trajectory(times: np.ndarray, points: np.ndarray, *, start_time: float = 0.0,
-                    ) -> Callable[[float], np.ndarray | None]:
-    """Targets taken at ``times`` (twin seconds, ascending), each held until the next (a zero-order hold, as a
-    device's commands are), shifted so the first is taken at ``start_time``; None before it.
+#: How far past a target's time it is already taken, seconds: step times are float sums, so a target recorded
+#: at t is found at t; half a millisecond is far below a device's command interval and above any sum's error.
+HOLD_SLACK = 5e-4
 
-    Half a millisecond of slack: step times are float sums, so a target recorded at t is found at t.
+
+@dataclass(frozen=True, eq=False)
+class HeldTargets:
+    """Targets taken at times, each held until the next (a zero-order hold, as a device's commands are): a
+    recorded operator. Call it with a twin time to get the target, None before the first; O(log n) a call.
+
+    Attributes:
+        times: (n,) float64, seconds of twin time, ascending (n may be 0: never a target).
+        points: (n, 3) float64, metres, world frame.
+        source: where the targets came from (a recording), for messages.
     """
-    times = np.asarray(times, float) - (float(times[0]) - start_time if len(times) else 0.0)
-    points = np.asarray(points, float)
-    slack = 5e-4
 
-    def at(t: float) -> np.ndarray | None:
-        i = int(np.searchsorted(times, t + slack, side="right")) - 1
-        return None if i < 0 else points[i]
+    times: np.ndarray
+    points: np.ndarray
+    source: str = "targets"
 
-    return at
+    def __call__(self, t: float) -> np.ndarray | None:
+        """The target held at twin time ``t``, seconds: (3,) float64, metres, world frame; None before the first."""
+        i = int(np.searchsorted(self.times, t + HOLD_SLACK, side="right")) - 1
+        return None if i < 0 else self.points[i]
+
+    def check_reach(self, box: tuple[np.ndarray, np.ndarray]) -> None:
+        """Refuse targets outside ``box`` (:func:`check_reach`; no units hint: a recording is in metres).
+
+        Raises:
+            TrajectoryError: a target outside the box.
+        """
+        check_reach(self.times, self.points, box, source=self.source)
 
 
 @dataclass(frozen=True, eq=False)
