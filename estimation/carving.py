@@ -19,6 +19,12 @@ neighbour's depth: left out, each silhouette casts a pixel-wide wedge nobody car
 L-bracket kept its concave corner (+11 % with exact depth). Pixels on the support plane carve down to the
 fitted plane itself (it is known far better than one pixel's noise), which is what lets the table seen
 around an object carve the space beside the object's base.
+
+What a camera did not see is never free for it: space outside its frame, beyond its range, behind a pixel
+without return. Nor is its frame's border an outline of the object: an object cut by a frame may run on out
+of view (:func:`frame_cut`). The solid stands on what was seen; where no view looked past a cut
+(:func:`open_past_frame`), nothing bounds the object there, and completion says so
+(``completion.Completion.open_past_frame``).
 """
 
 from __future__ import annotations
@@ -84,6 +90,17 @@ REACH_SAMPLES = 1_000_000
 #: Carved-surface points per boundary voxel face, per axis (2: four points a voxel, about the observed
 #: points' density, so the reconstruction sees no hole between carved and observed surface).
 SUBSAMPLE = 2
+
+#: A point whose pixel centre lies within this many pixels of its own camera's image border (0: the outermost
+#: row or column's centre) was cut by the frame (:func:`frame_cut`): the object may run on past it, out of
+#: view. Not an edge: ``fusion.edge_mask`` sees no jump across the border, so the outermost row is kept, and
+#: the half pixel more takes in the next row where the outermost was a dropout.
+FRAME_BORDER_PIXELS = 1.5
+
+#: The object is open past the frames (:func:`open_past_frame`) when no view had in its image the space just
+#: past the border behind at least this share of the cut points. A view that does have it there misses about
+#: 1 % of them (its own dropouts, 1 % of pixels at this project's sensors); five times that is the bar.
+OPEN_SHARE = 0.05
 
 
 #: A view given as points (:func:`depth_of_points`): its pixel pitch is the points' angular spacing, the
@@ -325,6 +342,91 @@ def free_space(points: np.ndarray, views: Sequence[DepthView], *, slack: float =
         with np.errstate(invalid="ignore"):
             free |= ok & np.isfinite(d) & (z < d - FREE_SIGMAS * s - slack)
     return free
+
+
+def frame_cut(points: np.ndarray, origins: np.ndarray, views: Sequence[DepthView]) -> tuple[np.ndarray, np.ndarray]:
+    """Where the frames cut the object: the observed points on their own camera's image border
+    (``FRAME_BORDER_PIXELS``), and for each, the place one pixel past that border at the point's depth.
+
+    An object's outline in a frame is where its surface turns away or the next pixel's ray passes it by,
+    except at the frame's border, which is only where the camera stopped looking: the object may run on
+    past it. A point in a corner of the image is cut twice (once per side).
+
+    Args:
+        points, origins: (n, 3) float64 metres, world frame: observed points and each one's sensor origin
+            (NaN rows, or an origin that is none of the ``views``' camera centres to 1 mm: not cut).
+        views: the cameras' depth images.
+
+    Returns:
+        (index (m,) int64 into ``points``, past (m, 3) metres, world frame).
+    """
+    pts = np.asarray(points, dtype=np.float64)
+    org = np.asarray(origins, dtype=np.float64)
+    index, past = [np.zeros(0, dtype=np.int64)], [np.zeros((0, 3))]
+    if not len(views) or not len(pts):
+        return index[0], past[0]
+    ok = np.isfinite(org).all(axis=1)
+    centres = np.array([np.asarray(v.position, dtype=np.float64) for v in views])
+    gap = np.linalg.norm(np.where(ok[:, None], org, 0.0)[:, None, :] - centres[None], axis=2)
+    which = np.where(ok & (gap.min(axis=1) <= 1e-3), np.argmin(gap, axis=1), -1)
+    for k, view in enumerate(views):
+        mine = np.flatnonzero(which == k)
+        if not len(mine):
+            continue
+        _, x, y, z = _pixels(pts[mine], view)
+        intr = view.intrinsics
+        rotation = np.asarray(view.rotation, dtype=np.float64)
+        # Continuous pixel coordinates as in _pixels (centres at integers); past the border by one pixel.
+        for row_edge, edge, beyond in ((False, 0, -1.0), (False, intr.width - 1, float(intr.width)),
+                                       (True, 0, -1.0), (True, intr.height - 1, float(intr.height))):
+            cut = (z > 0) & (np.abs((y if row_edge else x) - edge) < FRAME_BORDER_PIXELS)
+            if not cut.any():
+                continue
+            px = x[cut] if row_edge else np.full(int(cut.sum()), beyond)
+            py = np.full(int(cut.sum()), beyond) if row_edge else y[cut]
+            zc = z[cut]
+            cam = np.stack([(px + 0.5 - intr.cx) * zc / intr.fx, (py + 0.5 - intr.cy) * zc / intr.fy, zc], axis=1)
+            index.append(mine[cut])
+            past.append(cam @ rotation.T + np.asarray(view.position, dtype=np.float64))
+    return np.concatenate(index), np.concatenate(past)
+
+
+def framed(points: np.ndarray, views: Sequence[DepthView]) -> np.ndarray:
+    """(n,) bool: which ``points`` ((n, 3) metres, world) some view had in its image, at a pixel with a return.
+
+    Such a view looked there: it saw through the place, or saw a surface at it or in front of it (an object
+    there would be in its points, and its outline in that view's). Outside every image, or on pixels
+    without return (past a camera's range, a dropout), nobody looked.
+    """
+    pts = as_points(points, "points")
+    seen = np.zeros(len(pts), dtype=bool)
+    for view in views:
+        k = view.intrinsics
+        cam = (pts - np.asarray(view.position, dtype=np.float64)) @ np.asarray(view.rotation, dtype=np.float64)
+        ahead = cam[:, 2] > 1e-6
+        zs = np.where(ahead, cam[:, 2], 1.0)
+        col = np.floor(k.fx * cam[:, 0] / zs + k.cx).astype(np.int64)
+        row = np.floor(k.fy * cam[:, 1] / zs + k.cy).astype(np.int64)
+        inside = ahead & (col >= 0) & (col < k.width) & (row >= 0) & (row < k.height)
+        depth = view.depth[np.where(inside, row, 0), np.where(inside, col, 0)]
+        seen |= inside & np.isfinite(depth)
+    return seen
+
+
+def open_past_frame(points: np.ndarray, origins: np.ndarray, views: Sequence[DepthView]) -> bool:
+    """Whether the frames cut the object where no view looked past the cut (:func:`frame_cut`,
+    :func:`framed`; at least ``OPEN_SHARE`` of the cut points): the object may run on out of every view, and
+    nothing the cameras saw bounds its size. Where another view did look past the cut, its own points and
+    outline bound the object there as anywhere else.
+
+    Args:
+        points, origins: (n, 3) float64 metres, world frame: observed points and their sensor origins.
+        views: every camera's depth image (as :func:`carving_views` returns them).
+    """
+    index, past = frame_cut(points, origins, views)
+    if not len(index):
+        return False
+    return bool((~framed(past, views)).mean() >= OPEN_SHARE)
 
 
 def view_sigma(points: np.ndarray, views: Sequence[DepthView]) -> float:

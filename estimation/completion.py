@@ -27,6 +27,10 @@ this way; its coverage says how much of it was guessed.
 With depth images (:mod:`estimation.carving`), what is still open after the observed points and the
 images is filled from the solid the cameras did not carve away (an unseen side face lies on it), and a
 mirrored or turned point the cameras saw through is dropped. Without them, the base is closed as above.
+
+An object a camera's frame cuts where no other view looked (:func:`estimation.carving.open_past_frame`) is
+closed as seen, without a half turn (the silhouette's sides and the space seen past the object, which place
+its axis, may be the frame's), and flagged: its volume has no upper bound.
 """
 
 from __future__ import annotations
@@ -147,6 +151,9 @@ class Completion:
         turned: how many are the observed side turned half a turn (:func:`half_turn_axis`).
         carved: how many lie on the carved solid's surface.
         carved_volume: m^3, the carved solid's volume (an upper bound up to noise), None without depth images.
+        open_past_frame: a camera's frame cut the object where no view looked past the cut
+            (:func:`estimation.carving.open_past_frame`): the object may run on out of view, so what is closed
+            here is the part seen, and nothing bounds the volume above.
     """
 
     points: np.ndarray
@@ -156,6 +163,7 @@ class Completion:
     turned: int = 0
     carved: int = 0
     carved_volume: float | None = None
+    open_past_frame: bool = False
 
 
 def close_bottom(points: np.ndarray, normals: np.ndarray, plane: Plane, *, cell: float,
@@ -371,7 +379,8 @@ def close_on_plane(points: np.ndarray, origins: np.ndarray, normals: np.ndarray,
     half (:func:`mirror_image`); then, with ``views``, the half-turned image of one-sided views
     (:func:`half_turn_axis`; not into ``others``) and the carved solid's surface
     (:func:`estimation.carving.carve`, ``others`` as there), else the base on the plane
-    (:func:`close_bottom`). With ``views``, mirrored points some camera saw through are dropped.
+    (:func:`close_bottom`). With ``views``, mirrored points some camera saw through are dropped, and an object
+    a frame cuts where no view looked past it gets no half turn (``Completion.open_past_frame``).
 
     Args:
         points, origins, normals: (n, 3) float64 world frame: observed points (metres), their sensors,
@@ -411,8 +420,15 @@ def _complete(points: np.ndarray, normals: np.ndarray, origins: np.ndarray, plan
         image = mirror_image(points, normals, plane, noise=noise, cell=cell)
         if image is not None:
             mirrored = _not_seen_through(_new(image[0], image[1], points, NEW_SURFACE_CELLS * cell), views, cell)
-    axis = None if views is None or not oriented else half_turn_axis(points, origins, plane, views, cut=cut,
-                                                                        cell=cell, normals=normals)
+    open_past = False
+    if views is not None:
+        from estimation.carving import open_past_frame
+
+        open_past = open_past_frame(points, origins, views)
+    # Cut by a frame, the silhouette's sides across the view and the space seen beyond the object, which place
+    # the half turn's axis, may be the frame's: no half turn.
+    axis = None if views is None or not oriented or open_past else half_turn_axis(
+        points, origins, plane, views, cut=cut, cell=cell, normals=normals)
     if axis is not None:
         # The mirror image turned too: the back's underside.
         both, both_n = np.concatenate([points, mirrored[0]]), np.concatenate([normals, mirrored[1]])
@@ -467,7 +483,8 @@ def _complete(points: np.ndarray, normals: np.ndarray, origins: np.ndarray, plan
         surface, surface_n = surface[kept], surface_n[kept]
     return Completion(np.concatenate([mirrored[0], turned[0], surface]),
                       np.concatenate([mirrored[1], turned[1], surface_n]), 0.0, mirrored=len(mirrored[0]),
-                      turned=len(turned[0]), carved=len(surface), carved_volume=carving.volume)
+                      turned=len(turned[0]), carved=len(surface), carved_volume=carving.volume,
+                      open_past_frame=open_past)
 
 
 def _not_seen_through(image: tuple[np.ndarray, np.ndarray], views: Sequence[DepthView] | None,

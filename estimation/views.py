@@ -7,7 +7,8 @@ closed on the plane (:func:`estimation.completion.close_bottom`), normals are or
 point's sensor (:func:`estimation.fusion.fused_cloud`) and the result is estimated ('auto'). The record
 adds what the estimate alone cannot know: the share of the closed surface some sensor saw (``coverage``)
 and a volume interval that widens with what was completed or closed rather than observed
-(:func:`estimation.completion.honest_bounds`).
+(:func:`estimation.completion.honest_bounds`), and has no top where a depth image's frame cut the object and
+no other view looked past the cut (:func:`estimation.carving.open_past_frame`).
 
 Frames: world, metres, with ``+z`` up where a direction is needed (the plane "just below the lowest
 points" is horizontal), as in MuJoCo's world.
@@ -507,12 +508,16 @@ def estimate_views(views: list[View], density: float, *, support: Plane | str | 
     alln = np.where(closed.completed[:, None], closed.normals, np.nan)
     cloud = fused_cloud(closed.points, closed.origins, completed=closed.completed, completed_normals=alln)
     result = estimate(cloud, density, material=material, keep_strays=keep_strays, progress=progress)
-    share, bounds = assess(result, points, noise, normals=normals)
+    share, bounds = assess(result, points, noise, normals=normals, open_past_frame=completion.open_past_frame)
     warnings.extend(result.warnings)
     if len(completion.points):
         warnings.append(f"the base ({completion.base_area * 1e4:.3g} cm^2) was closed on the support plane, "
                         f"not observed")
-    if share < COVERAGE_WARNING and _one_sided(points, origins):
+    if completion.open_past_frame:
+        warnings.append(f"the object runs out of a depth image's frame where no other view looked: what lies past "
+                        f"the frame's border is unknown, the estimate is of the part seen, and the volume is only "
+                        f"known to be at least {bounds[0]:.4g} m^3")
+    elif share < COVERAGE_WARNING and _one_sided(points, origins):
         # Every view from one side: what lies behind the seen surface is bounded by nothing they saw (a ball
         # seen by one camera came out at 18 % of its volume with an interval that stopped at 40 %).
         bounds = (bounds[0], float("inf"))
@@ -536,7 +541,7 @@ def _one_sided(points: np.ndarray, origins: np.ndarray) -> bool:
 
 
 def assess(result: PhysicalEstimate, observed: np.ndarray, noise: float, *,
-           normals: np.ndarray | None = None) -> tuple[float, tuple[float, float]]:
+           normals: np.ndarray | None = None, open_past_frame: bool = False) -> tuple[float, tuple[float, float]]:
     """Coverage (0-1) of ``result``'s mesh by the ``observed`` points and its volume interval (m^3).
 
     Args:
@@ -545,6 +550,8 @@ def assess(result: PhysicalEstimate, observed: np.ndarray, noise: float, *,
         noise: metres, the observed points' sigma (``spacing.surface_noise``).
         normals: (n, 3) the observed points' outward normals, if known: a face counts as seen only by points
             facing its way (``completion.coverage``).
+        open_past_frame: the completion's flag (``Completion.open_past_frame``): a camera's frame cut the object
+            where no view looked past it, so the interval has no top (the object may run on out of view).
     """
     from estimation.spacing import point_spacing
 
@@ -553,5 +560,6 @@ def assess(result: PhysicalEstimate, observed: np.ndarray, noise: float, *,
     radius = 2 * max(result.cell, point_spacing(observed) if len(observed) > 1 else 0.0)
     seen, total = coverage(result.vertices, result.faces, observed, radius=radius, normals=normals)
     share = seen / total if total > 0 else 0.0
-    return share, honest_bounds(result.volume, result.volume_bounds_m3, total - seen, total, noise=noise,
-                                extent=float(result.obb.extents.min()))
+    low, high = honest_bounds(result.volume, result.volume_bounds_m3, total - seen, total, noise=noise,
+                              extent=float(result.obb.extents.min()))
+    return share, (low, float("inf") if open_past_frame else high)

@@ -874,3 +874,27 @@ def test_any_whole_seed_numpy_takes_is_taken():
     points, origin = _ball_view()
     for seed in (0, np.int64(7), 2**70):
         assert estimate_views([View(points, origin)], 1000.0, support="auto", seed=seed).estimate.volume > 0
+
+
+def test_depth_frames_that_cut_the_object_leave_its_volume_unbounded_above(capsys, tmp_path):
+    """`twin estimate A.npy B.npy --intrinsics ...` of two frames that both end before a box's far end: the
+    interval stopped at 0.89 of the true volume. Past the frames nobody looked, so it has no top, and says why."""
+    from scipy.spatial.transform import Rotation
+
+    from tests.test_carving import CUT_BOX, CUT_TOP, NARROW, box_frame
+
+    truth = float(np.prod(CUT_BOX))
+    files, argv = [], []
+    for k, camera in enumerate(NARROW):
+        _, view = box_frame(*camera, seed=k)
+        np.save(tmp_path / f"d{k}.npy", view.depth)
+        x, y, z, w = Rotation.from_matrix(view.rotation).as_quat()  # scipy: x y z w
+        files.append(str(tmp_path / f"d{k}.npy"))
+        argv += ["--viewpoint-pose", *map(str, (*view.position, w, x, y, z))]
+    intr = view.intrinsics  # fusion's pixel centres are at +0.5; OpenCV's cx is half a pixel less
+    argv += ["--intrinsics", str(intr.fx), str(intr.fy), str(intr.cx - 0.5), str(intr.cy - 0.5),
+             "--support-plane", "0", "0", "1", str(-CUT_TOP)]
+    record = _run(capsys, [*files, *argv])
+    low, high = record["volume_bounds_m3"]
+    assert low <= truth and high is None  # JSON has no infinity: null
+    assert any("runs out of a depth image's frame" in w for w in record["warnings"])
