@@ -51,14 +51,11 @@ def check_demo_records(record: Path, inputs: tuple[Path | None, ...] = ()) -> No
 
 
 def remote_sensor(name: str, scene):  # type: ignore[no-untyped-def]
-    """The remote's sensor for ``--sensor name``: None (the Remote's default, the surface sensor) or the
-    scene's default camera rig (:meth:`scenes.sensing.CameraSensor.for_scene`), scanning in the background
-    (these remotes run live)."""
-    if name == "surface":
-        return None
-    from scenes.sensing import CameraSensor
+    """The remote's sensor for ``--sensor name`` (:func:`scenes.headless.sensor_for`): None (the Remote's default,
+    the surface sensor) or the scene's default camera rig, scanning in the background (these remotes run live)."""
+    from scenes.headless import sensor_for
 
-    return CameraSensor.for_scene(scene, background=True)
+    return sensor_for(name, scene, background=True)
 
 
 def _remote_main(scene_path: str, endpoint: str, zenoh_config: str | None, ready, stop, results,  # type: ignore[no-untyped-def]
@@ -78,7 +75,7 @@ def _remote_main(scene_path: str, endpoint: str, zenoh_config: str | None, ready
     try:
         try:
             recorder = open_recorder(None if record is None else Path(record), clock=REAL_CLOCK, command="demo",
-                                     side="remote", scene_path=Path(scene_path))
+                                     side="remote", scene_path=Path(scene_path), sensor=sensor)
             scene = load_scene(scene_path)
             remote = Remote(scene, recording_transport(ZenohTransport(session), recorder, "remote"),
                             recorder=recorder, sensor=remote_sensor(sensor, scene))
@@ -159,7 +156,8 @@ def run_demo(*, duration: float = 5.0, scene_path: Path | None = None, zenoh_con
         raise
     console.print(f"remote ready in {time.perf_counter() - t0:.1f} s (ground truth built, clouds published)")
     session = open_session(make_config(connect=[endpoint], config_file=zenoh_config))
-    recorder = open_recorder(record, clock=REAL_CLOCK, command="demo", side="twin", scene_path=scene_path)
+    recorder = open_recorder(record, clock=REAL_CLOCK, command="demo", side="twin", scene_path=scene_path,
+                             sensor=sensor)
     local = None
     try:
         t_join = time.perf_counter()
@@ -181,6 +179,7 @@ def run_demo(*, duration: float = 5.0, scene_path: Path | None = None, zenoh_con
         drift = {i: float(np.linalg.norm(local.twin.pose(i)[0] - r[0])) for i in local.objects
                  if (r := local.remote_pose(i)) is not None}
         estimated = body_masses(local.twin.model, local.objects)
+        estimates = object_estimates(local)
         poses = {i: local.twin.pose(i) for i in local.objects}
     finally:
         stop.set()
@@ -231,9 +230,11 @@ def run_demo(*, duration: float = 5.0, scene_path: Path | None = None, zenoh_con
         "snaps": report.snaps,
         "lost_by_sensor": report.unseen,
         "holds": report.holds,
+        "warned_objects": report.warned_objects,
         "session_s": session_s,
         "twin_minus_remote_m": drift,
-        "per_object": object_records(report, estimated, poses, drift, remote_stats.get("true_mass_kg")),
+        "per_object": object_records(report, estimated, poses, drift, remote_stats.get("true_mass_kg"),
+                                     estimates=estimates),
     }
     # The summary is the result: stdout (progress went to stderr); with --json, the caller prints the record.
     Console(quiet=not progress).print(
@@ -248,7 +249,10 @@ def run_demo(*, duration: float = 5.0, scene_path: Path | None = None, zenoh_con
         f"{out['divergence_p99_mm']:.1f} mm, max {out['divergence_max_mm']:.1f} mm; {out['snaps']} snaps, "
         f"{out['holds']} holds"
         + (f"\nthe remote's sensor lost sight of objects {out['lost_by_sensor']} time(s); the twin simulated them "
-           f"alone from then (not in the divergence)" if out["lost_by_sensor"] else ""))
+           f"alone from then (not in the divergence)" if out["lost_by_sensor"] else "")
+        + (f"\nthe estimates of {', '.join(sorted(i for i, e in estimates.items() if e.warnings))} came with warnings "
+           f"(on stderr as each was added; per_object in --json)" if any(e.warnings for e in estimates.values())
+           else ""))
     return out
 
 
@@ -259,22 +263,36 @@ def body_masses(model, object_ids) -> dict[str, float]:  # type: ignore[no-untyp
     return {i: float(model.body_mass[mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, i)]) for i in object_ids}
 
 
+def object_estimates(local) -> dict:  # type: ignore[no-untyped-def]
+    """Object id -> the :class:`estimation.PhysicalEstimate` each object in a :class:`twin.runtime.Local` went into
+    the twin with (:meth:`twin.runtime.Local.twin_object`)."""
+    return {i: obj.estimate for i in local.objects if (obj := local.twin_object(i)) is not None}
+
+
 def object_records(report, estimated_mass_kg: dict[str, float], poses: dict[str, tuple[np.ndarray, np.ndarray]],  # type: ignore[no-untyped-def]
-                   twin_minus_remote_m: dict[str, float], true_mass_kg: dict[str, float] | None = None) -> list[dict]:
+                   twin_minus_remote_m: dict[str, float], true_mass_kg: dict[str, float] | None = None, *,
+                   estimates: dict | None = None) -> list[dict]:
     """One record per object in the twin, SI base units throughout (kg, m, s; the top-level summary's ``_ms``
     and ``_mm`` fields are older and say their units in their names too).
 
     ``report``: the twin's :class:`twin.runtime.LocalReport`. ``true_mass_kg``: the remote's truth, where
     known (the demo's remote has it; a real scene does not): adds ``true_mass_kg`` and ``mass_error_pct``
-    (estimated minus true, percent of true).
+    (estimated minus true, percent of true). ``estimates``: id -> the :class:`estimation.PhysicalEstimate` the
+    object went into the twin with (:func:`object_estimates`), for ``estimated_volume_m3``, ``volume_bounds_m3``
+    ([low, high]; an infinite bound is JSON's null) and ``warnings`` (the estimate's; None where not known).
     """
     out = []
     for object_id, (position, quat) in poses.items():
         gaps = report.divergence.get(object_id) or []
         touchable = report.touchable_after.get(object_id)
+        est = None if estimates is None else estimates.get(object_id)
+        bounds = None if est is None else est.volume_bounds_m3
         record: dict = {
             "id": object_id,
             "estimated_mass_kg": estimated_mass_kg.get(object_id),
+            "estimated_volume_m3": None if est is None else est.volume,
+            "volume_bounds_m3": None if bounds is None else list(bounds),
+            "warnings": None if est is None else list(est.warnings),
             "add_latency_s": None if touchable is None else touchable[1],  # cloud arrived -> touchable
             "add_latency_from_publish_s": None if touchable is None else touchable[0],
             "divergence_max_m": max(gaps) if gaps else None,

@@ -377,6 +377,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--script", type=Path, help="operator targets from this trajectory CSV (t,x,y,z) instead")
     _units_option(p, "the --script file's positions")
     p.add_argument("--scene", type=Path, help="scene TOML (default: the one in the recording)")
+    _sensor_option(p, replay=True)
     p.add_argument("--delay", dest="delay_ms", type=float, help="one-way delay each way, ms")
     p.add_argument("--jitter", dest="jitter_ms", type=float, help="delay standard deviation, ms (at most delay/3)")
     p.add_argument("--loss", dest="loss_pct", type=float, help="independent packet loss each way, percent")
@@ -876,7 +877,15 @@ def _units_option(p: argparse.ArgumentParser, what: str) -> None:
     p.add_argument("--units", default="m", choices=["m", "cm", "mm"], help=f"units of {what} (default m)")
 
 
-def _sensor_option(p: argparse.ArgumentParser) -> None:
+def _sensor_option(p: argparse.ArgumentParser, *, replay: bool = False) -> None:
+    """``--sensor``: the remote's (the names of :data:`scenes.headless.SENSORS`, written out: importing it loads
+    MuJoCo, which ``--help`` does not need). ``replay``: the default is the one the recording names."""
+    if replay:
+        p.add_argument("--sensor", choices=["surface", "cameras"], default=None,
+                       help="the remote's sensor to replay with (default: the one the recording names; 'surface' "
+                            "for a recording that names none: twin local's, and those made before sensors were "
+                            "recorded)")
+        return
     p.add_argument("--sensor", choices=["surface", "cameras"], default="surface",
                    help="what the remote publishes: 'surface' (default: whole true surfaces, simulator poses) or "
                         "'cameras' (3 ray-cast depth cameras around the table with a Kinect v1 noise model, "
@@ -974,7 +983,7 @@ def _cmd_replay(args: argparse.Namespace) -> int:
                                    seed=args.seed or 0)
     with _ReplayProgress() as progress:
         result = replay(args.recording, script=args.script, units=args.units, scene=args.scene, network=network,
-                        seed=args.seed,
+                        seed=args.seed, sensor=args.sensor,
                         duration=args.replay_duration, out=args.out, cache_dir=args.cache_dir, progress=progress)
     if result.summary["damage"]:
         print(f"twin replay: warning: {result.summary['damage']}", file=sys.stderr)
@@ -1031,7 +1040,8 @@ def _run_remote(args: argparse.Namespace, scene, rlog) -> None:  # type: ignore[
     from sync.zenoh_transport import ZenohTransport
 
     session = _session(args)
-    recorder = open_recorder(args.record, clock=REAL_CLOCK, command="remote", side="remote", scene_path=args.scene)
+    recorder = open_recorder(args.record, clock=REAL_CLOCK, command="remote", side="remote", scene_path=args.scene,
+                             sensor=args.sensor)
     started = False
     try:
         remote = Remote(scene, recording_transport(ZenohTransport(session), recorder, "remote"),
@@ -1133,7 +1143,8 @@ def _run_local(args: argparse.Namespace, rlog) -> None:  # type: ignore[no-untyp
         r, c = local.report, local.link.counters
         record = {"objects_synced": r.objects_synced, "pose_updates": r.pose_updates,
                   "dropped_malformed": c.dropped_malformed, "stale_events": r.stale_events,
-                  "snaps": r.snaps, "holds": r.holds, "operator_targets": r.operator_targets,
+                  "snaps": r.snaps, "holds": r.holds, "warned_objects": r.warned_objects,
+                  "operator_targets": r.operator_targets,
                   "operator_dropped": dict(r.operator_dropped), "forces_sent": r.forces_sent,
                   "step_p99_ms": stats.p99 * 1e3, "missed_deadlines": stats.missed,
                   "objects": local.objects, "objects_pending": local.pending}
@@ -1143,8 +1154,9 @@ def _run_local(args: argparse.Namespace, rlog) -> None:  # type: ignore[no-untyp
         else:
             print("  ".join(f"{k} {v}" for k, v in record.items() if k not in ("objects", "per_object")))
             for o in record["per_object"]:
+                warned = f"; its estimate warns ({len(o['warnings'])}, on stderr)" if o["warnings"] else ""
                 print(f"  {o['id']}: {o['estimated_mass_kg']:.3f} kg, touchable {o['add_latency_s'] or 0:.2f} s "
-                      f"after its cloud arrived, {(o['twin_minus_remote_m'] or 0) * 1e3:.1f} mm from the remote")
+                      f"after its cloud arrived, {(o['twin_minus_remote_m'] or 0) * 1e3:.1f} mm from the remote{warned}")
         local.close()
         _finish_recording(recorder, started, twin_time_s=local.twin.time)
     finally:
@@ -1156,13 +1168,13 @@ def _local_objects(local) -> list[dict]:  # type: ignore[no-untyped-def]
     """Per-object records of a twin following a remote (:func:`cli.demo.object_records`)."""
     import numpy as np
 
-    from cli.demo import body_masses, object_records
+    from cli.demo import body_masses, object_estimates, object_records
 
     ids = local.objects
     drift = {i: float(np.linalg.norm(local.twin.pose(i)[0] - r[0])) for i in ids
              if (r := local.remote_pose(i)) is not None}
     return object_records(local.report, body_masses(local.twin.model, ids), {i: local.twin.pose(i) for i in ids},
-                          drift)
+                          drift, estimates=object_estimates(local))
 
 
 def _cmd_demo(args: argparse.Namespace) -> int:

@@ -3,7 +3,7 @@
 Recording (:mod:`sync.recording`) wraps a side's transport so every wire message is logged with its send
 and receive times, and gives the runtimes a recorder for the operator's targets and force and the remote's
 ground truth. Replay re-runs a recording headless (:class:`scenes.headless.Headless`) on the simulated
-clock: the scene from the recording's metadata, the operator's targets from the recording (zero-order
+clock: the scene and the remote's sensor from the recording's metadata, the operator's targets from the recording (zero-order
 hold on the twin's time) unless a script replaces them, network conditions from the recording or the
 command line. Same recording and seed, same poses, bit for bit.
 """
@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from cli.outputs import check_output_folder, claim_output_folder, replace_file
-from estimation.errors import refused_number
+from estimation.errors import TwinError, refused_number
 from sync.clock import Clock
 from sync.netem import Conditions, GilbertElliott, Network
 from sync.recording import (
@@ -48,8 +48,11 @@ _SAME_TIME = 1e-6
 
 
 def open_recorder(path: Path | None, *, clock: Clock, command: str, side: str,
-                  scene_path: Path | None = None, scene_name: str = "") -> Recorder | None:
-    """A recorder for a live command (None without ``path``), with the session metadata it can know."""
+                  scene_path: Path | None = None, scene_name: str = "", sensor: str | None = None) -> Recorder | None:
+    """A recorder for a live command (None without ``path``), with the session metadata it can know.
+
+    ``sensor``: the remote's (``--sensor``, :data:`scenes.headless.SENSORS`), which replay rebuilds; None leaves
+    it out (``twin local`` does not know what the remote senses with)."""
     if path is None:
         return None
     from scenes.headless import scene_metadata
@@ -59,6 +62,8 @@ def open_recorder(path: Path | None, *, clock: Clock, command: str, side: str,
     if scene_path is not None:
         meta.update(scene_metadata(load_scene(scene_path)))
     meta.update({"command": command, "side": side, "seeds": {}, "network": None})
+    if sensor is not None:
+        meta["sensor"] = sensor
     return Recorder(path, clock=clock, metadata=meta)
 
 
@@ -130,6 +135,29 @@ def scene_folder(recording: Recording) -> tuple[Path, str | None]:
     return own, recorded
 
 
+def recorded_sensor(recording: Recording) -> str:
+    """The remote's sensor the recording names (its ``sensor`` metadata, one of :data:`scenes.headless.SENSORS`);
+    "surface" for one that names none (``twin local``'s, and every recording made before the sensor was
+    recorded, all of which the surface sensor made), said in a log line.
+
+    Raises:
+        RecordingError: a sensor replay does not know (another program's, or a headless session's own class).
+    """
+    from scenes.headless import SENSORS
+
+    name = recording.metadata.get("sensor")
+    if name is None:
+        log.warning("%s: the recording names no sensor (twin local records none, and recordings made before the "
+                    "sensor was recorded were all of the surface sensor): replaying with the surface sensor; "
+                    "--sensor cameras replays a camera session", recording.path)
+        return "surface"
+    if name not in SENSORS:
+        shown = name if len(name) <= 24 else name[:24] + "..."
+        raise RecordingError(f"{recording.path}: the recorded sensor {shown!r} is not one replay knows "
+                             f"({', '.join(SENSORS)}); give one with --sensor")
+    return name
+
+
 def recorded_network(recording: Recording) -> Network | None:
     """The emulated network a headless recording ran with (None: none, or a live recording)."""
     raw = recording.metadata.get("network", "null")
@@ -168,7 +196,7 @@ class ReplayResult:
 
 def replay(path: str | Path, *, script: Path | None = None, units: str = "m", scene: Path | None = None,
            network: Network | None = None, seed: int | None = None, duration: float | None = None,
-           out: Path | None = None, cache_dir: Path | None = None,
+           out: Path | None = None, cache_dir: Path | None = None, sensor: str | None = None,
            progress: Callable[[str, float, float], None] | None = None) -> ReplayResult:
     """Re-run a recorded session headless on the simulated clock.
 
@@ -177,6 +205,8 @@ def replay(path: str | Path, *, script: Path | None = None, units: str = "m", sc
         script: a trajectory CSV to use instead of the recorded targets.
         units: the units of the script's positions (m, cm, mm).
         scene: a scene file to use instead of the recorded one.
+        sensor: the remote's sensor (:data:`scenes.headless.SENSORS`) to use instead of the recorded one
+            (:func:`recorded_sensor`: "surface" for a recording that names none).
         network: conditions to use; None: the recording's (headless recordings), else none.
         seed: the network's seed (default: the recording's, else 0).
         duration: twin seconds to run (default: as long as the recorded session).
@@ -189,13 +219,14 @@ def replay(path: str | Path, *, script: Path | None = None, units: str = "m", sc
         The summary and the final poses.
 
     Raises:
-        RecordingError: a missing, corrupt or unknown-version recording, or one without a scene.
-        TwinError: a bad script, scene or network conditions; a script or recorded target outside the operator's
-            reach of the scene's table (:func:`twin.trajectory.check_reach`).
+        RecordingError: a missing, corrupt or unknown-version recording, one without a scene, or one naming a
+            sensor replay does not know (without ``sensor``).
+        TwinError: a bad script, scene, sensor or network conditions; a script or recorded target outside the
+            operator's reach of the scene's table (:func:`twin.trajectory.check_reach`).
     """
     from dataclasses import replace
 
-    from scenes.headless import Headless
+    from scenes.headless import SENSORS, Headless, sensor_for
     from scenes.scenefile import load_scene
     from twin.model import scene_reach_corners
     from twin.runtime import OPERATOR_REACH
@@ -205,6 +236,9 @@ def replay(path: str | Path, *, script: Path | None = None, units: str = "m", sc
     if recording.damage:
         log.info("%s", recording.damage)  # the summary's "damage"; `twin replay` prints it once, as a warning
     spec = load_scene(scene) if scene is not None else recorded_scene(recording)
+    if sensor is not None and sensor not in SENSORS:
+        raise TwinError(f"sensor must be one of {', '.join(SENSORS)}, got {sensor!r}")
+    sensor = recorded_sensor(recording) if sensor is None else sensor
     trajectory: Waypoints | HeldTargets | None
     if script is not None:
         recorded, trajectory = None, load_trajectory(script, units=units)
@@ -236,7 +270,7 @@ def replay(path: str | Path, *, script: Path | None = None, units: str = "m", sc
     wall0 = time.perf_counter()
     if progress is not None:
         progress("building", 0.0, 0.0)
-    with Headless(spec, network=network, cache_dir=cache_dir, record=record,
+    with Headless(spec, network=network, cache_dir=cache_dir, record=record, sensor=sensor_for(sensor, spec),
                   record_metadata={"command": "replay", "replayed": str(recording.path)}) as session:
         built = time.perf_counter() - wall0
         gaps: dict[str, list[float]] = {i: [] for i in truth}
@@ -261,7 +295,7 @@ def replay(path: str | Path, *, script: Path | None = None, units: str = "m", sc
         remote = {i: np.concatenate(session.remote.twin.pose(i)) for i in session.remote._objects}
         report = session.local.report
     summary = _summary(recording, spec, duration, built, run_s, twin, remote, last, gaps, report, network, script,
-                       trajectory is not None)
+                       trajectory is not None, sensor)
     if out is not None:
         from cli.main import to_json
 
@@ -294,7 +328,7 @@ def _truth_gaps(session, truth, t: float, gaps: dict[str, list[float]], last: di
 
 
 def _summary(recording, spec, duration, built, run_s, twin, remote, last, gaps, report,  # type: ignore[no-untyped-def]
-             network, script, operated: bool) -> dict:
+             network, script, operated: bool, sensor: str) -> dict:
     div = np.concatenate([np.asarray(g) for g in report.divergence.values()] or [np.zeros(0)]) * 1e3
     truth_gap = np.concatenate([np.asarray(g) for g in gaps.values()] or [np.zeros(0)]) * 1e3
     final_vs_truth = {  # at the last ground-truth sample this replay reached (the remote's time)
@@ -311,6 +345,7 @@ def _summary(recording, spec, duration, built, run_s, twin, remote, last, gaps, 
         "recording": str(recording.path),
         "damage": recording.damage,
         "scene": spec.name,
+        "sensor": sensor,
         "operator": "script" if script is not None else ("recorded" if operated else "none"),
         "network": None if network is None else {"uplink": _conditions(network.uplink),
                                                  "downlink": _conditions(network.downlink), "seed": network.seed},
@@ -327,6 +362,7 @@ def _summary(recording, spec, duration, built, run_s, twin, remote, last, gaps, 
         "pose_updates": report.pose_updates,
         "snaps": report.snaps,
         "holds": report.holds,
+        "warned_objects": report.warned_objects,  # added from an estimate that warns (each logged as it went in)
     }
 
 
@@ -339,7 +375,8 @@ def _conditions(c: Conditions | None) -> dict | None:
 
 def print_summary(summary: dict) -> None:
     """The human-readable form of a replay summary."""
-    lines = [f"replayed {summary['recording']} ({summary['scene']}, operator {summary['operator']}): "
+    lines = [f"replayed {summary['recording']} ({summary['scene']}, {summary['sensor']} sensor, operator "
+             f"{summary['operator']}): "
              f"{summary['duration_s']:.2f} s simulated in {summary['run_s']:.2f} s "
              f"({summary['speed_x_realtime']:.1f}x real time; build {summary['build_s']:.1f} s)",
              f"objects {', '.join(summary['objects'])}; pose updates {summary['pose_updates']}, "

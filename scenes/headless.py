@@ -21,7 +21,7 @@ import numpy as np
 
 from scenes.remote import Remote
 from scenes.scenefile import SceneSpec
-from scenes.sensing import Sensor
+from scenes.sensing import CameraSensor, Sensor, SurfaceSensor
 from sync.clock import SimClock
 from sync.inprocess import InProcessBus
 from sync.netem import LinkModel, Network
@@ -46,7 +46,8 @@ class Headless:
 
     ``record`` (an ``.mcap`` path) records the session (:mod:`sync.recording`): both sides' wire
     messages, the operator's targets and force, and the remote's true poses, on the simulated clock;
-    the file is finished by :meth:`close`. ``record_metadata`` adds entries to its session metadata.
+    the file is finished by :meth:`close`. Its session metadata names the scene and the remote's ``sensor``
+    (:func:`sensor_name`), which ``twin replay`` rebuilds; ``record_metadata`` adds entries to it.
 
     Raises: TypeError (before any work): ``scene``, ``settings``, ``operator`` or ``network`` of the wrong
     type. :class:`twin.settings.SettingsError`: ``points`` or ``epoch`` among ``remote_options`` out of range
@@ -65,7 +66,7 @@ class Headless:
                 raise TypeError(f"Headless: {name} must be {what}, got {type(value).__name__}")
         self.clock = SimClock()
         self.recorder = None if record is None else Recorder(record, clock=self.clock, metadata={
-            **scene_metadata(scene), "side": "both", "command": "headless",
+            **scene_metadata(scene), "side": "both", "command": "headless", "sensor": sensor_name(sensor),
             "network": None if network is None else dataclasses.asdict(network),
             "seeds": {"network": None if network is None else network.seed}, **(record_metadata or {})})
         try:
@@ -139,3 +140,37 @@ def scene_metadata(scene: SceneSpec) -> dict[str, object]:
     text = "" if scene.path is None else Path(scene.path).read_text(encoding="utf-8")
     folder = "" if scene.path is None else str(Path(scene.path).resolve().parent)
     return {"scene_name": scene.name, "scene_toml": text, "scene_dir": folder}
+
+
+#: The remote's sensors by the name ``--sensor`` gives them and a recording's ``sensor`` metadata keeps
+#: (:func:`sensor_for`): the surface sensor (:class:`scenes.sensing.SurfaceSensor`, the default) and the scene's
+#: default camera rig (:meth:`scenes.sensing.CameraSensor.for_scene`).
+SENSORS = ("surface", "cameras")
+
+
+def sensor_for(name: str, scene: SceneSpec, *, background: bool = False) -> Sensor | None:
+    """The remote's sensor called ``name`` (:data:`SENSORS`) for ``scene``: None for "surface" (the remote's
+    default, :class:`scenes.sensing.SurfaceSensor`), the scene's default camera rig for "cameras", scanning in
+    the background with ``background`` (live remotes; headless sessions and replays scan in the loop's thread,
+    so they repeat bit for bit).
+
+    Raises:
+        ValueError: a name not in :data:`SENSORS`.
+    """
+    if name == "surface":
+        return None
+    if name == "cameras":
+        return CameraSensor.for_scene(scene, background=background)
+    raise ValueError(f"unknown sensor {name!r}: one of {', '.join(SENSORS)}")
+
+
+def sensor_name(sensor: Sensor | None) -> str:
+    """What a recording calls the remote's ``sensor`` (its ``sensor`` metadata): "surface" for None or a
+    :class:`scenes.sensing.SurfaceSensor`, "cameras" for a :class:`scenes.sensing.CameraSensor` (replayed with the
+    scene's default rig, :func:`sensor_for`, whatever rig it had), else its class's name, which replay cannot
+    rebuild (``twin replay --sensor`` names one it can)."""
+    if sensor is None or type(sensor) is SurfaceSensor:
+        return "surface"
+    if type(sensor) is CameraSensor:
+        return "cameras"
+    return type(sensor).__name__

@@ -23,7 +23,9 @@ What a recording holds, one MCAP channel per topic:
 
 Plus one MCAP metadata record ``tactile_twin.session`` at the start (``schema_version``, ``tool_version``,
 ``clock`` ``real``/``sim``, ``scene_name``, ``scene_toml`` (the scene file's text, "" when the process
-has none), ``scene_dir``, ``seeds`` and ``network`` (JSON), ``side``, ``command``, ``dt``) and
+has none), ``scene_dir``, ``seeds`` and ``network`` (JSON), ``side``, ``command``, ``dt``, and ``sensor``, the
+remote's sensor by name (``surface``, ``cameras``), which replay rebuilds and checks: absent from ``twin local``'s
+recordings, which do not know it, and from those made before it was recorded) and
 ``tactile_twin.end`` when the recording is closed properly (``messages``, ``duration_s``).
 
 Times are the recording process's clock (:meth:`sync.clock.Clock.stamp_ns`: wall nanoseconds live,

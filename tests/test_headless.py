@@ -3,6 +3,7 @@ runs an estimation worker process, as live twins do)."""
 
 from __future__ import annotations
 
+import json
 import logging
 import time
 from dataclasses import replace
@@ -33,6 +34,7 @@ from sync.messages import (
     encode,
 )
 from sync.ordering import MARK_EXPIRY, MAX_SENDERS
+from twin.poses import rotation
 from twin.runtime import MAX_OBJECTS, MAX_ORPHAN_POSES, Local, LocalSettings, OperatorSettings
 from twin.trajectory import push_trajectory
 
@@ -519,6 +521,49 @@ def test_a_better_view_is_published_again_and_the_twin_replaces_the_object_in_pl
         assert session.local.report.objects_synced == synced + 1  # estimated again and swapped in
         assert sorted(session.local.objects) == ["can", "crate"]
         assert np.linalg.norm(session.local.twin.pose("crate")[0] - before) < 0.003
+
+
+class _OneSided(_Refreshing):
+    """The surface sensor, seeing only the three faces of the crate that look one way (a single view without its
+    origin: one sheet, whose estimate warns that its volume is not known); saying once that it saw it better."""
+
+    def observe(self, truth, object_id: str, points: int, *, shot: int):  # type: ignore[no-untyped-def]
+        from scenes.sensing import Observation
+
+        seen = super().observe(truth, object_id, points, shot=shot)
+        if object_id != "crate":
+            return seen
+        local = (seen.points - seen.frame_position) @ rotation(seen.frame_quat)
+        on_far_faces = (local > local.max(axis=0) - 1e-4).any(axis=1)  # the crate's +x, +y and +z faces
+        return Observation(seen.points[on_far_faces], None, seen.frame_position, seen.frame_quat)
+
+
+def test_an_estimates_warnings_stay_with_its_object_are_logged_once_and_reach_the_json(cache, caplog):
+    from cli.main import _local_objects, to_json
+
+    sensor = _OneSided()
+    with caplog.at_level(logging.WARNING, logger="twin.runtime"), \
+            Headless(load_scene(SMALL), cache_dir=cache, sensor=sensor) as session:
+        session.run(2.5)  # two keyframes of poses: the warnings are said when the object comes in, not again
+        said = [r.getMessage() for r in caplog.records if r.name == "twin.runtime"]
+        assert len(said) == 1 and "'crate'" in said[0] and "one sheet" in said[0] and "0..inf m^3" in said[0], said
+        local = session.local
+        assert local.report.warned_objects == 1
+        crate, can = local.twin_object("crate"), local.twin_object("can")
+        assert crate.estimate.warnings and crate.estimate.volume_bounds_m3 == (0.0, np.inf)
+        assert can.estimate.warnings == () and can.estimate.volume_bounds_m3[1] < np.inf
+        per = {o["id"]: o for o in json.loads(to_json({"per_object": _local_objects(local)}))["per_object"]}
+        assert per["crate"]["warnings"] == list(crate.estimate.warnings)
+        assert per["crate"]["volume_bounds_m3"] == [0.0, None]  # JSON's null: no upper bound
+        assert per["crate"]["estimated_volume_m3"] == crate.estimate.volume
+        assert per["can"]["warnings"] == [] and per["can"]["volume_bounds_m3"][1] > 0
+        sensor.pending = ["crate"]  # a new view of it, as one-sided: replaced, and said again
+        session.run(0.5)
+        assert local.report.objects_synced == 3 and local.report.warned_objects == 2
+        assert len([r for r in caplog.records if r.name == "twin.runtime"]) == 2
+        session.remote.remove("crate")
+        session.run(0.1)
+        assert local.twin_object("crate") is None and local.twin_object("can") is can
 
 
 def test_a_replayed_heartbeat_does_not_let_a_removed_objects_old_cloud_back_in(cache):

@@ -158,8 +158,26 @@ def test_demo_records_compare_estimated_and_true_mass():
     assert record["mass_error_pct"] == pytest.approx(10.0) and record["true_mass_kg"] == 0.30
     (unknown,) = object_records(LocalReport(), {"mug": 0.33}, {"mug": pose}, {})
     assert "true_mass_kg" not in unknown and unknown["add_latency_s"] is None and unknown["divergence_max_m"] is None
-    # SI base units only, and each key says which
-    assert all(k == "id" or k.endswith(("_m", "_kg", "_s", "_pct", "_wxyz")) for k in record)
+    assert unknown["warnings"] is None and unknown["volume_bounds_m3"] is None  # no estimate given: not known
+    # SI base units only, and each key says which (the estimate's warnings are text)
+    assert all(k in ("id", "warnings") or k.endswith(("_m", "_kg", "_s", "_pct", "_wxyz", "_m3")) for k in record)
+
+
+def test_demo_and_local_records_carry_each_estimates_warnings_and_volume_interval():
+    from cli.main import to_json
+
+    box = trimesh.creation.box((0.12, 0.08, 0.06))
+    points, index = trimesh.sample.sample_surface(box, 20000, seed=1)
+    one_side = estimate(make_cloud(points[box.face_normals[index] @ [1.0, 0.5, 0.8] > 0]), 500.0)  # one sheet
+    whole = estimate(make_cloud(points), 500.0)
+    pose = (np.array([0.1, 0.2, 0.8]), np.array([1.0, 0, 0, 0]))
+    records = object_records(LocalReport(), {"box": 0.05, "whole": 0.29}, {"box": pose, "whole": pose}, {},
+                             estimates={"box": one_side, "whole": whole})
+    box_record, whole_record = json.loads(to_json(records), parse_constant=_no_constants)
+    assert box_record["warnings"] == list(one_side.warnings) and any("one sheet" in w for w in box_record["warnings"])
+    assert box_record["volume_bounds_m3"] == [0.0, None]  # unbounded above: null, as `twin estimate --json` says it
+    assert box_record["estimated_volume_m3"] == one_side.volume
+    assert whole_record["warnings"] == [] and whole_record["volume_bounds_m3"] == list(whole.volume_bounds_m3)
 
 
 # -- materials -------------------------------------------------------------------------------------------------

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import logging
 import os
 import subprocess
 import sys
@@ -325,9 +326,9 @@ def test_record_refuses_an_input_or_a_users_file_and_a_failed_start_leaves_the_f
 
 
 def _rewrite(src: Path, dst: Path, *, topic: str | None = None, data: bytes = b"", end: dict | None = None,
-             session: dict | None = None) -> Path:
+             session: dict | None = None, drop: tuple[str, ...] = ()) -> Path:
     """A copy of recording ``src`` with the first message on ``topic`` replaced by ``data``, and entries of
-    the end or session metadata replaced: valid MCAP, bad content."""
+    the end or session metadata replaced (``drop``: session entries left out): valid MCAP, bad content."""
     from mcap.records import Channel, Message, Metadata, Schema
     from mcap.stream_reader import StreamReader
     from mcap.writer import Writer
@@ -349,7 +350,7 @@ def _rewrite(src: Path, dst: Path, *, topic: str | None = None, data: bytes = b"
                 w.add_message(cid, r.log_time, data if replace else r.data, r.publish_time)
             elif isinstance(r, Metadata):
                 extra = {"tactile_twin.end": end, "tactile_twin.session": session}.get(r.name) or {}
-                w.add_metadata(r.name, {**dict(r.metadata), **extra})
+                w.add_metadata(r.name, {k: v for k, v in {**dict(r.metadata), **extra}.items() if k not in drop})
         w.finish()
     return dst
 
@@ -379,6 +380,8 @@ def _rewrite(src: Path, dst: Path, *, topic: str | None = None, data: bytes = b"
     ({"session": {"network": json.dumps({"uplink": None, "downlink": {"delay": "0.05"}, "seed": 0})}}, "delay must be a number"),
     ({"session": {"network": json.dumps({"uplink": None, "downlink": {"reorder": "yes"}, "seed": 0})}}, "reorder must be"),
     ({"session": {"network": json.dumps({"uplink": None, "downlink": None, "seed": 1.5})}}, "seed must be an integer"),
+    ({"session": {"sensor": "lidar"}}, "the recorded sensor 'lidar' is not one replay knows (surface, cameras)"),
+    ({"session": {"sensor": "x" * 10_000}}, "the recorded sensor 'xxxxxxxxxxxxxxxxxxxxxxxx..."),
 ])
 def test_malformed_records_are_one_line_errors_naming_the_record_and_field(recorded, tmp_path, capsys, change, words):
     path, _, _ = recorded
@@ -625,3 +628,99 @@ def test_demo_refuses_a_remote_recording_path_it_must_not_replace_before_startin
         assert words in err and f"--record {record}" in err and err.count("\n") == 1, err
     assert notes.read_text() == "notes\n"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["dd.remote.mcap", "notes.remote.mcap"]
+
+
+# -- the remote's sensor ----------------------------------------------------------------------------------------
+
+ONE_CAN = """name = "onecan"
+[table]
+size = [1.0, 0.6, 0.04]
+height = 0.5
+[end_effector]
+position = [-0.45, -0.28, 0.6]
+[[objects]]
+id = "can"
+primitive = { type = "cylinder", size = [0.04, 0.12] }
+density = 1000
+position = [0.1, 0.05]
+"""
+
+
+def test_a_camera_session_is_recorded_with_its_sensor_and_replays_with_it(cache, tmp_path):
+    """Replay built every recording's remote with the surface sensor: a camera session replayed as another one."""
+    from scenes.sensing import CameraSensor
+
+    (tmp_path / "onecan.toml").write_text(ONE_CAN)
+    scene = load_scene(tmp_path / "onecan.toml")
+    path = tmp_path / "cameras.mcap"
+    with Headless(scene, cache_dir=cache, record=path, sensor=CameraSensor.for_scene(scene)) as session:
+        session.run(0.3)
+        twin = {i: np.concatenate(p) for i, p in session.poses().items()}
+        mass = float(session.local.twin.model.body("can").mass[0])
+    assert read_recording(path).metadata["sensor"] == "cameras"
+    result = replay(path, cache_dir=cache, out=tmp_path / "out")
+    assert result.summary["sensor"] == "cameras"
+    assert read_recording(tmp_path / "out" / "replay.mcap").metadata["sensor"] == "cameras"  # what it ran with
+    # The cameras' cloud, not the true surface's: the same twin, bit for bit.
+    assert sorted(result.twin_poses) == ["can"]
+    assert result.twin_poses["can"].tobytes() == twin["can"].tobytes()
+    with Headless(scene, cache_dir=cache) as surface:
+        surface.run(0.05)
+        assert float(surface.local.twin.model.body("can").mass[0]) != pytest.approx(mass, rel=1e-4)
+    # --sensor replaces the recorded one.
+    assert replay(path, cache_dir=cache, sensor="surface", duration=0.05).summary["sensor"] == "surface"
+
+
+def test_a_recording_that_names_no_sensor_replays_with_the_surface_sensor_and_says_so(recorded, cache, tmp_path,
+                                                                                        caplog, capsys):
+    path, _, _ = recorded
+    assert read_recording(path).metadata["sensor"] == "surface"  # a headless session with the default sensor
+    older = _rewrite(path, tmp_path / "older.mcap", drop=("sensor",))  # as every recording made before
+    assert "sensor" not in read_recording(older).metadata
+    with caplog.at_level(logging.WARNING, logger="cli.record"):
+        summary = replay(older, cache_dir=cache, duration=0.1).summary
+    assert summary["sensor"] == "surface"
+    said = [r.getMessage() for r in caplog.records if r.name == "cli.record"]
+    assert len(said) == 1 and "names no sensor" in said[0] and "surface" in said[0] and "--sensor" in said[0], said
+    # A sensor the recording names that replay does not know: --sensor replaces it, and the replay runs.
+    bad = _rewrite(path, tmp_path / "bad.mcap", session={"sensor": "lidar"})
+    assert main(["replay", str(bad), "--sensor", "surface", "--duration", "0.1", "--cache-dir", str(cache)]) == 0
+    capsys.readouterr()
+    with pytest.raises(SystemExit) as exc:  # the command line's own choices
+        main(["replay", str(bad), "--sensor", "lidar"])
+    assert exc.value.code == 2 and "invalid choice: 'lidar'" in capsys.readouterr().err
+
+
+def test_the_live_commands_record_their_remotes_sensor(tmp_path):
+    from cli.main import _parser
+    from cli.record import open_recorder
+    from scenes.headless import SENSORS
+
+    for sensor in SENSORS:
+        path = tmp_path / f"{sensor}.mcap"
+        open_recorder(path, clock=SimClock(), command="remote", side="remote", scene_path=SMALL, sensor=sensor).close()
+        assert read_recording(path).metadata["sensor"] == sensor
+    # `twin local` does not know what the remote senses with: its recordings name no sensor.
+    open_recorder(tmp_path / "local.mcap", clock=SimClock(), command="local", side="twin").close()
+    assert "sensor" not in read_recording(tmp_path / "local.mcap").metadata
+    parser = _parser()
+    for command in (["demo"], ["remote", str(SMALL)], ["replay", "x.mcap"]):
+        sensor = next(a for a in parser._subparsers._group_actions[0].choices[command[0]]._actions  # type: ignore[union-attr]
+                      if a.dest == "sensor")
+        assert tuple(sensor.choices) == SENSORS, command
+    assert parser.parse_args(["replay", "x.mcap"]).sensor is None  # the recording's, by default
+
+
+@pytest.mark.slow
+def test_a_demo_recorded_with_cameras_replays_with_cameras(cache, tmp_path, capsys):
+    """The real thing: both sides of a loopback demo with the camera sensor, recorded, then replayed."""
+    (tmp_path / "onecan.toml").write_text(ONE_CAN)
+    record = tmp_path / "demo.mcap"
+    assert main(["demo", "--scene", str(tmp_path / "onecan.toml"), "--sensor", "cameras", "--duration", "0.5",
+                 "--record", str(record), "--json"]) == 0
+    capsys.readouterr()
+    for path in (record, tmp_path / "demo.remote.mcap"):
+        assert read_recording(path).metadata["sensor"] == "cameras", path
+        assert main(["replay", str(path), "--duration", "0.3", "--json", "--cache-dir", str(cache)]) == 0
+        summary = json.loads(capsys.readouterr().out)
+        assert summary["sensor"] == "cameras" and summary["objects"] == ["can"], summary

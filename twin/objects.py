@@ -116,7 +116,10 @@ class TwinObject:
 
     Attributes:
         id: unique name in the scene.
-        estimate: the physical estimate (mass, inertia in the body frame's axes).
+        estimate: the physical estimate (mass, inertia in the body frame's axes), with what the estimator
+            warned of and the volume interval the cloud leaves open (``warnings``, ``volume_bounds_m3``): the
+            record the twin keeps of the object and reports (:meth:`twin.runtime.Local.twin_object`, which
+            keeps it without the full reconstruction and points: ``visual`` is what the twin draws).
         friction: sliding friction coefficient.
         visual: decimated reconstruction, vertices (v, 3) metres relative to the centre of mass.
         hulls: convex parts for collision, same frame.

@@ -41,7 +41,7 @@ from typing import Literal, overload
 
 import numpy as np
 
-from estimation import estimate, make_cloud
+from estimation import PhysicalEstimate, estimate, make_cloud
 from estimation.materials import resolve_density
 from sync.clock import REAL_CLOCK, Clock
 from sync.keys import Keys, any_scene_info
@@ -263,6 +263,9 @@ class LocalReport:
     unseen: int = 0  # times the remote's sensor lost an object (Pose.seen False): the twin simulated it alone
     holds: int = 0  # times an object strayed from the remote's pose on its own and was pinned to it
     snaps: int = 0  # corrections too large to blend in: the object was moved at once
+    # objects added or replaced whose estimate came with warnings (each logged once, naming it; the warnings and
+    # the volume interval stay with the object: Local.twin_object)
+    warned_objects: int = 0
     operator_targets: int = 0  # device targets taken (OperatorSettings.listen)
     # reason -> device targets dropped after decoding: "out-of-workspace", "out-of-order" (another message on
     # the target key is the link's "wrong-key")
@@ -332,6 +335,24 @@ def build_from_cloud(data: bytes, coacd: CoacdSettings, cache_dir: Path | None,
     return obj, display_subset(points) if display else None
 
 
+def _kept(obj: TwinObject) -> TwinObject:
+    """``obj`` with its estimate but for the full reconstruction (vertices and faces left empty; ``obj.visual``
+    is what the twin draws and decomposed) and the points it was built from (None): what the twin keeps of an
+    object while it is in it (:meth:`Local.twin_object`). A 30k-point box's whole estimate takes 3.1 MB, all
+    but a few kB of it those arrays; its mass properties, warnings and volume interval stay."""
+    est = obj.estimate
+    return replace(obj, estimate=replace(est, vertices=np.empty((0, 3)), faces=np.empty((0, 3), np.int64),
+                                         points=None, normals=None))
+
+
+def estimate_note(est: PhysicalEstimate) -> str:
+    """One line of what the twin says of an estimate that came with warnings: its mass and volume, the interval
+    the cloud cannot tell the volume from, and the warnings (joined by `` | ``: a warning may hold a ``;``)."""
+    bounds = est.volume_bounds_m3
+    known = "" if bounds is None else f" (known only to {bounds[0]:.3g}..{bounds[1]:.3g} m^3)"
+    return f"{est.mass.mass:.3g} kg, volume {est.volume:.3g} m^3{known}: " + " | ".join(est.warnings)
+
+
 def clear_of_support(obj: TwinObject, floor: float) -> TwinObject:
     """``obj`` lifted out of the support (table top or floor) at height ``floor``, metres, if what collides
     reaches into it.
@@ -382,6 +403,7 @@ class Local:
         self._retried: set[tuple[int, int]] = set()  # (epoch, seq) of clouds whose worker died once
         self._clouds: dict[str, tuple[int, int]] = {}  # id -> (epoch, seq) of the cloud in (or going into) the twin
         self._offsets: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+        self._taken: dict[str, TwinObject] = {}  # id -> the object as it went into the twin (twin_object)
         self._latest: dict[str, Pose] = {}
         self._unseen: set[str] = set()  # objects the remote's sensor has lost (Pose.seen False)
         self._pose_mark: dict[str, tuple[int, int]] = {}  # id -> (epoch, seq) of the newest pose taken
@@ -555,6 +577,12 @@ class Local:
         if latest is None or offset is None:
             return None
         return self._on_body(object_id, latest, offset)
+
+    def twin_object(self, object_id: str) -> TwinObject | None:
+        """The object as it went into the twin (added, or replaced by a later cloud's), or None while it is not in
+        it: its :attr:`~twin.objects.TwinObject.estimate` holds the mass properties, ``warnings`` and
+        ``volume_bounds_m3`` (not the full reconstruction and points: :func:`_kept`)."""
+        return self._taken.get(object_id) if object_id in self._clouds else None
 
     @property
     def expected(self) -> int:
@@ -769,6 +797,7 @@ class Local:
             self._jobs.pop(msg.object_id, None)
             self._clouds.pop(msg.object_id, None)
             self._offsets.pop(msg.object_id, None)
+            self._taken.pop(msg.object_id, None)
             self._targets.pop(msg.object_id, None)
             self._errors.pop(msg.object_id, None)
             self._latest.pop(msg.object_id, None)
@@ -860,6 +889,7 @@ class Local:
                     self._targets[obj.id] = latest
                     self._to_correct.append(obj.id)
                 self._hold_at(obj.id)
+                self._took(obj)
                 self.report.objects_synced += 1
                 self.report.add_latency.append(self.clock.now() - received)
                 self.report.touchable_after[obj.id] = ((self.clock.stamp_ns() - msg.stamp_ns) * 1e-9,
@@ -877,6 +907,18 @@ class Local:
                 self.rlog.event(self.twin.time, f"{object_id}: its model did not compile ({exc}); left out", "ERROR")
 
             self.twin.edit_async(edit, then=done, failed=failed)
+
+    def _took(self, obj: TwinObject) -> None:
+        """Keep ``obj`` (now in the twin) for :meth:`twin_object`, and say once what its estimate warns of: the log,
+        the report's ``warned_objects``, the debug log. At insertion only: the loop's steps never look."""
+        self._taken[obj.id] = _kept(obj)
+        est = obj.estimate
+        if not est.warnings:
+            return
+        self.report.warned_objects += 1
+        note = estimate_note(est)
+        log.warning("object %r is in the twin from an estimate that warns: %s", obj.id, note)
+        self.rlog.event(self.twin.time, f"{obj.id}: in the twin from an estimate that warns: {note}", "WARN")
 
     def _new_pool(self) -> ProcessPoolExecutor | None:
         if self.settings.workers == 0:
