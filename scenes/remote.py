@@ -175,6 +175,8 @@ class Remote:
         self.cloud_updates = 0  # clouds published again because the sensor saw the object better
         self.unseen_reports = 0  # times the sensor lost an object (Track.seen False), each said once on the wire
         self._unseen: set[str] = set()  # objects lost and said so: nothing more is published of them until found
+        self.unseen_clouds = 0  # objects whose cloud was held back, the sensor having observed nothing of them
+        self._withheld: set[str] = set()  # objects never published (nothing observed): no cloud, no pose yet
         top = scene.table.height if scene.table else None
         truth = prepare_objects(scene.objects, table_top=top, cache_dir=cache_dir, progress=progress,
                                 estimates=[reference_estimate(s) for s in scene.objects])
@@ -206,7 +208,8 @@ class Remote:
     # -- what the operator and the scene do ------------------------------------------------------
 
     def add(self, spec: ObjectSpec, position: np.ndarray | None = None) -> Future:
-        """An object appears. Returns a Future that resolves to its id once its cloud is published.
+        """An object appears. Returns a Future that resolves to its id once its cloud is published (or held back
+        until the sensor sees it: :meth:`publish_cloud`).
 
         The true mesh's mass properties, CoACD and the compile run in the background while the loop
         steps (a 200k-point object took over a second, long enough for twins to mark the link stale);
@@ -289,12 +292,31 @@ class Remote:
         return self._objects[object_id].body_mesh
 
     def publish_cloud(self, object_id: str, points: int | None = None) -> int:
-        """Sense and publish one object's cloud (with its sensed frame); returns the bytes sent."""
+        """Sense and publish one object's cloud (with its sensed frame); returns the bytes sent.
+
+        An object the sensor observed nothing of (no camera saw it, or saw it merged with another) is not
+        published: no cloud, and no pose until one is (a cloud of no points is no object, and the wire cannot
+        carry one). It is counted in ``unseen_clouds`` and logged, once, and published when the sensor offers a
+        view of it (``refreshed``). An object published before keeps what the twin has of it. Returns 0 then.
+        """
         truth = self._objects[object_id]
         spec = truth.spec
         seq = self._next()
         seen = self.sensor.observe(self, object_id, points or self.points or spec.points, shot=seq)
         cloud, pos, quat = seen.points, seen.frame_position, seen.frame_quat
+        if not len(cloud):
+            with self._lock:
+                published = self.keys.object(object_id, "cloud") in self._replies
+            if not published and object_id not in self._withheld:
+                self._withheld.add(object_id)
+                self.unseen_clouds += 1
+                log.warning("%s: the sensor observed nothing of it (unseen, or merged with another object); its "
+                            "cloud is published when it is seen", object_id)
+                self.rlog.event(self.twin.time, f"{object_id}: not seen; cloud held back")
+            return 0
+        if object_id in self._withheld:
+            self._withheld.discard(object_id)
+            log.info("%s: seen at last; cloud published", object_id)
         msg = cloud_message(object_id, cloud, stamp_ns=self.clock.stamp_ns(), epoch=self.epoch, seq=seq,
                             material=spec.material, density=spec.density, frame_position=pos, frame_quat=quat,
                             normals=seen.normals)
@@ -329,10 +351,12 @@ class Remote:
         self._publish_moved()
         refreshed = getattr(self.sensor, "refreshed", None)
         if refreshed is not None:
-            for object_id in refreshed():  # a turned object showed the cameras another side
+            # A turned object showed the cameras another side, or one held back was seen at last.
+            for object_id in refreshed():
                 if object_id in self._objects:
-                    self.publish_cloud(object_id)
-                    self.cloud_updates += 1
+                    first = object_id in self._withheld
+                    if self.publish_cloud(object_id) and not first:
+                        self.cloud_updates += 1
         now = self.clock.now()
         if self.keyframe_s > 0 and now - self._last_keyframe >= self.keyframe_s:
             # Every pose now and then, moved or not: a twin that drifted on its own (its estimated shape
@@ -373,6 +397,7 @@ class Remote:
         self.rlog.event(self.twin.time, f"{object_id}: removed")
         self._objects.pop(object_id, None)
         self._published.pop(object_id, None)
+        self._withheld.discard(object_id)
         self._rows = None  # rebuilt without it at the next step
         with self._lock:  # the queryable reads these from Zenoh's threads
             for kind in ("cloud", "pose"):
@@ -454,8 +479,11 @@ class Remote:
 
         When the sensor has lost the object, that is said once (``Pose.seen`` False, the last pose seen) and
         nothing more is published of it until it is found: the twin simulates it alone meanwhile, rather
-        than being pulled back to, or held at, where it was last seen.
+        than being pulled back to, or held at, where it was last seen. Nothing is published of an object whose
+        cloud is held back (:meth:`publish_cloud`).
         """
+        if object_id in self._withheld:
+            return  # no cloud yet: a pose of it would be of nothing the twin knows (and not a sensed one)
         seen = self.sensor.track(self, object_id) if track is None else track
         if not seen.seen:
             if object_id in self._unseen:

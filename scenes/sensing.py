@@ -5,8 +5,8 @@ true surface) and reports, per object, an :class:`Observation` (a cloud in the w
 sensor's estimate of the object's frame) and a :class:`Track` (the frame's pose and velocity now). The
 remote publishes exactly that and nothing else, so the wire carries only what a real site could know.
 
-:class:`SurfaceSensor` is the idealised sensor: points sampled off the whole true surface (no occlusion,
-no noise) and the simulator's own poses. Camera-based sensors plug in here.
+:class:`SurfaceSensor` is the idealised sensor: points sampled off the whole true surface with its normals (no
+occlusion, no noise) and the simulator's own poses. Camera-based sensors plug in here.
 """
 
 from __future__ import annotations
@@ -107,7 +107,8 @@ class PoseSensor(Sensor, Protocol):
 
 
 class SurfaceSensor:
-    """Idealised sensing: uniform samples of the whole true surface, and the simulator's poses.
+    """Idealised sensing: uniform samples of the whole true surface with its outward face normals, and the
+    simulator's poses.
 
     The object frame is the simulated body's frame. Samples are seeded by the object id and ``shot``,
     so a run is repeatable.
@@ -117,7 +118,10 @@ class SurfaceSensor:
         mesh = truth.true_surface(object_id)
         cloud = sample_surface(mesh, points, seed=zlib.crc32(object_id.encode()) + shot)
         pos, quat = truth.twin.pose(object_id)  # type: ignore[attr-defined]
-        return Observation(cloud.points @ rotation(quat).T + pos, None, pos, quat)
+        turn = rotation(quat)
+        # The true mesh's face normals come with the samples, as a scanner's viewpoint-oriented normals would:
+        # without them the twin fitted its own, and a 2 mm plate's two faces merged (+209 % in twin demo).
+        return Observation(cloud.points @ turn.T + pos, None, pos, quat, normals=cloud.normals @ turn.T)
 
     def __init__(self) -> None:
         self._bodies: tuple[object, list[str], np.ndarray] | None = None  # (model, ids, body ids) of poses()
@@ -173,7 +177,10 @@ class CameraSensor:
 
     Nothing the cameras see raises: an object in no segment, two objects in one segment, a lost ICP are
     logged and counted in ``self.feed.stats``; the last good observation or track is returned, a track
-    marked ``seen=False``.
+    marked ``seen=False``. An object is never observed from a segment another object is predicted in too
+    (merged: touching, stacked), which is neither of them; until it is seen alone (or parted, above) it has
+    no observation: :meth:`observe` gives one without points, and tracks say it unseen. Every later scan
+    looks for it again, and the first to see it alone observes it and offers it in :meth:`refreshed`.
 
     With ``background``, :meth:`track` never scans in the caller's thread: when a scan is due it copies
     the simulation's state and scans and tracks every object in a thread of its own, and answers with the
@@ -204,6 +211,11 @@ class CameraSensor:
         self._gates: dict[str, int] | None = None  # id -> segment at its prediction, in the current scan
         self._reviewed: dict[str, np.ndarray] = {}  # id -> motion when it was last fused (see refreshed)
         self._better: dict[str, tuple[Observation, np.ndarray]] = {}  # id -> (a better view, motion then)
+        self._given: set[str] = set()  # ids observe() has given a view of (with points)
+        self._fresh: set[str] = set()  # ids first observed by a tracking scan, not yet given (see refreshed)
+        self._merges: set[int] = set()  # segments of the current scan counted as merged
+        self._merged_said: set[frozenset[str]] = set()  # sets of objects said (at WARNING) to share a segment
+        self._waiting: set[str] = set()  # ids never observed whose first miss was said at WARNING
         self._lock = threading.Lock()  # the tracker's state: one scan-and-track at a time
         self._pool = ThreadPoolExecutor(1, thread_name_prefix="cameras") if background else None
         self._job: Future | None = None
@@ -229,8 +241,12 @@ class CameraSensor:
     # -- the Sensor seam -------------------------------------------------------------------------
 
     def observe(self, truth: GroundTruth, object_id: str, points: int, *, shot: int) -> Observation:
+        """The object's view (see the class); without points when it was never seen alone."""
         with self._lock:
-            return self._observe(truth, object_id, points, shot)
+            seen = self._observe(truth, object_id, points, shot)
+            if len(seen.points):
+                self._given.add(object_id)
+            return seen
 
     def track(self, truth: GroundTruth, object_id: str) -> Track:
         if self._pool is not None:
@@ -244,8 +260,9 @@ class CameraSensor:
             self._pool.shutdown(wait=True)
 
     def refreshed(self) -> list[str]:
-        """Objects a later scan saw better than the cloud :meth:`observe` last gave (once each): the remote
-        publishes their cloud again, and :meth:`observe` then gives that view.
+        """Objects a later scan saw better than the cloud :meth:`observe` last gave, or saw alone for the
+        first time when :meth:`observe` had nothing of them (once each): the remote publishes their cloud
+        (again), and :meth:`observe` then gives that view.
 
         An object is looked at again when it rests, alone in its segment, turned ``REVIEW_TURN_DEG`` or
         moved ``REVIEW_SHIFT`` from where it was last looked at (another side faces the cameras); the view
@@ -253,22 +270,34 @@ class CameraSensor:
         object's frame as tracked now, so the poses before and after it agree. Empty while a background
         scan runs (it holds the state :meth:`observe` needs).
         """
-        if not self._better or (self._job is not None and not self._job.done()):
+        if not (self._better or self._fresh) or (self._job is not None and not self._job.done()):
             return []
-        return sorted(self._better)
+        return sorted(set(self._better) | self._fresh)
 
     # -- internals -------------------------------------------------------------------------------
 
-    def _observe(self, truth: GroundTruth, object_id: str, points: int, shot: int) -> Observation:
+    def _observe(self, truth: GroundTruth, object_id: str, points: int, shot: int, *,
+                 force: bool = True) -> Observation:
+        """The object's view from the scan of now (``force``: scanned now if it was never observed; else the
+        current scan); its last view, or one without points, when that scan does not show it alone."""
         better = self._better.pop(object_id, None)
         if better is not None:
             return self._adopt(object_id, *better, points=points, shot=shot)
-        scan = self._current(truth, force=object_id not in self._observed)
+        if object_id in self._fresh:  # first seen by a tracking scan: that view, in the frame tracked since
+            self._fresh.discard(object_id)
+            seen = self._observed[object_id] = self._subsample(self._observed[object_id], points, shot)
+            return seen
+        scan = self._current(truth, force=force and object_id not in self._observed)
         k = self._associate(truth, scan, object_id)
+        if k is not None and not self._alone(scan, k, object_id):
+            self._refuse_merged(scan, k, object_id)
+            k = None
         if k is None:
             last = self._observed.get(object_id)
             if last is not None:
                 return last
+            # Its track of this scan too: looked at once per scan (and counted once), not again by track().
+            self._tracked[object_id] = (scan.time, self._unseen_track(object_id, scan.time))
             empty = np.zeros((0, 3))
             return Observation(empty, empty, self._last.get(object_id, np.zeros(3)), np.array([1.0, 0, 0, 0]))
         seen = self._subsample(self._fuse(scan, scan.segments[k]), points, shot)
@@ -282,7 +311,32 @@ class CameraSensor:
         # centre is that of the segment, which two touching objects share.
         self._previous[object_id], self._seen_at[object_id] = seen.frame_position, scan.time
         self._velocity.pop(object_id, None)
+        if object_id in self._waiting:
+            self._waiting.discard(object_id)
+            log.info("%s: seen alone at t=%.3f: observed", object_id, scan.time)
         return seen
+
+    def _refuse_merged(self, scan, k: int, object_id: str) -> None:  # type: ignore[no-untyped-def]
+        """Say (once per object until it is observed; at DEBUG after) and count (once per segment and scan)
+        that segment ``k`` is not ``object_id``'s view: other objects are predicted in it too."""
+        owners = sorted(i for i, g in self._gated(scan).items() if g == k)
+        self._count_merge(scan, k, owners)
+        level = logging.DEBUG if object_id in self._waiting else logging.WARNING
+        self._waiting.add(object_id)
+        log.log(level, "%s: its segment in the scan at t=%.3f holds %s too (merged); not observed until it is "
+                "seen alone", object_id, scan.time, ", ".join(i for i in owners if i != object_id))
+
+    def _count_merge(self, scan, k: int, owners) -> None:  # type: ignore[no-untyped-def]
+        """Count and say once per scan that segment ``k`` holds the objects ``owners``."""
+        if k in self._merges:
+            return
+        self._merges.add(k)
+        self.feed.stats.merged += 1
+        pair = frozenset(owners)
+        # Said at WARNING the first time these objects are seen merged; a stack that stays is not said every scan.
+        level = logging.DEBUG if pair in self._merged_said else logging.WARNING
+        self._merged_said.add(pair)
+        log.log(level, "segment %d of the scan at t=%.3f holds %s: merged", k, scan.time, ", ".join(sorted(owners)))
 
     def _adopt(self, object_id: str, seen: Observation, motion: np.ndarray, points: int, shot: int) -> Observation:
         """A later, better view of a tracked object as its observation, in its frame as tracked (``motion``,
@@ -320,12 +374,12 @@ class CameraSensor:
                      100 * _completed_share(candidate), 100 * _completed_share(current) if current else 100)
 
     def _track_now(self, truth: GroundTruth, object_id: str) -> Track:
-        if object_id not in self._model:
-            self._observe(truth, object_id, 0, shot=0)
         scan = self._current(truth)
         done = self._tracked.get(object_id)
         if done is not None and done[0] == scan.time:
             return done[1]
+        if object_id not in self._model:
+            return self._first_sight(truth, scan, object_id)
         k = self._associate(truth, scan, object_id)
         model, centre = self._model.get(object_id, (np.zeros((0, 3)), self._last.get(object_id, np.zeros(3))))
         result = None
@@ -368,10 +422,24 @@ class CameraSensor:
         self._tracked[object_id] = (scan.time, track)
         return track
 
+    def _first_sight(self, truth: GroundTruth, scan, object_id: str) -> Track:  # type: ignore[no-untyped-def]
+        """The track of an object never observed: observed from ``scan`` if it shows it alone (and offered in
+        :meth:`refreshed` unless :meth:`observe` gave it already), else unseen where it was labelled."""
+        seen = self._observe(truth, object_id, 0, 0, force=False)
+        if len(seen.points) and object_id not in self._given:
+            self._fresh.add(object_id)
+        return self._tracked[object_id][1]
+
+    def _unseen_track(self, object_id: str, time: float | None) -> Track:
+        """The track of an object never observed: not seen, at rest where it was labelled."""
+        return Track(self._last.get(object_id, np.zeros(3)), np.array([1.0, 0, 0, 0]), np.zeros(3), np.zeros(3),
+                     seen=False, time=time)
+
     def _track_behind(self, truth: GroundTruth, object_id: str) -> Track:
-        """:meth:`track` with ``background``: the last track done; a scan of a copy of now started if due."""
-        if object_id not in self._model:
-            self.observe(truth, object_id, 0, shot=0)
+        """:meth:`track` with ``background``: the last track done; a scan of a copy of now started if due.
+
+        An object not observed yet is not scanned for here (that took a scan in the caller's thread at every
+        step): the background scans look for it, and until one sees it its track says it unseen."""
         job = self._job
         if job is not None and job.done():
             self._job = None
@@ -381,8 +449,10 @@ class CameraSensor:
         now = float(truth.twin.time)  # type: ignore[attr-defined]
         if self._job is None and now - self._submitted >= self.track_period:
             self._submitted = now
-            self._job = self._pool.submit(self._track_all, _Still(truth.twin), list(self._model))  # type: ignore[union-attr]
-        return self._tracked[object_id][1]
+            ids = list(truth.twin.object_ids())  # type: ignore[attr-defined]  # the unobserved too: looked for
+            self._job = self._pool.submit(self._track_all, _Still(truth.twin), ids)  # type: ignore[union-attr]
+        done = self._tracked.get(object_id)
+        return done[1] if done is not None else self._unseen_track(object_id, None)
 
     def _track_all(self, truth: GroundTruth, ids: list[str]) -> None:
         with self._lock:
@@ -402,16 +472,18 @@ class CameraSensor:
         expected = [g for i in twin.object_ids()  # type: ignore[attr-defined]
                     if (g := mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, f"{i}/visual")) >= 0]
         self._scan = self.feed.scan(model, twin.data, time=now, expected=expected)  # type: ignore[attr-defined]
-        self._claims, self._gates = {}, None
+        self._claims, self._gates, self._merges = {}, None, set()
         ids = list(twin.object_ids())  # type: ignore[attr-defined]
         for object_id in ids:
-            self._label(truth, object_id, now)
+            self._label(truth, object_id, now, again=True)
         self._split_shared(ids)
         return self._scan
 
-    def _label(self, truth: GroundTruth, object_id: str, time: float) -> None:
-        """Labelling, once: where ``object_id`` is, from the simulator (see the class docstring)."""
-        if object_id not in self._last:
+    def _label(self, truth: GroundTruth, object_id: str, time: float, *, again: bool = False) -> None:
+        """Labelling, once: where ``object_id`` is, from the simulator (see the class docstring); ``again``
+        (a new scan), also where an object never observed is now: it is labelled at first sight, and a label
+        kept from before would be looked for ever further from where it was (``_reach``) while it was unseen."""
+        if object_id not in self._last or (again and object_id not in self._observed):
             self._last[object_id] = np.asarray(truth.twin.pose(object_id)[0], float)  # type: ignore[attr-defined]
             self._seen_at[object_id] = time
             self._gates = None  # one more object to gate
@@ -469,7 +541,7 @@ class CameraSensor:
         self._label(truth, object_id, scan.time)  # done at the scan, unless the object came after it
         if not scan.segments:
             self.feed.stats.unseen += 1
-            log.warning("%s: the scan at t=%.3f has no segments", object_id, scan.time)
+            log.log(self._miss_level(object_id), "%s: the scan at t=%.3f has no segments", object_id, scan.time)
             return None
         gates = self._gated(scan)
         k = gates.get(object_id)
@@ -478,15 +550,24 @@ class CameraSensor:
         if k is None:
             self.feed.stats.unseen += 1
             since = scan.time - self._seen_at.get(object_id, scan.time)
-            log.warning("%s: no free segment within %.0f mm of where it was %.1f s ago; not seen", object_id,
-                        1000 * self._reach(since), since)
+            log.log(self._miss_level(object_id), "%s: no free segment within %.0f mm of where it was %.1f s ago; "
+                    "not seen", object_id, 1000 * self._reach(since), since)
             return None
         owners = self._claims.setdefault(k, set())
         owners.add(object_id)
-        if len(owners) == 2:
-            self.feed.stats.merged += 1
-            log.warning("segment %d of the scan at t=%.3f holds %s: merged", k, scan.time, ", ".join(sorted(owners)))
+        if len(owners) >= 2:
+            self._count_merge(scan, k, owners)
         return k
+
+    def _miss_level(self, object_id: str) -> int:
+        """WARNING, but DEBUG for an object never observed whose first miss was said: it is looked for at every
+        scan (a 5 mm bead no camera resolves would fill the log)."""
+        if object_id in self._observed:
+            return logging.WARNING
+        if object_id in self._waiting:
+            return logging.DEBUG
+        self._waiting.add(object_id)
+        return logging.WARNING
 
     def _predicted(self, object_id: str, time: float) -> np.ndarray:
         """Where the object's frame centre is expected at ``time``: its last position moved at its velocity."""
