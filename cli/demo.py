@@ -9,6 +9,7 @@ leave the deadband. Nothing to start by hand, no router.
 
 from __future__ import annotations
 
+import dataclasses
 import multiprocessing as mp
 import queue
 import time
@@ -88,8 +89,11 @@ def _remote_main(scene_path: str, endpoint: str, zenoh_config: str | None, ready
         c = remote.link.counters
         said = {"bytes_sent": c.bytes_sent, "messages_sent": c.messages_sent, "pose_updates": remote.pose_updates,
                 "points": remote.cloud_points(), "step_p99_ms": stats.p99 * 1e3,
-                "dropped_malformed": c.dropped_malformed,
+                "dropped_malformed": c.dropped_malformed, "unseen_clouds": remote.unseen_clouds,
                 "true_mass_kg": body_masses(remote.twin.model, remote.twin.object_ids())}
+        feed = getattr(remote.sensor, "feed", None)  # the camera sensor's counters (scenes.cameras.FeedStats)
+        if feed is not None:
+            said["sensor_stats"] = dataclasses.asdict(feed.stats)
         remote.close()
         if recorder is not None:
             try:  # before the results: a recording that could not be put in place is the parent's error
@@ -231,6 +235,9 @@ def run_demo(*, duration: float = 5.0, scene_path: Path | None = None, zenoh_con
         "lost_by_sensor": report.unseen,
         "holds": report.holds,
         "warned_objects": report.warned_objects,
+        # objects the remote's sensor never observed apart, so never published (scenes.remote.Remote.unseen_clouds)
+        "unseen_clouds": remote_stats["unseen_clouds"],
+        "sensor_stats": remote_stats.get("sensor_stats"),  # cameras: scans, unseen, merged, lost tracks ...
         "session_s": session_s,
         "twin_minus_remote_m": drift,
         "per_object": object_records(report, estimated, poses, drift, remote_stats.get("true_mass_kg"),

@@ -59,3 +59,16 @@ def test_an_unknown_sensor_is_refused_and_surface_is_the_default(capsys, command
         main([*command, "--sensor", "lidar"])
     assert exc.value.code == 2
     assert "invalid choice: 'lidar'" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_demo_says_which_objects_the_cameras_never_saw(capsys):
+    # A 5 mm bead no default camera resolves: the remote publishes nothing of it (it crashed on an empty cloud
+    # before), and the demo's summary says so (unseen_clouds, the camera feed's counters) rather than leave
+    # the reader to notice one object short in per_object.
+    bead = Path(__file__).parent / "data" / "bead.toml"
+    assert main(["demo", "--scene", str(bead), "--sensor", "cameras", "--duration", "0.3", "--json"]) == 0
+    record = json.loads(capsys.readouterr().out)
+    assert [o["id"] for o in record["per_object"]] == ["crate"]
+    assert record["unseen_clouds"] == 1
+    assert record["sensor_stats"]["scans"] >= 1 and record["sensor_stats"]["unseen"] >= 1
