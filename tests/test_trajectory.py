@@ -105,8 +105,9 @@ def test_a_file_in_millimetres_is_refused_naming_units_and_read_with_them(tmp_pa
     with pytest.raises(TrajectoryError, match=r"path.csv: the target at t = 0 s, \(-300, 0, 560\) m, is outside the "
                                               r"operator's reach \(x -2.5 to 2.5, y -2.3 to 2.3, z 0 to 2.5 m\): "
                                               r"looks like millimetres: pass --units mm$"):
-        load_trajectory(path, box=SMALL_BOX)
-    at = load_trajectory(path, units="mm", box=SMALL_BOX)
+        load_trajectory(path).check_reach(SMALL_BOX)
+    at = load_trajectory(path, units="mm")
+    at.check_reach(SMALL_BOX)
     assert at(1.0) == pytest.approx([0.0, 0.0, 0.56]) and at(0.0) == pytest.approx([-0.3, 0.0, 0.56])
     assert load_trajectory(_write(tmp_path, "0,-30,0,56\n", "cm.csv"), units="cm")(0.0) == pytest.approx([-0.3, 0, 0.56])
     from estimation.units import UnitsError
@@ -125,11 +126,11 @@ def test_targets_under_the_floor_or_a_stray_far_one_are_refused_without_a_units_
     under = _write(tmp_path, "t,x,y,z\n0,-0.3,0,0.56\n0.5,0.0,0,-5\n")  # was 25,100 N on the end effector
     with pytest.raises(TrajectoryError, match=r"the target at t = 0.5 s, \(0, 0, -5\) m, is outside the operator's "
                                               r"reach \(x -2.5 to 2.5, y -2.3 to 2.3, z 0 to 2.5 m\)$"):
-        load_trajectory(under, box=SMALL_BOX)
+        load_trajectory(under).check_reach(SMALL_BOX)
     far = _write(tmp_path, "t,x,y,z\n0,-0.3,0,0.56\n0.1,999,999,999\n", "far.csv")
     with pytest.raises(TrajectoryError, match=r"\(999, 999, 999\) m, is outside the operator's reach \(.*\)$"):
-        load_trajectory(far, box=SMALL_BOX)
-    at = load_trajectory(far)  # no box: checked later (Waypoints.check_reach), as the CLI does once it has the scene
+        load_trajectory(far).check_reach(SMALL_BOX)
+    at = load_trajectory(far)  # read; its reach is checked once the scene is known, as the CLI does
     with pytest.raises(TrajectoryError, match=r"far.csv: the target at t = 0.1 s"):
         at.check_reach(SMALL_BOX)
 

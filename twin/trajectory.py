@@ -150,7 +150,7 @@ def check_reach(times: np.ndarray, points: np.ndarray, box: tuple[np.ndarray, np
         TrajectoryError: the first target outside the box, and the box.
     """
     low, high = (np.asarray(c, dtype=np.float64) for c in box)
-    inside = np.all((points >= low) & (points <= high), axis=1)
+    inside = _within(points, low, high)
     if inside.all():
         return
     i = int(np.argmin(inside))
@@ -158,7 +158,7 @@ def check_reach(times: np.ndarray, points: np.ndarray, box: tuple[np.ndarray, np
     hint = ""
     if units is not None and not inside.any():  # all outside: read in the wrong units, not a stray target
         fits = [name for name, scale in UNIT_SCALE.items() if scale < UNIT_SCALE[units]
-                and np.all((points * (scale / UNIT_SCALE[units]) >= low) & (points * (scale / UNIT_SCALE[units]) <= high))]
+                and _within(points * (scale / UNIT_SCALE[units]), low, high).all()]
         if fits:
             hint = (f": looks like {' or '.join(_UNIT_WORDS[f] for f in fits)}: pass "
                     f"{' or '.join(f'--units {f}' for f in fits)}")
@@ -167,8 +167,12 @@ def check_reach(times: np.ndarray, points: np.ndarray, box: tuple[np.ndarray, np
                           f"{high[2]:g} m){hint}")
 
 
-def load_trajectory(path: str | Path, *, units: str = "m", box: tuple[np.ndarray, np.ndarray] | None = None,
-                    ) -> Waypoints:
+def _within(points: np.ndarray, low: np.ndarray, high: np.ndarray) -> np.ndarray:
+    """(n,) bool: which of the (n, 3) ``points`` lie in the box ``low``..``high``."""
+    return np.all((points >= low) & (points <= high), axis=1)
+
+
+def load_trajectory(path: str | Path, *, units: str = "m") -> Waypoints:
     """An end-effector trajectory from a CSV file.
 
     Format: one row per waypoint, ``t,x,y,z``: time in seconds (strictly increasing) and the target
@@ -185,9 +189,8 @@ def load_trajectory(path: str | Path, *, units: str = "m", box: tuple[np.ndarray
 
     Args:
         path: the CSV file, at most :data:`MAX_TRAJECTORY_BYTES` and :data:`MAX_WAYPOINTS` rows.
-        units: the positions' units: ``m``, ``cm`` or ``mm`` (:data:`estimation.units.UNIT_SCALE`).
-        box: (low, high) corners, metres, world frame, every target must lie in (:func:`check_reach`); None:
-            checked later with :meth:`Waypoints.check_reach`, or not at all.
+        units: the positions' units: ``m``, ``cm`` or ``mm`` (:data:`estimation.units.UNIT_SCALE`). The
+            targets' reach is the caller's, once it knows the scene: :meth:`Waypoints.check_reach`.
 
     Returns:
         ``trajectory(t) -> (3,) float64``, metres, world frame: a :class:`Waypoints`.
@@ -196,7 +199,7 @@ def load_trajectory(path: str | Path, *, units: str = "m", box: tuple[np.ndarray
         TrajectoryError: the file is not a regular file, is too large, or cannot be read, a row has other than
             four columns or a value that is not a finite number, a position beyond
             :data:`sync.messages.MAX_COORDINATE` (what the wire carries), there are no waypoints or too many,
-            the times do not increase, or (with ``box``) a target lies outside the box.
+            the times do not increase.
         UnitsError: ``units`` is not one of m, cm, mm.
     """
     path = Path(path)
@@ -217,10 +220,7 @@ def load_trajectory(path: str | Path, *, units: str = "m", box: tuple[np.ndarray
         raise TrajectoryError(f"{path}: more than {MAX_WAYPOINTS:,} waypoints (thin them)")
     times, points = np.ascontiguousarray(table[:, 0]), np.ascontiguousarray(table[:, 1:])
     _warn_if_milliseconds(path, times, points)
-    waypoints = Waypoints(times, points, source=str(path), units=units)
-    if box is not None:
-        waypoints.check_reach(box)
-    return waypoints
+    return Waypoints(times, points, source=str(path), units=units)
 
 
 def _cannot_read(path: Path, exc: BaseException) -> TrajectoryError:
