@@ -402,12 +402,9 @@ def framed(points: np.ndarray, views: Sequence[DepthView]) -> np.ndarray:
     seen = np.zeros(len(pts), dtype=bool)
     for view in views:
         k = view.intrinsics
-        cam = (pts - np.asarray(view.position, dtype=np.float64)) @ np.asarray(view.rotation, dtype=np.float64)
-        ahead = cam[:, 2] > 1e-6
-        zs = np.where(ahead, cam[:, 2], 1.0)
-        col = np.floor(k.fx * cam[:, 0] / zs + k.cx).astype(np.int64)
-        row = np.floor(k.fy * cam[:, 1] / zs + k.cy).astype(np.int64)
-        inside = ahead & (col >= 0) & (col < k.width) & (row >= 0) & (row < k.height)
+        _, x, y, z = _pixels(pts, view)
+        col, row = np.floor(x + 0.5).astype(np.int64), np.floor(y + 0.5).astype(np.int64)  # the pixel it falls in
+        inside = (z > 1e-6) & (col >= 0) & (col < k.width) & (row >= 0) & (row < k.height)
         depth = view.depth[np.where(inside, row, 0), np.where(inside, col, 0)]
         seen |= inside & np.isfinite(depth)
     return seen
