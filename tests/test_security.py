@@ -457,11 +457,10 @@ def test_a_host_name_that_does_not_resolve_is_refused_at_once_naming_the_flag(ar
     reached = _stop_before_opening(monkeypatch)
     from cli.main import main
 
-    t0 = time.monotonic()
     assert main(argv) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and re.search(message, err), err
-    assert reached == [] and time.monotonic() - t0 < 5  # it waited 10 s for a session before
+    assert reached == []  # refused before any session: it waited 10 s for one before
 
 
 @pytest.mark.parametrize("key", ["connect", "listen"])
@@ -515,12 +514,11 @@ def test_resolving_a_host_name_is_bounded(monkeypatch):
     import sync.zenoh_transport as zt
 
     monkeypatch.setattr(zt, "RESOLVE_TIMEOUT", 0.2)
-    _fake_dns(monkeypatch, {"slow.test": ["127.0.0.1"]}, delay=2.0)  # a DNS server that does not answer
-    t0 = time.monotonic()
+    # A DNS server that answers only after 2 s: unbounded, the name would resolve and no error come.
+    _fake_dns(monkeypatch, {"slow.test": ["127.0.0.1"]}, delay=2.0)
     with pytest.raises(zt.SessionError, match=r"^--connect 'tcp/slow\.test:7447': host 'slow\.test' did not "
                                               r"resolve within 0\.2 s$"):
         zt.make_config(connect=["tcp/slow.test:7447"], connect_name="--connect")
-    assert time.monotonic() - t0 < 1.5
 
 
 def test_a_bad_zenoh_config_is_one_line_with_its_position(tmp_path, capsys):
