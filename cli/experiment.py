@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import dataclasses
 import logging
 import math
 from pathlib import Path
@@ -55,6 +56,9 @@ def add_parser(sub) -> None:  # type: ignore[no-untyped-def]
                         "recorded for a recording)")
     p.add_argument("--speed", type=float, default=1.0,
                    help="task speed factor, from 0.05 to 20 (2: twice as fast; default 1)")
+    p.add_argument("--sensor", choices=["surface", "cameras"], default=None,
+                   help="the remote's sensor in every session (default: 'surface' for a scene, the one a recording "
+                        "names for a recording; see twin demo --help)")
     p.add_argument("--workers", type=int, default=2, help="worker processes (default 2; 0: this process)")
     p.add_argument("--dask", metavar="ADDRESS",
                    help="run the sessions on a Dask cluster instead: a scheduler address (tcp://HOST:8786) or "
@@ -135,38 +139,41 @@ def is_recording(path: Path) -> bool:
 
 
 def source(args: argparse.Namespace, tasks: tuple[str, ...]):  # type: ignore[no-untyped-def]
-    """The scene and, for a recording, its operator as a :class:`scenes.experiment.RecordedTask` (else None);
-    ``tasks`` as :func:`parse` read them (``"push, recorded"`` holds ``recorded``).
+    """The scene, for a recording its operator as a :class:`scenes.experiment.RecordedTask` (else None), and
+    the remote's sensor (``--sensor``, else the one a recording names, else "surface"); ``tasks`` as
+    :func:`parse` read them (``"push, recorded"`` holds ``recorded``).
 
     Raises:
-        TwinError: an unreadable scene file or recording, a recording without a scene, or one whose operator
-            applied no target while the recorded task was asked for.
+        TwinError: an unreadable scene file or recording, a recording without a scene or naming a sensor
+            replay does not know (without ``--sensor``), or one whose operator applied no target while the
+            recorded task was asked for.
     """
     from scenes.experiment import RecordedTask
     from scenes.scenefile import load_scene
 
     if not is_recording(args.scene):
-        return load_scene(args.scene), None
-    from cli.record import recorded_scene
+        return load_scene(args.scene), None, args.sensor or "surface"
+    from cli.record import recorded_scene, recorded_sensor
     from sync.recording import read_recording
 
     recording = read_recording(args.scene)
     if recording.damage:
         log.warning("%s", recording.damage)
     scene = recorded_scene(recording)
+    sensor = args.sensor or recorded_sensor(recording)
     times, points = recording.targets()
     if len(times) == 0:
         if "recorded" in tasks:
             raise TwinError(f"{args.scene}: the recording has no operator targets (a remote's recording has none; "
                             "record the twin side, or give --tasks push,press)")
-        return scene, None
+        return scene, None, sensor
     task = RecordedTask(times=times, points=points)
     if "recorded" in tasks:
         try:
             task.plan(args.speed)  # its length checked before any work
         except TwinError as exc:
             raise TwinError(f"{args.scene}: {exc}") from None
-    return scene, task
+    return scene, task, sensor
 
 
 def run(args: argparse.Namespace) -> int:
@@ -178,7 +185,8 @@ def run(args: argparse.Namespace) -> int:
     from scenes.experiment import dask_executor, run_experiment
 
     sweep = parse(args)
-    scene, recorded = source(args, sweep.tasks)
+    scene, recorded, sensor = source(args, sweep.tasks)
+    sweep = dataclasses.replace(sweep, sensor=sensor)
     out: Path = args.out
     engine = nullcontext(None) if args.dask is None else dask_executor(args.dask, args.workers)
     with engine as executor, Progress(TextColumn("sessions"), BarColumn(), MofNCompleteColumn(),
@@ -194,9 +202,9 @@ def run(args: argparse.Namespace) -> int:
                                       progress=progress)
     replace_file(out / "results.csv", lambda tmp: write_csv(rows, tmp))
     plots = write_plots(rows, traces, out)
-    text = report(rows, args, plots)
+    text = report(rows, args, plots, sweep.sensor)
     replace_file(out / "report.md", lambda tmp: tmp.write_text(text))
-    print(f"{len(rows)} rows -> {out / 'results.csv'}; plots: {', '.join(p.name for p in plots)}; "
+    print(f"{len(rows)} rows ({sweep.sensor} sensor) -> {out / 'results.csv'}; plots: {', '.join(p.name for p in plots)}; "
           f"report: {out / 'report.md'}")
     return 0
 
@@ -309,15 +317,17 @@ def _f(x: float, fmt: str = ".1f") -> str:
     return "-" if not math.isfinite(x) else format(x, fmt)
 
 
-def report(rows, args: argparse.Namespace, plots: list[Path]) -> str:  # type: ignore[no-untyped-def]
-    """``report.md``: the command, a table per task, and the findings with their numbers."""
+def report(rows, args: argparse.Namespace, plots: list[Path], sensor: str) -> str:  # type: ignore[no-untyped-def]
+    """``report.md``: the command, a table per task, and the findings with their numbers. ``sensor``: the
+    remote's in every session."""
     tasks = sorted({r.task for r in rows})
     delays = sorted({r.delay_ms for r in rows})
     masses = sorted({r.mass_scale for r in rows})
     m1 = 1.0 if 1.0 in masses else masses[0]
     lines = ["# Latency experiment", "",
              f"Scene `{args.scene}`, delays {args.delays} ms each way, jitter {args.jitter:g} ms, loss {args.loss:g} %, "
-             f"mass scales {args.mass_scale}, {args.seeds} seed(s), tasks {args.tasks}, speed {args.speed:g}. "
+             f"mass scales {args.mass_scale}, {args.seeds} seed(s), tasks {args.tasks}, speed {args.speed:g}, "
+             f"the remote's {sensor} sensor. "
              "Force errors are against C's force in the same task with no delay, no loss and the true mass; "
              "RMS and peak are % of the truth's peak force, the contact error is the signed error of the mean "
              f"force magnitude while the truth is in contact. Values are means over seeds.", ""]

@@ -394,21 +394,25 @@ def force_sample_bytes() -> int:
 
 
 def run_session(scene: SceneSpec, condition: Condition, *, cache_dir: Path | None = None,
-                recorded: RecordedTask | None = None, settings: LocalSettings | None = None) -> Trace:
+                recorded: RecordedTask | None = None, settings: LocalSettings | None = None,
+                sensor: str = "surface") -> Trace:
     """One deterministic headless session of ``condition``; see the module docstring. The task
     :data:`RECORDED` replays ``recorded``. ``settings``: the twin's (default :data:`twin.runtime.DEFAULT_LOCAL`),
-    its ``mass_scale`` replaced by the condition's.
+    its ``mass_scale`` replaced by the condition's. ``sensor``: the remote's, by name
+    (:data:`scenes.headless.SENSORS`).
 
     Raises:
         ExperimentError: as :func:`check_condition` and :func:`plan_task`; the recorded task without a recording.
+        ValueError: an unknown ``sensor``.
     """
-    from scenes.headless import Headless
+    from scenes.headless import Headless, sensor_for
 
     check_condition(condition)
     link = condition.conditions()
     network = Network(uplink=link, downlink=link, seed=condition.seed)
     settings = replace(settings or DEFAULT_LOCAL, mass_scale=condition.mass_scale)
-    with Headless(scene, settings=settings, network=network, cache_dir=cache_dir) as session:
+    with Headless(scene, settings=settings, network=network, cache_dir=cache_dir,
+                  sensor=sensor_for(sensor, scene)) as session:
         remote, local = session.remote, session.local
         dt = session.dt
         session.run(SETUP_S)
@@ -566,15 +570,21 @@ class Sweep:
     mass_scales: tuple[float, ...] = (1.0,)
     seeds: int = 1
     speed: float = 1.0
+    #: The remote's sensor in every session (:data:`scenes.headless.SENSORS`).
+    sensor: str = "surface"
 
     def conditions(self) -> list[Condition]:
         """Every run, checked (see :func:`check_condition`). Jitter the distribution cannot take at some delay
         (normal jitter needs ``jitter <= delay / 3``, so any jitter at zero delay) is refused, not clipped.
 
         Raises:
-            ExperimentError: an empty list, fewer than one seed, more than :data:`MAX_RUNS` runs, or a condition
-                :func:`check_condition` refuses.
+            ExperimentError: an empty list, fewer than one seed, more than :data:`MAX_RUNS` runs, an unknown
+                sensor, or a condition :func:`check_condition` refuses.
         """
+        from scenes.headless import SENSORS
+
+        if self.sensor not in SENSORS:
+            raise ExperimentError(f"sensor must be one of {', '.join(SENSORS)}, got {self.sensor!r}")
         if not self.tasks or not self.delays or not self.mass_scales:
             raise ExperimentError("tasks, delays and mass scales must each have at least one value")
         if not isinstance(self.seeds, int) or self.seeds < 1:
@@ -622,8 +632,9 @@ def dask_executor(address: str, workers: int = 2) -> Iterator[Executor]:
         yield client.get_executor()
 
 
-def _job(scene: SceneSpec, condition: Condition, cache_dir: Path | None, recorded: RecordedTask | None) -> Trace:
-    return run_session(scene, condition, cache_dir=cache_dir, recorded=recorded)
+def _job(scene: SceneSpec, condition: Condition, cache_dir: Path | None, recorded: RecordedTask | None,
+         sensor: str) -> Trace:
+    return run_session(scene, condition, cache_dir=cache_dir, recorded=recorded, sensor=sensor)
 
 
 def run_experiment(scene: SceneSpec, sweep: Sweep, *, workers: int = 1, executor: Executor | None = None,
@@ -653,13 +664,13 @@ def run_experiment(scene: SceneSpec, sweep: Sweep, *, workers: int = 1, executor
     traces: dict[Condition, Trace] = {}
     if executor is None and workers == 0:
         for i, c in enumerate(todo):
-            traces[c] = run_session(scene, c, cache_dir=cache_dir, recorded=recorded)
+            traces[c] = run_session(scene, c, cache_dir=cache_dir, recorded=recorded, sensor=sweep.sensor)
             if progress is not None:
                 progress(i + 1, len(todo))
     else:
         pool = executor or ProcessPoolExecutor(workers, mp_context=mp.get_context("spawn"))
         try:
-            futures = {pool.submit(_job, scene, c, cache_dir, recorded): c for c in todo}
+            futures = {pool.submit(_job, scene, c, cache_dir, recorded, sweep.sensor): c for c in todo}
             for i, future in enumerate(as_completed(futures)):
                 traces[futures[future]] = future.result()
                 if progress is not None:
