@@ -12,7 +12,7 @@ viewpoint for all (``estimate(viewpoint=...)``) flips every normal on the far si
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -292,25 +292,28 @@ class Registration:
         transform: (4, 4) float64.
         fitness: share of source points with a correspondence within the distance (0-1).
         rmse: metres, RMS distance of those correspondences.
-        covariance: (6, 6) of the motion's rotation (radians, about x y z) and translation (metres), in
-            that order: ``rmse^2`` times the inverse of the correspondences' information matrix (Open3D's
-            ``get_information_matrix_from_point_clouds``). It counts the noise only, not what partial
-            overlap and a changed view do to ICP: at rest the tracked error runs well above it
+        covariance: (6, 6) of the motion's rotation (radians, about x y z through ``pivot``) and translation
+            (metres), in that order: ``rmse^2`` times the inverse of the correspondences' information matrix
+            (Open3D's ``get_information_matrix_from_point_clouds``). It counts the noise only, not what
+            partial overlap and a changed view do to ICP: at rest the tracked error runs well above it
             (``bench/cameras.py`` prints both).
+        pivot: (3,) metres, world frame: the point the covariance's rotation turns about.
     """
 
     transform: np.ndarray
     fitness: float
     rmse: float
     covariance: np.ndarray | None = None
+    pivot: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
     def position_sigma(self, point: np.ndarray) -> float:
         """Metres: the standard deviation, along its worst direction, of where the motion puts ``point``
         ((3,) metres, world frame, after the motion); 0 when not known. A small motion moves it by
-        ``omega x point + t``, so the rotation's uncertainty counts with the point's distance from the origin."""
+        ``omega x (point - pivot) + t``, so the rotation's uncertainty counts with the point's distance from
+        the pivot."""
         if self.covariance is None:
             return 0.0
-        p = np.asarray(point, dtype=np.float64)
+        p = np.asarray(point, dtype=np.float64) - self.pivot
         jacobian = np.hstack([-np.array([[0, -p[2], p[1]], [p[2], 0, -p[0]], [-p[1], p[0], 0]]), np.eye(3)])
         return _worst_sigma(jacobian @ self.covariance @ jacobian.T)
 
@@ -344,15 +347,22 @@ def register(source: np.ndarray, target: np.ndarray, *, init: np.ndarray, max_di
     if len(src) < 3 or len(tgt) < 3:
         raise CloudError(f"register: need 3 points on each side, got {len(src)} and {len(tgt)}")
     reg = o3d.pipelines.registration
-    a = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(src))
-    b = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(tgt))
+    # Solved about the target's centroid, not the world origin: point-to-plane ICP turns about the origin,
+    # and a surface that does not pin every turn (a ball, a can about its axis) leaves a turn about its own
+    # centre free, which about an origin a metre away is a turn plus a large shift. A 1 cm ball at rest went
+    # 0.1 to 9 m off from a start 1 mm off, every other scan.
+    pivot = tgt.mean(axis=0)
+    shift, back = np.eye(4), np.eye(4)
+    shift[:3, 3], back[:3, 3] = -pivot, pivot
+    a = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(src - pivot))
+    b = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(tgt - pivot))
     b.estimate_normals(o3d.geometry.KDTreeSearchParamKNN(knn=min(tol.NORMAL_NEIGHBOURS, len(tgt))))
-    out = reg.registration_icp(a, b, max_distance, np.asarray(init, dtype=np.float64),
+    out = reg.registration_icp(a, b, max_distance, shift @ np.asarray(init, dtype=np.float64) @ back,
                                reg.TransformationEstimationPointToPlane(),
                                reg.ICPConvergenceCriteria(max_iteration=iterations))
-    transform = np.asarray(out.transformation).copy()
-    information = np.asarray(reg.get_information_matrix_from_point_clouds(a, b, max_distance, transform))
+    centred = np.asarray(out.transformation).copy()
+    information = np.asarray(reg.get_information_matrix_from_point_clouds(a, b, max_distance, centred))
     covariance = None
     if out.fitness > 0 and np.isfinite(information).all() and np.linalg.matrix_rank(information) == 6:
         covariance = float(out.inlier_rmse) ** 2 * np.linalg.inv(information)
-    return Registration(transform, float(out.fitness), float(out.inlier_rmse), covariance)
+    return Registration(back @ centred @ shift, float(out.fitness), float(out.inlier_rmse), covariance, pivot)
