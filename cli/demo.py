@@ -126,6 +126,7 @@ def run_demo(*, duration: float = 5.0, scene_path: Path | None = None, zenoh_con
     from cli.record import open_recorder, recording_transport
     from sync.clock import REAL_CLOCK
     from sync.zenoh_transport import SessionError, ZenohTransport, free_port, make_config, open_session
+    from twin.decompose import ProgressBar
     from twin.hold import HoldSettings
     from twin.runtime import Local, LocalSettings
     from twin.trajectory import push_trajectory
@@ -169,7 +170,20 @@ def run_demo(*, duration: float = 5.0, scene_path: Path | None = None, zenoh_con
                       settings=LocalSettings(workers=2, hold=HoldSettings(enabled=hold)), rlog=rlog, recorder=recorder)
         expected = local.expected
         console.print(f"twin joined late and got {expected} clouds; estimating them while the loop runs at 1 kHz")
-        local.run(600.0, until=lambda: len(local.objects) >= expected and not local.adding)
+        # Camera clouds take seconds each to estimate and decompose (a 20-object scene, minutes): say how far.
+        bar, shown = ProgressBar(progress, expected, "objects touchable in the twin"), [0]
+
+        def touchable() -> bool:
+            count = len(local.objects)
+            while shown[0] < min(count, expected):
+                bar.advance()
+                shown[0] += 1
+            return count >= expected and not local.adding
+
+        try:
+            local.run(600.0, until=touchable)
+        finally:
+            bar.close()
         sync_s = time.perf_counter() - t_join
         console.print(f"all {len(local.objects)} objects touchable in the twin after {sync_s:.1f} s")
         start = local.twin.data.mocap_pos[0].copy()
