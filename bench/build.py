@@ -69,7 +69,8 @@ def cold_build(scene, label: str, *, coacd=None, workers: int | None = None, ver
     from twin.decompose import DEFAULT_SETTINGS
 
     def line(k: int, n: int, obj, report) -> None:  # type: ignore[no-untyped-def]
-        how = "near-convex" if report.skipped_coacd else "cached" if obj.hull_cached else "CoACD"
+        how = (obj.primitive.kind if obj.primitive else "near-convex" if report.skipped_coacd
+               else "cached" if obj.hull_cached else "CoACD")
         print(f"  [{k + 1}/{n}] {obj.id}: estimate {report.source_seconds + report.estimate_seconds:.1f} s, hulls "
               f"{report.hull_seconds:.1f} s ({len(obj.hulls)}, {how}, concavity {report.concavity:.4f})",
               file=sys.stderr)

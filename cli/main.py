@@ -670,7 +670,8 @@ def _cmd_build(args: argparse.Namespace) -> int:
 
     def progress(k: int, n: int, obj, report) -> None:  # type: ignore[no-untyped-def]
         est = obj.estimate
-        how = "cached" if obj.hull_cached else "near-convex, no CoACD" if report.skipped_coacd else "CoACD"
+        how = ("cached" if obj.hull_cached else f"collides as a {obj.primitive.kind}, no CoACD" if obj.primitive
+               else "near-convex, no CoACD" if report.skipped_coacd else "CoACD")
         err.print(f"[{k + 1}/{n}] {obj.id}: estimated in {report.source_seconds + report.estimate_seconds:.1f} s "
                   f"({est.mass.mass:.3f} kg, {est.method}"
                   f"{', ' + str(len(est.warnings)) + ' warning(s)' if est.warnings else ''}), "

@@ -72,8 +72,9 @@ class ObjectReport:
         hull_seconds: wall seconds of its visual mesh and convex parts (decimation, cache, CoACD).
         cpu_seconds: CPU seconds of all three, in the process that built it.
         concavity: :func:`twin.decompose.concavity` of its visual mesh.
-        skipped_coacd: near-convex (:func:`twin.decompose.skips_coacd`): it collides as its convex hull and
-            CoACD did not run on it. False for hulls read from the cache.
+        skipped_coacd: CoACD did not run on it: it collides as a primitive (:func:`twin.objects.collision_shapes`)
+            or, near-convex (:func:`twin.decompose.skips_coacd`), as its convex hull. False for hulls read
+            from the cache.
     """
 
     source_seconds: float
@@ -171,7 +172,8 @@ def build_object(spec: ObjectSpec, *, table_top: float | None, coacd: CoacdSetti
     excess = concavity(*obj.visual)
     report = ObjectReport(source_seconds=max(0.0, t1 - t0 - est.timings.total), estimate_seconds=est.timings.total,
                           hull_seconds=t2 - t1, cpu_seconds=time.process_time() - cpu0, concavity=excess,
-                          skipped_coacd=not obj.hull_cached and skips_coacd(excess, coacd))
+                          skipped_coacd=not obj.hull_cached and (obj.primitive is not None
+                                                                 or skips_coacd(excess, coacd)))
     return obj, report
 
 

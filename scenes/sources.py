@@ -28,8 +28,8 @@ from estimation.materials import resolve_density
 from estimation.units import unit_scale, units_warning
 from scenes.scenefile import ObjectSpec, SceneError
 from sync.messages import MAX_COORDINATE
-from twin.decompose import DEFAULT_SETTINGS, CoacdSettings, decompose_many
-from twin.objects import DEFAULT_FRICTION, TwinObject, fit_primitive, lowest_point, visual_mesh
+from twin.decompose import DEFAULT_SETTINGS, CoacdSettings
+from twin.objects import DEFAULT_FRICTION, TwinObject, collision_shapes, lowest_point, visual_mesh
 
 log = logging.getLogger(__name__)
 
@@ -322,12 +322,12 @@ def prepare_objects(
     if estimates is None:
         estimates = [estimate_object(s) for s in specs]
     visuals = [visual_mesh(est) for est, _ in estimates]
-    hulls = decompose_many(visuals, coacd, cache_dir=cache_dir, progress=progress)
+    shapes = collision_shapes(visuals, coacd, cache_dir=cache_dir, progress=progress)
     out = []
-    for s, (est, friction), visual, (parts, cached) in zip(specs, estimates, visuals, hulls, strict=True):
-        obj = TwinObject(id=s.id, estimate=est, friction=friction, visual=visual, hulls=tuple(parts),
+    for s, (est, friction), visual, (hulls, cached, primitive) in zip(specs, estimates, visuals, shapes, strict=True):
+        obj = TwinObject(id=s.id, estimate=est, friction=friction, visual=visual, hulls=hulls,
                          position=np.zeros(3), quat=np.array([1.0, 0, 0, 0]), hull_cached=cached,
-                         primitive=fit_primitive(visual))
+                         primitive=primitive)
         position = placement(s, lowest_point(obj), table_top, center_of_mass=est.mass.center_of_mass)
         out.append(replace(obj, position=position))
     return out

@@ -134,6 +134,27 @@ def test_an_estimated_box_cloud_collides_as_a_box_of_its_size_and_pose(tmp_path)
     assert model.body_mass[body] == pytest.approx(est.mass.mass, rel=1e-9)
 
 
+def test_an_object_that_collides_as_a_primitive_is_not_decomposed(tmp_path):
+    """CoACD ran for hulls that do not collide: 2-5 s for each camera-scanned box (its noise reads as concave)."""
+    from estimation.hull import convex_hull
+    from twin.objects import collision_shapes
+
+    box = trimesh.creation.box(extents=(0.1, 0.06, 0.04))
+    est = estimate(sample_surface(box, 20_000, seed=2), 500.0)
+    obj = object_at_estimate("b", est, 0.5, cache_dir=tmp_path)
+    assert obj.primitive is not None and obj.primitive.kind == "box"
+    (hull,) = obj.hulls  # its convex hull, to look at
+    np.testing.assert_array_equal(hull[0], convex_hull(obj.visual[0])[0])
+    assert not obj.hull_cached and not list(tmp_path.iterdir())  # CoACD never ran: nothing cached
+    # A mesh that fits none goes to CoACD, beside one that fits, in one call.
+    mug = paper_object("mug")
+    mug_visual = (np.asarray(mug.vertices, float), np.asarray(mug.faces, np.int64))
+    (mug_hulls, _, none), (box_hulls, _, fit) = collision_shapes([mug_visual, obj.visual], cache_dir=tmp_path,
+                                                                 progress=False)
+    assert none is None and len(mug_hulls) > 1 and len(list(tmp_path.iterdir())) == 1
+    assert fit is not None and len(box_hulls) == 1
+
+
 def test_the_paper_mug_stays_meshes(tmp_path):
     mug = paper_object("mug")
     obj = object_at_estimate("mug", from_mesh(mug.vertices, mug.faces, 1000.0), 0.5, cache_dir=tmp_path)

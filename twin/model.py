@@ -186,7 +186,8 @@ def add_object(spec, obj: TwinObject, *, rgba: tuple[float, float, float, float]
 
     With ``primitives`` (the default), an object with a :attr:`~twin.objects.TwinObject.primitive` collides
     as that primitive, named ``<id>/primitive``: MuJoCo's analytic colliders cost a fraction of convex
-    mesh pairs (``bench/replay.py``). Inertia is the estimate's either way, not the primitive's.
+    mesh pairs (``bench/replay.py``). Inertia is the estimate's either way, not the primitive's. Without
+    ``primitives`` its hulls collide: for such an object, its convex hull (:func:`twin.objects.collision_shapes`).
     """
     import mujoco
 

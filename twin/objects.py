@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from estimation import PhysicalEstimate
-from twin.decompose import DEFAULT_SETTINGS, CoacdSettings, Hull, decompose
+from twin.decompose import DEFAULT_SETTINGS, CoacdSettings, Hull, decompose_many
 
 log = logging.getLogger(__name__)
 
@@ -122,7 +122,8 @@ class TwinObject:
             keeps it without the full reconstruction and points: ``visual`` is what the twin draws).
         friction: sliding friction coefficient.
         visual: decimated reconstruction, vertices (v, 3) metres relative to the centre of mass.
-        hulls: convex parts for collision, same frame.
+        hulls: convex parts for collision, same frame; under a ``primitive``, the visual mesh's convex hull
+            alone (CoACD is not run for what does not collide: :func:`collision_shapes`).
         position: (3,) world position of the centre of mass, metres.
         quat: (4,) body orientation, w x y z (MuJoCo order).
         hull_cached: the hulls came from the CoACD cache.
@@ -440,7 +441,26 @@ def object_at_estimate(object_id: str, est: PhysicalEstimate, friction: float, *
     What the synchronised twin builds from a remote cloud (no placement: the cloud says where it is).
     """
     visual = visual_mesh(est)
-    hulls, cached = decompose(*visual, coacd, cache_dir=cache_dir)
-    return TwinObject(id=object_id, estimate=est, friction=friction, visual=visual, hulls=tuple(hulls),
+    ((hulls, cached, primitive),) = collision_shapes([visual], coacd, cache_dir=cache_dir, progress=False)
+    return TwinObject(id=object_id, estimate=est, friction=friction, visual=visual, hulls=hulls,
                       position=est.mass.center_of_mass.copy(), quat=np.array([1.0, 0, 0, 0]), hull_cached=cached,
-                      primitive=fit_primitive(visual))
+                      primitive=primitive)
+
+
+def collision_shapes(visuals: list[Hull], coacd: CoacdSettings = DEFAULT_SETTINGS, *, cache_dir: Path | None = None,
+                     progress: bool = True) -> list[tuple[tuple[Hull, ...], bool, Primitive | None]]:
+    """What collides for each visual mesh (body frame): (hulls, from CoACD's cache, primitive or None).
+
+    A mesh that fits a primitive (:func:`fit_primitive`) collides as it, and its hulls are only its convex
+    hull, for viewers: CoACD is not run for parts that would not collide (2-5 s each for a camera-scanned
+    box, whose noise makes it read as concave). The others go to CoACD (:func:`twin.decompose.decompose_many`,
+    cache misses in parallel).
+    """
+    from estimation.hull import convex_hull
+
+    primitives = [fit_primitive(v) for v in visuals]
+    rest = [i for i, p in enumerate(primitives) if p is None]
+    decomposed = dict(zip(rest, decompose_many([visuals[i] for i in rest], coacd, cache_dir=cache_dir,
+                                               progress=progress), strict=True))
+    return [(tuple(decomposed[i][0]), decomposed[i][1], None) if p is None
+            else ((convex_hull(visuals[i][0]),), False, p) for i, p in enumerate(primitives)]
