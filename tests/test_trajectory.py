@@ -43,6 +43,11 @@ def test_one_waypoint_is_held_for_ever(tmp_path):
     ("", r"path.csv: no waypoints"),
     # A stray quote opens one field that runs past csv's 131,072-character limit: a traceback before.
     ('t,x,y,z\n"0,0,0,0.6\n' + "0.001,0.000,0.000,0.600\n" * 8_000, r"path.csv:\d+: not CSV \(field larger than field limit"),
+    # One a thousand rows can hold: numpy was told to skip to where the row ended, and read one waypoint.
+    ('t,x,y,z\n0,-0.3,0,"0.56\n' + "".join(f"{k / 100},-0.2,0,0.56\n" for k in range(1, 1000)),
+     r"path.csv:2: not CSV \(a stray quote runs this row on to line 1001\)$"),
+    # An inline comment ends its row for both readers: the bad row is named, not the commented one.
+    ("0,1,2,3 # start\n1,1,2,3\n0.5,1,2,3\n", r"path.csv:3: t = 0.5 s does not increase"),
 ])
 def test_bad_files_are_one_line_errors_naming_file_and_line(tmp_path, text, match):
     with pytest.raises(TrajectoryError, match=match) as err:
@@ -171,6 +176,10 @@ def test_numpy_and_the_line_by_line_reader_agree(tmp_path):
     indented = _write(tmp_path, "0,0.1,0,0.2\n  # note\n1,0.2,0,0.3\n", "indented.csv")
     assert _read_fast(indented, 1.0) is None
     assert load_trajectory(indented)(0.5) == pytest.approx([0.15, 0, 0.25])
+    # An inline comment: the same rows both ways.
+    inline = _write(tmp_path, "0,0.1,0,0.2 # start\n1,0.2,0,0.3#\n", "inline.csv")
+    fast, slow = _read_fast(inline, 1.0), _read_checked(inline, 1.0)
+    assert fast is not None and np.array_equal(fast, slow) and fast.shape == (2, 4)
     # What numpy does not read but Python's float does is still read, line by line.
     assert load_trajectory(_write(tmp_path, "0,1_0.0,0,0.5\n", "u.csv"))(0) == pytest.approx([10.0, 0, 0.5])
 

@@ -228,7 +228,8 @@ def _cannot_read(path: Path, exc: BaseException) -> TrajectoryError:
 
 
 def _rows(path: Path) -> Iterator[tuple[int, list[str]]]:
-    """(line number, stripped cells) of each row that is not blank, a ``#`` comment or the header row.
+    """(line number where it starts, stripped cells) of each row that is not blank, a ``#`` comment or the
+    header row; a ``#`` ends a row (as ``numpy.loadtxt`` reads it, so both readers see the same rows).
 
     Raises:
         TrajectoryError: the file cannot be read or decoded, or is not CSV (a stray quote).
@@ -239,19 +240,37 @@ def _rows(path: Path) -> Iterator[tuple[int, list[str]]]:
             reader = csv.reader(fh)
             first = True
             try:
-                for row in reader:
-                    cells = [c.strip() for c in row]
-                    if not cells or cells == [""] or cells[0].startswith("#"):
+                while True:
+                    # Where the row starts: a stray quote makes one row of many lines, and line_num is its end
+                    # (the fast reader skipped every line before it and read one waypoint of a thousand).
+                    start = reader.line_num + 1
+                    row = next(reader, None)
+                    if row is None:
+                        break
+                    if any("\n" in c or "\r" in c for c in row):
+                        raise TrajectoryError(f"{path}:{start}: not CSV (a stray quote runs this row on to line "
+                                              f"{reader.line_num})")
+                    cells = _uncommented([c.strip() for c in row])
+                    if not cells or cells == [""]:
                         continue
                     if first:
                         first = False
                         if tuple(c.lower() for c in cells) == TRAJECTORY_HEADER:
                             continue
-                    yield reader.line_num, cells
+                    yield start, cells
             except csv.Error as exc:  # a stray quote makes one field of the rest of the file, past csv's limit
                 raise TrajectoryError(f"{path}:{reader.line_num}: not CSV ({exc})") from None
     except (OSError, UnicodeDecodeError) as exc:
         raise _cannot_read(path, exc) from None
+
+
+def _uncommented(cells: list[str]) -> list[str]:
+    """The cells before a ``#`` (which ends a row, an inline comment included), stripped."""
+    for k, cell in enumerate(cells):
+        if "#" in cell:
+            head = cell.split("#", 1)[0].strip()
+            return cells[:k] + ([head] if head or k else [])
+    return cells
 
 
 def _read_fast(path: Path, scale: float) -> np.ndarray | None:
