@@ -145,23 +145,26 @@ def source(args: argparse.Namespace, tasks: tuple[str, ...]):  # type: ignore[no
 
     Raises:
         TwinError: an unreadable scene file or recording, a recording without a scene or naming a sensor
-            replay does not know (without ``--sensor``), or one whose operator applied no target while the
-            recorded task was asked for.
+            replay does not know (without ``--sensor``), or, when the recorded task is asked for, one whose
+            operator applied no target or one outside the operator's reach (as ``twin replay`` refuses it).
     """
     from scenes.experiment import RecordedTask
     from scenes.scenefile import load_scene
 
     if not is_recording(args.scene):
         return load_scene(args.scene), None, args.sensor or "surface"
-    from cli.record import recorded_scene, recorded_sensor
+    from cli.record import recorded_scene, recorded_sensor, recorded_targets
     from sync.recording import read_recording
+    from twin.model import scene_reach_corners
+    from twin.runtime import OPERATOR_REACH
 
     recording = read_recording(args.scene)
     if recording.damage:
         log.warning("%s", recording.damage)
     scene = recorded_scene(recording)
     sensor = args.sensor or recorded_sensor(recording)
-    times, points = recording.targets()
+    targets = recorded_targets(recording)
+    times, points = targets.times, targets.points
     if len(times) == 0:
         if "recorded" in tasks:
             raise TwinError(f"{args.scene}: the recording has no operator targets (a remote's recording has none; "
@@ -169,6 +172,9 @@ def source(args: argparse.Namespace, tasks: tuple[str, ...]):  # type: ignore[no
         return scene, None, sensor
     task = RecordedTask(times=times, points=points)
     if "recorded" in tasks:
+        # As twin replay checks them: a target under the floor went into results.csv as a 27 kN "blow-up" of the
+        # twin, while the remote dropped it (outside its workspace) and C and C' were driven differently.
+        targets.check_reach(scene_reach_corners(scene.table, scene.end_effector, OPERATOR_REACH))
         try:
             task.plan(args.speed)  # its length checked before any work
         except TwinError as exc:

@@ -256,6 +256,24 @@ def test_an_experiment_asks_for_what_its_input_can_give(recorded, tmp_path, caps
     assert not (tmp_path / "a").exists() and not (tmp_path / "b").exists()
 
 
+def test_an_experiment_refuses_a_recorded_operator_out_of_reach_as_replay_does(tmp_path, capsys):
+    """Replay refused a target under the floor; the experiment ran it: a 27 kN twin row in results.csv."""
+    path = tmp_path / "floor.mcap"
+    with Recorder(path, clock=SimClock(), metadata={"scene_toml": SMALL.read_text(),
+                                                    "scene_dir": str(SMALL.parent)}) as r:
+        r.target(0.0, np.array([0.0, 0.0, 0.9]))
+        r.target(0.5, np.array([0.0, 0.0, -5.0]))
+    for command in (["replay", str(path)], ["experiment", str(path), "--delays", "0", "--out", str(tmp_path / "x")]):
+        assert main(command) == 2
+        err = capsys.readouterr().err
+        assert "the target at t = 0.5 s, (0, 0, -5) m, is outside the operator's reach" in err, err
+        assert err.count("\n") == 1
+    assert not (tmp_path / "x").exists()
+    # The scene's own tasks do not use the recorded operator: they run.
+    assert main(["experiment", str(path), "--tasks", "push", "--delays", "0", "--workers", "0", "--speed", "4",
+                 "--out", str(tmp_path / "y")]) == 0
+
+
 def test_a_recorded_scene_folder_is_read_only_where_the_recording_or_the_package_is(tmp_path, capsys):
     import trimesh
 
