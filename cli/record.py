@@ -270,8 +270,12 @@ def replay(path: str | Path, *, script: Path | None = None, units: str = "m", sc
     wall0 = time.perf_counter()
     if progress is not None:
         progress("building", 0.0, 0.0)
+    meta: dict[str, object] = {"command": "replay", "replayed": str(recording.path)}
+    if scene is None:  # the recorded scene has no file of its own: carry its text on (the output replays too)
+        meta.update(scene_name=spec.name, scene_toml=recording.metadata.get("scene_toml", ""),
+                    scene_dir=str(scene_folder(recording)[0]))
     with Headless(spec, network=network, cache_dir=cache_dir, record=record, sensor=sensor_for(sensor, spec),
-                  record_metadata={"command": "replay", "replayed": str(recording.path)}) as session:
+                  record_metadata=meta) as session:
         built = time.perf_counter() - wall0
         gaps: dict[str, list[float]] = {i: [] for i in truth}
         last: dict[str, tuple[float, np.ndarray, np.ndarray]] = {}  # id -> (t, replayed, recorded) at the last sample

@@ -216,6 +216,16 @@ def test_impossible_conditions_and_a_recording_without_a_scene_exit_2(recorded, 
     assert "carries no scene file; give one with --scene" in capsys.readouterr().err
 
 
+def test_a_replays_output_carries_the_recorded_scene_and_replays_in_turn(recorded, cache, tmp_path):
+    """`twin replay --out` of a recording's own scene wrote no scene: its replay.mcap could not be replayed."""
+    path, _, _ = recorded
+    first = replay(path, cache_dir=cache, out=tmp_path / "one", duration=0.3)
+    meta = read_recording(tmp_path / "one" / "replay.mcap").metadata
+    assert meta["scene_toml"] == SMALL.read_text() and meta["scene_name"] == "small"
+    second = replay(tmp_path / "one" / "replay.mcap", cache_dir=cache, duration=0.3)
+    assert second.twin_poses["crate"].tobytes() == first.twin_poses["crate"].tobytes()
+
+
 def test_twin_replay_runs_as_a_command(recorded, cache):
     path, _, _ = recorded
     done = subprocess.run([sys.executable, "-m", "cli.main", "replay", str(path), "--duration", "0.5",
