@@ -43,6 +43,9 @@ def add_parser(sub) -> None:  # type: ignore[no-untyped-def]
                        description=HELP)
     p.add_argument("scene", type=Path, metavar="SCENE_OR_RECORDING",
                    help="scene TOML file, or an .mcap recording (its scene and its operator's targets)")
+    p.add_argument("--scene", dest="scene_file", type=Path, metavar="SCENE.toml",
+                   help="with a recording: its scene file (default: the one the recording carries; twin local "
+                        "records none)")
     p.add_argument("--delays", default="0,10,25,50,100,200",
                    help="one-way delays in ms, each direction, comma-separated (default 0,10,25,50,100,200)")
     p.add_argument("--jitter", type=float, default=0.0,
@@ -126,10 +129,12 @@ def parse(args: argparse.Namespace):  # type: ignore[no-untyped-def]
         raise TwinError(f"--tasks: {twice} is given twice in {args.tasks!r}")
     if "recorded" in tasks and not is_recording(args.scene):
         raise TwinError("--tasks recorded needs a recording (.mcap) in place of the scene file")
+    if getattr(args, "scene_file", None) is not None and not is_recording(args.scene):
+        raise TwinError("--scene is for a recording's scene: the input is a scene file already")
     sweep = Sweep(tasks=tasks, delays=tuple(d / 1e3 for d in delays), jitter=args.jitter / 1e3,
                   loss=args.loss / 100, mass_scales=masses, seeds=args.seeds, speed=args.speed)
     sweep.conditions()  # every condition checked before any work
-    check_output_folder(args.out, marker=MARKER, writes=WRITES, inputs=(args.scene,))
+    check_output_folder(args.out, marker=MARKER, writes=WRITES, inputs=(args.scene, getattr(args, "scene_file", None)))
     return sweep
 
 
@@ -153,6 +158,7 @@ def source(args: argparse.Namespace, tasks: tuple[str, ...]):  # type: ignore[no
 
     if not is_recording(args.scene):
         return load_scene(args.scene), None, args.sensor or "surface"
+    scene_file = getattr(args, "scene_file", None)
     from cli.record import recorded_scene, recorded_sensor, recorded_targets
     from sync.recording import read_recording
     from twin.model import scene_reach_corners
@@ -161,7 +167,7 @@ def source(args: argparse.Namespace, tasks: tuple[str, ...]):  # type: ignore[no
     recording = read_recording(args.scene)
     if recording.damage:
         log.warning("%s", recording.damage)
-    scene = recorded_scene(recording)
+    scene = recorded_scene(recording) if scene_file is None else load_scene(scene_file)
     sensor = args.sensor or recorded_sensor(recording)
     targets = recorded_targets(recording)
     times, points = targets.times, targets.points

@@ -284,6 +284,22 @@ def test_an_experiment_refuses_a_recorded_operator_out_of_reach_as_replay_does(t
                  "--out", str(tmp_path / "y")]) == 0
 
 
+def test_an_experiment_on_a_recording_without_a_scene_takes_one_with_scene(tmp_path, capsys, cache, monkeypatch):
+    """`twin local` records no scene: the error said to give --scene, which twin experiment did not take."""
+    monkeypatch.setenv("TWIN_CACHE_DIR", str(cache))
+    path = tmp_path / "local.mcap"
+    with Recorder(path, clock=SimClock(), metadata={"command": "local", "side": "twin"}) as r:
+        r.target(0.0, np.array([-0.3, 0.0, 0.56]))
+        r.target(0.3, np.array([-0.2, 0.0, 0.56]))
+    base = ["experiment", str(path), "--delays", "0", "--workers", "0"]
+    assert main([*base, "--out", str(tmp_path / "a")]) == 2
+    assert "carries no scene file; give one with --scene" in capsys.readouterr().err
+    assert main([*base, "--scene", str(SMALL), "--out", str(tmp_path / "b")]) == 0
+    assert "rows (surface sensor)" in capsys.readouterr().out
+    assert main(["experiment", str(SMALL), "--scene", str(SMALL), "--out", str(tmp_path / "c")]) == 2
+    assert "--scene is for a recording's scene" in capsys.readouterr().err
+
+
 def test_a_recorded_scene_folder_is_read_only_where_the_recording_or_the_package_is(tmp_path, capsys):
     import trimesh
 
