@@ -492,7 +492,7 @@ class Recording:
             return None
         try:
             t = float(raw)
-        except ValueError:
+        except (ValueError, TypeError, OverflowError):
             raise RecordingError(f"{self.path}: the end record's twin_time_s {raw!r} is not a number") from None
         return self._in_range(t, "the end record's twin_time_s", 0.0, self.latest_time())
 
@@ -512,7 +512,12 @@ class Recording:
         if isinstance(value, bool) or not isinstance(value, int | float):
             raise RecordingError(f"{self.path}: a {topic} record's {name} is "
                                  f"{'missing' if value is None else 'not a number'}")
-        return self._in_range(float(value), f"a {topic} record's {name}", low, high)
+        try:
+            number = float(value)
+        except OverflowError:  # JSON holds integers of any length; 1e400 as digits was a traceback
+            raise RecordingError(f"{self.path}: a {topic} record's {name} is an integer of about "
+                                 f"{int(value.bit_length() * math.log10(2)) + 1} digits, outside [{low:g}, {high:g}]") from None
+        return self._in_range(number, f"a {topic} record's {name}", low, high)
 
     def _in_range(self, value: float, what: str, low: float, high: float) -> float:
         if not (math.isfinite(value) and low <= value <= high):

@@ -406,6 +406,11 @@ def _rewrite(src: Path, dst: Path, *, topic: str | None = None, data: bytes = b"
     ({"topic": TARGET_TOPIC, "data": b'{"sim_time": NaN, "position": {"x": 0, "y": 0, "z": 0}}'}, "sim_time nan is outside"),
     ({"topic": TARGET_TOPIC, "data": b'{"sim_time": 0.1, "position": {"x": 1e300, "y": 0, "z": 0}}'}, "position.x 1e+300 is outside"),
     ({"topic": TARGET_TOPIC, "data": b'{"sim_time": 1e9, "position": {"x": 0, "y": 0, "z": 0}}'}, "sim_time 1e+09 is outside"),
+    # JSON integers have no bound: a 401-digit one was an OverflowError traceback.
+    ({"topic": TARGET_TOPIC, "data": b'{"sim_time": 1' + b"0" * 400 + b', "position": {"x": 0, "y": 0, "z": 0}}'},
+     "sim_time is an integer of about 401 digits, outside"),
+    ({"topic": TARGET_TOPIC, "data": b'{"sim_time": 0.1, "position": {"x": -1' + b"0" * 400 + b', "y": 0, "z": 0}}'},
+     "position.x is an integer of about 401 digits, outside [-1000, 1000]"),
     ({"topic": TRUTH_TOPIC, "data": b'{"sim_time": 0, "transforms": [{"child_frame_id": 5}]}'}, "child_frame_id is not a string"),
     ({"topic": TRUTH_TOPIC, "data": b"{not json"}, "/truth/transforms record is not JSON"),
     ({"end": {"twin_time_s": "inf"}}, "twin_time_s inf is outside"),
