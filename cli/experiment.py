@@ -192,6 +192,7 @@ def run(args: argparse.Namespace) -> int:
     """The ``twin experiment`` handler: sweep, CSV, plots, report."""
     from contextlib import nullcontext
 
+    from rich.console import Console
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
     from scenes.experiment import dask_executor, run_experiment
@@ -202,7 +203,7 @@ def run(args: argparse.Namespace) -> int:
     out: Path = args.out
     engine = nullcontext(None) if args.dask is None else dask_executor(args.dask, args.workers)
     with engine as executor, Progress(TextColumn("sessions"), BarColumn(), MofNCompleteColumn(),
-                                      TimeElapsedColumn(), transient=False) as bar:
+                                      TimeElapsedColumn(), console=Console(stderr=True), transient=False) as bar:
         # Claimed once the engine is up: an unreachable scheduler left an out folder holding only the marker.
         claim_output_folder(out, marker=MARKER, command="twin experiment")
         task = bar.add_task("sessions", total=None)

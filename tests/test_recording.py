@@ -295,7 +295,9 @@ def test_an_experiment_on_a_recording_without_a_scene_takes_one_with_scene(tmp_p
     assert main([*base, "--out", str(tmp_path / "a")]) == 2
     assert "carries no scene file; give one with --scene" in capsys.readouterr().err
     assert main([*base, "--scene", str(SMALL), "--out", str(tmp_path / "b")]) == 0
-    assert "rows (surface sensor)" in capsys.readouterr().out
+    said = capsys.readouterr()
+    # The result on stdout, one line; the progress bar on stderr (it went to stdout).
+    assert "rows (surface sensor)" in said.out and said.out.count("\n") == 1 and "sessions" in said.err, said
     assert main(["experiment", str(SMALL), "--scene", str(SMALL), "--out", str(tmp_path / "c")]) == 2
     assert "--scene is for a recording's scene" in capsys.readouterr().err
 
