@@ -10,6 +10,7 @@ folder whole.
 from __future__ import annotations
 
 import os
+import stat
 from collections.abc import Callable, Iterable
 from pathlib import Path
 
@@ -81,7 +82,7 @@ def check_output_folder(out: Path, *, marker: str, flag: str = "--out", writes: 
                         inputs: Iterable[Path | None] = ()) -> None:
     """Refuse an output folder this command must not write into: it exists and is not a folder, or holds
     files and not ``marker`` (so it is not this command's); or one of the files it ``writes`` there is one
-    of the ``inputs``.
+    of the ``inputs``, or a folder, device or pipe (which a file cannot replace).
 
     Raises:
         TwinError: naming the folder and why.
@@ -94,6 +95,14 @@ def check_output_folder(out: Path, *, marker: str, flag: str = "--out", writes: 
     inputs = tuple(inputs)
     for name in writes:
         check_not_input(out / name, inputs, flag)
+        try:
+            mode = (out / name).lstat().st_mode
+        except OSError:  # not there (or not examinable: the write says so)
+            continue
+        if not (stat.S_ISREG(mode) or stat.S_ISLNK(mode)):  # a link is replaced, never written through
+            # An experiment ran all its sessions, then stopped on IsADirectoryError, a traceback.
+            raise TwinError(f"{flag} {out}: {name} there is a folder or a device, not a file this command can "
+                            "replace")
 
 
 def claim_output_folder(out: Path, *, marker: str, command: str) -> None:
@@ -120,7 +129,10 @@ def replace_file(path: Path, write: Callable[[Path], object]) -> None:
     os.close(fd)
     try:
         write(tmp)
-        os.replace(tmp, path)
+        try:
+            os.replace(tmp, path)
+        except OSError as exc:  # a folder put in its place since the command's checks
+            raise TwinError(f"cannot write {path}: {exc.strerror or exc}") from None
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise

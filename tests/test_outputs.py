@@ -440,3 +440,22 @@ def test_recordings_rerun_files_and_meshes_replace_only_their_own_by_one_rule(tm
         with pytest.raises(TwinError, match=words):
             check(path)
     assert notes.read_text() == "precious\n" and folder.is_dir() and fifo.is_fifo()
+
+
+def test_a_folder_where_an_output_file_goes_is_refused_before_the_work(tmp_path, capsys):
+    """A folder at results.csv in an experiment's own output folder: every session ran, then a traceback."""
+    from cli.outputs import replace_file
+    from estimation.errors import TwinError
+
+    out = tmp_path / "out"
+    (out / "results.csv").mkdir(parents=True)
+    (out / "results.csv" / "mine.txt").write_text("mine\n")
+    (out / ".twin-experiment").write_text("written by twin experiment\n")
+    assert main(["experiment", str(SMALL), "--delays", "0", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "results.csv there is a folder or a device" in err and err.count("\n") == 1, err
+    # And where one appears after the checks, the write is one line too.
+    with pytest.raises(TwinError, match=r"cannot write .*results\.csv: Is a directory"):
+        replace_file(out / "results.csv", lambda tmp: tmp.write_text("x"))
+    assert (out / "results.csv" / "mine.txt").read_text() == "mine\n"
+    assert sorted(p.name for p in out.iterdir()) == [".twin-experiment", "results.csv"]  # no temporary left
