@@ -381,11 +381,16 @@ def findings(rows) -> list[str]:  # type: ignore[no-untyped-def]
         def rms(mode: str, d: float, m: float = m1, task: str = task) -> float:
             return _mean(r.force_rms_pct for r in _by(rows, task=task, mode=mode, delay_ms=d, mass_scale=m))
 
-        twin0 = rms("twin", delays[0])
+        twins = [rms("twin", d) for d in delays]
         worse = [d for d in delays if rms("direct", d) > rms("twin", d)]
-        out.append(f"- **{task}**: direct teleoperation's RMS force error grows from {rms('direct', delays[0]):.1f} % "
-                   f"at {delays[0]:g} ms to {rms('direct', delays[-1]):.1f} % at {delays[-1]:g} ms; the twin's stays "
-                   f"{twin0:.1f}-{max(rms('twin', d) for d in delays):.1f} % (its floor is the estimated shape, not "
+        first, last = rms("direct", delays[0]), rms("direct", delays[-1])
+        # Said as measured: one delay is no trend, and a longer delay may give a smaller error (it "grew" down).
+        trend = (f"is {first:.1f} % at {delays[0]:g} ms" if len(delays) == 1 else
+                 f"{'grows' if last > first else 'falls' if last < first else 'stays'} from {first:.1f} % at "
+                 f"{delays[0]:g} ms to {last:.1f} % at {delays[-1]:g} ms")
+        span = f"{min(twins):.1f}-{max(twins):.1f} %" if len(delays) > 1 else f"{twins[0]:.1f} %"
+        out.append(f"- **{task}**: direct teleoperation's RMS force error {trend}; the twin's "
+                   f"{'stays ' if len(delays) > 1 else 'is '}{span} (its floor is the estimated shape, not "
                    "the network). " + (f"The twin is closer to the truth (RMS) at {', '.join(f'{d:g}' for d in worse)} ms "
                                         "one way." if worse else "Direct beats the twin at every delay measured."))
         better = [d for d in delays if rms("direct", d) <= rms("twin", d)]

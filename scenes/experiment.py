@@ -178,7 +178,9 @@ COLUMNS = (
 
 @dataclass(frozen=True)
 class Row:
-    """One line of ``results.csv``: one mode of one run. See :data:`COLUMNS`; NaN: not defined for this mode."""
+    """One line of ``results.csv``: one mode of one run. See :data:`COLUMNS`; NaN (blank in the CSV): not
+    defined for this mode or run (direct teleoperation's felt delay when every command or force sample was
+    lost)."""
 
     mode: str
     task: str
@@ -480,7 +482,7 @@ def run_session(scene: SceneSpec, condition: Condition, *, cache_dir: Path | Non
             divergence=np.asarray(divergence),
             end_c={i: remote.twin.pose(i)[0] - start_c[i] for i in objects},
             end_twin={i: local.twin.pose(i)[0] - start_twin[i] for i in objects if local.twin.has(i)},
-            uplink_delay=uplink_delay, force_delay=force_link.stats.mean_delay if force_link.stats.delivered else 0.0,
+            uplink_delay=uplink_delay, force_delay=_mean_delay((0, 0, 0, 0.0), _counts(force_link)),
             messages={"uplink": up1[0] - up0[0], "downlink": down1[0] - down0[0], "force": force_link.stats.sent},
             bytes={"uplink": up1[1] - up0[1], "downlink": down1[1] - down0[1], "force": force_link.stats.bytes_sent},
         )
@@ -495,8 +497,12 @@ def _counts(model: LinkModel | None) -> tuple[int, int, int, float]:
 
 
 def _mean_delay(before: tuple[int, int, int, float], after: tuple[int, int, int, float]) -> float:
+    """Mean delay of the packets delivered between the two counts, seconds; NaN if packets were sent and none
+    was delivered (all lost), 0 if none was sent (no link model: a perfect link)."""
     n = after[2] - before[2]
-    return (after[3] - before[3]) / n if n else 0.0
+    if n:
+        return (after[3] - before[3]) / n
+    return math.nan if after[0] > before[0] else 0.0
 
 
 # -- rows ------------------------------------------------------------------------------------------------
@@ -523,7 +529,10 @@ def rows_for(trace: Trace, truth: Trace) -> list[Row]:
         err = np.linalg.norm(felt - f_truth, axis=1)
         rms, peak = float(np.sqrt(np.mean(err**2))) if n else 0.0, float(err.max(initial=0.0))
         if mode == "direct":
-            perceived = dt * (1 + max(1, _steps(trace.uplink_delay, dt)) + _steps(trace.force_delay, dt))
+            # With every command or force sample lost the operator feels nothing: no delay to speak of (it read
+            # 2 ms, a perfect link's, at 100 % loss).
+            perceived = (dt * (1 + max(1, _steps(trace.uplink_delay, dt)) + _steps(trace.force_delay, dt))
+                         if math.isfinite(trace.uplink_delay + trace.force_delay) else math.nan)
             messages = trace.messages["uplink"] + trace.messages["force"]
             sent = trace.bytes["uplink"] + trace.bytes["force"]
             div = (math.nan,) * 3

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import math
 import re
 import subprocess
 import sys
@@ -74,6 +75,36 @@ def test_twin_rows_carry_divergence_and_traffic(rows):
     assert 0.0 <= twin.div_p50_mm <= twin.div_p99_mm <= twin.div_max_mm < 50.0
     assert twin.messages > 0 and direct.messages > twin.messages  # direct streams a force sample every step
     assert direct.bytes_per_s > twin.bytes_per_s > 0
+
+
+def test_the_findings_say_the_trend_the_numbers_show(rows):
+    """With one delay the report said "grows from 24.3 % at 50 ms to 24.3 % at 50 ms", and an error that fell
+    with delay "grew" from 26.6 to 24.3 %."""
+    from dataclasses import replace
+
+    from cli.experiment import findings
+
+    true_mass = [r for r in rows if r.mass_scale == 1.0]
+    late = _row(rows, mode="direct", delay_ms=50.0, mass_scale=1.0).force_rms_pct
+    assert f"grows from 0.0 % at 0 ms to {late:.1f} % at 50 ms" in findings(true_mass)[0]
+    one = findings([r for r in true_mass if r.delay_ms == 50.0])[0]
+    assert f"error is {late:.1f} % at 50 ms; the twin's is " in one and "from" not in one, one
+    falling = [replace(r, force_rms_pct=100.0 - r.force_rms_pct) if r.mode == "direct" else r for r in true_mass]
+    assert f"falls from 100.0 % at 0 ms to {100 - late:.1f} % at 50 ms" in findings(falling)[0]
+
+
+def test_a_direct_link_that_loses_every_packet_has_no_felt_delay(cache):
+    """At 100 % loss the direct row said 2 ms, a perfect link's: the mean of no packets counted as 0."""
+    from scenes.experiment import Condition, rows_for, run_session
+
+    scene = load_scene(SMALL)
+    lost = run_session(scene, Condition(task="push", delay=0.05, loss=1.0, speed=4.0), cache_dir=cache)
+    truth = run_session(scene, Condition(task="push", speed=4.0), cache_dir=cache)
+    direct, twin = rows_for(lost, truth)
+    assert math.isnan(direct.perceived_delay_ms) and twin.perceived_delay_ms == pytest.approx(1.0)
+    assert direct.contact_force_err_pct == pytest.approx(-100.0)  # nothing felt
+    zero_direct, _ = rows_for(truth, truth)
+    assert zero_direct.perceived_delay_ms == pytest.approx(2.0)  # a perfect link still is one
 
 
 @pytest.mark.slow
