@@ -1123,7 +1123,10 @@ def _run_local(args: argparse.Namespace, rlog) -> None:  # type: ignore[no-untyp
     if args.script is not None:
         trajectory = load_trajectory(args.script, units=args.units)
     elif args.replay_operator is not None:
-        trajectory = recorded_targets(read_recording(args.replay_operator))  # read and decoded once
+        recording = read_recording(args.replay_operator)
+        if recording.damage:  # what is intact still drives the twin; said, as twin replay and experiment say it
+            log.warning("%s", recording.damage)
+        trajectory = recorded_targets(recording)  # read and decoded once
         if not len(trajectory.times):
             raise TwinError(f"{args.replay_operator}: the recording has no operator targets")
     session = _session(args)

@@ -4,6 +4,7 @@ dropped and counted."""
 
 from __future__ import annotations
 
+import logging
 import queue
 import re
 import time
@@ -221,7 +222,7 @@ def _targets_recording(path, targets):  # type: ignore[no-untyped-def]
 
 
 def test_twin_local_replays_a_recorded_operator_read_once_and_refuses_one_beyond_the_table(endpoint, cache, tmp_path,
-                                                                                           capsys, monkeypatch):
+                                                                                           capsys, monkeypatch, caplog):
     """--replay-operator read the recording twice (the trajectory, then its reach); one read, one decode now."""
     import sync.recording
     from cli.main import main
@@ -248,4 +249,12 @@ def test_twin_local_replays_a_recorded_operator_read_once_and_refuses_one_beyond
         assert len(line) == 1 and line[0].endswith(f"{far}: the target at t = 0.02 s, (999, -999, 999) m, is outside "
                                                    "the operator's reach (x -2.5 to 2.5, y -2.3 to 2.3, z 0 to 2.5 m)"), err
         assert main(["local", "--connect", endpoint, "--duration", "0.5", "--replay-operator", str(near), "--json"]) == 0
-    assert reads == {str(far): 1, str(near): 1} and decodes == {str(far): 1, str(near): 1}
+        capsys.readouterr()
+        # A torn recording drives the twin with what is intact, and says so (it said nothing).
+        many = _targets_recording(tmp_path / "many.mcap", [(k / 400, (-0.3 + k / 4000, 0.0, 0.56)) for k in range(200)])
+        torn = tmp_path / "torn.mcap"
+        torn.write_bytes(many.read_bytes()[: many.stat().st_size * 2 // 3])
+        assert main(["local", "--connect", endpoint, "--duration", "0.3", "--replay-operator", str(torn), "--json"]) == 0
+        assert any(f"{torn}: the recording is damaged after" in r.getMessage() and r.levelno == logging.WARNING
+                   for r in caplog.records), caplog.records
+    assert reads == {str(far): 1, str(near): 1, str(torn): 1} and decodes == {str(far): 1, str(near): 1, str(torn): 1}
