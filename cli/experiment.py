@@ -99,12 +99,18 @@ def parse(args: argparse.Namespace):  # type: ignore[no-untyped-def]
     """
     from scenes.experiment import MASS_SCALE_RANGE, SPEED_RANGE, Sweep
 
+    from sync.netem import MAX_DELAY_S
+
     delays = _floats(args.delays, "--delays")
     if min(delays) < 0:
         raise TwinError(f"--delays: a delay cannot be negative, got {refused_number(min(delays), 0)} ms")
     for flag, value in (("--jitter", args.jitter), ("--loss", args.loss)):
         if not math.isfinite(value) or value < 0:
             raise TwinError(f"{flag} must be a finite number >= 0, got {refused_number(value, 0)}")
+    top = MAX_DELAY_S * 1e3  # the link model's bound, in the ms these options take (it says it in seconds)
+    for flag, value in (("--delays: a delay", max(delays)), ("--jitter", args.jitter)):
+        if value > top:
+            raise TwinError(f"{flag} must be at most {top:g} ms (an hour), got {refused_number(value, top)} ms")
     if args.loss > 100:
         raise TwinError(f"--loss is a percentage: at most 100, got {refused_number(args.loss, 100)}")
     low, high = SPEED_RANGE
