@@ -154,7 +154,8 @@ _NUMBERS: dict[str, tuple[str, float, bool, float]] = {
     "delay_ms": ("--delay", 0.0, True, 3.6e6),
     "jitter_ms": ("--jitter", 0.0, True, 3.6e6),
     "loss_pct": ("--loss", 0.0, True, 100.0),
-    "replay_duration": ("--duration", 0.0, False, math.inf),
+    # At least one physics step (twin.model.TIMESTEP): 0.0004 s ran no tick and reported "89x real time".
+    "replay_duration": ("--duration", 1e-3, True, math.inf),
 }
 
 

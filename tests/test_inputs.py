@@ -304,6 +304,8 @@ def test_a_refused_density_shows_the_digits_that_refuse_it(box_cloud, density, s
      "--delays: a delay must be at most 3.6e+06 ms (an hour), got 3600000.001 ms"),
     (["experiment", "s.toml", "--out", "o", "--delays", "5", "--jitter", "1e9"],
      "--jitter must be at most 3.6e+06 ms (an hour), got 1e+09 ms"),
+    # Less than a physics step replayed nothing and reported "89x real time".
+    (["replay", "r.mcap", "--duration", "0.0004"], "--duration must be >= 0.001, got 0.0004"),
 ])
 def test_the_cli_shows_a_refused_number_with_the_digits_that_refuse_it(capsys, argv, said):
     from cli.main import main
@@ -568,3 +570,10 @@ def test_from_mesh_checks_its_mesh_and_says_when_it_is_not_closed():
                                   (v, f[:0], "mesh encloses no volume")]:
         with pytest.raises(CloudError, match=re.escape(said)):
             from_mesh(vertices, faces, 1000.0)
+
+
+def test_the_shortest_replay_is_one_physics_step():
+    from cli.main import _NUMBERS
+    from twin.model import TIMESTEP
+
+    assert _NUMBERS["replay_duration"][1:3] == (TIMESTEP, True)
