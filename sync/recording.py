@@ -186,7 +186,9 @@ class Recorder:
             self._file = os.fdopen(fd, "wb")  # closed by close()
         except OSError as exc:
             raise RecordingError(f"{self.path}: cannot write a recording ({exc.strerror or exc})") from None
-        self._writer = Writer(self._file, chunk_size=CHUNK_BYTES)
+        # The data section's CRC covers what chunks' CRCs do not: the session metadata (scene, network, seeds),
+        # where a flipped digit replayed another scene without a word.
+        self._writer = Writer(self._file, chunk_size=CHUNK_BYTES, enable_data_crcs=True)
         self._writer.start(profile=PROFILE, library="tactile-twin")
         meta = {"schema_version": str(SCHEMA_VERSION), "tool_version": tool_version(),
                 "clock": "real" if clock.realtime else "sim"}
@@ -556,8 +558,8 @@ def read_recording(path: str | Path) -> Recording:
             (:meth:`Recording.end_time`).
     """
     from mcap.exceptions import McapError, RecordLengthLimitExceeded
-    from mcap.records import Channel, Chunk, Message, MessageIndex, Metadata
-    from mcap.stream_reader import StreamReader
+    from mcap.records import Channel, Chunk, DataEnd, Message, MessageIndex, Metadata
+    from mcap.stream_reader import CRCValidationError, StreamReader
 
     path = Path(path)
     check_recording_file(path)
@@ -633,8 +635,14 @@ def read_recording(path: str | Path) -> Recording:
                 raise RecordingError(f"{path}: a record is larger than the {MAX_RECORD_BYTES >> 20} MiB limit ({exc})") from None
             damage = (f"the recording is damaged after {len(held)} messages (a record claims more than the "
                       f"{MAX_RECORD_BYTES >> 20} MiB limit: {exc}); using those")
+        except CRCValidationError as exc:
+            if metadata is None or not isinstance(exc.record, DataEnd):
+                raise RecordingError(f"{path}: not a readable tactile-twin recording ({exc})") from None
+            # Read to its end: every record parsed, but some byte changed, maybe in the scene or the settings.
+            damage = (f"the recording fails its checksum (a byte changed since it was written: its scene, "
+                      f"network or messages may not be what was recorded); using its {len(held)} messages")
         except (McapError, ValueError, struct.error, zlib.error, EOFError, MemoryError, UnicodeDecodeError) as exc:
-            # ValueError covers the reader's CRC mismatch; _inflate turns zstd's and lz4's errors into McapError.
+            # ValueError covers the reader's chunk CRC mismatch; _inflate turns zstd's and lz4's errors into McapError.
             what = type(exc).__name__ + (f": {exc}" if str(exc) else "")
             if metadata is None:
                 raise RecordingError(f"{path}: not a readable tactile-twin recording ({what})") from None

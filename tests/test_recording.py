@@ -447,6 +447,24 @@ def test_malformed_records_are_one_line_errors_naming_the_record_and_field(recor
     assert not (tmp_path / "x").exists()
 
 
+def test_a_changed_byte_in_the_session_metadata_fails_the_checksum(tmp_path):
+    """The scene's density flipped from 700 to 300 replayed another scene without a word: chunk CRCs cover
+    messages, not metadata. The data section's CRC covers both."""
+    path = tmp_path / "r.mcap"
+    with Recorder(path, clock=SimClock(), metadata={"scene_toml": SMALL.read_text()}) as r:
+        for k in range(50):
+            r.target(k / 100, np.array([0.0, 0.0, 0.6]))
+    assert read_recording(path).damage is None
+    data = bytearray(path.read_bytes())
+    at = data.find(b"density = 700") + len("density = ")
+    data[at] = ord("3")
+    flipped = tmp_path / "flipped.mcap"
+    flipped.write_bytes(bytes(data))
+    rec = read_recording(flipped)
+    assert "density = 300" in rec.metadata["scene_toml"]  # read, but not trusted silently
+    assert rec.damage is not None and "fails its checksum" in rec.damage and len(rec.targets()[0]) == 50
+
+
 def test_a_damaged_zstd_chunk_is_damage_not_a_traceback(recorded, tmp_path):
     from mcap.writer import CompressionType, Writer
 
