@@ -98,7 +98,6 @@ def parse(args: argparse.Namespace):  # type: ignore[no-untyped-def]
             take at some delay, an unknown task, or an --out folder with files this command did not write.
     """
     from scenes.experiment import MASS_SCALE_RANGE, SPEED_RANGE, Sweep
-
     from sync.netem import MAX_DELAY_S
 
     delays = _floats(args.delays, "--delays")

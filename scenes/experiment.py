@@ -617,7 +617,10 @@ def dask_executor(address: str, workers: int = 2) -> Iterator[Executor]:
     Args:
         address: a running scheduler's address (``tcp://HOST:8786``; its workers need this package and the
             scene's files at the same paths), or ``"local"`` for a :class:`distributed.LocalCluster` of
-            ``workers`` single-threaded processes on this machine, listening on loopback only, no dashboard.
+            ``workers`` single-threaded processes on this machine, listening on loopback only. Its scheduler
+            serves HTTP (health routes; no dashboard pages without bokeh) on a free loopback port: distributed
+            starts that server even when told not to (dask/distributed#7207), and on 8787 it took a port a
+            user's own dashboard may hold.
         workers: processes of the local cluster (at least 1).
 
     Raises:
@@ -630,7 +633,7 @@ def dask_executor(address: str, workers: int = 2) -> Iterator[Executor]:
         raise ExperimentError("Dask is not installed: pip install 'tactile-twin[dask]' (or distributed)") from None
     if address == "local":
         with LocalCluster(n_workers=max(1, workers), threads_per_worker=1, processes=True, host="127.0.0.1",
-                          dashboard_address=None) as cluster, Client(cluster) as client:
+                          dashboard_address="127.0.0.1:0") as cluster, Client(cluster) as client:
             yield client.get_executor()
         return
     try:

@@ -190,6 +190,15 @@ def test_a_dask_local_cluster_gives_the_rows_local_processes_give(rows, cache):
     one = Sweep(tasks=("push",), delays=(0.05,), mass_scales=(1.5,), seeds=1, speed=2.0)  # 2 sessions, truth too
     with dask_executor("local", workers=2) as executor:
         on_dask, _ = run_experiment(load_scene(SMALL), one, executor=executor, cache_dir=cache)
+        # Every socket the cluster listens on is on loopback, and its HTTP server is not on the dashboard's
+        # 8787, which distributed took though told "no dashboard" (psutil comes with distributed).
+        import psutil
+
+        me = psutil.Process()
+        listening = [c.laddr for p in (me, *me.children(recursive=True)) for c in p.net_connections("tcp")
+                     if c.status == psutil.CONN_LISTEN]
+        assert listening and all(a.ip == "127.0.0.1" for a in listening), listening
+        assert 8787 not in {a.port for a in listening}, listening
     assert len(on_dask) == 2
     # repr: NaN fields (undefined for a mode) compare equal as text, and every float to the last digit.
     assert repr(on_dask) == repr([r for r in rows if r.delay_ms == 50 and r.mass_scale == 1.5])
