@@ -429,7 +429,7 @@ def test_build_warns_up_front_of_a_slow_coacd_threshold_and_reports_each_object(
     assert err[1] == "building 'small': 2 objects"
     # A line per object as it is built, whole (not wrapped at 80 columns, as a pipe had it).
     assert sorted(line.split(":")[0] for line in err[2:4]) == ["[1/2] crate", "[2/2] can"]
-    assert all(re.search(r"hull\(s\) in [\d.]+ s \((near-convex, no CoACD|cached|CoACD)\)$", line) for line in err[2:4])
+    assert all(re.search(r"hull\(s\) in [\d.]+ s \((collides as a \w+, no CoACD|near-convex, no CoACD|cached|CoACD)\)$", line) for line in err[2:4])
     assert main(["build", str(SMALL), "--out", str(tmp_path / "fast"), "--threshold", f"{FAST_THRESHOLD:g}"]) == 0
     assert "warning" not in capsys.readouterr().err
 
