@@ -393,9 +393,11 @@ def findings(rows) -> list[str]:  # type: ignore[no-untyped-def]
         trend = (f"is {first:.1f} % at {delays[0]:g} ms" if len(delays) == 1 else
                  f"{'grows' if last > first else 'falls' if last < first else 'stays'} from {first:.1f} % at "
                  f"{delays[0]:g} ms to {last:.1f} % at {delays[-1]:g} ms")
-        span = f"{min(twins):.1f}-{max(twins):.1f} %" if len(delays) > 1 else f"{twins[0]:.1f} %"
+        low, high = f"{min(twins):.1f}", f"{max(twins):.1f}"
+        span = (f"is {low} %" if len(delays) == 1 else f"stays at {low} %" if low == high
+                else f"stays within {low}-{high} %")
         out.append(f"- **{task}**: direct teleoperation's RMS force error {trend}; the twin's "
-                   f"{'stays ' if len(delays) > 1 else 'is '}{span} (its floor is the estimated shape, not "
+                   f"{span} (its floor is the estimated shape, not "
                    "the network). " + (f"The twin is closer to the truth (RMS) at {', '.join(f'{d:g}' for d in worse)} ms "
                                         "one way." if worse else "Direct beats the twin at every delay measured."))
         better = [d for d in delays if rms("direct", d) <= rms("twin", d)]
