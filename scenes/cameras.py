@@ -407,6 +407,7 @@ class FeedStats:
     unseen: int = 0
     merged: int = 0
     parted: int = 0  # segments parted among the objects in them (scenes.sensing.CameraSensor._split_shared)
+    labelled: int = 0  # objects observed in a merged segment by the simulator's segmentation image
     lost_tracks: int = 0
     failed_scans: int = 0
 
@@ -417,7 +418,7 @@ class Segment:
 
     points: np.ndarray
     origins: np.ndarray
-    geom: np.ndarray  # (n,) int32 true geom ids (checks only)
+    geom: np.ndarray  # (n,) int32 true geom ids: the simulator's segmentation image (checks, and merged segments)
 
     @cached_property
     def centroid(self) -> np.ndarray:

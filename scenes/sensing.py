@@ -21,6 +21,7 @@ from typing import Protocol
 import numpy as np
 
 from estimation.fusion import SurfaceMotions, unseen_motions
+from estimation.segmentation import MIN_CLUSTER_POINTS
 from scenes.sampling import sample_surface
 from twin.model import free_joint
 from twin.poses import matrix_quat, rotation, to_rotvec
@@ -177,10 +178,13 @@ class CameraSensor:
 
     Nothing the cameras see raises: an object in no segment, two objects in one segment, a lost ICP are
     logged and counted in ``self.feed.stats``; the last good observation or track is returned, a track
-    marked ``seen=False``. An object is never observed from a segment another object is predicted in too
-    (merged: touching, stacked), which is neither of them; until it is seen alone (or parted, above) it has
-    no observation: :meth:`observe` gives one without points, and tracks say it unseen. Every later scan
-    looks for it again, and the first to see it alone observes it and offers it in :meth:`refreshed`.
+    marked ``seen=False``. An object is never observed from the whole of a segment another object is predicted
+    in too (merged: touching, stacked), which is neither of them. With ``segmentation_image`` (the default; a
+    simulator gives it with every ray, a real site would need instance segmentation) it is observed from its
+    own points of that segment, as the image labels them (counted in ``labelled``); without it, until it is
+    seen alone (or parted, above) it has no observation: :meth:`observe` gives one without points, and tracks
+    say it unseen. Every later scan looks for it again, and the first to see it alone observes it and offers
+    it in :meth:`refreshed`.
 
     With ``background``, :meth:`track` never scans in the caller's thread: when a scan is due it copies
     the simulation's state and scans and tracks every object in a thread of its own, and answers with the
@@ -190,8 +194,9 @@ class CameraSensor:
     """
 
     def __init__(self, feed, *, track_period: float = 0.5, seed: int = 0,  # type: ignore[no-untyped-def]
-                 background: bool = False, rest_window: int | None = None) -> None:
+                 background: bool = False, rest_window: int | None = None, segmentation_image: bool = True) -> None:
         self.feed = feed
+        self.segmentation_image = segmentation_image
         self.track_period = track_period
         self.rest_window = REST_WINDOW if rest_window is None else max(1, int(rest_window))  # 1: each scan's own fit
         self._rest: dict[str, int] = {}  # id -> fits averaged into its track since it last moved (see _at_rest)
@@ -217,6 +222,7 @@ class CameraSensor:
         self._merged_said: set[frozenset[str]] = set()  # sets of objects said (at WARNING) to share a segment
         self._waiting: set[str] = set()  # ids never observed whose first miss was said at WARNING
         self._lost: dict[str, int] = {}  # id -> scans its track has been lost in a row (said at WARNING once)
+        self._labelled_said: set[str] = set()  # ids observed by the segmentation image, said at INFO once
         self._lock = threading.Lock()  # the tracker's state: one scan-and-track at a time
         self._pool = ThreadPoolExecutor(1, thread_name_prefix="cameras") if background else None
         self._job: Future | None = None
@@ -225,11 +231,12 @@ class CameraSensor:
     @classmethod
     def for_scene(cls, scene, *, cameras: int = 3, seed: int = 0, track_period: float = 0.5,  # type: ignore[no-untyped-def]
                   noise=None, background: bool = False, rest_window: int | None = None,
-                  **camera: object) -> CameraSensor:
+                  segmentation_image: bool = True, **camera: object) -> CameraSensor:
         """The default rig for a scene file: ``cameras`` around its table, the table's workspace.
 
         ``noise``: a :class:`scenes.cameras.DepthNoise` (None: the Kinect model); ``camera`` options go to
-        every :class:`scenes.cameras.Camera`; ``background``, ``rest_window``: see the class.
+        every :class:`scenes.cameras.Camera`; ``background``, ``rest_window``, ``segmentation_image``: see
+        the class.
         """
         from scenes.cameras import KINECT_V1, CameraFeed, table_ring, table_workspace
 
@@ -237,7 +244,8 @@ class CameraSensor:
         height = None if scene.table is None else scene.table.height
         rig = table_ring(size, height, count=cameras, **camera)
         feed = CameraFeed(rig, table_workspace(size, height), noise=KINECT_V1 if noise is None else noise, seed=seed)
-        return cls(feed, track_period=track_period, seed=seed, background=background, rest_window=rest_window)
+        return cls(feed, track_period=track_period, seed=seed, background=background, rest_window=rest_window,
+                   segmentation_image=segmentation_image)
 
     # -- the Sensor seam -------------------------------------------------------------------------
 
@@ -290,9 +298,12 @@ class CameraSensor:
             return seen
         scan = self._current(truth, force=force and object_id not in self._observed)
         k = self._associate(truth, scan, object_id)
+        segment = None if k is None else scan.segments[k]
         if k is not None and not self._alone(scan, k, object_id):
-            self._refuse_merged(scan, k, object_id)
-            k = None
+            segment = self._labelled_part(truth, scan, k, object_id)
+            if segment is None:
+                self._refuse_merged(scan, k, object_id)
+                k = None
         if k is None:
             last = self._observed.get(object_id)
             if last is not None:
@@ -301,7 +312,7 @@ class CameraSensor:
             self._tracked[object_id] = (scan.time, self._unseen_track(object_id, scan.time))
             empty = np.zeros((0, 3))
             return Observation(empty, empty, self._last.get(object_id, np.zeros(3)), np.array([1.0, 0, 0, 0]))
-        seen = self._subsample(self._fuse(scan, scan.segments[k]), points, shot)
+        seen = self._subsample(self._fuse(scan, segment), points, shot)
         observed = scan.trackable(seen.points[~seen.completed])  # type: ignore[index]
         self._model[object_id] = (self._icp_model(observed, shot), seen.frame_position)
         self._motion[object_id] = self._reviewed[object_id] = np.eye(4)
@@ -316,6 +327,27 @@ class CameraSensor:
             self._waiting.discard(object_id)
             log.info("%s: seen alone at t=%.3f: observed", object_id, scan.time)
         return seen
+
+    def _labelled_part(self, truth: GroundTruth, scan, k: int, object_id: str):  # type: ignore[no-untyped-def]
+        """``object_id``'s own points of the merged segment ``k``, as the simulator's segmentation image labels
+        them (a :class:`scenes.cameras.Segment`), or None: without ``segmentation_image``, or with fewer than
+        ``MIN_LABELLED_POINTS`` of them. Counted in ``labelled`` and said once per object."""
+        if not self.segmentation_image:
+            return None
+        model = truth.twin.model  # type: ignore[attr-defined]
+        body = model.jnt_bodyid[free_joint(model, object_id)]
+        seg = scan.segments[k]
+        mine = np.isin(seg.geom, np.flatnonzero(model.geom_bodyid == body))
+        if mine.sum() < MIN_LABELLED_POINTS:
+            return None
+        self.feed.stats.labelled += 1
+        owners = sorted(i for i, g in self._gated(scan).items() if g == k and i != object_id)
+        level = logging.DEBUG if object_id in self._labelled_said else logging.INFO
+        self._labelled_said.add(object_id)
+        log.log(level, "%s: its segment in the scan at t=%.3f holds %s too (merged); observed from its own %d "
+                "points, as the simulator's segmentation image labels them", object_id, scan.time,
+                ", ".join(owners) or "another object", int(mine.sum()))
+        return seg.part(mine)
 
     def _refuse_merged(self, scan, k: int, object_id: str) -> None:  # type: ignore[no-untyped-def]
         """Say (once per object until it is observed; at DEBUG after) and count (once per segment and scan)
@@ -811,6 +843,10 @@ ASSOCIATION_RADIUS = 0.08
 #: Metres outside a shared segment's footprint an object's centre may be and still share it when another
 #: object's centre is over it (:func:`_outsiders`): a few clustering cells of a 1 mm camera at a metre.
 SHARED_MARGIN = 0.02
+
+#: An object's own points of a merged segment, as the segmentation image labels them, fewer than this are not a
+#: view of it (the clustering's own smallest segment: :data:`estimation.segmentation.MIN_CLUSTER_POINTS`).
+MIN_LABELLED_POINTS = MIN_CLUSTER_POINTS
 
 #: ICP matching fewer of the model's points than this share has lost the object.
 MIN_FITNESS = 0.3

@@ -23,8 +23,8 @@ def cache(tmp_path_factory) -> Path:
     return tmp_path_factory.getbasetemp() / "coacd"
 
 
-def _cameras(scene):  # type: ignore[no-untyped-def]
-    return CameraSensor.for_scene(scene, width=320, height=240)
+def _cameras(scene, **options):  # type: ignore[no-untyped-def]
+    return CameraSensor.for_scene(scene, width=320, height=240, **options)
 
 
 def _sent(remote, object_id: str, kind: str):  # type: ignore[no-untyped-def]
@@ -50,9 +50,10 @@ def test_an_object_no_camera_sees_is_not_published_and_the_twin_builds_the_rest(
 
 def test_touching_objects_are_published_only_once_seen_apart(cache):
     # Face to face the cameras see one segment: before, each cube got the pair's cloud (+99 % mass) at one
-    # centroid, and the twin's two interpenetrated. Now neither is published until they are apart.
+    # centroid, and the twin's two interpenetrated. Without the simulator's segmentation image (a real site's
+    # clustering alone) neither is published until they are apart.
     scene = load_scene(DATA / "touching.toml")
-    sensor = _cameras(scene)
+    sensor = _cameras(scene, segmentation_image=False)
     with Headless(scene, sensor=sensor, cache_dir=cache) as session:
         remote = session.remote
         session.run(0.6)
@@ -74,6 +75,27 @@ def test_touching_objects_are_published_only_once_seen_apart(cache):
             est = session.local.twin.model.body(object_id).mass[0]
             true = remote.twin.model.body(object_id).mass[0]
             assert 0.7 < est / true < 1.4, (object_id, est / true)
+
+
+def test_touching_objects_are_published_from_their_own_points_by_the_segmentation_image(cache):
+    """With the image (the default), each cube of the touching pair is published at once from its own points
+    and the twin has both (withheld, they never reached it while they touched)."""
+    scene = load_scene(DATA / "touching.toml")
+    sensor = _cameras(scene)
+    with Headless(scene, sensor=sensor, cache_dir=cache) as session:
+        remote = session.remote
+        session.run(0.1)
+        assert remote.unseen_clouds == 0 and sensor.feed.stats.merged >= 1 and sensor.feed.stats.labelled == 2
+        for object_id in ("left", "right"):
+            cloud = _sent(remote, object_id, "cloud")
+            assert cloud is not None and np.ptp(unpack_points(cloud)[:, 0]) < 0.075, object_id  # one 5 cm cube
+        assert set(session.local.objects) == {"left", "right"}
+        for object_id in ("left", "right"):
+            est = session.local.twin.model.body(object_id).mass[0]
+            true = remote.twin.model.body(object_id).mass[0]
+            assert 0.7 < est / true < 1.4, (object_id, est / true)
+        gap = np.linalg.norm(session.local.twin.pose("left")[0] - session.local.twin.pose("right")[0])
+        assert gap > 0.04  # two cubes side by side, not one place (their true centres are 5 cm apart)
 
 
 def test_the_surface_sensor_sends_the_normals_it_samples(cache):
