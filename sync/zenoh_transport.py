@@ -48,8 +48,9 @@ def exposed_without_tls(endpoints: list[str]) -> list[str]:
     ``tcp/127.0.0.1:7447`` and ``tcp/[::1]:7447`` stay on this machine; ``tcp/0.0.0.0``, ``tcp/[::]`` or an
     interface's address do not. A host name is judged by the addresses it resolves to, all of which must be
     loopback (``tcp/localhost:7447`` usually is; a name that also resolves to a public address is not). An
-    endpoint :func:`check_endpoint` refuses (a host that does not resolve included), or one of a protocol
-    without a host (a serial line, a vsock), counts as exposed: only a known loopback host is not.
+    endpoint :func:`check_endpoint` refuses (a host that does not resolve included), or one of another protocol
+    without a host (a serial line, a vsock), counts as exposed: only a known loopback host is not, or a Unix
+    socket or pipe (a file on this machine, guarded by its permissions).
     """
     exposed = []
     for endpoint in endpoints:
@@ -67,7 +68,7 @@ def _exposes(checked: Endpoint) -> bool:
     """Whether another machine could reach ``checked`` (from :func:`check_endpoint`) in plain text."""
     import ipaddress
 
-    if checked.protocol in ("tls", "quic"):
+    if checked.protocol in ("tls", "quic", "unixsock-stream", "unixpipe"):  # encrypted, or local to this machine
         return False
     if checked.host is None or not checked.addresses:
         return True
@@ -288,12 +289,16 @@ def make_config(*, listen: list[str] | None = None, connect: list[str] | None = 
     source = "" if config_file is None else f"zenoh config {config_file}: "
     if config_file is not None:
         path = Path(config_file)
-        if not path.is_file():
-            raise SessionError(f"zenoh config {path}: no such file")
+        check_config_text(_read_small(path, "zenoh config", MAX_CONFIG_BYTES), path)
         try:
             conf = zenoh.Config.from_file(str(path))
         except Exception as exc:  # zenoh raises its own ZError for JSON5 or schema problems
             raise SessionError(f"zenoh config {path}: {_zenoh_error(exc)}") from exc
+        for key in TLS_FILE_KEYS:  # Zenoh reads them when the session opens: a FIFO hung it, /dev/zero ate memory
+            named = json.loads(conf.get_json(f"transport/link/tls/{key}"))
+            if named is not None:
+                _read_small(Path(str(named)), f"zenoh config {path}: transport/link/tls/{key}", MAX_CONFIG_BYTES,
+                            read=False)
     else:
         conf = zenoh.Config()
         conf.insert_json5("mode", json.dumps(mode))
@@ -340,6 +345,75 @@ def make_config(*, listen: list[str] | None = None, connect: list[str] | None = 
         raise SessionError(f"Zenoh endpoints {effective_listen} {effective_connect or []}: "
                            f"{_zenoh_error(exc)}") from exc
     return conf
+
+
+#: Largest zenoh config (and TLS key or certificate it names) read, bytes: they are a few kB; a 200 MB one took
+#: 16 GB and a minute to load.
+MAX_CONFIG_BYTES = 1 << 20
+
+#: Deepest nesting of brackets a zenoh config may have: Zenoh's JSON5 parser recursed past its stack (a
+#: segmentation fault) at 15,000 levels; a real config has five or six.
+MAX_CONFIG_DEPTH = 64
+
+#: The files a zenoh config names for TLS (``transport/link/tls/...``), checked as :func:`make_config` reads it.
+TLS_FILE_KEYS = ("root_ca_certificate", "listen_private_key", "listen_certificate", "connect_private_key",
+                 "connect_certificate")
+
+
+def _read_small(path: Path, what: str, limit: int, *, read: bool = True) -> str:
+    """``path``'s text (or "" without ``read``), refused unless it is a regular file of at most ``limit`` bytes.
+
+    Raises:
+        SessionError: naming ``what`` and why (missing, a folder, a device or pipe, too large, not UTF-8).
+    """
+    import stat
+
+    try:
+        info = path.stat()
+    except OSError:
+        raise SessionError(f"{what} {path}: no such file") from None
+    if not stat.S_ISREG(info.st_mode):
+        kind = "a folder" if stat.S_ISDIR(info.st_mode) else "a device or a pipe"
+        raise SessionError(f"{what} {path}: is {kind}, not a file")
+    if info.st_size > limit:
+        raise SessionError(f"{what} {path}: {info.st_size:,} bytes, more than the {limit:,} such a file may hold")
+    if not read:
+        return ""
+    try:
+        return path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise SessionError(f"{what} {path}: cannot read it ({exc})") from None
+
+
+def check_config_text(text: str, path: Path) -> None:
+    """Refuse a zenoh config whose brackets nest deeper than :data:`MAX_CONFIG_DEPTH` (strings and comments
+    skipped), before Zenoh's parser recurses into it.
+
+    Raises:
+        SessionError: naming the file and the depth.
+    """
+    depth = deepest = 0
+    i, n = 0, len(text)
+    while i < n:
+        c = text[i]
+        if c in "\"'":  # a string: to its closing quote, escapes skipped
+            i += 1
+            while i < n and text[i] != c:
+                i += 2 if text[i] == "\\" else 1
+        elif text.startswith("//", i) or c == "#":  # JSON5 and YAML line comments
+            i = text.find("\n", i)
+            i = n if i < 0 else i
+        elif text.startswith("/*", i):
+            i = text.find("*/", i + 2)
+            i = n if i < 0 else i + 1
+        elif c in "{[":
+            depth += 1
+            deepest = max(deepest, depth)
+            if deepest > MAX_CONFIG_DEPTH:
+                raise SessionError(f"zenoh config {path}: nested more than {MAX_CONFIG_DEPTH} levels deep")
+        elif c in "}]":
+            depth -= 1
+        i += 1
 
 
 def _mode_endpoints(conf, key: str, mode: str) -> list[str] | None:  # type: ignore[no-untyped-def]

@@ -531,6 +531,37 @@ def test_a_bad_zenoh_config_is_one_line_with_its_position(tmp_path, capsys):
     assert err.count("\n") == 1 and "at line 1, column 2" in err and ".rs:" not in err, err
 
 
+@pytest.mark.parametrize("make", ["deep", "huge", "folder", "fifo", "tls fifo", "tls device"])
+def test_a_zenoh_config_or_a_file_it_names_that_cannot_be_a_config_is_refused_in_one_line(make, tmp_path, capsys):
+    """A config nested 30,000 deep crashed Zenoh's parser (a segmentation fault); a TLS key that was a FIFO hung
+    the session's opening, /dev/zero ate memory; a 200 MB config took 16 GB; a folder was 'no such file'."""
+    import os
+
+    from cli.main import main
+
+    path = tmp_path / "z.json5"
+    said = {"deep": "nested more than 64 levels deep", "huge": "more than the 1,048,576 such a file may hold",
+            "folder": "is a folder, not a file", "fifo": "is a device or a pipe, not a file",
+            "tls fifo": "transport/link/tls/listen_private_key", "tls device": "/dev/zero: is a device or a pipe"}[make]
+    if make == "deep":
+        path.write_text("{ metadata: " + "{a:" * 30_000 + "1" + "}" * 30_000 + " }")
+    elif make == "huge":
+        path.write_text('{ metadata: { note: "' + "x" * (2 << 20) + '" } }')
+    elif make == "folder":
+        path.mkdir()
+    elif make == "fifo":
+        os.mkfifo(path)
+    else:
+        key = str(tmp_path / "key.fifo") if make == "tls fifo" else "/dev/zero"
+        if make == "tls fifo":
+            os.mkfifo(key)
+        path.write_text('{ transport: { link: { tls: { listen_private_key: "%s", listen_certificate: "%s" } } } }'
+                        % (key, key))
+    assert main(["local", "--zenoh-config", str(path), "--duration", "0.1"]) == 2
+    err = capsys.readouterr().err
+    assert said in err and err.count("\n") == 1, err
+
+
 # -- what a zenoh config leaves open ------------------------------------------------------------------
 
 def _own_sockets() -> list[tuple[str, str]]:

@@ -363,6 +363,9 @@ def test_a_twin_object_straying_on_its_own_is_held_at_the_remote_pose(tmp_path):
     ("tcp/127.0.0.1:7447", False), ("tcp/localhost:7447", False), ("tcp/[::1]:7447", False),
     ("tcp/0.0.0.0:7447", True), ("tcp/[::]:7447", True), ("tcp/192.0.2.7:7447", True), ("udp/0.0.0.0:7447", True),
     ("tls/0.0.0.0:7447", False), ("quic/[::]:7447", False),
+    # A Unix socket or pipe is a file on this machine (it was refused as reachable "in plain text"); a serial
+    # line is not.
+    ("unixsock-stream//tmp/zenoh.sock", False), ("unixpipe/zenoh-pipe", False), ("serial//dev/ttyUSB0", True),
 ])
 def test_plain_listeners_beyond_loopback_are_named(endpoint, exposed):
     from sync.zenoh_transport import exposed_without_tls
