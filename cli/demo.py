@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 from rich.console import Console
 
+from estimation.errors import TwinError
 from twin.debuglog import OFF
 from twin.rerunlog import RerunLog
 
@@ -62,7 +63,6 @@ def remote_sensor(name: str, scene):  # type: ignore[no-untyped-def]
 def _remote_main(scene_path: str, endpoint: str, zenoh_config: str | None, ready, stop, results,  # type: ignore[no-untyped-def]
                  record: str | None = None, sensor: str = "surface") -> None:
     from cli.record import open_recorder, recording_transport
-    from estimation.errors import TwinError
     from scenes.remote import Remote
     from scenes.scenefile import load_scene
     from sync.clock import REAL_CLOCK
@@ -70,7 +70,11 @@ def _remote_main(scene_path: str, endpoint: str, zenoh_config: str | None, ready
     from twin.workers import die_with_parent
 
     die_with_parent()  # a killed demo must not leave its remote listening
-    session = open_session(make_config(listen=[endpoint], config_file=zenoh_config))
+    try:
+        session = open_session(make_config(listen=[endpoint], config_file=zenoh_config, insecure_flag=None))
+    except TwinError as exc:  # a config Zenoh or the checks refuse: the parent says it, in one line (not a traceback)
+        results.put({"error": str(exc)})
+        return
     recorder = None
     started = False
     try:
@@ -152,15 +156,20 @@ def run_demo(*, duration: float = 5.0, scene_path: Path | None = None, zenoh_con
                 except queue.Empty:
                     said = {}
                 if "error" in said:
-                    from scenes.scenefile import SceneError
-
-                    raise SceneError(said["error"])
+                    raise TwinError(said["error"])
                 raise SessionError("the remote process exited before it was ready (see its error above)")
     except BaseException:
         remote.terminate()
         raise
     console.print(f"remote ready in {time.perf_counter() - t0:.1f} s (ground truth built, clouds published)")
-    session = open_session(make_config(connect=[endpoint], config_file=zenoh_config))
+    try:
+        session = open_session(make_config(connect=[endpoint], config_file=zenoh_config, insecure_flag=None))
+    except BaseException:  # the remote runs for a day unless told: it printed the error, then never exited
+        stop.set()
+        remote.join(timeout=10)
+        if remote.is_alive():
+            remote.terminate()
+        raise
     recorder = open_recorder(record, clock=REAL_CLOCK, command="demo", side="twin", scene_path=scene_path,
                              sensor=sensor)
     local = None
@@ -213,8 +222,6 @@ def run_demo(*, duration: float = 5.0, scene_path: Path | None = None, zenoh_con
     if remote.is_alive():
         remote.terminate()
     if "error" in remote_stats:  # the remote ran but could not finish its recording
-        from estimation.errors import TwinError
-
         raise TwinError(remote_stats["error"])
     raw = sum(remote_stats["points"].values()) * RAW_BYTES_PER_POINT * RAW_STREAM_HZ * session_s
     lat_all = np.asarray(report.pose_latency) * 1e3

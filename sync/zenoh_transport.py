@@ -245,7 +245,7 @@ def make_config(*, listen: list[str] | None = None, connect: list[str] | None = 
                 config_file: str | Path | None = None, mode: str = "peer", insecure: bool = False,
                 listen_default: str = LOOPBACK_ANY_PORT, connect_default: str | None = None,
                 listen_name: str = "listen endpoint",
-                connect_name: str = "connect endpoint"):  # type: ignore[no-untyped-def]
+                connect_name: str = "connect endpoint", insecure_flag: str | None = "--insecure"):  # type: ignore[no-untyped-def]
     """A ``zenoh.Config``: the file's settings (if any), the safe defaults for what it leaves out, then the
     endpoints given here; refused if it would expose the session in plain text, unless ``insecure``.
 
@@ -265,6 +265,8 @@ def make_config(*, listen: list[str] | None = None, connect: list[str] | None = 
         connect_default: where to connect when neither ``connect`` nor the file says, or None.
         listen_name, connect_name: what errors call ``listen`` and ``connect`` (and the defaults), e.g. the
             CLI's flags, '--listen' and '--connect'.
+        insecure_flag: what the exposure errors offer as the way to allow it; None for a command that has none
+            (``twin demo``, loopback only).
 
     Raises:
         SessionError: the file is missing or Zenoh refuses it; an endpoint, given here, in the file or as a
@@ -324,13 +326,14 @@ def make_config(*, listen: list[str] | None = None, connect: list[str] | None = 
         check([connect_default], connect_name, True)
     exposed = [endpoint for endpoint in effective_listen if _exposes(listening[endpoint])]
     if not insecure:
+        allow = f" or pass {insecure_flag}" if insecure_flag else " (this command runs on loopback only)"
         if exposed:
             said = f"{source}listen endpoint" if listen is None and file_listen is not None else listen_name
             raise SessionError(f"{said} {exposed[0]!r} is reachable from other machines in plain text; listen on "
-                               f"a tls/ endpoint (certificates in a zenoh config) or pass --insecure")
+                               f"a tls/ endpoint (certificates in a zenoh config){allow}")
         if multicast:
             raise SessionError(f"{source}scouting/multicast/enabled is true: it announces this session to every "
-                               f"machine on the network in plain text; remove it or pass --insecure")
+                               f"machine on the network in plain text; remove it{allow}")
     if exposed:
         log.warning("listening on %s without TLS: anyone on that network can read and drive this scene",
                     ", ".join(exposed))

@@ -747,3 +747,24 @@ def test_a_peer_answering_without_end_is_read_only_up_to_the_caps(monkeypatch):
     finally:
         client.close()
         server.close()
+
+
+@pytest.mark.parametrize(("text", "said"), [
+    # The twin's side refused it after the remote had started: the error, then a demo that never exited.
+    ('{ listen: { endpoints: ["tcp/0.0.0.0:7450"] } }', "(this command runs on loopback only)"),
+    # The remote's side refused it: a child's traceback before the one line.
+    ('{ scouting: { multicast: { enabled: true } } }', "scouting/multicast/enabled is true"),
+    ("{ unknown_key: 5 }", "unknown field `unknown_key`"),
+])
+def test_twin_demo_with_a_config_a_side_refuses_is_one_line_and_leaves_no_process(text, said, tmp_path, capfd):
+    import multiprocessing
+
+    from cli.main import main
+
+    config = tmp_path / "z.json5"
+    config.write_text(text)
+    assert main(["demo", "--duration", "0.5", "--zenoh-config", str(config)]) == 2
+    err = capfd.readouterr().err
+    lines = [line for line in err.splitlines() if "error" in line or "Traceback" in line]
+    assert len(lines) == 1 and said in lines[0] and "Traceback" not in err, err
+    assert not multiprocessing.active_children()
