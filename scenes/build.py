@@ -7,6 +7,7 @@ object's estimate and the transform from its cloud's or mesh's frame to its body
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 import shutil
@@ -284,29 +285,44 @@ def _check_output(out: Path, keep: tuple[Path, ...]) -> None:
             raise BuildError(f"{out}: not empty and not written by 'twin build'; give --out a new or empty folder")
         if (out / MARKER).is_file():
             ours = _built_files(out)
+            folders = {"assets", OBJECTS} | {p for name in ours for p in map(str, Path(name).parents) if p != "."}
             for path in sorted(out.rglob("*")):
                 name = path.relative_to(out).as_posix()
                 if (path.is_file() or path.is_symlink()) and name not in ours:
                     # A build replaces the folder whole: what the user put in it since would go with it.
                     raise BuildError(f"{out}: holds {name}, which no build wrote; move it out or give --out a new "
                                      f"folder")
+                if path.is_dir() and not path.is_symlink() and name not in folders:
+                    raise BuildError(f"{out}: holds the folder {name}, which no build made; move it out or give "
+                                     f"--out a new folder")
+                digest = ours.get(name)
+                if digest is not None and path.is_file() and _sha256(path) != digest:
+                    # docs/cli.md: `twin run DIR` runs a built folder as it now is, edits included.
+                    raise BuildError(f"{out}: {name} was edited since the build wrote it; move the folder aside or "
+                                     f"give --out a new folder")
 
 
 #: The line of :data:`MARKER` after which the files the build wrote are listed, one per line.
 _FILES_HEADER = "files:"
 
 
-def _built_files(out: Path) -> set[str]:
-    """The files (relative, POSIX) the build that wrote ``out`` listed in its marker, the marker included.
+def _built_files(out: Path) -> dict[str, str | None]:
+    """The files (relative, POSIX) the build that wrote ``out`` listed in its marker, the marker included, each
+    with the sha256 it was written with (None where the marker gives none: builds before session 38).
 
     A marker from before the list (builds before 2026-12-04) names none: what such a build wrote is known by
     its layout instead (scene.xml, estimates.json, assets/, objects/).
     """
     lines = (out / MARKER).read_text(errors="replace").splitlines()
     if _FILES_HEADER in lines:
-        return {MARKER, *lines[lines.index(_FILES_HEADER) + 1:]}
-    return {MARKER, "scene.xml", ESTIMATES, *(p.relative_to(out).as_posix() for folder in ("assets", OBJECTS)
-                                              for p in (out / folder).rglob("*"))}
+        listed = (line.split("\t", 1) for line in lines[lines.index(_FILES_HEADER) + 1:])
+        return {MARKER: None, **{parts[0]: parts[1] if len(parts) > 1 else None for parts in listed}}
+    return dict.fromkeys([MARKER, "scene.xml", ESTIMATES, *(p.relative_to(out).as_posix() for folder in
+                                                           ("assets", OBJECTS) for p in (out / folder).rglob("*"))])
+
+
+def _sha256(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
 
 
 def write_scene(spec, out: Path, *, keep: tuple[Path, ...] = (), built: BuiltScene | None = None) -> Path:  # type: ignore[no-untyped-def]
@@ -351,9 +367,11 @@ def write_scene(spec, out: Path, *, keep: tuple[Path, ...] = (), built: BuiltSce
                 (staging / OBJECTS / f"{obj.id}.xml").write_text(object_xml(obj, staging / OBJECTS))
             record = estimates_record(built)
             (staging / ESTIMATES).write_text(json.dumps(record, indent=1, allow_nan=False) + "\n")
-        written = sorted(p.relative_to(staging).as_posix() for p in staging.rglob("*") if p.is_file())
+        written = sorted(f"{p.relative_to(staging).as_posix()}\t{_sha256(p)}" for p in staging.rglob("*")
+                         if p.is_file())
         (staging / MARKER).write_text("written by 'twin build'; the next build into this folder replaces it, unless it "
-                                      "holds files not listed here\n" + "\n".join([_FILES_HEADER, *written]) + "\n")
+                                      "holds files not listed here, or listed files changed since (their sha256 "
+                                      "follows each)\n" + "\n".join([_FILES_HEADER, *written]) + "\n")
         import mujoco
 
         mujoco.MjModel.from_xml_path(str(staging / "scene.xml"))  # what we write must load
@@ -363,6 +381,9 @@ def write_scene(spec, out: Path, *, keep: tuple[Path, ...] = (), built: BuiltSce
         if out.exists():
             check_output(out, keep=keep)  # still ours: nothing else was put there while we built
             shutil.rmtree(out)
+        umask = os.umask(0)
+        os.umask(umask)
+        staging.chmod(0o777 & ~umask)  # mkdtemp's 0700 kept every other user out of a build folder
         staging.rename(out)
     except BaseException:
         shutil.rmtree(staging, ignore_errors=True)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import re
 import subprocess
 import sys
@@ -214,8 +215,25 @@ def test_cli_build_and_run(small_scene, tmp_path, capsys):
     assert err.count("\n") == 1 and "holds assets/mynotes.txt, which no build wrote" in err, err
     assert (out / "assets" / "mynotes.txt").read_text() == "mine" and (out / "scene.xml").is_file()
     (out / "assets" / "mynotes.txt").unlink()
+    # Nor an edit to a file it wrote (`twin run DIR` runs the folder "edits included"), nor a folder made in it.
+    with (out / "scene.xml").open("a") as f:
+        f.write("<!-- mine -->\n")
+    (out / "mine").mkdir()
+    assert main(["build", str(small_scene), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "holds the folder mine, which no build made" in err, err
+    (out / "mine").rmdir()
+    assert main(["build", str(small_scene), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "scene.xml was edited since the build wrote it" in err, err
+    assert (out / "scene.xml").read_text().endswith("<!-- mine -->\n")
+    (out / "scene.xml").write_text((out / "scene.xml").read_text().removesuffix("<!-- mine -->\n"))
     assert main(["build", str(small_scene), "--out", str(out)]) == 0
     capsys.readouterr()
+    # The folder as a plain mkdir makes it (mkdtemp's 0700 kept other users out).
+    umask = os.umask(0)
+    os.umask(umask)
+    assert (out.stat().st_mode & 0o777) == 0o777 & ~umask
     assert main(["run", str(out), "--duration", "0.2", "--no-realtime", "--json"]) == 0
     record = json.loads(capsys.readouterr().out, parse_constant=_no_constants)  # strict JSON: no NaN
     assert record["steps"] == 200 and record["objects"] == 2 and record["step_p99_ms"] > 0
