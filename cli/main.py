@@ -191,6 +191,11 @@ def check_args(args: argparse.Namespace) -> None:
     if rerun and rerun[0] == "save" and len(rerun) == 2:
         _check_writable_file(Path(rerun[1]), "--rerun save")
         check_not_input(Path(rerun[1]), inputs, "--rerun save")
+        out = getattr(args, "out", None)
+        # A build replaces --out whole: the .rrd would go with it, or (written after) block the next build.
+        if args.command == "build" and out is not None and Path(out).resolve() in Path(rerun[1]).resolve().parents:
+            raise TwinError(f"--rerun save {rerun[1]}: inside --out {out}, which the build replaces whole; save it "
+                            "beside the folder")
 
 
 #: Options naming files a command reads (``local --scene`` is a name, not a file: only paths count).

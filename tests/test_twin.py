@@ -714,3 +714,13 @@ def test_cli_run_simulates_duration_seconds_at_any_rate_it_takes(capsys):
         assert main(["run", str(SMALL), "--duration", "1", "--rate", rate, "--no-realtime"]) == 2
         err = capsys.readouterr().err
         assert err.count("\n") == 1 and "1000 Hz divided by a whole number (1000, 500, 333.333, 250, ...)" in err, err
+
+
+def test_a_rerun_recording_inside_the_build_folder_is_refused_before_the_work(small_scene, tmp_path, capsys):
+    """It was written into the folder, and the next build refused the folder for it."""
+    out = tmp_path / "built"
+    out.mkdir()
+    assert main(["build", str(small_scene), "--out", str(out), "--rerun", "save", str(out / "view.rrd")]) == 2
+    err = capsys.readouterr().err
+    assert "inside --out" in err and "which the build replaces whole" in err and err.count("\n") == 1, err
+    assert not any(out.iterdir())
