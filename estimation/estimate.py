@@ -35,7 +35,7 @@ from estimation.cloud import (
 )
 from estimation.contracts import as_points
 from estimation.downsample import thin_to_budget, voxel_downsample
-from estimation.errors import CloudError, ReconstructionError, refused_number
+from estimation.errors import CloudError, ReconstructionError, SettingsError, refused_number
 from estimation.inertia import MassProperties, mass_properties, triangle_areas
 from estimation.materials import check_density
 from estimation.obb import OrientedBox, oriented_box, oriented_box_local
@@ -169,18 +169,19 @@ def estimate(
         CloudError: too few points, a flat or line-like cloud, a viewpoint beyond
             ``tolerances.MAX_COORDINATE_M``.
         MaterialError: a non-positive or non-finite density.
-        ValueError: an unknown method, a resolution outside ``tolerances.MIN_RESOLUTION``..``MAX_RESOLUTION``.
+        SettingsError: an unknown method, a resolution outside ``tolerances.MIN_RESOLUTION``..``MAX_RESOLUTION``
+            (a :class:`TwinError` and a ``ValueError``).
         ReconstructionError: 'auto' found no closed solid.
     """
     check_is_cloud(cloud, "estimate")
     if method not in METHODS:
-        raise ValueError(f"unknown method {method!r}; choose from {', '.join(METHODS)}")
+        raise SettingsError(f"unknown method {str(method)[:40]!r}; choose from {', '.join(METHODS)}")
     density = check_density(density)
     if isinstance(resolution, bool) or not isinstance(resolution, numbers.Integral) or not (
             tol.MIN_RESOLUTION <= resolution <= tol.MAX_RESOLUTION):
         # 0 divided by zero, 1 cell lost two thirds of a box without a word, NaN asked for negative dimensions.
-        raise ValueError(f"resolution must be a whole number of cells from {tol.MIN_RESOLUTION} to {tol.MAX_RESOLUTION}, "
-                         f"got {str(resolution)[:40]}")
+        raise SettingsError(f"resolution must be a whole number of cells from {tol.MIN_RESOLUTION} to "
+                            f"{tol.MAX_RESOLUTION}, got {str(resolution)[:40]}")
     check_count_and_range(cloud.points)
     if viewpoint is not None:
         viewpoint = as_points(np.reshape(viewpoint, (1, -1)), "viewpoint")[0]

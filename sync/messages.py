@@ -25,7 +25,7 @@ import math
 import msgspec
 import numpy as np
 
-from estimation.errors import MaterialError
+from estimation.errors import MaterialError, TwinError
 from estimation.materials import MAX_DENSITY, MIN_DENSITY, material
 from sync.keys import MAX_ID_LENGTH, valid_id
 
@@ -79,7 +79,7 @@ CLOUD_QUANTUM = 1e-4
 _ZSTD_LEVEL = 3
 
 
-class MessageError(ValueError):
+class MessageError(TwinError, ValueError):
     """A message that cannot be used. ``reason`` is a short tag for counting (e.g. ``"non-finite"``)."""
 
     def __init__(self, reason: str, detail: str) -> None:

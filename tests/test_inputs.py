@@ -359,8 +359,17 @@ def test_a_viewpoint_that_is_not_a_point_is_refused(box_cloud):
 
 
 def test_unknown_method(box_cloud):
-    with pytest.raises(ValueError, match="unknown method 'poisson'"):
+    # docs/api.md: every error raised on bad input derives from TwinError (these were plain ValueErrors).
+    from estimation.errors import SettingsError, TwinError
+    from sync.messages import MessageError, decode
+
+    with pytest.raises(SettingsError, match="unknown method 'poisson'"):
         estimate(box_cloud, 1000.0, method="poisson")
+    with pytest.raises(SettingsError, match="resolution must be a whole number"):
+        estimate(box_cloud, 1000.0, resolution=0)
+    with pytest.raises(MessageError) as err:
+        decode(b"not a message")
+    assert isinstance(err.value, TwinError) and isinstance(err.value, ValueError)
 
 
 def test_unknown_material_suggests():
