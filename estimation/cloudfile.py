@@ -22,6 +22,7 @@ is an error naming the formats that keep it, unless the caller names it in ``sav
 
 from __future__ import annotations
 
+import numbers
 import stat
 import zipfile
 from collections.abc import Iterable
@@ -29,7 +30,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from estimation.cloud import PointCloud, check_is_cloud, make_cloud
-from estimation.errors import CloudError, CloudFileError
+from estimation.errors import CloudError, CloudFileError, SettingsError
 from estimation.numpycloud import read_numpy, write_numpy
 from estimation.pcdfile import one_origin, read_pcd, write_pcd
 from estimation.plyfile import read_ply, write_ply
@@ -66,6 +67,9 @@ def load_cloud(path: str | Path, *, scale: float = 1.0, max_points: int = MAX_PO
         CloudError: the file holds no usable points.
     """
     path = Path(path)
+    if isinstance(max_points, bool) or not isinstance(max_points, numbers.Integral) or max_points < 1:
+        # '5' was a TypeError from a comparison deep in a reader; -1 was taken, and refused every file.
+        raise SettingsError(f"max_points must be a whole number >= 1, got {str(max_points)[:40]!r}")
     check_input_file(path)
     suffix = path.suffix.lower()
     if suffix not in SUFFIXES:

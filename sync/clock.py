@@ -8,8 +8,11 @@ result every time.
 
 from __future__ import annotations
 
+import math
 import time
 from typing import Protocol
+
+from estimation.errors import SettingsError
 
 
 class Clock(Protocol):
@@ -55,7 +58,7 @@ class SimClock:
     realtime = False
 
     def __init__(self, start: float = 0.0) -> None:
-        self._t = float(start)
+        self._t = _seconds(start, "start")
 
     def now(self) -> float:
         return self._t
@@ -64,18 +67,33 @@ class SimClock:
         return round(self._t * 1e9)
 
     def sleep(self, seconds: float) -> None:
-        if seconds > 0:
+        if _seconds(seconds, "sleep") > 0:
             self._t += seconds
 
     def advance(self, seconds: float) -> None:
         """Move time forward by ``seconds`` (>= 0)."""
-        if seconds < 0:
-            raise ValueError(f"a clock does not go back ({seconds} s)")
+        if _seconds(seconds, "advance") < 0:
+            raise SettingsError(f"a clock does not go back ({seconds} s)")
         self._t += seconds
 
     def advance_to(self, t: float) -> None:
         """Move time forward to ``t`` seconds (no-op if already past it)."""
-        self._t = max(self._t, float(t))
+        self._t = max(self._t, _seconds(t, "advance_to"))
+
+
+def _seconds(value: float, what: str) -> float:
+    """``value`` as seconds: a finite number (NaN or infinity would stop a simulated clock for good).
+
+    Raises:
+        SettingsError: naming ``what``.
+    """
+    try:
+        seconds = float(value)
+    except (TypeError, ValueError):
+        raise SettingsError(f"simulated clock {what}: seconds must be a number, got {str(value)[:40]!r}") from None
+    if not math.isfinite(seconds):
+        raise SettingsError(f"simulated clock {what}: seconds must be finite, got {seconds}")
+    return seconds
 
 
 #: The clock of live commands.

@@ -586,3 +586,25 @@ def test_the_shortest_replay_is_one_physics_step():
     from twin.model import TIMESTEP
 
     assert _NUMBERS["replay_duration"][1:3] == (TIMESTEP, True)
+
+
+def test_a_simulated_clock_and_a_reader_cap_refuse_what_they_cannot_mean(tmp_path):
+    """SimClock(nan) and sleep(inf) stopped a clock for good; load_cloud(max_points='5') was a TypeError from a
+    reader's comparison, and -1 was taken."""
+    from estimation.cloudfile import load_cloud
+    from estimation.errors import SettingsError
+    from sync.clock import SimClock
+
+    for bad in (float("nan"), float("inf"), "soon"):
+        with pytest.raises(SettingsError, match="simulated clock start"):
+            SimClock(bad)  # type: ignore[arg-type]
+    clock = SimClock()
+    for call in (clock.sleep, clock.advance, clock.advance_to):
+        with pytest.raises(SettingsError, match="must be finite"):
+            call(float("inf"))
+    clock.sleep(0.25)
+    clock.advance(0.25)
+    assert clock.now() == 0.5
+    for bad in ("5", -1, 0, True, 2.5):
+        with pytest.raises(SettingsError, match="max_points must be a whole number >= 1"):
+            load_cloud(tmp_path / "x.ply", max_points=bad)  # type: ignore[arg-type]
