@@ -285,6 +285,11 @@ def make_config(*, listen: list[str] | None = None, connect: list[str] | None = 
             if not connecting:
                 listening[endpoint] = checked
 
+    for endpoints, name in ((listen, listen_name), (connect, connect_name)):
+        # A string is a sequence too: "tcp/127.0.0.1:7447" was read as the endpoints 't', 'c', 'p', ...
+        if endpoints is not None and (isinstance(endpoints, str | bytes)
+                                      or not all(isinstance(e, str) for e in endpoints)):
+            raise SessionError(f"{name}: expected a list of endpoint strings, got {str(endpoints)[:60]!r}")
     # The caller's endpoints first: a malformed one is named as given, before the file is read.
     check(listen, listen_name, False)
     check(connect, connect_name, True)

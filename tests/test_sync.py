@@ -390,3 +390,14 @@ def test_twin_remote_runs_for_its_duration_and_reports(sensor, capsys):
     assert main(["remote", scene, "--listen", f"tcp/127.0.0.1:{free_port()}", "--duration", "0.7",
                  "--sensor", sensor]) == 0
     assert "pose updates" in capsys.readouterr().out
+
+
+def test_make_config_takes_lists_of_endpoints_not_a_string():
+    """A string was read as its characters ("'t': not a Zenoh endpoint"); [None] was an AttributeError."""
+    from sync.zenoh_transport import SessionError, make_config
+
+    for bad in ("tcp/127.0.0.1:7447", [None], [7447]):
+        with pytest.raises(SessionError, match="expected a list of endpoint strings"):
+            make_config(listen=bad)  # type: ignore[arg-type]
+        with pytest.raises(SessionError, match="expected a list of endpoint strings"):
+            make_config(connect=bad)  # type: ignore[arg-type]
