@@ -113,8 +113,8 @@ def parse_target(words: list[str], rate_hz: float = DEFAULT_RATE_HZ) -> RerunTar
         return RerunTarget("spawn", None, rate_hz)
     if mode == "save" and len(rest) == 1:
         path = Path(rest[0])
-        if path.suffix != ".rrd":
-            raise TwinError(f"--rerun save: {path} should end in .rrd")
+        if path.suffix != ".rrd":  # ".rrd" alone is a hidden file's name with no suffix: it said ".rrd should end in .rrd"
+            raise TwinError(f"--rerun save: {path} should be a file name ending in .rrd (e.g. view.rrd)")
         if not path.parent.resolve().is_dir():
             raise TwinError(f"--rerun save: directory {path.parent} does not exist")
         found = found_at(path, lambda head, _size: head.startswith(RRD_MAGIC))
