@@ -24,6 +24,8 @@ def as_points(array: object, name: str = "points", *, allow_nonfinite: bool = Fa
         CloudError: wrong shape, non-numeric, fewer than ``min_rows`` rows, or non-finite values when not
             allowed.
     """
+    if getattr(getattr(array, "dtype", None), "kind", None) == "c":  # numpy drops the imaginary part, with a warning
+        raise CloudError(f"{name}: expected real coordinates, got a {array.dtype} array")  # type: ignore[attr-defined]
     try:
         out = np.ascontiguousarray(array, dtype=np.float64)
     except (TypeError, ValueError) as exc:

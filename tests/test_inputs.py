@@ -37,6 +37,9 @@ def test_empty_cloud():
 def test_wrong_shape():
     with pytest.raises(CloudError, match=r"expected shape \(n, 3\)"):
         make_cloud(np.zeros((10, 2)))
+    # A complex array lost its imaginary part with only numpy's warning.
+    with pytest.raises(CloudError, match="expected real coordinates, got a complex128 array"):
+        make_cloud(np.zeros((10, 3)) + 1j)
 
 
 def test_nan_rows_are_dropped_and_reported(box_cloud, caplog):
