@@ -279,7 +279,9 @@ def check_estimable(cloud: PointCloud) -> None:
 
     Raises:
         CloudError: with the count, the coordinates' range or the principal extents in the message.
+        TypeError: ``cloud`` is not a :class:`PointCloud`.
     """
+    check_is_cloud(cloud, "check_estimable")
     check_count_and_range(cloud.points)
     n = len(cloud)
     # Singular values of the centred cloud are its spread along the principal axes (a uniform subset of

@@ -174,6 +174,9 @@ def estimate(
         ReconstructionError: 'auto' found no closed solid.
     """
     check_is_cloud(cloud, "estimate")
+    if progress is not None and not callable(progress):
+        raise TypeError(f"estimate: progress must be a callable taking one line of text, or None, got "
+                        f"{type(progress).__name__}")
     if method not in METHODS:
         raise SettingsError(f"unknown method {str(method)[:40]!r}; choose from {', '.join(METHODS)}")
     density = check_density(density)

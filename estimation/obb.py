@@ -11,6 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from estimation.contracts import as_points
+from estimation.errors import CloudError
 
 
 @dataclass(frozen=True)
@@ -91,7 +92,12 @@ def oriented_box_local(points: np.ndarray) -> tuple[OrientedBox, np.ndarray]:
     mean = column_mean(points)
     centred = points - mean
     # eigh returns ascending eigenvalues; reverse so the first axis carries the largest spread.
-    _, vectors = np.linalg.eigh(centred.T @ centred)
+    with np.errstate(over="ignore", invalid="ignore"):
+        scatter = centred.T @ centred
+    if not np.isfinite(scatter).all():  # coordinates past 1e150: numpy's "Eigenvalues did not converge"
+        raise CloudError(f"points: coordinates too large to measure (up to {float(np.abs(points).max()):.3g}); "
+                         "are they in metres?")
+    _, vectors = np.linalg.eigh(scatter)
     axes = vectors[:, ::-1].copy()
     if np.linalg.det(axes) < 0:
         axes[:, 2] *= -1

@@ -285,6 +285,8 @@ def make_config(*, listen: list[str] | None = None, connect: list[str] | None = 
             if not connecting:
                 listening[endpoint] = checked
 
+    if mode not in ("peer", "client", "router"):  # Zenoh's own message quoted a Rust source path
+        raise SessionError(f"zenoh mode must be 'peer', 'client' or 'router', got {str(mode)[:40]!r}")
     for endpoints, name in ((listen, listen_name), (connect, connect_name)):
         # A string is a sequence too: "tcp/127.0.0.1:7447" was read as the endpoints 't', 'c', 'p', ...
         if endpoints is not None and (isinstance(endpoints, str | bytes)

@@ -611,3 +611,20 @@ def test_a_simulated_clock_and_a_reader_cap_refuse_what_they_cannot_mean(tmp_pat
     for bad in ("5", -1, 0, True, 2.5):
         with pytest.raises(SettingsError, match="max_points must be a whole number >= 1"):
             load_cloud(tmp_path / "x.ply", max_points=bad)  # type: ignore[arg-type]
+
+
+def test_api_misuse_is_a_clear_error_not_a_library_internal(box_cloud):
+    """check_estimable(None) was an AttributeError, estimate(progress=5) "'int' object is not callable" mid-way,
+    oriented_box of 1e200 m numpy's "Eigenvalues did not converge", make_config(mode='banana') Zenoh's error
+    with a Rust source path."""
+    from estimation import check_estimable, oriented_box
+    from sync.zenoh_transport import SessionError, make_config
+
+    with pytest.raises(TypeError, match="check_estimable takes a PointCloud"):
+        check_estimable(None)  # type: ignore[arg-type]
+    with pytest.raises(TypeError, match="progress must be a callable"):
+        estimate(box_cloud, 1000.0, progress=5)  # type: ignore[arg-type]
+    with pytest.raises(CloudError, match="coordinates too large to measure"):
+        oriented_box(np.random.default_rng(0).uniform(size=(50, 3)) * 1e200)
+    with pytest.raises(SessionError, match="zenoh mode must be 'peer', 'client' or 'router', got 'banana'"):
+        make_config(mode="banana")

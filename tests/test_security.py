@@ -555,8 +555,8 @@ def test_a_zenoh_config_or_a_file_it_names_that_cannot_be_a_config_is_refused_in
         key = str(tmp_path / "key.fifo") if make == "tls fifo" else "/dev/zero"
         if make == "tls fifo":
             os.mkfifo(key)
-        path.write_text('{ transport: { link: { tls: { listen_private_key: "%s", listen_certificate: "%s" } } } }'
-                        % (key, key))
+        tls = f'listen_private_key: "{key}", listen_certificate: "{key}"'
+        path.write_text("{ transport: { link: { tls: { " + tls + " } } } }")
     assert main(["local", "--zenoh-config", str(path), "--duration", "0.1"]) == 2
     err = capsys.readouterr().err
     assert said in err and err.count("\n") == 1, err
