@@ -377,6 +377,23 @@ def scene_document(text: str, where: str) -> dict:
         raise SceneError(f"{where}: nested too deeply to be a scene file") from None
 
 
+def _plain(value: object, depth: int = 0) -> object:
+    """``value`` with numpy scalars as the Python numbers they hold (a document built in Python, not read from
+    TOML: ``np.float64(0.1)`` was "expected a number"). Deeper than any scene is left as it is, for the
+    conversion to refuse."""
+    if depth > 32:
+        return value
+    if isinstance(value, dict):
+        return {k: _plain(v, depth + 1) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return type(value)(_plain(v, depth + 1) for v in value)
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, np.ndarray) and value.size <= 16:  # a position or size as an array
+        return value.tolist()
+    return value
+
+
 def parse_scene(doc: dict, *, base: str | os.PathLike[str] = Path("."),
                 path: str | os.PathLike[str] | None = None) -> SceneSpec:
     """Validate a scene document (the parsed TOML) into a :class:`SceneSpec`.
@@ -401,7 +418,7 @@ def parse_scene(doc: dict, *, base: str | os.PathLike[str] = Path("."),
     if not isinstance(doc, dict):
         raise SceneError(f"scene: expected a table, got {_kind(doc)}")
     try:
-        scene = msgspec.convert(doc, SceneDoc)
+        scene = msgspec.convert(_plain(doc), SceneDoc)
     except msgspec.ValidationError as exc:
         raise SceneError(_translate(str(exc), doc)) from None
     _check_finite(scene, [], doc)

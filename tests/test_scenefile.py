@@ -430,3 +430,18 @@ def test_parse_scene_takes_its_folder_as_a_string_too(tmp_path):
         parse_scene(doc, base=None)  # type: ignore[arg-type]
     with pytest.raises(TypeError, match=r"^parse_scene: path must be a file path or None, got int$"):
         parse_scene(doc, base=tmp_path, path=3)  # type: ignore[arg-type]
+
+
+def test_a_scene_document_built_in_python_may_hold_numpy_numbers():
+    """np.float64(0.05) was refused as "expected a number" (a document built in Python, not read from TOML)."""
+    import numpy as np
+
+    scene = parse_scene({"name": "x", "objects": [{
+        "id": "a", "primitive": {"type": "box", "size": [np.float64(0.05), 0.05, np.float32(0.04)]},
+        "density": np.int64(500), "position": np.array([0.1, 0.2])}]})
+    (obj,) = scene.objects
+    assert obj.density == 500.0 and obj.position == (0.1, 0.2)
+    assert obj.value["size"][:2] == (0.05, 0.05)  # type: ignore[index]
+    with pytest.raises(SceneError, match="expected a number"):
+        parse_scene({"name": "x", "objects": [{"id": "a", "primitive": {"type": "box", "size": [0.05, 0.05, "b"]},
+                                               "density": 500}]})
