@@ -748,6 +748,11 @@ def from_mesh(vertices: np.ndarray, faces: np.ndarray, density: float, *,
     vertices = as_points(vertices, "mesh vertices")
     check_range(vertices, "mesh vertices")
     faces = as_faces(faces, len(vertices), "mesh faces")
+    if len(vertices):
+        across = float(np.ptp(vertices, axis=0).max())
+        if across < tol.MIN_EXTENT_M:  # as a cloud's (check_estimable): a 10 nm box merged to "not closed"
+            raise CloudError(f"mesh is {refused_number(across, tol.MIN_EXTENT_M, digits=3)} m across, below the "
+                             f"{tol.MIN_EXTENT_M:g} m an estimate resolves (wrong units?)")
     t0 = time.perf_counter()
     merged = _merged(vertices, faces)
     watertight = _is_closed(merged)

@@ -579,7 +579,9 @@ def test_from_mesh_checks_its_mesh_and_says_when_it_is_not_closed():
                                   (v * 1e200, f, "beyond the 10000 m"), (v, f + 100, "vertex indices must be 0 to 7"),
                                   (v, f.astype(float), "whole vertex indices"), (v[:, :2], f, "expected shape (n, 3)"),
                                   # the CloudError the docstring promised (a ReconstructionError came through)
-                                  (v, f[:0], "mesh encloses no volume")]:
+                                  (v, f[:0], "mesh encloses no volume"),
+                                  # below what a cloud may span: a 10 nm box was "not closed" (its vertices merged)
+                                  (v * 1e-7, f, "m across, below the 1e-06 m an estimate resolves")]:
         with pytest.raises(CloudError, match=re.escape(said)):
             from_mesh(vertices, faces, 1000.0)
 
