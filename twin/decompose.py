@@ -13,6 +13,7 @@ import hashlib
 import json
 import logging
 import math
+import numbers
 import os
 from collections.abc import Sequence
 from concurrent.futures import ProcessPoolExecutor
@@ -21,12 +22,17 @@ from pathlib import Path
 
 import numpy as np
 
+from estimation.contracts import shown
 from estimation.errors import TwinError, refused_number
 from twin.workers import background_worker
 
 log = logging.getLogger(__name__)
 
 Hull = tuple[np.ndarray, np.ndarray]  # vertices (v, 3) metres, faces (f, 3) int
+
+#: The largest values of CoACD's C ``int`` (its counts) and ``unsigned int`` (its seed): ctypes wraps a larger
+#: number without a word (2**32 + 16 hulls were 16; and seed -1 was 4294967295).
+C_INT_MAX, C_UINT_MAX = 2**31 - 1, 2**32 - 1
 
 
 @dataclass(frozen=True)
@@ -71,25 +77,74 @@ class CoacdSettings:
     def __post_init__(self) -> None:
         """Refuse what CoACD would abort on (``threshold > 1`` kills the process) or cannot mean.
 
+        Every field is checked for its type too: NaN compares false with every bound, and CoACD takes its
+        numbers through ctypes, which wraps a count past a C int without a word (:data:`C_INT_MAX`).
+
         Raises:
             CoacdSettingsError: ``threshold`` outside (0, 1] (CoACD's documented range is 0.01 to 1),
                 ``max_convex_hull`` not -1 or >= 1, ``max_ch_vertex`` below 4 (a hull has 4), a
-                resolution or MCTS count below 1, ``preprocess_mode`` not auto/on/off, or
+                resolution or MCTS count below 1, a count that is not a whole number (a bool, a float) or
+                past :data:`C_INT_MAX`, ``seed`` not a whole number from 0 to :data:`C_UINT_MAX`,
+                ``preprocess_mode`` not auto/on/off, ``merge`` or ``decimate`` not True or False, or
                 ``convex_tolerance`` outside [0, 1].
         """
+        self._check_real("threshold")
         if not (math.isfinite(self.threshold) and 0 < self.threshold <= 1):
             raise CoacdSettingsError(f"CoACD threshold must be in (0, 1], got {refused_number(self.threshold, 0, 1)}")
+        self._check_whole("max_convex_hull", C_INT_MAX)
         if self.max_convex_hull != -1 and self.max_convex_hull < 1:
-            raise CoacdSettingsError(f"CoACD max hulls must be -1 (no cap) or >= 1, got {self.max_convex_hull}")
+            raise CoacdSettingsError(f"CoACD max hulls must be -1 (no cap) or >= 1, got {shown(self.max_convex_hull)}")
+        self._check_whole("max_ch_vertex", C_INT_MAX)
         if self.max_ch_vertex < 4:
-            raise CoacdSettingsError(f"CoACD max_ch_vertex must be >= 4, got {self.max_ch_vertex}")
+            raise CoacdSettingsError(f"CoACD max_ch_vertex must be >= 4, got {shown(self.max_ch_vertex)}")
         for name in ("preprocess_resolution", "resolution", "mcts_nodes", "mcts_iterations", "mcts_max_depth"):
+            self._check_whole(name, C_INT_MAX)
             if getattr(self, name) < 1:
-                raise CoacdSettingsError(f"CoACD {name} must be >= 1, got {getattr(self, name)}")
-        if self.preprocess_mode not in ("auto", "on", "off"):
-            raise CoacdSettingsError(f"CoACD preprocess_mode must be auto, on or off, got {self.preprocess_mode!r}")
+                raise CoacdSettingsError(f"CoACD {name} must be >= 1, got {shown(getattr(self, name))}")
+        self._check_whole("seed", C_UINT_MAX)
+        if self.seed < 0:
+            raise CoacdSettingsError(f"CoACD seed must be >= 0, got {shown(self.seed)}")
+        if not isinstance(self.preprocess_mode, str) or self.preprocess_mode not in ("auto", "on", "off"):
+            raise CoacdSettingsError(f"CoACD preprocess_mode must be auto, on or off, got {shown(self.preprocess_mode)}")
+        for name in ("merge", "decimate"):
+            if not isinstance(getattr(self, name), bool):
+                raise CoacdSettingsError(f"CoACD {name} must be True or False, got {type(getattr(self, name)).__name__} "
+                                         f"{shown(getattr(self, name))}")
+        self._check_real("convex_tolerance")
         if not (math.isfinite(self.convex_tolerance) and 0 <= self.convex_tolerance <= 1):
             raise CoacdSettingsError(f"convex_tolerance must be in [0, 1], got {refused_number(self.convex_tolerance, 0, 1)}")
+
+    def _check_real(self, name: str) -> None:
+        """Refuse a field that is not a real number (a string, None, a bool) or an integer past any float; a
+        numpy float becomes a float, which the cache key's JSON can write.
+
+        Raises:
+            CoacdSettingsError: naming the field and what came.
+        """
+        value = getattr(self, name)
+        if isinstance(value, bool) or not isinstance(value, numbers.Real):
+            raise CoacdSettingsError(f"CoACD {name} must be a number, got {type(value).__name__} {shown(value)}")
+        try:
+            as_float = float(value)
+        except OverflowError:  # an integer past any float: math.isfinite raised it
+            raise CoacdSettingsError(f"CoACD {name} must be a finite number, got {shown(value)}") from None
+        if not isinstance(value, int | float):
+            object.__setattr__(self, name, as_float)
+
+    def _check_whole(self, name: str, high: int) -> None:
+        """Refuse a field that is not a whole number (a float, NaN, a bool, None) or is past ``high`` (what
+        CoACD's C type holds); a numpy integer becomes an int, which the cache key's JSON can write.
+
+        Raises:
+            CoacdSettingsError: naming the field and what came.
+        """
+        value = getattr(self, name)
+        if isinstance(value, bool) or not isinstance(value, numbers.Integral):
+            raise CoacdSettingsError(f"CoACD {name} must be a whole number, got {type(value).__name__} {shown(value)}")
+        if value > high:
+            raise CoacdSettingsError(f"CoACD {name} must be at most {high}, got {shown(value)}")
+        if type(value) is not int:
+            object.__setattr__(self, name, int(value))
 
 
 class CoacdSettingsError(TwinError, ValueError):

@@ -15,7 +15,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from estimation.contracts import check_number as number
+from estimation.contracts import shown
+from estimation.errors import MaterialError, SettingsError
+from sync.messages import MAX_COORDINATE, MAX_SCENE_SIZE, MIN_SIZE
 from twin.objects import TwinObject
+from twin.settings import check_number, check_type
 
 #: Physics step for the haptic loop: 1 kHz.
 TIMESTEP = 0.001
@@ -37,6 +42,10 @@ EE_WELD_SOLREF = (0.02, 1.0)
 #: MuJoCo's per-mesh hull vertex cap for collision (CoACD already caps at 64; this guards raw meshes).
 MAX_HULL_VERTICES = 64
 
+#: The most solver iterations :class:`PhysicsSettings` takes: MuJoCo keeps the count in a C int, and 2**31 was
+#: a multi-line pybind TypeError in :func:`new_spec`.
+MAX_ITERATIONS = 2**31 - 1
+
 
 @dataclass(frozen=True)
 class PhysicsSettings:
@@ -57,25 +66,101 @@ class PhysicsSettings:
     multiccd: bool = True
     iterations: int = 100
 
+    def __post_init__(self) -> None:
+        """Refuse what MuJoCo would take and then run wrongly: a timestep of 0 compiled and ended in a
+        ZeroDivisionError in :func:`twin.run_paced`, -0.001 s in a loop of "-1000 Hz"; -5 iterations compiled.
+
+        Raises:
+            SettingsError: ``timestep`` not a finite number above 0 (seconds); ``sleep``, ``elliptic`` or
+                ``multiccd`` not True or False; ``iterations`` not a whole number from 1 to
+                :data:`MAX_ITERATIONS`.
+        """
+        check_number(self, "timestep", low_ok=False)
+        for name in ("sleep", "elliptic", "multiccd"):
+            check_type(self, name, bool, "True or False")
+        check_number(self, "iterations", low=1, whole=True)
+        if self.iterations > MAX_ITERATIONS:
+            raise SettingsError(f"PhysicsSettings.iterations must be at most {MAX_ITERATIONS} (MuJoCo's C int), "
+                                f"got {shown(self.iterations)}")
+
 
 DEFAULT_PHYSICS = PhysicsSettings()
 
 
 @dataclass(frozen=True)
 class TableSpec:
-    """The support: a box of full ``size`` (m) whose top surface is ``height`` m above the floor."""
+    """The support: a box of full ``size`` (m) whose top surface is ``height`` m above the floor.
+
+    Sizes and height lie in [:data:`sync.messages.MIN_SIZE`, :data:`sync.messages.MAX_SCENE_SIZE`] metres, as in a
+    scene file and on the wire.
+    """
 
     size: tuple[float, float, float] = (1.2, 0.8, 0.04)
     height: float = 0.75
     material: str = "wood_oak"
 
+    def __post_init__(self) -> None:
+        """Refuse a table MuJoCo cannot build or would build wrong: a negative size was a multi-line MuJoCo
+        compile error, ``size=(1, 1)`` an IndexError in :func:`new_spec`.
+
+        Raises:
+            SettingsError: ``size`` not three numbers, or a size or ``height`` not a finite number from
+                :data:`sync.messages.MIN_SIZE` to :data:`sync.messages.MAX_SCENE_SIZE` (metres); ``material``
+                not a string.
+            MaterialError: ``material`` names no material (it sets the table's friction).
+        """
+        _check_three(self, "size", low=MIN_SIZE, high=MAX_SCENE_SIZE)
+        check_number(self, "height", low=MIN_SIZE, high=MAX_SCENE_SIZE)
+        check_type(self, "material", str, "a material name")
+        from estimation.materials import material
+
+        try:
+            material(self.material)
+        except MaterialError as exc:
+            raise MaterialError(f"TableSpec.material: {exc}") from exc
+
 
 @dataclass(frozen=True)
 class EndEffectorSpec:
-    """The operator's sphere: ``radius`` m, starting at ``position`` (world frame, m)."""
+    """The operator's sphere: ``radius`` m, starting at ``position`` (world frame, m).
+
+    As in a scene file: the radius lies in [:data:`sync.messages.MIN_SIZE`, :data:`sync.messages.MAX_SCENE_SIZE`]
+    metres, each coordinate within :data:`sync.messages.MAX_COORDINATE` of 0.
+    """
 
     radius: float = 0.02
     position: tuple[float, float, float] = (0.0, -0.5, 0.9)
+
+    def __post_init__(self) -> None:
+        """Refuse a sphere MuJoCo cannot build or run: a NaN position compiled and stepped NaN; a radius of
+        0 or less was a multi-line MuJoCo compile error, 1e300 m stepped to a non-finite state.
+
+        Raises:
+            SettingsError: ``radius`` not a finite number from :data:`sync.messages.MIN_SIZE` to
+                :data:`sync.messages.MAX_SCENE_SIZE` (metres); ``position`` not three finite numbers within
+                :data:`sync.messages.MAX_COORDINATE` (metres).
+        """
+        check_number(self, "radius", low=MIN_SIZE, high=MAX_SCENE_SIZE)
+        _check_three(self, "position", low=-MAX_COORDINATE, high=MAX_COORDINATE)
+
+
+def _check_three(record: object, name: str, *, low: float, high: float) -> None:
+    """Refuse ``record.name`` unless it is a sequence of three finite numbers, each from ``low`` to ``high``.
+
+    Raises:
+        SettingsError: not three numbers (a string, a scalar, two values), or one of them NaN, infinite or
+            outside the range, named by its index.
+    """
+    label = f"{type(record).__name__}.{name}"
+    value = getattr(record, name)
+    vector = (isinstance(value, Sequence) and not isinstance(value, str | bytes)) or (
+        isinstance(value, np.ndarray) and value.ndim == 1)
+    if not vector or len(value) != 3:
+        # An array's repr spans lines: its shape says what was wrong.
+        got = f"array of shape {value.shape}" if isinstance(value, np.ndarray) else f"{type(value).__name__} {shown(value)}"
+        raise SettingsError(f"{label} must be three numbers (x, y, z), got {got}")
+    for i, x in enumerate(value):
+        number(x, f"{label}[{i}]", low=low, high=high, error=SettingsError)
 
 
 #: How far beyond the table (and above its top) an object's pose may be, metres: objects fall off tables and

@@ -15,6 +15,8 @@ from pathlib import Path
 import numpy as np
 
 from estimation import PhysicalEstimate
+from estimation.contracts import check_number, shown
+from estimation.errors import SettingsError
 from twin.decompose import DEFAULT_SETTINGS, CoacdSettings, Hull, decompose_many
 
 log = logging.getLogger(__name__)
@@ -141,6 +143,24 @@ class TwinObject:
     quat: np.ndarray
     hull_cached: bool = False
     primitive: Primitive | None = None
+
+    def __post_init__(self) -> None:
+        """Refuse a friction MuJoCo would take and then run wrongly: NaN made the object's state non-finite
+        at its first contact, -1 compiled and slid.
+
+        Raises:
+            SettingsError: ``friction`` not a finite number at least 0.
+        """
+        check_friction(self.friction, self.id)
+
+
+def check_friction(friction: object, object_id: object) -> None:
+    """Refuse a sliding friction coefficient that is not a finite number at least 0 (0: frictionless).
+
+    Raises:
+        SettingsError: naming the object and the value.
+    """
+    check_number(friction, f"friction of object {shown(object_id)}", error=SettingsError)
 
 
 def fit_primitive(mesh: Hull, *, min_fill: float = PRIMITIVE_MIN_FILL,
@@ -439,7 +459,11 @@ def object_at_estimate(object_id: str, est: PhysicalEstimate, friction: float, *
     """A twin object where its cloud was: body at the estimated centre of mass, world axes.
 
     What the synchronised twin builds from a remote cloud (no placement: the cloud says where it is).
+
+    Raises:
+        SettingsError: ``friction`` not a finite number at least 0 (checked before the mesh work).
     """
+    check_friction(friction, object_id)
     visual = visual_mesh(est)
     ((hulls, cached, primitive),) = collision_shapes([visual], coacd, cache_dir=cache_dir, progress=False)
     return TwinObject(id=object_id, estimate=est, friction=friction, visual=visual, hulls=hulls,

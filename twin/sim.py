@@ -27,6 +27,31 @@ class TwinClosedError(TwinError, RuntimeError):
     """A closed :class:`Twin` was asked to step or change."""
 
 
+class ModelMismatchError(TwinError, ValueError):
+    """A :class:`Twin` was given a model not compiled from its spec."""
+
+
+def _check_compiled_from(spec, model) -> None:  # type: ignore[no-untyped-def]
+    """Refuse a ``model`` whose bodies are not ``spec``'s, in order, by name: another scene's model ran with no
+    objects (``object_ids()`` was empty) and the spec's next edit would have swapped the scene. A few
+    microseconds (names only, no compile); a model compiled from ``spec`` always passes.
+
+    Raises:
+        ModelMismatchError: naming the first body that differs, or the two counts.
+    """
+    bodies = spec.bodies
+    if len(bodies) != model.nbody:
+        raise ModelMismatchError(f"Twin: the model's body count is {model.nbody}, its spec's {len(bodies)}: pass the "
+                                 f"model compiled from this spec (or None)")
+    # Read from the model's name buffer: a third faster than model.body(i).name (75 against 105 us at 100 bodies).
+    names = model.names
+    for i, (body, start) in enumerate(zip(bodies, model.name_bodyadr.tolist(), strict=True)):
+        name = names[start:names.index(b"\0", start)].decode(errors="replace")
+        if body.name != name:
+            raise ModelMismatchError(f"Twin: model's body {i} is {name!r}, its spec's {body.name!r}: pass the model "
+                                     f"compiled from this spec (or None)")
+
+
 class Twin:
     """The local simulation C'. The caller owns the loop: ``step()`` advances one physics step.
 
@@ -56,6 +81,7 @@ class Twin:
 
         Raises:
             TypeError: ``spec`` not an ``MjSpec``, or ``model`` neither None nor an ``MjModel``.
+            ModelMismatchError: ``model``'s bodies are not ``spec``'s (another scene's model).
         """
         import mujoco
 
@@ -64,6 +90,8 @@ class Twin:
             raise TypeError(f"Twin: spec must be a mujoco.MjSpec, got {type(spec).__name__}")
         if model is not None and not isinstance(model, mujoco.MjModel):
             raise TypeError(f"Twin: model must be a mujoco.MjModel or None, got {type(model).__name__}")
+        if model is not None:
+            _check_compiled_from(spec, model)
         self._closed = False
         self.spec = spec
         self.model = model if model is not None else spec.compile()
