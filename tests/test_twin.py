@@ -14,6 +14,7 @@ import pytest
 import trimesh
 
 from cli.main import main
+from estimation.errors import SettingsError
 from scenes.build import build_scene, write_scene
 from scenes.scenefile import SceneError, load_scene, parse_scene
 from twin.decompose import CoacdSettings, decompose
@@ -530,13 +531,19 @@ def test_setters_and_step_refuse_absurd_values_and_leave_the_state_alone(built):
             (lambda: twin.set_pose("can", np.zeros(3), np.array([np.inf, 0, 0, 0])), "non-zero quaternion"),
             (lambda: twin.set_pose("can", np.zeros(3), np.array([1.0, 0, 0])), "non-zero quaternion"),
             (lambda: twin.set_end_effector(np.array([0.0, 0.0, 1e300])), "end-effector target must be at most"),
-            (lambda: twin.step(-1), r"n must be a whole number >= 0, got -1"),
-            (lambda: twin.step(2.5), r"n must be a whole number >= 0, got 2\.5"),
-            (lambda: twin.step(True), r"n must be a whole number >= 0, got True"),
+            (lambda: twin.step(-1), r"n must be a whole number from 0 to 2147483647, got -1"),
+            (lambda: twin.step(2.5), r"n must be a whole number from 0 to 2147483647, got 2\.5"),
+            (lambda: twin.step(True), r"n must be a whole number from 0 to 2147483647, got True"),
+            # MuJoCo's C int: a multi-line pybind error.
+            (lambda: twin.step(2**31), r"n must be a whole number from 0 to 2147483647, got 2147483648"),
         ]
-        for call, message in refused:
-            with pytest.raises(ValueError, match=message):
+        for call, message in refused:  # each a TwinError too (docs/api.md), and a ValueError
+            with pytest.raises(SettingsError, match=message):
                 call()
+        with pytest.raises(TypeError, match=r"Twin\.add takes a TwinObject"):
+            twin.add(None)  # type: ignore[arg-type]  # an AttributeError
+        with pytest.raises(TypeError, match=r"Twin\.remove takes an object id \(str\)"):
+            twin.remove(None)  # type: ignore[arg-type]  # a multi-line pybind error
         for setter, args in ((twin.set_velocity, (np.zeros(3), np.zeros(3))), (twin.set_pose, (np.zeros(3), np.ones(4)))):
             with pytest.raises(KeyError, match="no object 'mug'"):
                 setter("mug", *args)

@@ -207,9 +207,15 @@ def model_reach_corners(model, reach: float) -> tuple[np.ndarray, np.ndarray]:  
 
 def new_spec(name: str, *, table: TableSpec | None = None, end_effector: EndEffectorSpec | None = None,  # type: ignore[no-untyped-def]
              physics: PhysicsSettings = DEFAULT_PHYSICS):
-    """An MjSpec with the floor, the table and the end effector, and no objects."""
+    """An MjSpec with the floor, the table and the end effector, and no objects.
+
+    Raises:
+        TypeError: ``name`` is not a string (MuJoCo's own message spanned lines).
+    """
     import mujoco
 
+    if not isinstance(name, str):
+        raise TypeError(f"new_spec: name must be a string, got {type(name).__name__}")
     spec = mujoco.MjSpec()
     spec.modelname = name
     spec.option.timestep = physics.timestep

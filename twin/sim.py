@@ -11,7 +11,7 @@ from concurrent.futures import Future, ThreadPoolExecutor
 
 import numpy as np
 
-from estimation.errors import TwinError
+from estimation.errors import SettingsError, TwinError
 from sync.clock import REAL_CLOCK, Clock
 from sync.messages import MAX_ANGULAR_SPEED, MAX_COORDINATE, MAX_SPEED
 from twin.debuglog import OFF, DebugLog
@@ -153,8 +153,8 @@ class Twin:
             raise TwinClosedError("twin is closed")
         # bool is an int to Python, and mj_step takes -1 or 2.5 without a word and steps nothing. A plain int
         # is asked about first: this is the 1 kHz path.
-        if (type(n) is not int and (not isinstance(n, numbers.Integral) or isinstance(n, bool))) or n < 0:
-            raise ValueError(f"step count n must be a whole number >= 0, got {n!r}")
+        if (type(n) is not int and (not isinstance(n, numbers.Integral) or isinstance(n, bool))) or not 0 <= n <= MAX_STEPS:
+            raise SettingsError(f"step count n must be a whole number from 0 to {MAX_STEPS}, got {str(n)[:40]}")
         d = self.data
         if not self._finite():  # a bad write since the last step: catch it before the solver spreads it
             self._recover()
@@ -274,15 +274,21 @@ class Twin:
         """Add an object without disturbing the others.
 
         Raises:
+            TypeError: ``obj`` is not a :class:`~twin.objects.TwinObject`.
             ValueError: MuJoCo refused the edited model (the twin is unchanged).
         """
+        _check_object(obj, "add")
         self.edit(lambda spec: add_object(spec, obj))
 
     def remove(self, object_id: str) -> None:
+        """Remove an object. Raises: TypeError: ``object_id`` is not a string."""
+        if not isinstance(object_id, str):  # MuJoCo's own message spanned lines ("incompatible function arguments")
+            raise TypeError(f"Twin.remove takes an object id (str), got {type(object_id).__name__}")
         self.edit(lambda spec: remove_object(spec, object_id))
 
     def replace(self, obj: TwinObject) -> None:
         """Swap an object's geometry and inertia, keeping its current pose and velocity."""
+        _check_object(obj, "replace")
         pos, quat = self.pose(obj.id)
 
         def swap(spec) -> None:  # type: ignore[no-untyped-def]
@@ -431,7 +437,7 @@ class Twin:
         quat = np.asarray(quat, dtype=np.float64)
         biggest = float(np.abs(quat).max()) if quat.shape == (4,) else math.nan
         if not 0 < biggest < math.inf:  # NaN fails too
-            raise ValueError(f"object {object_id!r}: pose must be finite with a non-zero quaternion, "
+            raise SettingsError(f"object {object_id!r}: pose must be finite with a non-zero quaternion, "
                              f"got {_short(quat)}")
         # Scaled first: the norm of 1e300s overflows to inf and that of 1e-200s underflows to 0, and MuJoCo's
         # own normalisation then made a zero (NaN) or identity rotation of a quaternion that has a direction.
@@ -448,24 +454,35 @@ class Twin:
         return None if bid < 0 else int(self.model.body_mocapid[bid])
 
 
+def _check_object(obj: object, caller: str) -> None:
+    """Raises: TypeError: ``obj`` is not a :class:`~twin.objects.TwinObject` (None was an AttributeError)."""
+    if not isinstance(obj, TwinObject):
+        raise TypeError(f"Twin.{caller} takes a TwinObject (twin.object_at_estimate makes one), got "
+                        f"{type(obj).__name__}")
+
+
+#: Most physics steps one :meth:`Twin.step` call takes: MuJoCo's C int (2**31 was a multi-line pybind error).
+MAX_STEPS = 2**31 - 1
+
+
 def _vector(value: object, size: int, limit: float, what: str, unit: str, *, norm: bool = False) -> np.ndarray:
     """``value`` as a (size,) float64 array of finite numbers, each (or, with ``norm``, their length) at most
     ``limit`` ``unit``.
 
     Raises:
-        ValueError: naming ``what``, the bound and the value.
+        SettingsError: naming ``what``, the bound and the value (a TwinError and a ValueError).
     """
     try:
         v = np.asarray(value, dtype=np.float64)
     except (TypeError, ValueError):
-        raise ValueError(f"{what} must be {size} finite numbers, got {_short(value)}") from None
+        raise SettingsError(f"{what} must be {size} finite numbers, got {_short(value)}") from None
     if v.shape != (size,) or not np.isfinite(v).all():
-        raise ValueError(f"{what} must be {size} finite numbers, got {_short(v)}")
+        raise SettingsError(f"{what} must be {size} finite numbers, got {_short(v)}")
     biggest = float(np.abs(v).max())
     # The length only under the limit: it is at least the largest component, and 1e300s overflow it.
     if not (biggest <= limit and (not norm or float(np.linalg.norm(v)) <= limit)):
         bound = f"at most {limit:g} {unit}" + (" in magnitude" if norm else " in each axis")
-        raise ValueError(f"{what} must be {bound}, got {_short(v)}")
+        raise SettingsError(f"{what} must be {bound}, got {_short(v)}")
     return v
 
 
