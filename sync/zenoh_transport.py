@@ -305,7 +305,8 @@ def make_config(*, listen: list[str] | None = None, connect: list[str] | None = 
             raise SessionError(f"zenoh config {path}: {_zenoh_error(exc)}") from exc
         for key in TLS_FILE_KEYS:  # Zenoh reads them when the session opens: a FIFO hung it, /dev/zero ate memory
             named = json.loads(conf.get_json(f"transport/link/tls/{key}"))
-            if named is not None:
+            # One not made yet is Zenoh's to report when it opens a TLS link (configs/ ships names, not files).
+            if named is not None and Path(str(named)).exists():
                 _read_small(Path(str(named)), f"zenoh config {path}: transport/link/tls/{key}", MAX_CONFIG_BYTES,
                             read=False)
     else:

@@ -74,7 +74,7 @@ def test_parse_target_accepts_the_three_modes_and_names_what_is_wrong(tmp_path):
     assert parse_target(["save", str(tmp_path / "a.rrd")], 10).rate_hz == 10
     assert parse_target(["connect"]).address == "rerun+http://127.0.0.1:9876/proxy"
     assert parse_target(["connect", "host:1234"]).address == "rerun+http://host:1234/proxy"
-    with pytest.raises(TwinError, match=r"should end in \.rrd"):
+    with pytest.raises(TwinError, match=r"should be a file name ending in \.rrd"):
         parse_target(["save", str(tmp_path / "a.txt")])
     with pytest.raises(TwinError, match="does not exist"):
         parse_target(["save", str(tmp_path / "no" / "a.rrd")])
