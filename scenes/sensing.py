@@ -298,12 +298,14 @@ class CameraSensor:
             return seen
         scan = self._current(truth, force=force and object_id not in self._observed)
         k = self._associate(truth, scan, object_id)
-        segment = None if k is None else scan.segments[k]
+        segment, shared = None if k is None else scan.segments[k], None
         if k is not None and not self._alone(scan, k, object_id):
-            segment = self._labelled_part(truth, scan, k, object_id)
-            if segment is None:
+            mine = self._labelled(truth, scan, k, object_id)
+            if mine is None:
                 self._refuse_merged(scan, k, object_id)
                 k = None
+            else:
+                segment, shared = scan.segments[k].part(mine), (scan.segments[k], scan.segments[k].points[~mine])
         if k is None:
             last = self._observed.get(object_id)
             if last is not None:
@@ -312,7 +314,7 @@ class CameraSensor:
             self._tracked[object_id] = (scan.time, self._unseen_track(object_id, scan.time))
             empty = np.zeros((0, 3))
             return Observation(empty, empty, self._last.get(object_id, np.zeros(3)), np.array([1.0, 0, 0, 0]))
-        seen = self._subsample(self._fuse(scan, segment), points, shot)
+        seen = self._subsample(self._fuse(scan, segment, shared=shared), points, shot)
         observed = scan.trackable(seen.points[~seen.completed])  # type: ignore[index]
         self._model[object_id] = (self._icp_model(observed, shot), seen.frame_position)
         self._motion[object_id] = self._reviewed[object_id] = np.eye(4)
@@ -328,9 +330,9 @@ class CameraSensor:
             log.info("%s: seen alone at t=%.3f: observed", object_id, scan.time)
         return seen
 
-    def _labelled_part(self, truth: GroundTruth, scan, k: int, object_id: str):  # type: ignore[no-untyped-def]
-        """``object_id``'s own points of the merged segment ``k``, as the simulator's segmentation image labels
-        them (a :class:`scenes.cameras.Segment`), or None: without ``segmentation_image``, or with fewer than
+    def _labelled(self, truth: GroundTruth, scan, k: int, object_id: str) -> np.ndarray | None:  # type: ignore[no-untyped-def]
+        """Which points of the merged segment ``k`` are ``object_id``'s own, as the simulator's segmentation image
+        labels them ((n,) bool), or None: without ``segmentation_image``, or with fewer than
         ``MIN_LABELLED_POINTS`` of them. Counted in ``labelled`` and said once per object."""
         if not self.segmentation_image:
             return None
@@ -347,7 +349,7 @@ class CameraSensor:
         log.log(level, "%s: its segment in the scan at t=%.3f holds %s too (merged); observed from its own %d "
                 "points, as the simulator's segmentation image labels them", object_id, scan.time,
                 ", ".join(owners) or "another object", int(mine.sum()))
-        return seg.part(mine)
+        return mine
 
     def _refuse_merged(self, scan, k: int, object_id: str) -> None:  # type: ignore[no-untyped-def]
         """Say (once per object until it is observed; at DEBUG after) and count (once per segment and scan)
@@ -758,15 +760,19 @@ class CameraSensor:
         self._seen_at[object_id] = time
         return self._velocity.get(object_id, (np.zeros(3), np.zeros(3)))
 
-    def _fuse(self, scan, seg, *, carve: bool = True) -> Observation:  # type: ignore[no-untyped-def]
+    def _fuse(self, scan, seg, *, carve: bool = True, shared=None) -> Observation:  # type: ignore[no-untyped-def]
         """The segment's views as one cloud: normals towards each point's camera, the base closed (without
-        ``carve``, by the mirror image and the base alone: bench/carving_effect.py compares the two)."""
+        ``carve``, by the mirror image and the base alone: bench/carving_effect.py compares the two).
+        ``shared``: (the merged segment ``seg`` was cut from, the rest of its points): that rest is other
+        objects', as the other segments are (the whole segment, this object's points included, was)."""
         from estimation.completion import close_on_plane
         from estimation.fusion import oriented_normals
         from estimation.spacing import surface_noise
 
         pts, origins = seg.points, seg.origins
-        others = [s.points for s in scan.segments if s is not seg]
+        others = [s.points for s in scan.segments if s is not seg and (shared is None or s is not shared[0])]
+        if shared is not None:
+            others.append(shared[1])
         # The segment holds its lowest band too (below the clustering cut, see Scan.cut); completion starts at
         # the cut as before (the skirt, the carving grid's cell), and the mirror test reads the band.
         closed = close_on_plane(pts, origins, oriented_normals(pts, origins), scan.plane, cell=scan.cell / 3,
