@@ -25,6 +25,7 @@ from estimation.segmentation import MIN_CLUSTER_POINTS
 from scenes.sampling import sample_surface
 from twin.model import free_joint
 from twin.poses import matrix_quat, rotation, to_rotvec
+from twin.workers import lower_priority
 
 log = logging.getLogger(__name__)
 
@@ -224,7 +225,10 @@ class CameraSensor:
         self._lost: dict[str, int] = {}  # id -> scans its track has been lost in a row (said at WARNING once)
         self._labelled_said: set[str] = set()  # ids observed by the segmentation image, said at INFO once
         self._lock = threading.Lock()  # the tracker's state: one scan-and-track at a time
-        self._pool = ThreadPoolExecutor(1, thread_name_prefix="cameras") if background else None
+        # The scans at the priority of the twin's estimation workers: at the loop's, on two cores shared with a
+        # twin (twin demo), scanning without pause took the CPU its workers needed (8 objects: 347 s).
+        self._pool = (ThreadPoolExecutor(1, thread_name_prefix="cameras", initializer=lower_priority)
+                      if background else None)
         self._job: Future | None = None
         self._submitted = -np.inf  # simulated time of the last background scan's state
 

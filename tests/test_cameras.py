@@ -724,3 +724,21 @@ def test_a_camera_at_its_own_target_is_refused_not_given_a_nan_rotation():
 
     with pytest.raises(SettingsError, match=r"^Camera 'c': target must differ from position"):
         Camera("c", (0.1, 0.2, 1.0), (0.1, 0.2, 1.0))
+
+
+def test_background_scans_run_at_the_estimation_workers_priority_not_the_loops():
+    """At the loop's priority the scan thread took the CPU a twin's estimation workers needed on two shared
+    cores: the paper scene's 8 camera objects touchable after 342 s in twin demo."""
+    import os
+
+    from twin.workers import WORKER_NICENESS
+
+    model, data = _model({"a": (0.0, 0.0)})
+    sensor = CameraSensor(CameraFeed(_rig(1), WORKSPACE, seed=1), background=True)
+    try:
+        base = os.getpriority(os.PRIO_PROCESS, 0)
+        scan_thread = sensor._pool.submit(os.getpriority, os.PRIO_PROCESS, 0).result()  # type: ignore[union-attr]
+        assert scan_thread == min(19, base + WORKER_NICENESS)
+        assert os.getpriority(os.PRIO_PROCESS, 0) == base  # this thread (the loop's) untouched
+    finally:
+        sensor.close()

@@ -35,6 +35,12 @@ WORKER_NICENESS = 10
 def background_worker() -> None:
     """Initializer for worker pools: :func:`die_with_parent`, and a lower scheduling priority."""
     die_with_parent()
+    lower_priority()
+
+
+def lower_priority() -> None:
+    """Lower the calling thread's scheduling priority by :data:`WORKER_NICENESS` (on Linux niceness is a
+    thread's own: a background thread of a loop's process may call it; elsewhere, the process's)."""
     try:
         os.nice(WORKER_NICENESS)
     except OSError:  # not permitted here: run at the parent's priority
