@@ -733,7 +733,6 @@ def test_background_scans_run_at_the_estimation_workers_priority_not_the_loops()
 
     from twin.workers import WORKER_NICENESS
 
-    model, data = _model({"a": (0.0, 0.0)})
     sensor = CameraSensor(CameraFeed(_rig(1), WORKSPACE, seed=1), background=True)
     try:
         base = os.getpriority(os.PRIO_PROCESS, 0)
