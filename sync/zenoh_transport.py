@@ -298,7 +298,7 @@ def make_config(*, listen: list[str] | None = None, connect: list[str] | None = 
     source = "" if config_file is None else f"zenoh config {config_file}: "
     if config_file is not None:
         path = Path(config_file)
-        check_config_text(_read_small(path, "zenoh config", MAX_CONFIG_BYTES), path)
+        check_config_text(_config_text(path), path)
         try:
             conf = zenoh.Config.from_file(str(path))
         except Exception as exc:  # zenoh raises its own ZError for JSON5 or schema problems
@@ -307,8 +307,8 @@ def make_config(*, listen: list[str] | None = None, connect: list[str] | None = 
             named = json.loads(conf.get_json(f"transport/link/tls/{key}"))
             # One not made yet is Zenoh's to report when it opens a TLS link (configs/ ships names, not files).
             if named is not None and Path(str(named)).exists():
-                _read_small(Path(str(named)), f"zenoh config {path}: transport/link/tls/{key}", MAX_CONFIG_BYTES,
-                            read=False)
+                _check_small_file(Path(str(named)), f"zenoh config {path}: transport/link/tls/{key}",
+                                  MAX_CONFIG_BYTES)
     else:
         conf = zenoh.Config()
         conf.insert_json5("mode", json.dumps(mode))
@@ -371,11 +371,11 @@ TLS_FILE_KEYS = ("root_ca_certificate", "listen_private_key", "listen_certificat
                  "connect_certificate")
 
 
-def _read_small(path: Path, what: str, limit: int, *, read: bool = True) -> str:
-    """``path``'s text (or "" without ``read``), refused unless it is a regular file of at most ``limit`` bytes.
+def _check_small_file(path: Path, what: str, limit: int) -> None:
+    """Refuse ``path`` unless it is a regular file of at most ``limit`` bytes.
 
     Raises:
-        SessionError: naming ``what`` and why (missing, a folder, a device or pipe, too large, not UTF-8).
+        SessionError: naming ``what`` and why (missing, a folder, a device or pipe, too large).
     """
     import stat
 
@@ -388,12 +388,19 @@ def _read_small(path: Path, what: str, limit: int, *, read: bool = True) -> str:
         raise SessionError(f"{what} {path}: is {kind}, not a file")
     if info.st_size > limit:
         raise SessionError(f"{what} {path}: {info.st_size:,} bytes, more than the {limit:,} such a file may hold")
-    if not read:
-        return ""
+
+
+def _config_text(path: Path) -> str:
+    """A zenoh config's text, checked by :func:`_check_small_file` first.
+
+    Raises:
+        SessionError: as :func:`_check_small_file`, or not readable as UTF-8.
+    """
+    _check_small_file(path, "zenoh config", MAX_CONFIG_BYTES)
     try:
         return path.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as exc:
-        raise SessionError(f"{what} {path}: cannot read it ({exc})") from None
+        raise SessionError(f"zenoh config {path}: cannot read it ({exc})") from None
 
 
 def check_config_text(text: str, path: Path) -> None:
