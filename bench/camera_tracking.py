@@ -7,7 +7,7 @@ of a crate and a can on a 1 m table; the operator pushes the crate 30 cm at 0.1,
 the can, or off the table's end, then holds still for 1.5 s. Three remote sensors, each run in this process:
 - ``surface``: the simulator's own poses (what the twin gets with perfect sensing: the baseline for C'-C);
 - ``cameras, gate only``: the camera tracker with its prediction, re-acquisition and coarse ICP pass
-  switched off (``MAX_SPEED``, ``VELOCITY_WINDOW`` and ``CENTROID_TURNS`` to 0 or none, ``COARSE_FACTOR``
+  switched off (``scenes.association.MAX_SPEED``, ``VELOCITY_WINDOW`` and ``CENTROID_TURNS`` to 0 or none, ``COARSE_FACTOR``
   1): the association and ICP start of before commit 76544b1 (what the wire says of a lost object,
   ``Pose.seen``, is the same for both);
 - ``cameras``: the tracker as it is (scenes.sensing.CameraSensor, 3 Kinect-model cameras, a scan every
@@ -53,15 +53,17 @@ HOLD_S = 1.5
 @contextmanager
 def gate_only():
     """The camera tracker without prediction, re-acquisition or coarse pass (module constants)."""
+    import scenes.association as association
     import scenes.sensing as sensing
 
-    saved = {k: getattr(sensing, k) for k in ("MAX_SPEED", "VELOCITY_WINDOW", "CENTROID_TURNS", "COARSE_FACTOR")}
-    sensing.MAX_SPEED, sensing.VELOCITY_WINDOW, sensing.CENTROID_TURNS, sensing.COARSE_FACTOR = 0.0, 0.0, (), 1.0
+    saved = [(association, "MAX_SPEED")] + [(sensing, k) for k in ("VELOCITY_WINDOW", "CENTROID_TURNS", "COARSE_FACTOR")]
+    values = [getattr(module, k) for module, k in saved]
+    association.MAX_SPEED, sensing.VELOCITY_WINDOW, sensing.CENTROID_TURNS, sensing.COARSE_FACTOR = 0.0, 0.0, (), 1.0
     try:
         yield
     finally:
-        for k, v in saved.items():
-            setattr(sensing, k, v)
+        for (module, k), v in zip(saved, values, strict=True):
+            setattr(module, k, v)
 
 
 def run(scene, push: float, speed: float, sensor_name: str) -> dict:  # type: ignore[no-untyped-def]

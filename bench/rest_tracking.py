@@ -8,7 +8,7 @@ observes every object once, then the scene is stepped one tracking period at a t
 touches it, and every object is tracked after each step, ``--scans`` times. Each track is compared with the
 object's frame as first observed (nothing moved: the truth is no motion). Two trackers in the same process,
 on the same scans: each scan's own fit (``rest_window=1``, the tracker before averaging) and the running
-mean of the fits at rest (``scenes.sensing.REST_WINDOW``, the default). "corrections" counts the poses the
+mean of the fits at rest (``scenes.restfilter.REST_WINDOW``, the default). "corrections" counts the poses the
 remote would have published of objects that did not move: tracks that left its deadband (1 mm, 0.5 degree)
 around the last one published.
 """
@@ -77,7 +77,7 @@ def run(cameras: int, scans: int, rest_window: int | None) -> dict:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from scenes.sensing import REST_WINDOW
+    from scenes.restfilter import REST_WINDOW
 
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--scans", type=int, default=12, help="tracking periods at rest (default 12: 6 s)")

@@ -22,6 +22,8 @@ import numpy as np
 
 from estimation.fusion import SurfaceMotions, unseen_motions
 from estimation.segmentation import MIN_CLUSTER_POINTS
+from scenes import association
+from scenes.restfilter import REST_WINDOW, RestFilter
 from scenes.sampling import sample_surface
 from twin.model import free_joint
 from twin.poses import matrix_quat, rotation, to_rotvec
@@ -170,12 +172,12 @@ class CameraSensor:
     with the scan's time.
 
     While an object rests, its track is the running mean of its last fits (``rest_window`` of them at most,
-    see :meth:`_at_rest`), so each scan's noise does not move it; 1 turns that off.
+    see :class:`scenes.restfilter.RestFilter`), so each scan's noise does not move it; 1 turns that off.
 
     Between scans an object is predicted at constant velocity (from its last two tracks), and ICP starts
     from that prediction and, when the segment is the object's alone, from the segment's centroid; the
     better fit wins. An object not found near its prediction is looked for again, in segments no other
-    object claims, within how far it could have moved since it was last seen (``MAX_SPEED``).
+    object claims, within how far it could have moved since it was last seen (:mod:`scenes.association`).
 
     Nothing the cameras see raises: an object in no segment, two objects in one segment, a lost ICP are
     logged and counted in ``self.feed.stats``; the last good observation or track is returned, a track
@@ -199,9 +201,7 @@ class CameraSensor:
         self.feed = feed
         self.segmentation_image = segmentation_image
         self.track_period = track_period
-        self.rest_window = REST_WINDOW if rest_window is None else max(1, int(rest_window))  # 1: each scan's own fit
-        self._rest: dict[str, int] = {}  # id -> fits averaged into its track since it last moved (see _at_rest)
-        self._scatter: dict[str, tuple[int, float]] = {}  # id -> (steps at rest counted, their mean square reach)
+        self._rest = RestFilter(REST_WINDOW if rest_window is None else rest_window)  # 1: each scan's own fit
         self.seed = seed
         self._scan = None
         self._claims: dict[int, set[str]] = {}
@@ -385,7 +385,7 @@ class CameraSensor:
         observed = self._scan.trackable(seen.points[~seen.completed])  # type: ignore[union-attr,index]
         back = (observed - motion[:3, 3]) @ motion[:3, :3]  # R^T (x - t)
         self._model[object_id] = (self._icp_model(back, shot), self._model[object_id][1])
-        self._rest[object_id] = 1  # the fits averaged so far answered to the old model
+        self._rest.restart(object_id)
         self._observed[object_id] = seen
         return seen
 
@@ -452,7 +452,7 @@ class CameraSensor:
             # What the model's surface cannot show (a ball's turns, a can's about its axis) stays as it was:
             # ICP's answer there is noise, and it went out as corrections of objects at rest.
             step = self._surface_motions(object_id, model).without(np.linalg.inv(before) @ result.transform)
-            step, shrink = self._at_rest(object_id, model, step, result.rmse)
+            step, shrink = self._rest.step(object_id, model, step, result.rmse)
             motion = self._motion[object_id] = before @ step
             position = motion[:3, :3] @ centre + motion[:3, 3]
             linvel, angvel = self._update_velocity(object_id, position, motion[:3, :3] @ before[:3, :3].T, scan.time)
@@ -529,7 +529,7 @@ class CameraSensor:
     def _label(self, truth: GroundTruth, object_id: str, time: float, *, again: bool = False) -> None:
         """Labelling, once: where ``object_id`` is, from the simulator (see the class docstring); ``again``
         (a new scan), also where an object never observed is now: it is labelled at first sight, and a label
-        kept from before would be looked for ever further from where it was (``_reach``) while it was unseen."""
+        kept from before would be looked for ever further from where it was (:func:`scenes.association.reach`) while it was unseen."""
         if object_id not in self._last or (again and object_id not in self._observed):
             self._last[object_id] = np.asarray(truth.twin.pose(object_id)[0], float)  # type: ignore[attr-defined]
             self._seen_at[object_id] = time
@@ -541,28 +541,15 @@ class CameraSensor:
         cells, and a first view fused from two objects is neither of them (the paper's large objects under
         the Kinect model at 3 m, a 31 mm cell, came out +150 % to +2,400 %). Segments of tracked objects only
         are left whole: registration has its own rule for a shared segment (``MAX_SEEN_THROUGH``)."""
-        from scipy.spatial import cKDTree
-
         from estimation.segmentation import split_cluster
 
         scan = self._scan
         if len(scan.segments) == 0 or len(ids) < 2 or all(i in self._observed for i in ids):
             return  # (a tracking scan: nothing to part, and no tree of every point to build)
-        # An object is in the segment of the scan's point nearest its prediction, if that segment's box (grown
-        # by ASSOCIATION_RADIUS) holds it. Not _gated's nearest centroid: a segment of several objects has its
-        # centroid between them, nearer other segments than some of its own objects.
-        which = np.concatenate([np.full(len(seg.points), k) for k, seg in enumerate(scan.segments)])
-        tree = cKDTree(np.concatenate([seg.points for seg in scan.segments]))
-        sharing: dict[int, list[str]] = {}
-        for object_id in ids:
-            here = self._predicted(object_id, scan.time)
-            k = int(which[tree.query(here)[1]])
-            low, high = scan.segments[k].bounds
-            if ((here >= low - ASSOCIATION_RADIUS) & (here <= high + ASSOCIATION_RADIUS)).all():
-                sharing.setdefault(k, []).append(object_id)
+        sharing = association.sharing(scan.segments, {i: self._predicted(i, scan.time) for i in ids})
         segments = list(scan.segments)
         for k, owners in sorted(sharing.items()):
-            away = _outsiders(scan.segments[k], {i: self._predicted(i, scan.time) for i in owners})
+            away = association.outsiders(scan.segments[k], {i: self._predicted(i, scan.time) for i in owners})
             owners = [i for i in owners if i not in away]
             if len(owners) < 2 or all(i in self._observed for i in owners):
                 continue
@@ -598,7 +585,7 @@ class CameraSensor:
             self.feed.stats.unseen += 1
             since = scan.time - self._seen_at.get(object_id, scan.time)
             log.log(self._miss_level(object_id), "%s: no free segment within %.0f mm of where it was %.1f s ago; "
-                    "not seen", object_id, 1000 * self._reach(since), since)
+                    "not seen", object_id, 1000 * association.reach(since), since)
             return None
         owners = self._claims.setdefault(k, set())
         owners.add(object_id)
@@ -623,55 +610,20 @@ class CameraSensor:
         return last if velocity is None else last + velocity[0] * (time - self._seen_at.get(object_id, time))
 
     def _gated(self, scan) -> dict[str, int]:  # type: ignore[no-untyped-def]
-        """Every labelled object's segment at its prediction in ``scan`` (computed once per scan).
-
-        The segment is the one with the nearest centroid, if the prediction lies inside its box grown by
-        ``ASSOCIATION_RADIUS`` (a large object's centroid, of what was seen, can be far from its frame).
-        """
-        if self._gates is not None:
-            return self._gates
-        centroids = np.array([seg.centroid for seg in scan.segments])
-        lows = np.array([seg.bounds[0] for seg in scan.segments]) - ASSOCIATION_RADIUS
-        highs = np.array([seg.bounds[1] for seg in scan.segments]) + ASSOCIATION_RADIUS
-        gates: dict[str, int] = {}
-        for object_id in self._last:
-            here = self._predicted(object_id, scan.time)
-            k = int(np.argmin(np.linalg.norm(centroids - here, axis=1)))
-            if ((here >= lows[k]) & (here <= highs[k])).all():
-                gates[object_id] = k
-        by_segment: dict[int, list[str]] = {}
-        for object_id, k in gates.items():
-            by_segment.setdefault(k, []).append(object_id)
-        for k, owners in by_segment.items():
-            for object_id in _outsiders(scan.segments[k], {i: self._predicted(i, scan.time) for i in owners}):
-                del gates[object_id]
-        self._gates = gates
-        return gates
+        """Every labelled object's segment at its prediction in ``scan`` (:func:`scenes.association.gate`,
+        computed once per scan)."""
+        if self._gates is None:
+            self._gates = association.gate(scan.segments, {i: self._predicted(i, scan.time) for i in self._last})
+        return self._gates
 
     def _search(self, scan, object_id: str, *, taken: set[int]) -> int | None:  # type: ignore[no-untyped-def]
         """The nearest segment no object is predicted in, within reach of where ``object_id`` was last seen."""
-        last = self._last[object_id]
-        reach = self._reach(scan.time - self._seen_at.get(object_id, scan.time))
-        best, best_d = None, np.inf
-        for k, seg in enumerate(scan.segments):
-            if k in taken:
-                continue
-            # Distance from the last position to the segment's box: a box, not the centroid, for the reason
-            # in _gated.
-            low, high = seg.bounds
-            d = float(np.linalg.norm(np.maximum(0.0, np.maximum(low - last, last - high))))
-            if d <= reach and d < best_d:
-                best, best_d = k, d
-        return best
+        since = scan.time - self._seen_at.get(object_id, scan.time)
+        return association.search(scan.segments, self._last[object_id], association.reach(since), taken=taken)
 
     def _alone(self, scan, k: int, object_id: str) -> bool:  # type: ignore[no-untyped-def]
         """No other object is predicted in segment ``k`` of ``scan``."""
         return all(i == object_id for i, g in self._gated(scan).items() if g == k)
-
-    @staticmethod
-    def _reach(since: float) -> float:
-        """Metres an object may have moved in ``since`` seconds unseen."""
-        return ASSOCIATION_RADIUS + MAX_SPEED * max(since, 0.0)
 
     def _register(self, scan, k: int, object_id: str, model: np.ndarray):  # type: ignore[no-untyped-def]
         """ICP of the object's model to segment ``k``, from where it was (the fit kept if ``GOOD_FITNESS``);
@@ -710,36 +662,6 @@ class CameraSensor:
         top = max(f.fitness for f in fits)
         return min((f for f in fits if f.fitness >= top - FITNESS_TIE), key=lambda f: f.rmse)
 
-    def _at_rest(self, object_id: str, model: np.ndarray, step: np.ndarray, rmse: float) -> tuple[np.ndarray, float]:
-        """``step`` ((4, 4), what ICP found since the last track, acting on the model's points), averaged with
-        the fits before it while the object rests; and the factor its uncertainty shrinks by.
-
-        A step is noise at rest when it moves no model point further than ``REST_GATE`` times the scatter of
-        this object's earlier steps at rest (their RMS reach), and never further than ``REST_GATE`` times the
-        fit's RMS residual (all a first step has to go by). Then the track moves by ``1/n`` of it, the running
-        mean of the last ``n`` such fits (at most ``REST_WINDOW``). The first is the pose the object was first
-        seen in, or after a motion the first fit at rest (taken whole: the last fit in motion may have caught
-        it still sliding). A larger step is motion: the track takes it whole and the count starts again.
-
-        At rest each scan's fresh noise turned a 3 cm dice by up to 1.4 degrees seen by one camera, and every
-        such turn past the remote's deadband went out as a correction of an object that had not moved. The
-        price: a creep slower than the gate a scan is followed up to the gate late. The gate follows the
-        scatter because the residual alone let a can's first 2 mm of being pushed (its fits at rest moved it
-        0.1-0.4 mm; the residual was 2.5 mm) be averaged away.
-        """
-        moved = model @ step[:3, :3].T + step[:3, 3] - model
-        reach = float(np.sqrt(np.einsum("ij,ij->i", moved, moved).max())) if len(model) else np.inf
-        count, scatter = self._scatter.get(object_id, (0, 0.0))
-        gate = REST_GATE * (rmse if count < 2 else min(rmse, np.sqrt(scatter)))
-        if reach > gate:
-            self._rest[object_id] = 0
-            return step, 1.0
-        # The scatter's memory is REST_WINDOW steps too: a new view or noise level shows within a few scans.
-        count = min(count + 1, self.rest_window)
-        self._scatter[object_id] = (count, scatter + (reach**2 - scatter) / count)
-        n = self._rest[object_id] = min(self._rest.get(object_id, 1) + 1, self.rest_window)
-        return _partial_motion(step, model.mean(axis=0), 1.0 / n), 1.0 / np.sqrt(n)
-
     def _surface_motions(self, object_id: str, model: np.ndarray) -> SurfaceMotions:
         """:func:`estimation.fusion.unseen_motions` of the object's ICP model (worked out once per model)."""
         cached = self._unseen.get(object_id)
@@ -755,8 +677,8 @@ class CameraSensor:
         if before is not None and 0 < since <= VELOCITY_WINDOW:
             linear = (position - before) / since
             speed = float(np.linalg.norm(linear))
-            if speed > MAX_SPEED:
-                linear = linear * (MAX_SPEED / speed)
+            if speed > association.MAX_SPEED:
+                linear = linear * (association.MAX_SPEED / speed)
             self._velocity[object_id] = (linear, to_rotvec(matrix_quat(turn)[None])[0] / since)
         else:
             self._velocity.pop(object_id, None)
@@ -810,23 +732,6 @@ def _seen_through(scan, model: np.ndarray, transform: np.ndarray) -> float:  # t
     return float(free_space(moved, scan.views, slack=scan.cell).mean())
 
 
-def _outsiders(seg, predicted: dict[str, np.ndarray]) -> set[str]:  # type: ignore[no-untyped-def]
-    """Of the objects predicted (world frame, metres) in one segment, those that are not in it: when some
-    stand over the segment's footprint (the world's x-y box of its points), the others further than
-    ``SHARED_MARGIN`` outside it. A centre of mass stands over its object's footprint, and a segment seen
-    from above covers the footprints of the objects in it; the box ``ASSOCIATION_RADIUS`` around a segment
-    is wide for objects whose visible part is small (one mostly hidden behind another), and a 3 mm disc
-    flat on the table, all of it below the clustering cut, took a ball's segment 9 cm away for its own.
-    """
-    if len(predicted) < 2:
-        return set()
-    low, high = seg.bounds[0][:2], seg.bounds[1][:2]
-    gap = {i: float(np.linalg.norm(np.maximum(0.0, np.maximum(low - p[:2], p[:2] - high)))) for i, p in predicted.items()}
-    if min(gap.values()) > 0:
-        return set()  # none over it: nothing tells them apart here
-    return {i for i, g in gap.items() if g > SHARED_MARGIN}
-
-
 def _completed_share(seen: Observation) -> float:
     """The share of an observation's points no camera saw: 0 without completion flags, 1 without points."""
     if seen.completed is None or not len(seen.points):
@@ -846,13 +751,7 @@ REVIEW_GAIN = 0.05
 #: Points of an object's first fused cloud kept as its ICP model.
 MODEL_POINTS_CAP = 4000
 
-#: A segment further than this from an object's last position is not that object, metres: more than an
-#: object at rest moves between scans, less than the gaps in the clutter scene.
-ASSOCIATION_RADIUS = 0.08
 
-#: Metres outside a shared segment's footprint an object's centre may be and still share it when another
-#: object's centre is over it (:func:`_outsiders`): a few clustering cells of a 1 mm camera at a metre.
-SHARED_MARGIN = 0.02
 
 #: An object's own points of a merged segment, as the segmentation image labels them, fewer than this are not a
 #: view of it (the clustering's own smallest segment: :data:`estimation.segmentation.MIN_CLUSTER_POINTS`).
@@ -870,24 +769,12 @@ MIN_FITNESS = 0.3
 #: Two objects of the same shape in each other's place are not told apart this way.
 MAX_SEEN_THROUGH = 0.2
 
-#: The fastest an object is expected to move, m/s: what a teleoperated arm pushes or carries across a table.
-#: An object lost for t seconds is looked for within ``ASSOCIATION_RADIUS + MAX_SPEED t`` of where it was.
-MAX_SPEED = 1.0
 
 #: Seconds over which two tracks give a velocity to predict with; further apart, none (a stale difference
 #: says little about the motion now).
 VELOCITY_WINDOW = 1.5
 
-#: A step of ICP that moves no point of the model further than this many times the scatter of the object's
-#: earlier steps at rest (their RMS reach), nor this many times the fit's RMS residual, is taken for noise at
-#: rest (``CameraSensor._at_rest``): three sigmas. One noisy camera's fits of a resting box reached 1.5-3
-#: times the residual; a push moves an object centimetres between two scans.
-REST_GATE = 3.0
 
-#: Fits at rest a track is the running mean of, at most (``CameraSensor._at_rest``): eight scans, 4 s at the
-#: default period, take the noise of each down by a factor of 2.8; a longer memory would follow a slow creep
-#: (under the fit's residual a scan) later.
-REST_WINDOW = 8
 
 #: Turns about the vertical (radians) tried from the segment's centroid: a pushed object turns.
 CENTROID_TURNS = (0.0, np.pi / 2, np.pi, -np.pi / 2)
@@ -901,18 +788,6 @@ GOOD_FITNESS = 0.95
 #: Fits within this much of the best fitness are told apart by their RMSE (fitness saturates at 1 when the
 #: correspondence distance is several noise sigmas).
 FITNESS_TIE = 0.02
-
-
-def _partial_motion(step: np.ndarray, centre: np.ndarray, share: float) -> np.ndarray:
-    """``share`` (0-1) of the rigid motion ``step`` ((4, 4)): the same turn about ``centre`` ((3,) metres) by
-    ``share`` of its angle, and ``share`` of ``centre``'s shift."""
-    from scipy.spatial.transform import Rotation
-
-    out = np.eye(4)
-    out[:3, :3] = Rotation.from_rotvec(share * Rotation.from_matrix(step[:3, :3]).as_rotvec()).as_matrix()
-    shift = step[:3, :3] @ centre + step[:3, 3] - centre
-    out[:3, 3] = centre + share * shift - out[:3, :3] @ centre
-    return out
 
 
 class _Still:

@@ -281,7 +281,7 @@ def test_a_lost_track_is_said_once_while_it_stays_lost_and_when_it_is_found(monk
 
 
 def test_at_rest_a_track_is_the_mean_of_its_fits_and_a_move_is_taken_whole():
-    from scenes.sensing import REST_WINDOW
+    from scenes.restfilter import REST_WINDOW
 
     each, mean = _rest_tracks(1, 8), _rest_tracks(None, 8)
     # The same scans (same seed): each fit's noise moves the first tracker; the mean settles.
@@ -309,7 +309,7 @@ def _tracked_error(sensor, truth, name: str, seen, start) -> float:  # type: ign
 
 
 def test_an_object_moved_further_than_the_association_radius_between_scans_is_found_again():
-    from scenes.sensing import ASSOCIATION_RADIUS
+    from scenes.association import ASSOCIATION_RADIUS
 
     model, data = _model({"a": (-0.2, 0.0), "b": (0.2, 0.15)})
     sensor, truth = CameraSensor(CameraFeed(_rig(3), WORKSPACE, seed=3)), _Truth(model, data)
@@ -741,3 +741,4 @@ def test_background_scans_run_at_the_estimation_workers_priority_not_the_loops()
         assert os.getpriority(os.PRIO_PROCESS, 0) == base  # this thread (the loop's) untouched
     finally:
         sensor.close()
+
