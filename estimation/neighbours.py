@@ -20,6 +20,12 @@ TIE_EXTRA = 8
 TIE_RELATIVE = 1e-9
 
 
+#: Queries at least this many are split across every core; fewer run in the caller's thread (scipy starts
+#: its threads at every call: a few hundred queries, as ICP asks for a target's normals, waited on them
+#: longer than they searched).
+PARALLEL_QUERIES = 2000
+
+
 def nearest(tree: cKDTree, queries: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
     """Distances (q, k) and indices (q, k) of each query's ``k`` nearest points in ``tree``, nearest
     first; points at one distance (``TIE_RELATIVE``) in ascending index order.
@@ -30,7 +36,7 @@ def nearest(tree: cKDTree, queries: np.ndarray, k: int) -> tuple[np.ndarray, np.
         k: neighbours wanted, at most ``tree.n``.
     """
     fetch = min(k + TIE_EXTRA, tree.n)
-    dist, index = tree.query(queries, k=fetch, workers=-1)
+    dist, index = tree.query(queries, k=fetch, workers=-1 if len(queries) >= PARALLEL_QUERIES else 1)
     dist = dist.reshape(len(queries), fetch)
     index = index.reshape(len(queries), fetch)
     step = np.diff(dist, axis=1) > TIE_RELATIVE * dist[:, 1:]

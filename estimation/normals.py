@@ -113,15 +113,20 @@ def fit_normals(points: np.ndarray, k: int = tol.NORMAL_NEIGHBOURS, *,
     tilt = np.empty(len(points))
     for start in range(0, len(points), NORMAL_BLOCK):
         block = slice(start, start + NORMAL_BLOCK)
-        patch = points[neighbours[block]]
-        patch -= patch.mean(axis=1, keepdims=True)
-        # eigh sorts eigenvalues ascending: column 0 is the direction of least spread.
-        lam, vec = np.linalg.eigh(patch.transpose(0, 2, 1) @ patch)
+        lam, vec = patch_axes(points, neighbours[block])
         normals[block] = vec[:, :, 0]
         tilt[block] = np.maximum(lam[:, 0], 0.0) / (k * np.maximum(lam[:, 1], np.finfo(float).tiny))
     if noise > 0 and k > tol.NORMAL_NEIGHBOURS:
         _refit_own_sheet(points, neighbours, normals, tilt, noise)
     return normals, tilt
+
+
+def patch_axes(points: np.ndarray, neighbours: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The principal axes of each patch ``points[neighbours[i]]``: eigenvalues (q, 3) ascending (m^2, the
+    patch's spread times its size) and unit eigenvectors (q, 3, 3) as columns; column 0 is the normal."""
+    patch = points[neighbours]
+    patch -= patch.mean(axis=1, keepdims=True)
+    return np.linalg.eigh(patch.transpose(0, 2, 1) @ patch)
 
 
 def _refit_own_sheet(points: np.ndarray, neighbours: np.ndarray, normals: np.ndarray, tilt: np.ndarray,

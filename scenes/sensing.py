@@ -630,9 +630,9 @@ class CameraSensor:
         failing that, the best fit also from its predicted motion and, when the segment is the object's
         alone, from the segment's centroid at a few turns about the vertical (each a coarse pass, then a
         fine one). Best: the lowest RMSE among the fits within ``FITNESS_TIE`` of the highest fitness."""
-        from estimation.fusion import register
+        from estimation.fusion import icp_target, register
 
-        target = scan.trackable(scan.segments[k].points)
+        target = icp_target(scan.trackable(scan.segments[k].points))  # its normals and tree, once for every fit
         motion = self._motion[object_id]
         distance = max(3 * scan.cell, 0.01)
         still = register(model, target, init=motion, max_distance=distance)
