@@ -22,7 +22,6 @@ is an error naming the formats that keep it, unless the caller names it in ``sav
 
 from __future__ import annotations
 
-import numbers
 import stat
 import zipfile
 from collections.abc import Iterable
@@ -30,6 +29,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from estimation.cloud import PointCloud, check_is_cloud, make_cloud
+from estimation.contracts import check_number
 from estimation.errors import CloudError, CloudFileError, SettingsError
 from estimation.numpycloud import read_numpy, write_numpy
 from estimation.pcdfile import one_origin, read_pcd, write_pcd
@@ -67,9 +67,8 @@ def load_cloud(path: str | Path, *, scale: float = 1.0, max_points: int = MAX_PO
         CloudError: the file holds no usable points.
     """
     path = Path(path)
-    if isinstance(max_points, bool) or not isinstance(max_points, numbers.Integral) or max_points < 1:
-        # '5' was a TypeError from a comparison deep in a reader; -1 was taken, and refused every file.
-        raise SettingsError(f"max_points must be a whole number >= 1, got {str(max_points)[:40]!r}")
+    # '5' was a TypeError from a comparison deep in a reader; -1 was taken, and refused every file.
+    check_number(max_points, "max_points", low=1, whole=True, error=SettingsError)
     check_input_file(path)
     suffix = path.suffix.lower()
     if suffix not in SUFFIXES:

@@ -118,7 +118,8 @@ def check_number(value: object, label: str, *, low: float = 0.0, low_ok: bool = 
     if isinstance(value, bool) or not isinstance(value, kind):
         raise error(f"{label} must be a {'whole number' if whole else 'number'}, got {type(value).__name__} "
                     f"{shown(value)}")
-    bounds = f"{'>=' if low_ok else '>'} {low:g}" + (f" and <= {high:g}" if math.isfinite(high) else "")
+    bounds = " and ".join(([f"{'>=' if low_ok else '>'} {low:g}"] if math.isfinite(low) else [])
+                          + ([f"<= {high:g}"] if math.isfinite(high) else [])) or "a finite number"
     if isinstance(value, numbers.Integral) and abs(int(value)) > 2**1023:  # past any float: past any bound
         raise error(f"{label} must be {bounds}, got {shown(value)}")
     number = float(value)

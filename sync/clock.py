@@ -87,13 +87,9 @@ def _seconds(value: float, what: str) -> float:
     Raises:
         SettingsError: naming ``what``.
     """
-    try:
-        seconds = float(value)
-    except (TypeError, ValueError):
-        raise SettingsError(f"simulated clock {what}: seconds must be a number, got {str(value)[:40]!r}") from None
-    if not math.isfinite(seconds):
-        raise SettingsError(f"simulated clock {what}: seconds must be finite, got {seconds}")
-    return seconds
+    from estimation.contracts import check_number  # numpy: not at import, which the CLI's start pays for
+
+    return check_number(value, f"simulated clock {what}: seconds", low=-math.inf, error=SettingsError)
 
 
 #: The clock of live commands.

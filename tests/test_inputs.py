@@ -605,13 +605,15 @@ def test_a_simulated_clock_and_a_reader_cap_refuse_what_they_cannot_mean(tmp_pat
             SimClock(bad)  # type: ignore[arg-type]
     clock = SimClock()
     for call in (clock.sleep, clock.advance, clock.advance_to):
-        with pytest.raises(SettingsError, match="must be finite"):
+        with pytest.raises(SettingsError, match="must be a finite number"):
             call(float("inf"))
+        with pytest.raises(SettingsError, match="must be a finite number, got an integer of 1329 bits"):
+            call(10**400)
     clock.sleep(0.25)
     clock.advance(0.25)
     assert clock.now() == 0.5
     for bad in ("5", -1, 0, True, 2.5):
-        with pytest.raises(SettingsError, match="max_points must be a whole number >= 1"):
+        with pytest.raises(SettingsError, match=r"max_points must be (a whole number|>= 1)"):
             load_cloud(tmp_path / "x.ply", max_points=bad)  # type: ignore[arg-type]
 
 
