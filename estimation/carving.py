@@ -335,10 +335,13 @@ def free_space(points: np.ndarray, views: Sequence[DepthView], *, slack: float =
         ok, x, y, z = _pixels(pts, view)
         x0, y0 = np.floor(x).astype(np.int64), np.floor(y).astype(np.int64)
         x0, y0 = np.where(ok, x0, 0), np.where(ok, y0, 0)
+        # Points off the image (not ok) read pixel 0 and are masked; an image one pixel wide (a view of one
+        # repeated point, pictured by depth_of_points) has no pixel 1 for them to read.
+        x1, y1 = np.minimum(x0 + 1, depth.shape[1] - 1), np.minimum(y0 + 1, depth.shape[0] - 1)
         ax, ay = x - x0, y - y0
-        d = ((1 - ax) * (1 - ay) * depth[y0, x0] + ax * (1 - ay) * depth[y0, x0 + 1]
-             + (1 - ax) * ay * depth[y0 + 1, x0] + ax * ay * depth[y0 + 1, x0 + 1])
-        s = np.maximum.reduce([sigma[y0, x0], sigma[y0, x0 + 1], sigma[y0 + 1, x0], sigma[y0 + 1, x0 + 1]])
+        d = ((1 - ax) * (1 - ay) * depth[y0, x0] + ax * (1 - ay) * depth[y0, x1]
+             + (1 - ax) * ay * depth[y1, x0] + ax * ay * depth[y1, x1])
+        s = np.maximum.reduce([sigma[y0, x0], sigma[y0, x1], sigma[y1, x0], sigma[y1, x1]])
         with np.errstate(invalid="ignore"):
             free |= ok & np.isfinite(d) & (z < d - FREE_SIGMAS * s - slack)
     return free

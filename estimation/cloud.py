@@ -282,23 +282,10 @@ def check_estimable(cloud: PointCloud) -> None:
         TypeError: ``cloud`` is not a :class:`PointCloud`.
     """
     check_is_cloud(cloud, "check_estimable")
-    check_count_and_range(cloud.points)
-    n = len(cloud)
+    check_spread(cloud.points)
     # Singular values of the centred cloud are its spread along the principal axes (a uniform subset of
     # 20,000 tells flat from solid as well as a million points, at a 50th of the cost).
-    sample = cloud.points[:: max(1, n // 20000)]
-    low, high = column_bounds(cloud.points)  # np.ptp(axis=0) took 70 ms of a 1M-point estimate
-    across = float((high - low).max())
-    if across == 0:
-        raise CloudError("degenerate cloud: all points are identical")
-    if across < tol.MIN_EXTENT_M:
-        raise CloudError(f"object is {refused_number(across, tol.MIN_EXTENT_M, digits=3)} m across, below the "
-                         f"{tol.MIN_EXTENT_M:g} m an estimate "
-                         f"resolves (wrong --units or scale?)")
-    distinct = count_distinct(cloud.points, tol.MIN_POINTS)
-    if distinct < tol.MIN_POINTS:
-        raise CloudError(f"too few distinct points: {distinct} distinct positions among {n} points (need at "
-                         f"least {tol.MIN_POINTS}; repeated rows add no surface)")
+    sample = cloud.points[:: max(1, len(cloud) // 20000)]
     centred = sample - sample.mean(axis=0)
     _, spread, axes = np.linalg.svd(centred, full_matrices=False)
     if spread[2] < tol.FLATNESS_RATIO * spread[0]:
@@ -308,6 +295,29 @@ def check_estimable(cloud: PointCloud) -> None:
         far = far_points(cloud.points)
         raise CloudError(f"degenerate cloud: {shape}, it encloses no volume ({extents} m along its principal axes)"
                          + (f"; but that is {far}: remove them" if far else ""))
+
+
+def check_spread(points: np.ndarray) -> None:
+    """Raise unless ``points`` ((n, 3) finite, metres) are :func:`check_count_and_range`'s and spread: not one
+    point repeated, at least ``tolerances.MIN_EXTENT_M`` across, ``tolerances.MIN_POINTS`` distinct. Before any
+    neighbour search: a k-d tree's query among coincident points takes time with the square of their number.
+
+    Raises:
+        CloudError: naming which.
+    """
+    check_count_and_range(points)
+    low, high = column_bounds(points)  # np.ptp(axis=0) took 70 ms of a 1M-point estimate
+    across = float((high - low).max())
+    if across == 0:
+        raise CloudError("degenerate cloud: all points are identical")
+    if across < tol.MIN_EXTENT_M:
+        raise CloudError(f"object is {refused_number(across, tol.MIN_EXTENT_M, digits=3)} m across, below the "
+                         f"{tol.MIN_EXTENT_M:g} m an estimate "
+                         f"resolves (wrong --units or scale?)")
+    distinct = count_distinct(points, tol.MIN_POINTS)
+    if distinct < tol.MIN_POINTS:
+        raise CloudError(f"too few distinct points: {distinct} distinct positions among {len(points)} points (need "
+                         f"at least {tol.MIN_POINTS}; repeated rows add no surface)")
 
 
 def far_points(points: np.ndarray) -> str:

@@ -95,22 +95,10 @@ def read_depth(path: str | Path, *, scale: float | None = None) -> np.ndarray:
                          f"Open3D's depth_scale is the inverse), got "
                          f"{refused_number(scale, MIN_DEPTH_SCALE, MAX_DEPTH_SCALE)}")
     check_input_file(path)
-    suffix = path.suffix.lower()
-    if suffix == ".png":
-        raw = _read_png(path)
-    elif suffix == ".npy":
-        # Shape, type and size from the header, before any data is read.
-        shape, dtype = npy_header(path)
-        if len(shape) != 2 or dtype.kind not in REAL_KINDS or dtype.fields is not None:
-            raise CloudFileError(f"{path}: a depth image must be a numeric (h, w) array of real numbers, got {dtype} "
-                                 f"{shape}")
-        _check_pixels(path, shape[1], shape[0])
-        try:
-            raw = np.load(path, allow_pickle=False)
-        except (OSError, ValueError) as exc:
-            raise CloudFileError(f"{path}: not a readable .npy array ({exc})") from None
-    else:
-        raise CloudFileError(f"{path}: depth images are read from .png or .npy, not {suffix or 'no suffix'}")
+    try:
+        raw = _read_raw(path)
+    except OSError as exc:  # a permission denied was a traceback (the point cloud readers said it in a line)
+        raise CloudFileError(f"cannot read {path}: {exc.strerror or exc}") from None
     if raw.size == 0:
         raise CloudError(f"{path}: the depth image is empty ({raw.shape[1] if raw.ndim == 2 else 0}x{raw.shape[0]})")
     if scale is None:
@@ -127,6 +115,25 @@ def _check_pixels(path: Path, width: int, height: int) -> None:
     if width * height > MAX_DEPTH_PIXELS:
         raise CloudFileError(f"{path}: a {width}x{height} depth image is more than the {MAX_DEPTH_PIXELS:,} pixels "
                              f"one view may hold")
+
+
+def _read_raw(path: Path) -> np.ndarray:
+    """The image's stored values, by its suffix (see :func:`read_depth`)."""
+    suffix = path.suffix.lower()
+    if suffix == ".png":
+        return _read_png(path)
+    if suffix != ".npy":
+        raise CloudFileError(f"{path}: depth images are read from .png or .npy, not {suffix or 'no suffix'}")
+    # Shape, type and size from the header, before any data is read.
+    shape, dtype = npy_header(path)
+    if len(shape) != 2 or dtype.kind not in REAL_KINDS or dtype.fields is not None:
+        raise CloudFileError(f"{path}: a depth image must be a numeric (h, w) array of real numbers, got {dtype} "
+                             f"{shape}")
+    _check_pixels(path, shape[1], shape[0])
+    try:
+        return np.load(path, allow_pickle=False)
+    except ValueError as exc:
+        raise CloudFileError(f"{path}: not a readable .npy array ({exc})") from None
 
 
 def _read_png(path: Path) -> np.ndarray:

@@ -33,6 +33,7 @@ from estimation.cloudtable import (
     header_lines,
     parse_numbers,
     read_head,
+    read_rows,
     write_table,
 )
 from estimation.contracts import unit_quaternion
@@ -119,6 +120,13 @@ def read_pcd(path: Path, max_points: int) -> Columns:
         if len(table) != n:
             raise CloudFileError(f"{path}: truncated: claims {n} points, read {len(table)}")
     elif data == "binary_compressed":
+        # open3d decompresses, and reads an 8-byte float field of a compressed PCD as 0: a valid file was all points
+        # at the origin ("all points are identical").
+        odd = [f"{nm} ({kinds[names.index(nm)]} {sizes[names.index(nm)]})" for nm in
+               ("x", "y", "z", "normal_x", "normal_y", "normal_z") if nm in names and codes[names.index(nm)] != "f4"]
+        if odd:
+            raise CloudFileError(f"{path}: a binary_compressed PCD is read with 4-byte float coordinates and normals only, "
+                                 f"this one has {', '.join(odd)}; save it as binary or ascii")
         return _read_pcd_compressed(path, size, offset, n, dtype.itemsize, origins)
     else:
         raise CloudFileError(f"{path}: unknown PCD DATA kind {data[:40]!r}; use ascii, binary or binary_compressed")
@@ -170,15 +178,14 @@ def _read_pcd_ascii(
 ) -> dict[str, np.ndarray]:
     width = sum(counts)
     check_text_size(path, size, offset, n, width, "points")
-    with path.open("rb") as fh:
-        fh.seek(offset)
-        values = parse_numbers(fh.read())
+    rows, trailing = read_rows(path, offset, n, width)
+    values = parse_numbers(b" ".join(rows))
     if values.size < n * width:
         raise CloudFileError(
             f"{path}: truncated: the header claims {n} points but the file holds {values.size // width}"
         )
-    if values.size > n * width:
-        log.warning("%s: %d values after the %d points the header claims; ignored", path, values.size - n * width, n)
+    if values.size > n * width or trailing:
+        log.warning("%s: text after the %d points the header claims; ignored", path, n)
     table = values[: n * width].reshape(n, width)
     starts = np.cumsum([0, *counts])
     return {name: table[:, starts[i]] for i, name in enumerate(names) if counts[i] == 1}

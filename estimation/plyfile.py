@@ -29,6 +29,7 @@ from estimation.cloudtable import (
     header_lines,
     parse_numbers,
     read_head,
+    read_rows,
     write_table,
 )
 from estimation.errors import CloudFileError
@@ -193,10 +194,7 @@ def _read_ply_ascii(
     nprops = len(vertex.props)
     skip = sum(e.count for e in elements[:index])
     check_text_size(path, size, offset, vertex.count, nprops, "vertices")
-    with path.open("rb") as fh:
-        fh.seek(offset)
-        body = fh.read()
-    rows = body.split(b"\n", skip + vertex.count)
+    rows, trailing = read_rows(path, offset, skip + vertex.count, nprops)
     lines = rows[skip : skip + vertex.count]
     if len(lines) < vertex.count or (lines and not lines[-1].strip()):
         present = sum(1 for line in lines if line.strip())
@@ -207,7 +205,7 @@ def _read_ply_ascii(
             f"{path}: the {vertex.count} vertex lines hold {values.size} values, not {vertex.count} x {nprops} "
             "properties (truncated or malformed)"
         )
-    if len(elements) == index + 1 and len(rows) > skip + vertex.count and rows[-1].strip():
+    if len(elements) == index + 1 and trailing:
         log.warning("%s: text after the %d vertices the header claims; ignored", path, vertex.count)
     table = values.reshape(vertex.count, nprops)
     structured = {name: table[:, i] for i, (name, _) in enumerate(vertex.props)}

@@ -18,13 +18,11 @@ from pathlib import Path
 import numpy as np
 
 from estimation.cloud import PointCloud
-from estimation.cloudtable import Columns, byte_colors, split_columns
+from estimation.cloudtable import MAX_TEXT_LINE, Columns, byte_colors, split_columns
 from estimation.errors import CloudFileError
 
 log = logging.getLogger(__name__)
 
-#: Longest line a text cloud may have, bytes: a row of nine numbers written at full precision is under 250.
-MAX_TEXT_LINE = 4096
 
 
 #: Bytes of a text file scanned at a time for its line lengths, before it is read whole.

@@ -632,3 +632,123 @@ def test_api_misuse_is_a_clear_error_not_a_library_internal(box_cloud):
         oriented_box(np.random.default_rng(0).uniform(size=(50, 3)) * 1e200)
     with pytest.raises(SessionError, match="zenoh mode must be 'peer', 'client' or 'router', got 'banana'"):
         make_config(mode="banana")
+
+
+# -- from a probe of `twin estimate` with odd files (session 39) ----------------------------------------------------
+
+
+def _box_views() -> tuple[np.ndarray, list[np.ndarray]]:
+    """A 10 x 6 x 4 cm box on a table, as points two sensors see (faces turned towards each), and the sensors."""
+    box = trimesh.creation.box(extents=[0.10, 0.06, 0.04])
+    pts, faces = trimesh.sample.sample_surface(box, 20000, seed=1)
+    normals = box.face_normals[faces]
+    table = np.c_[np.random.default_rng(0).random((6000, 2)) * 0.3 - 0.15, np.zeros(6000)]
+    cams = [np.array([0.5, -0.3, 0.45]), np.array([-0.4, 0.4, 0.5])]
+    out, on_table = [], pts + np.array([0.0, 0.0, 0.02])
+    for cam in cams:
+        seen = np.einsum("ij,ij->i", normals, cam - on_table) > 0
+        out.append(np.r_[table, on_table[seen]])
+    return out, cams
+
+
+def test_a_view_of_one_repeated_point_beside_real_views_is_no_index_error():
+    """carving.free_space read pixel 1 of a one-pixel image (a view of 200 copies of one point, pictured by
+    depth_of_points): an IndexError and exit 1 from `twin estimate A B C --support-plane auto`."""
+    from estimation.views import View, estimate_views
+
+    views, cams = _box_views()
+    junk = View(np.tile([[0.0, 0.0, 0.05]], (200, 1)), cams[0])
+    result = estimate_views([View(v, c) for v, c in zip(views, cams, strict=True)] + [junk], 1000.0, support="auto")
+    assert result.estimate.volume == pytest.approx(2.4e-4, rel=0.05)
+
+
+def test_the_views_path_refuses_one_repeated_point_and_drops_repeats_before_searching():
+    """150,000 copies of one point with a VIEWPOINT took 90 s to be refused (the single-cloud path: 1.5 s); beside a
+    box's 5,000 points they took 76 s in the normals' neighbour searches."""
+    import time
+
+    from estimation.views import View, estimate_views
+
+    origin = np.array([0.5, -0.3, 0.45])
+    with pytest.raises(CloudError, match="all points are identical"):
+        estimate_views([View(np.tile([[0.01, 0.02, 0.03]], (150_000, 1)), origin)], 1000.0)
+    with pytest.raises(CloudError, match="below the 1e-06 m"):
+        estimate_views([View(np.full((5000, 3), 0.1) + np.random.default_rng(0).normal(0, 1e-9, (5000, 3)), origin)],
+                       1000.0)
+    box = trimesh.creation.box(extents=[0.10, 0.06, 0.04])
+    pts = trimesh.sample.sample_surface(box, 5000, seed=1)[0] + [0, 0, 0.02]
+    start = time.process_time()
+    result = estimate_views([View(np.r_[np.tile([[0.01, 0.02, 0.0]], (150_000, 1)), pts], origin)], 1000.0)
+    assert time.process_time() - start < 30  # a bound far above its 2 s, far below the 76 s it took
+    assert result.estimate.points_in <= 5001  # the copies are one point
+    assert result.estimate.volume == pytest.approx(2.4e-4, rel=0.05)
+
+
+def test_an_unreadable_depth_image_is_a_one_line_error(tmp_path, monkeypatch):
+    """A permission denied on a .png or .npy depth image was a traceback, exit 1."""
+    from pathlib import Path
+
+    from estimation.depthimage import read_depth
+    from estimation.errors import CloudFileError
+
+    np.save(tmp_path / "d.npy", np.full((24, 32), 0.8))
+    (tmp_path / "d.png").write_bytes(b"\x89PNG\r\n\x1a\n" + b"\0" * 40)
+    real_open = Path.open
+
+    def denied(self, *args, **kwargs):  # type: ignore[no-untyped-def]
+        if self.name in ("d.npy", "d.png"):
+            raise PermissionError(13, "Permission denied", str(self))
+        return real_open(self, *args, **kwargs)
+
+    monkeypatch.setattr(Path, "open", denied)
+    monkeypatch.setattr(np, "load", lambda *a, **k: (_ for _ in ()).throw(PermissionError(13, "Permission denied")))
+    for name in ("d.npy", "d.png"):
+        with pytest.raises(CloudFileError, match=f"cannot read .*{name}: Permission denied"):
+            read_depth(tmp_path / name)
+
+
+def test_a_compressed_pcd_with_8_byte_fields_is_refused_by_name_not_read_as_zeros(tmp_path):
+    """open3d reads an F 8 field of a binary_compressed PCD as 0: a valid file was 'all points are identical'."""
+    import struct
+
+    from estimation.errors import CloudFileError
+
+    pts = np.random.default_rng(0).normal(size=(500, 3))
+
+    def literal(b: bytes) -> bytes:  # LZF with literal runs only (valid, uncompressed)
+        return b"".join(bytes([len(b[i:i + 32]) - 1]) + b[i:i + 32] for i in range(0, len(b), 32))
+
+    for size in (8, 4):
+        raw = b"".join(pts[:, i].astype(f"<f{size}").tobytes() for i in range(3))
+        comp = literal(raw)
+        path = tmp_path / f"f{size}.pcd"
+        path.write_bytes(f"VERSION 0.7\nFIELDS x y z\nSIZE {size} {size} {size}\nTYPE F F F\nCOUNT 1 1 1\nWIDTH 500\n"
+                         f"HEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS 500\nDATA binary_compressed\n".encode()
+                         + struct.pack("<II", len(comp), len(raw)) + comp)
+    with pytest.raises(CloudFileError, match=r"x \(F 8\), y \(F 8\), z \(F 8\); save it as binary or ascii"):
+        load_cloud(tmp_path / "f8.pcd")
+    assert np.allclose(load_cloud(tmp_path / "f4.pcd").points, pts.astype(np.float32))
+
+
+@pytest.mark.parametrize("suffix", [".ply", ".pcd"])
+def test_a_text_table_followed_by_a_gigabyte_hole_is_read_in_bounded_memory(tmp_path, suffix, caplog):
+    """A PLY claiming 200 vertices then 1 GB of NUL bytes (8 KB on disk) took 2 GB read whole; the PCD 1 GB."""
+    import tracemalloc
+
+    pts = np.random.default_rng(0).normal(size=(200, 3))
+    body = "".join(f"{x:.6f} {y:.6f} {z:.6f}\n" for x, y, z in pts)
+    head = ("ply\nformat ascii 1.0\nelement vertex 200\nproperty float x\nproperty float y\nproperty float z\n"
+            "end_header\n" if suffix == ".ply" else
+            "VERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH 200\nHEIGHT 1\nPOINTS 200\nDATA ascii\n")
+    path = tmp_path / f"hole{suffix}"
+    path.write_text(head + body)
+    with path.open("r+b") as fh:
+        fh.truncate(path.stat().st_size + 200 * 2**20)  # a 200 MB hole of NUL bytes
+    tracemalloc.start()
+    with caplog.at_level(logging.WARNING):
+        cloud = load_cloud(path)
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    assert np.allclose(cloud.points, pts, atol=1e-6)
+    assert peak < 20 * 2**20, peak
+    assert any("after the 200" in r.getMessage() for r in caplog.records)
