@@ -86,6 +86,12 @@ class MessageError(TwinError, ValueError):
         super().__init__(detail)
         self.reason = reason
 
+    def __reduce__(self) -> tuple[type, tuple[str, str]]:
+        # Raised in an estimation worker (a cloud's points or normals unpacked there), it comes back pickled: with
+        # the default (the message alone as args) it could not be rebuilt, the pool took the worker for dead, and
+        # every estimate queued behind it failed with it.
+        return (type(self), (self.reason, str(self)))
+
 
 class _Msg(msgspec.Struct, array_like=True, tag_field="t", forbid_unknown_fields=True):
     v: int

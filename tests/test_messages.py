@@ -398,3 +398,23 @@ def test_the_twin_saturates_the_force_it_sends_at_what_receivers_accept():
         assert decode(encode(OperatorForce(v=VERSION, stamp_ns=0, epoch=0, seq=1, sim_time=0.0,
                                            force=tuple(float(f) for f in sent), position=(0.0, 0.0, 1.0)))).seq == 1
     assert np.array_equal(_saturated(np.array([1.0, -2.0, 3.0])), [1.0, -2.0, 3.0])
+
+
+def _refuse_in_a_worker(reason: str) -> None:
+    raise MessageError(reason, "cloud 'x': a zero normal")
+
+
+def test_a_message_error_raised_in_a_worker_process_comes_back_as_itself():
+    """MessageError(reason, detail) could not be unpickled: a cloud whose normals a worker refused (a zero normal)
+    broke the twin's estimation pool, and the good clouds queued behind it were dropped with it."""
+    import pickle
+    from concurrent.futures import ProcessPoolExecutor
+
+    error = pickle.loads(pickle.dumps(MessageError("zero-normal", "cloud 'x': a zero normal")))
+    assert (error.reason, str(error)) == ("zero-normal", "cloud 'x': a zero normal")
+    with ProcessPoolExecutor(1) as pool:
+        future = pool.submit(_refuse_in_a_worker, "zero-normal")
+        with pytest.raises(MessageError, match="a zero normal") as raised:
+            future.result()
+        assert raised.value.reason == "zero-normal"
+        assert pool.submit(abs, -3).result() == 3  # the pool still works

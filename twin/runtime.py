@@ -400,7 +400,8 @@ class Local:
         self.inbox: queue.SimpleQueue = queue.SimpleQueue()
         self.stale = False
         self._jobs: dict[str, tuple[Future, Cloud, float]] = {}
-        self._retried: set[tuple[int, int]] = set()  # (epoch, seq) of clouds whose worker died once
+        # (id, epoch, seq) of clouds whose worker died once: by id too, as a forged cloud may reuse another's seq
+        self._retried: set[tuple[str, int, int]] = set()
         self._clouds: dict[str, tuple[int, int]] = {}  # id -> (epoch, seq) of the cloud in (or going into) the twin
         self._offsets: dict[str, tuple[np.ndarray, np.ndarray]] = {}
         self._taken: dict[str, TwinObject] = {}  # id -> the object as it went into the twin (twin_object)
@@ -844,10 +845,10 @@ class Local:
                 obj, display = future.result()
             except BrokenProcessPool as exc:  # a worker died (killed, out of memory, a native crash)
                 self.rlog.event(self.twin.time, f"{object_id}: the estimation worker died", "ERROR")
-                if (msg.epoch, msg.seq) not in self._retried:
+                if (object_id, msg.epoch, msg.seq) not in self._retried:
                     # The cloud is at hand and the remote sends it only once: one more try (every job of a
                     # broken pool fails with it, not only the one that killed it; _submit replaces the pool).
-                    self._retried.add((msg.epoch, msg.seq))
+                    self._retried.add((object_id, msg.epoch, msg.seq))
                     self.report.worker_retries += 1
                     log.error("object %r: the estimation worker died (%s); estimating it again", object_id, exc)
                     self._jobs[object_id] = (self._submit(msg), msg, received)
