@@ -108,6 +108,33 @@ def test_a_restarted_remote_is_followed_at_once(cache):
         assert np.linalg.norm(session.local.twin.pose("crate")[0] - target) < 0.005
 
 
+def test_a_restarted_remote_without_an_object_takes_it_out_of_the_twin_and_brings_its_new_ones(cache, tmp_path, caplog):
+    """The twin asked for the scene state once, at its start: a restarted remote's objects that came while the link
+    was down never arrived, and the ones it no longer had stayed in the twin as ghosts (probe of session 39)."""
+    import dataclasses
+    import logging
+
+    scene = load_scene(SMALL)
+    with Headless(scene, cache_dir=cache) as session:
+        session.run(0.5)
+        assert sorted(session.local.objects) == ["can", "crate"]
+        session.remote.close()
+        crate = next(o for o in scene.objects if o.id == "crate")
+        ball = dataclasses.replace(crate, id="ball", position=(crate.position[0] - 0.3, crate.position[1] + 0.2))
+        again = dataclasses.replace(scene, objects=(crate, ball))
+        session.remote = Remote(again, session.bus.transport(), clock=session.clock, cache_dir=cache,
+                                epoch=session.remote.epoch + 1)
+        # The new remote published its scene and clouds before the twin's link was up again: lost.
+        while not session.local.inbox.empty():
+            session.local.inbox.get_nowait()
+        with caplog.at_level(logging.WARNING, logger="twin.runtime"):
+            session.run(1.0)
+        assert sorted(session.local.objects) == ["ball", "crate"]
+        assert session.local.report.resyncs >= 1
+        said = [r.getMessage() for r in caplog.records]
+        assert any("restarted" in m for m in said) and any("'can'" in m and "removed" in m for m in said), said
+
+
 def test_a_forged_sequence_number_silences_an_object_only_until_two_heartbeats_and_a_keyframe(cache):
     with Headless(load_scene(SMALL), cache_dir=cache) as session:
         session.run(0.5)

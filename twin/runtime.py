@@ -32,6 +32,7 @@ import math
 import multiprocessing as mp
 import os
 import queue
+import threading
 from collections import Counter
 from concurrent.futures import Future, ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
@@ -252,6 +253,7 @@ class LocalReport:
     worst_step_while_adding: float = 0.0
     stale_events: int = 0
     recoveries: int = 0
+    resyncs: int = 0  # state queries asked again: a restarted remote, or heartbeats counting objects the twin lacks
     estimation_errors: int = 0
     worker_retries: int = 0  # clouds estimated again because their worker process died
     clouds_superseded: int = 0  # estimations cancelled before they started: a newer cloud of the object came
@@ -306,6 +308,23 @@ MAX_GONE = 1024
 #: Outside it the stamp is broken or forged (a stamp of 0 read as a 56-year latency and set the report's p99);
 #: the pose is still applied (order is by ``(epoch, seq)``), and the stamp counted (``LocalReport.stamps_off``).
 LATENCY_RANGE = (-1.0, 60.0)
+
+#: Seconds after a state query before the twin asks again while the remote's heartbeats count more objects than
+#: it knows (a query refused by the remote's budget, clouds published while the link was down), doubling each
+#: time up to ``RESYNC_MAX_S``: a remote that withholds objects (cameras that have not seen them) is asked
+#: rarely. A heartbeat of a new epoch (a restarted remote) asks at once.
+RESYNC_FIRST_S, RESYNC_MAX_S = 1.0, 60.0
+
+
+@dataclass(frozen=True)
+class _StateAnswered:
+    """Queued after a state query's replies: the epoch asked of, whether anything answered, and the ids of the
+    clouds that came (what a restarted remote still holds)."""
+
+    epoch: int
+    answered: bool
+    ids: frozenset[str]
+
 
 #: How often (twin time, seconds) the report samples each object's divergence from the remote.
 DIVERGENCE_EVERY = 0.01
@@ -442,6 +461,11 @@ class Local:
         if operator.listen:
             self.link.subscribe(self.keys.operator_target, self._enqueue)
         # A late joiner asks for the current scene: every cloud and pose the remote last published.
+        self._state_wait = wait
+        self._remote_epoch: int | None = None  # of the newest heartbeat taken
+        self._resync_at = clock.now() + RESYNC_FIRST_S
+        self._resync_every = RESYNC_FIRST_S
+        self._resyncing: threading.Thread | None = None
         self.link.query(self.keys.state, self._enqueue, timeout=wait)
         self._start = clock.now()
         self._drain()  # start estimating what the query brought before the loop runs
@@ -631,6 +655,7 @@ class Local:
             self.report.out_of_order += 1
             return
         self._heartbeats.take("remote", msg.epoch, msg.seq, received)
+        self._resync_if_behind(msg)
         now = (msg.epoch, msg.seq)
         beyond: dict[tuple[int, str], tuple[int, int]] = {}
         for which, marks in enumerate((self._pose_mark, self._clouds, self._gone)):
@@ -644,6 +669,58 @@ class Local:
                 else:
                     beyond[(which, object_id)] = mark
         self._beyond = beyond
+
+    def _resync_if_behind(self, beat: Heartbeat) -> None:
+        """Ask for the scene state again when ``beat`` is of a new epoch (a restarted remote publishes its clouds
+        once, perhaps before the link was up again, and knows nothing of the objects it no longer has), or counts
+        more objects than the twin knows (the first query went unanswered: over the remote's budget). On a real
+        clock the query runs in a thread of its own (it waits up to ``wait``); its replies queue as live
+        messages do, then a :class:`_StateAnswered`."""
+        restarted = self._remote_epoch is not None and beat.epoch > self._remote_epoch
+        self._remote_epoch = beat.epoch
+        behind = beat.objects > len(self._clouds) and self.clock.now() >= self._resync_at
+        if not (restarted or behind) or (self._resyncing is not None and self._resyncing.is_alive()):
+            return
+        if restarted:
+            log.warning("the remote restarted (a new epoch): asking for its scene state again")
+            self._resync_every = RESYNC_FIRST_S
+        else:
+            log.info("the remote counts %d objects, the twin knows %d: asking for its scene state again",
+                     beat.objects, len(self._clouds))
+            self._resync_every = min(2 * self._resync_every, RESYNC_MAX_S)
+        self._resync_at = self.clock.now() + self._resync_every
+        self.report.resyncs += 1
+        if self.clock.realtime:
+            self._resyncing = threading.Thread(target=self._ask_state, args=(beat.epoch,), daemon=True,
+                                               name="twin-resync")
+            self._resyncing.start()
+        else:  # the in-process bus answers at once: asked in the loop, a headless session stays repeatable
+            self._ask_state(beat.epoch)
+
+    def _ask_state(self, epoch: int) -> None:
+        ids: set[str] = set()
+
+        def take(key: str, msg) -> None:  # type: ignore[no-untyped-def]
+            if isinstance(msg, Cloud):
+                ids.add(msg.object_id)
+            self._enqueue(key, msg)
+
+        answered = self.link.query(self.keys.state, take, timeout=self._state_wait) > 0
+        self.inbox.put((self.clock.now(), "", _StateAnswered(epoch, answered, frozenset(ids))))
+
+    def _on_state_answered(self, done: _StateAnswered) -> None:
+        """After a restarted remote's state: the objects it no longer sent (clouds of an older epoch) are gone. An
+        unanswered query is said (a remote's query budget spent by another peer starves a joining twin)."""
+        if not done.answered:
+            self.dropped_log.warning("state-unanswered", "the remote did not answer the twin's scene-state query "
+                                     "(its query budget spent by other peers?); asking again in %.0f s",
+                                     self._resync_every)
+            return
+        for object_id, (epoch, _) in list(self._clouds.items()):
+            if epoch < done.epoch and object_id not in done.ids:
+                log.warning("object %r: the restarted remote no longer has it; removed", object_id)
+                self._handle(self.clock.now(), "", Gone(v=VERSION, stamp_ns=self.clock.stamp_ns(), object_id=object_id,
+                                                        epoch=done.epoch, seq=0))
 
     def _operator_target(self, trajectory) -> np.ndarray | None:  # type: ignore[no-untyped-def]
         if not self.twin.has_end_effector:
@@ -738,6 +815,8 @@ class Local:
     def _handle(self, received: float, key: str, msg) -> None:  # type: ignore[no-untyped-def]
         if isinstance(msg, OperatorTarget):  # the link passes one on its key only (sync.keys.carried_by)
             self._on_device_target(msg, received)
+        elif isinstance(msg, _StateAnswered):
+            self._on_state_answered(msg)
         elif isinstance(msg, Heartbeat):
             self._on_heartbeat(msg, received)
         elif isinstance(msg, (Pose, Cloud)) and msg.object_id in RESERVED_IDS:
