@@ -95,6 +95,14 @@ MAX_RECORDING_BYTES = 1 * 2**30
 #: size, so the byte limit alone let a 12.5 KB file of empty messages hold 4 M records in 1.1 GB, and ~34 M.
 MAX_RECORDS = 16_000_000
 
+#: Topics (MCAP channels) a recording makes at most: MCAP numbers channels in 16 bits. A session has a few a
+#: wire key (two or three keys an object, at most a thousand objects); past this, messages on new topics are
+#: counted in ``Recorder.dropped``, not recorded.
+MAX_CHANNELS = 16_384
+
+#: Longest topic recorded, characters: a wire key holds a scene name and an object id (64 each) and a few words.
+MAX_RECORDED_TOPIC = 512
+
 #: The most records a recording may hold per byte of its file. A recording's records take 20-40 bytes each
 #: compressed with their message index (a target a millisecond, 25 B if it never moves, 34 B if it does); a 43 KB
 #: file of 16 M empty messages packed into four zstd chunks took 4 GB to read. One a byte leaves 20x room for a
@@ -195,6 +203,9 @@ class Recorder:
         meta.update({k: v if isinstance(v, str) else json.dumps(v) for k, v in (metadata or {}).items()})
         self._writer.add_metadata("tactile_twin.session", meta)
         self._channels: dict[str, int] = {}
+        self._topics: set[str] = set()  # topics logged so far (their channels are made by the writing thread)
+        self.dropped = 0  # messages not recorded: on a topic past MAX_CHANNELS, or a key past MAX_RECORDED_KEY
+        self._write_failures = 0
         self._lock = threading.Lock()
         self._last_ns = -1
         self._first_ns: int | None = None
@@ -300,6 +311,17 @@ class Recorder:
         if self._closed:
             return
         with self._lock:  # the stamp and the queue position are taken together: log_time never goes back
+            if topic not in self._topics:
+                # A wire channel a key: a flood of ever new keys (garbage, before any check) made 65,536 channels,
+                # past MCAP's 16-bit channel ids: a struct.error at every message after, and the recording lost.
+                if len(self._topics) >= MAX_CHANNELS or len(topic) > MAX_RECORDED_TOPIC:
+                    self.dropped += 1
+                    if self.dropped == 1:
+                        log.warning("%s: a message on %s not recorded: more than %d topics, or a topic past %d "
+                                    "characters (a flood of garbage keys?); such messages are counted, not recorded",
+                                    self.path, topic[:200], MAX_CHANNELS, MAX_RECORDED_TOPIC)
+                    return
+                self._topics.add(topic)
             now = max(self.clock.stamp_ns(), self._last_ns)
             self._last_ns = now
             if self._first_ns is None:
@@ -319,7 +341,9 @@ class Recorder:
                     channel = self._channels[topic] = self._register(topic, meta)
                 self._writer.add_message(channel, log_time=log_ns, data=data, publish_time=max(0, publish_ns))
             except Exception:  # a write error must not kill the thread and leave close() waiting
-                log.exception("writing %s to %s failed", topic, self.path)
+                self._write_failures += 1
+                if self._write_failures <= 3:  # a full disk fails every message: a few tracebacks say it
+                    log.exception("writing %s to %s failed", topic, self.path)
 
     def _register(self, topic: str, meta: dict[str, str] | None) -> int:
         if topic.startswith(WIRE_PREFIX):

@@ -820,3 +820,24 @@ def test_an_experiment_on_a_camera_recording_runs_with_the_cameras(cache, tmp_pa
             twin_rms[name] = next(float(r["force_rms_n"]) for r in csv.DictReader(f) if r["mode"] == "twin")
     # The twin built from the cameras' cloud is not the one built from the true surface: its push feels different.
     assert twin_rms["recorded"] != pytest.approx(twin_rms["surface"], rel=1e-3), twin_rms
+
+
+def test_a_flood_of_new_keys_is_counted_not_recorded_and_the_recording_is_whole(tmp_path, monkeypatch, caplog):
+    """`twin local --record` under 100,000 garbage messages, each on a key of its own: one MCAP channel a key, past
+    the format's 16-bit channel ids a struct.error at every message (34,000 tracebacks), then close() raised it and
+    the recording was lost (probe of session 39). Recorded as is, with MAX_CHANNELS made small."""
+    import sync.recording
+
+    monkeypatch.setattr(sync.recording, "MAX_CHANNELS", 40)
+    path = tmp_path / "flood.mcap"
+    with caplog.at_level(logging.WARNING, logger="sync.recording"), \
+            Recorder(path, clock=SimClock(), metadata={"scene_name": "x", "scene_toml": ""}) as r:
+        for i in range(200):
+            r.wire("twin", "received", f"twin/x/objects/g{i}/pose", b"\x01")
+        r.wire("twin", "received", "twin/x/objects/" + "a" * 2000 + "/pose", b"\x01")  # a key too long to keep
+        r.wire("twin", "received", "twin/x/objects/g3/pose", b"\x02")  # a topic it has: recorded
+    assert r.dropped == 200 - 40 + 1
+    wire = read_recording(path).wire()
+    assert len(wire) == 41 and {w.key for w in wire} == {f"twin/x/objects/g{i}/pose" for i in range(40)}
+    said = [m.getMessage() for m in caplog.records]
+    assert len(said) == 1 and "not recorded" in said[0], said
