@@ -1153,7 +1153,10 @@ def _run_local(args: argparse.Namespace, rlog) -> None:  # type: ignore[no-untyp
         stats = local.run(args.duration, trajectory=trajectory, until=None if args.json else _arrivals(local))
         r, c = local.report, local.link.counters
         record = {"objects_synced": r.objects_synced, "pose_updates": r.pose_updates,
-                  "dropped_malformed": c.dropped_malformed, "stale_events": r.stale_events,
+                  "dropped_malformed": c.dropped_malformed, "dropped_by_reason": dict(c.dropped_by_reason),
+                  "out_of_scene": r.out_of_scene, "out_of_order": r.out_of_order,
+                  "estimation_errors": r.estimation_errors, "failed_edits": r.failed_edits,
+                  "evicted": dict(r.evicted), "resyncs": r.resyncs, "stale_events": r.stale_events,
                   "snaps": r.snaps, "holds": r.holds, "warned_objects": r.warned_objects,
                   "operator_targets": r.operator_targets,
                   "operator_dropped": dict(r.operator_dropped), "forces_sent": r.forces_sent,

@@ -165,6 +165,13 @@ def test_twin_local_records_a_scripted_session(endpoint, cache, tmp_path, capsys
     assert code == 0
     record = json.loads(capsys.readouterr().out)
     assert record["forces_sent"] > 100  # (objects may still be estimating in a worker: not asked here)
+    # The twin's drop and error counters, all of them (only dropped_malformed was printed: an out-of-scene pose
+    # read as no drop at all).
+    assert {k: record[k] for k in ("dropped_malformed", "dropped_by_reason", "out_of_scene", "estimation_errors",
+                                   "failed_edits", "evicted", "resyncs")} == {
+        "dropped_malformed": 0, "dropped_by_reason": {}, "out_of_scene": 0, "estimation_errors": 0, "failed_edits": 0,
+        "evicted": {}, "resyncs": 0}
+    assert record["out_of_order"] >= 0
     # Every object the remote published is either touchable or named as pending.
     assert sorted(record["objects"] + record["objects_pending"]) == ["can", "crate"]
     rec = read_recording(path)
