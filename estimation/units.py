@@ -31,10 +31,12 @@ def units_warning(extents_m: np.ndarray) -> str | None:
     """Return a warning when an object's extents (metres) look like the wrong units, else None."""
     largest = float(np.max(extents_m))
     low, high = tol.PLAUSIBLE_EXTENT_M
+    # Said of clouds from files and from the wire alike (a twin passes its estimates' warnings on): the hint names
+    # the option of `twin estimate`, where a file's units are chosen.
     if largest > high:
-        return (
-            f"object is {largest:.3g} m across; if the file is in mm or cm, pass --units mm or --units cm"
-        )
+        return (f"object is {largest:.3g} m across; if the points are in mm or cm, scale them to metres "
+                f"(twin estimate --units mm or --units cm)")
     if largest < low:
-        return f"object is {largest * 1000:.3g} mm across; if the file is in metres already, check --units"
+        return (f"object is {largest * 1000:.3g} mm across; if the points are in metres already, check their scale "
+                f"(twin estimate --units)")
     return None
