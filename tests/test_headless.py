@@ -135,6 +135,30 @@ def test_a_restarted_remote_without_an_object_takes_it_out_of_the_twin_and_bring
         assert any("restarted" in m for m in said) and any("'can'" in m and "removed" in m for m in said), said
 
 
+def test_of_two_remotes_of_one_scene_the_twin_follows_the_newer_and_says_so(cache, caplog):
+    """A second remote publishing the same scene name was merged with the first without a word: the twin held the
+    newer one's crate and ball and the older one's can, a scene neither holds (probe of session 39)."""
+    import dataclasses
+    import logging
+
+    scene = load_scene(SMALL)
+    with Headless(scene, cache_dir=cache) as session:
+        session.run(0.5)
+        older = session.remote
+        crate = next(o for o in scene.objects if o.id == "crate")
+        ball = dataclasses.replace(crate, id="ball", position=(crate.position[0] - 0.3, crate.position[1] + 0.2))
+        session.remote = Remote(dataclasses.replace(scene, objects=(crate, ball)), session.bus.transport(),
+                                clock=session.clock, cache_dir=cache, epoch=older.epoch + 1)
+        with caplog.at_level(logging.WARNING, logger="twin.runtime"):
+            for _ in range(1000):  # both run: the older one's heartbeats keep coming
+                older.step()
+                session.tick()
+        older.close()
+        assert sorted(session.local.objects) == ["ball", "crate"]
+        said = [r.getMessage() for r in caplog.records]
+        assert any("older remote" in m for m in said) and any("'can'" in m and "removed" in m for m in said), said
+
+
 def test_a_forged_sequence_number_silences_an_object_only_until_two_heartbeats_and_a_keyframe(cache):
     with Headless(load_scene(SMALL), cache_dir=cache) as session:
         session.run(0.5)

@@ -315,6 +315,10 @@ LATENCY_RANGE = (-1.0, 60.0)
 #: rarely. A heartbeat of a new epoch (a restarted remote) asks at once.
 RESYNC_FIRST_S, RESYNC_MAX_S = 1.0, 60.0
 
+#: Older remotes' epochs (heartbeats still coming from an epoch older than the one followed) that each make the
+#: twin ask the newest remote's state once; forged heartbeats of ever new old epochs stop asking past this.
+MAX_OLDER_EPOCHS = 16
+
 
 @dataclass(frozen=True)
 class _StateAnswered:
@@ -466,6 +470,7 @@ class Local:
         self._resync_at = clock.now() + RESYNC_FIRST_S
         self._resync_every = RESYNC_FIRST_S
         self._resyncing: threading.Thread | None = None
+        self._older: set[int] = set()  # epochs of older remotes whose heartbeats still come (MAX_OLDER_EPOCHS)
         self.link.query(self.keys.state, self._enqueue, timeout=wait)
         self._start = clock.now()
         self._drain()  # start estimating what the query brought before the loop runs
@@ -653,6 +658,17 @@ class Local:
         taken (late, replayed): counted out of order, nothing else. ``received``: clock seconds."""
         if not self._heartbeats.newer("remote", msg.epoch, msg.seq, received):
             self.report.out_of_order += 1
+            if self._remote_epoch is not None and msg.epoch < self._remote_epoch:
+                # Alive, and older than the epoch followed: two remotes publish this scene (their objects were
+                # merged without a word before session 39), or an old one still runs.
+                self.dropped_log.warning("older-remote", "a heartbeat of an older remote (epoch %d) while the twin "
+                                         "follows epoch %d: two remotes publish this scene? Following the newer",
+                                         msg.epoch, self._remote_epoch)
+                if msg.epoch not in self._older and len(self._older) < MAX_OLDER_EPOCHS:
+                    # Once an older epoch: the newer remote's state says which objects are its own (the first
+                    # state query took both remotes' clouds).
+                    self._older.add(msg.epoch)
+                    self._start_resync(self._remote_epoch)
             return
         self._heartbeats.take("remote", msg.epoch, msg.seq, received)
         self._resync_if_behind(msg)
@@ -689,27 +705,35 @@ class Local:
                      beat.objects, len(self._clouds))
             self._resync_every = min(2 * self._resync_every, RESYNC_MAX_S)
         self._resync_at = self.clock.now() + self._resync_every
+        self._start_resync(beat.epoch)
+
+    def _start_resync(self, epoch: int) -> None:
+        """Ask for the scene state of the remote of ``epoch`` (see :meth:`_resync_if_behind`)."""
+        if self._resyncing is not None and self._resyncing.is_alive():
+            return
         self.report.resyncs += 1
         if self.clock.realtime:
-            self._resyncing = threading.Thread(target=self._ask_state, args=(beat.epoch,), daemon=True,
-                                               name="twin-resync")
+            self._resyncing = threading.Thread(target=self._ask_state, args=(epoch,), daemon=True, name="twin-resync")
             self._resyncing.start()
         else:  # the in-process bus answers at once: asked in the loop, a headless session stays repeatable
-            self._ask_state(beat.epoch)
+            self._ask_state(epoch)
 
     def _ask_state(self, epoch: int) -> None:
         ids: set[str] = set()
+        answered = [False]  # by the remote of ``epoch`` (an older one still running answers the same key)
 
         def take(key: str, msg) -> None:  # type: ignore[no-untyped-def]
-            if isinstance(msg, Cloud):
-                ids.add(msg.object_id)
+            if getattr(msg, "epoch", -1) >= epoch:
+                answered[0] = True
+                if isinstance(msg, Cloud):
+                    ids.add(msg.object_id)
             self._enqueue(key, msg)
 
-        answered = self.link.query(self.keys.state, take, timeout=self._state_wait) > 0
-        self.inbox.put((self.clock.now(), "", _StateAnswered(epoch, answered, frozenset(ids))))
+        self.link.query(self.keys.state, take, timeout=self._state_wait)
+        self.inbox.put((self.clock.now(), "", _StateAnswered(epoch, answered[0], frozenset(ids))))
 
     def _on_state_answered(self, done: _StateAnswered) -> None:
-        """After a restarted remote's state: the objects it no longer sent (clouds of an older epoch) are gone. An
+        """After the state of the remote followed: objects of older epochs it did not send are gone. An
         unanswered query is said (a remote's query budget spent by another peer starves a joining twin)."""
         if not done.answered:
             self.dropped_log.warning("state-unanswered", "the remote did not answer the twin's scene-state query "
@@ -718,7 +742,8 @@ class Local:
             return
         for object_id, (epoch, _) in list(self._clouds.items()):
             if epoch < done.epoch and object_id not in done.ids:
-                log.warning("object %r: the restarted remote no longer has it; removed", object_id)
+                log.warning("object %r: the remote followed (epoch %d) does not hold it (restarted without it, or "
+                            "it was another remote's); removed", object_id, done.epoch)
                 self._handle(self.clock.now(), "", Gone(v=VERSION, stamp_ns=self.clock.stamp_ns(), object_id=object_id,
                                                         epoch=done.epoch, seq=0))
 
