@@ -159,6 +159,20 @@ def test_of_two_remotes_of_one_scene_the_twin_follows_the_newer_and_says_so(cach
         assert any("older remote" in m for m in said) and any("'can'" in m and "removed" in m for m in said), said
 
 
+def test_clouds_past_the_pending_budget_are_dropped_and_taken_later_by_a_state_query(cache, monkeypatch):
+    """40 clouds of 5 M points waited for estimation in 1 GB, an honest one behind them (probe of session 39). Past
+    MAX_PENDING_POINTS (made one cloud's worth here) a cloud is dropped, counted, and asked for again."""
+    import twin.runtime
+
+    monkeypatch.setattr(twin.runtime, "MAX_PENDING_POINTS", 25_000)
+    with Headless(load_scene(SMALL), cache_dir=cache) as session:
+        session.tick()
+        assert session.local.link.counters.dropped_by_reason["too-much-pending"] == 1
+        assert len(session.local.objects) + len(session.local.pending) == 1
+        session.run(3.0)
+        assert sorted(session.local.objects) == ["can", "crate"] and session.local.report.resyncs >= 1
+
+
 def test_a_forged_sequence_number_silences_an_object_only_until_two_heartbeats_and_a_keyframe(cache):
     with Headless(load_scene(SMALL), cache_dir=cache) as session:
         session.run(0.5)

@@ -292,6 +292,13 @@ MAX_ORPHAN_POSES = 1024
 #: a cloud of a new id is dropped and counted (``"too-many-objects"``); one of an object the twin has is taken.
 MAX_OBJECTS = 1000
 
+#: Points of clouds waiting for estimation at once (all objects). Each waits with its message and an encoded
+#: copy for its worker: 40 forged clouds of 5 M points took 1 GB and held a honest cloud behind them for the
+#: minutes their estimates took. Past it a cloud is dropped and counted (``"too-much-pending"``); the state query
+#: asked again while heartbeats count objects the twin lacks brings it later. A scene of a thousand 30k-point
+#: objects waits within it.
+MAX_PENDING_POINTS = 40_000_000
+
 #: Messages the transport's threads may queue for the loop at once. The loop drains them every step; a flood
 #: faster than it handles them (49,000 heartbeats a second once stood the loop still for 25 s) must not grow
 #: memory without limit: past this many, a message arriving is dropped and counted (``"inbox-full"``). An
@@ -883,6 +890,12 @@ class Local:
             if msg.object_id not in self._clouds and len(self._clouds) >= MAX_OBJECTS:
                 self.link.dropped("too-many-objects", "dropped a cloud of %r: the twin has %d objects already",
                                   msg.object_id, len(self._clouds))
+                return
+            waiting = sum(job[1].count for i, job in self._jobs.items() if i != msg.object_id)
+            if waiting + msg.count > MAX_PENDING_POINTS:
+                # Before its mark moves: a state query asked again (heartbeats count the object) takes it later.
+                self.link.dropped("too-much-pending", "dropped a cloud of %r (%d points): %d points wait for "
+                                  "estimation already", msg.object_id, msg.count, waiting)
                 return
             if not self._newer(self._clouds, msg):
                 return
