@@ -516,9 +516,15 @@ def estimate_views(views: list[View], density: float, *, support: Plane | str | 
     result = estimate(cloud, density, material=material, keep_strays=keep_strays, progress=progress)
     share, bounds = assess(result, points, noise, normals=normals, open_past_frame=completion.open_past_frame)
     warnings.extend(result.warnings)
-    if len(completion.points):
+    if len(completion.points) and completion.base_area > 0:
         warnings.append(f"the base ({completion.base_area * 1e4:.3g} cm^2) was closed on the support plane, "
                         f"not observed")
+    elif len(completion.points):  # no flat base ("the base (0 cm^2) was closed" said so of a carved hull's points)
+        how = [f"{n:,} {what}" for n, what in ((completion.carved, "on the hull the views carved"),
+                                                (completion.mirrored, "mirrored"), (completion.turned, "turned"))
+               if n] or [f"{len(completion.points):,}"]
+        warnings.append(f"what no view saw was closed on the support plane and the views' evidence ({', '.join(how)} "
+                        f"points), not observed")
     if completion.open_past_frame:
         warnings.append(f"the object runs out of a depth image's frame where no other view looked: what lies past "
                         f"the frame's border is unknown, the estimate is of the part seen, and the volume is only "
