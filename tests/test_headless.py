@@ -31,6 +31,7 @@ from sync.messages import (
     Pose,
     SceneInfo,
     cloud_message,
+    decode,
     encode,
 )
 from sync.ordering import MARK_EXPIRY, MAX_SENDERS
@@ -171,6 +172,26 @@ def test_clouds_past_the_pending_budget_are_dropped_and_taken_later_by_a_state_q
         assert len(session.local.objects) + len(session.local.pending) == 1
         session.run(3.0)
         assert sorted(session.local.objects) == ["can", "crate"] and session.local.report.resyncs >= 1
+
+
+def test_a_cloud_the_twin_refused_is_not_estimated_again_when_the_state_is_asked_again(cache, monkeypatch):
+    """Heartbeats count the remote's objects; one whose cloud the twin refused is one it lacks, so the twin asks for
+    the state again (every 1 to 60 s): the same cloud must not be estimated, and refused, each time."""
+    import twin.runtime
+    from estimation.errors import CloudError
+
+    build = twin.runtime.build_from_cloud
+
+    def refuse_the_can(data, *args, **kwargs):  # type: ignore[no-untyped-def]
+        if decode(data).object_id == "can":
+            raise CloudError("degenerate cloud: flat (planar)")
+        return build(data, *args, **kwargs)
+
+    monkeypatch.setattr(twin.runtime, "build_from_cloud", refuse_the_can)
+    with Headless(load_scene(SMALL), cache_dir=cache) as session:
+        session.run(5.0)
+        report = session.local.report
+        assert session.local.objects == ["crate"] and report.estimation_errors == 1 and report.resyncs == 0
 
 
 def test_a_forged_sequence_number_silences_an_object_only_until_two_heartbeats_and_a_keyframe(cache):

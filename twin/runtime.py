@@ -433,6 +433,9 @@ class Local:
         # (id, epoch, seq) of clouds whose worker died once: by id too, as a forged cloud may reuse another's seq
         self._retried: set[tuple[str, int, int]] = set()
         self._clouds: dict[str, tuple[int, int]] = {}  # id -> (epoch, seq) of the cloud in (or going into) the twin
+        # id -> (epoch, seq) of its cloud the twin could not take (estimate, scene, compile): a state query asked
+        # again sends it again, and it is not estimated again (a later cloud of the object is)
+        self._refused: dict[str, tuple[int, int]] = {}
         self._offsets: dict[str, tuple[np.ndarray, np.ndarray]] = {}
         self._taken: dict[str, TwinObject] = {}  # id -> the object as it went into the twin (twin_object)
         self._latest: dict[str, Pose] = {}
@@ -701,7 +704,7 @@ class Local:
         messages do, then a :class:`_StateAnswered`."""
         restarted = self._remote_epoch is not None and beat.epoch > self._remote_epoch
         self._remote_epoch = beat.epoch
-        behind = beat.objects > len(self._clouds) and self.clock.now() >= self._resync_at
+        behind = beat.objects > len(self._clouds) + len(self._refused) and self.clock.now() >= self._resync_at
         if not (restarted or behind) or (self._resyncing is not None and self._resyncing.is_alive()):
             return
         if restarted:
@@ -891,6 +894,9 @@ class Local:
                 self.link.dropped("too-many-objects", "dropped a cloud of %r: the twin has %d objects already",
                                   msg.object_id, len(self._clouds))
                 return
+            if self._refused.get(msg.object_id) == (msg.epoch, msg.seq):
+                self.report.out_of_order += 1  # refused once already (sent again by a state query)
+                return
             waiting = sum(job[1].count for i, job in self._jobs.items() if i != msg.object_id)
             if waiting + msg.count > MAX_PENDING_POINTS:
                 # Before its mark moves: a state query asked again (heartbeats count the object) takes it later.
@@ -900,6 +906,7 @@ class Local:
             if not self._newer(self._clouds, msg):
                 return
             self._orphans.pop(msg.object_id, None)  # its pose, if one came first, is kept for it
+            self._refused.pop(msg.object_id, None)
             superseded = self._jobs.get(msg.object_id)
             if superseded is not None and superseded[0].cancel():  # its result would be thrown away unused
                 self.report.clouds_superseded += 1
@@ -912,6 +919,7 @@ class Local:
                 self.report.out_of_order += 1  # older than the cloud the twin has: not about this object
                 return
             self._forget_later(msg)
+            self._refused.pop(msg.object_id, None)
             self._jobs.pop(msg.object_id, None)
             self._clouds.pop(msg.object_id, None)
             self._offsets.pop(msg.object_id, None)
@@ -930,6 +938,13 @@ class Local:
             for side in ("twin", "remote"):
                 self.rlog.removed(side, msg.object_id, self.twin.time)
             self.rlog.event(self.twin.time, f"{msg.object_id}: removed by the remote")
+
+    def _refuse(self, object_id: str, msg: Cloud) -> None:
+        """Remember that ``msg``, ``object_id``'s cloud, was not taken (newest last, at most :data:`MAX_OBJECTS`)."""
+        self._refused.pop(object_id, None)
+        self._refused[object_id] = (msg.epoch, msg.seq)
+        if len(self._refused) > MAX_OBJECTS:
+            del self._refused[next(iter(self._refused))]
 
     def _forget_later(self, msg: Gone) -> None:
         """Remember that ``msg``'s object is gone as of its ``(epoch, seq)``, newest last; past :data:`MAX_GONE`
@@ -973,10 +988,12 @@ class Local:
                 self.report.estimation_errors += 1
                 log.error("object %r: the estimation worker died again (%s); going on without it", object_id, exc)
                 self._clouds.pop(object_id, None)  # the next cloud for it is taken again
+                self._refuse(object_id, msg)
                 continue
             except Exception as exc:  # a cloud the estimator rejects: the twin goes on without it
                 self.report.estimation_errors += 1
                 self._clouds.pop(object_id, None)  # its slot is free (MAX_OBJECTS), and a later cloud is tried
+                self._refuse(object_id, msg)
                 self.dropped_log.warning("estimation-failed", "object %r: could not estimate its cloud: %s", object_id, exc)
                 self.rlog.event(self.twin.time, f"{object_id}: could not estimate its cloud: {exc}", "ERROR")
                 continue
@@ -984,6 +1001,7 @@ class Local:
                 # The message's origin and frame were in the scene; its points need not be (a 400 m cloud
                 # would be a 1e11 kg body). Its slot is free again.
                 self._clouds.pop(object_id, None)
+                self._refuse(object_id, msg)
                 continue
 
             def edit(spec, obj=obj) -> None:  # type: ignore[no-untyped-def]
@@ -1019,9 +1037,10 @@ class Local:
                     self.rlog.event(t, f"{obj.id}: added to the twin ({m.mass:.3g} kg, {len(obj.hulls)} hulls) "
                                        f"{self.report.add_latency[-1]:.2f} s after its cloud arrived")
 
-            def failed(exc: Exception, object_id=object_id) -> None:  # type: ignore[no-untyped-def]
+            def failed(exc: Exception, object_id=object_id, msg=msg) -> None:  # type: ignore[no-untyped-def]
                 self.report.failed_edits += 1
                 self._clouds.pop(object_id, None)  # a later cloud of it is tried again
+                self._refuse(object_id, msg)
                 self.rlog.event(self.twin.time, f"{object_id}: its model did not compile ({exc}); left out", "ERROR")
 
             self.twin.edit_async(edit, then=done, failed=failed)
