@@ -452,6 +452,8 @@ def _correspondences(moving: np.ndarray, tgt: IcpTarget, transform: np.ndarray, 
 def _point_to_plane_step(match: _Match, tgt: IcpTarget) -> np.ndarray:
     """(4, 4): the small motion that best moves the matched points onto their targets' tangent planes,
     linearised in three Euler angles and a shift, the rotation then made exact (Rz Ry Rx, as Open3D)."""
+    from scipy.spatial.transform import Rotation
+
     p = match.moved[match.found]
     j = match.index[match.found]
     n = tgt.normals(j)
@@ -459,10 +461,8 @@ def _point_to_plane_step(match: _Match, tgt: IcpTarget) -> np.ndarray:
     residual = np.einsum("ij,ij->i", p - tgt.points[j], n)
     # A least-squares solve: a surface that pins no turn about some axis (a ball) leaves it at zero.
     x = np.linalg.lstsq(jacobian.T @ jacobian, -jacobian.T @ residual, rcond=None)[0]
-    (ca, cb, cg), (sa, sb, sg) = np.cos(x[:3]), np.sin(x[:3])
     out = np.eye(4)
-    out[:3, :3] = (np.array([[cg, -sg, 0], [sg, cg, 0], [0, 0, 1]]) @ np.array([[cb, 0, sb], [0, 1, 0], [-sb, 0, cb]])
-                   @ np.array([[1, 0, 0], [0, ca, -sa], [0, sa, ca]]))
+    out[:3, :3] = Rotation.from_euler("xyz", x[:3]).as_matrix()  # extrinsic x, y, z: Rz Ry Rx
     out[:3, 3] = x[3:]
     return out
 

@@ -665,8 +665,6 @@ def test_a_view_of_one_repeated_point_beside_real_views_is_no_index_error():
 def test_the_views_path_refuses_one_repeated_point_and_drops_repeats_before_searching():
     """150,000 copies of one point with a VIEWPOINT took 90 s to be refused (the single-cloud path: 1.5 s); beside a
     box's 5,000 points they took 76 s in the normals' neighbour searches."""
-    import time
-
     from estimation.views import View, estimate_views
 
     origin = np.array([0.5, -0.3, 0.45])
@@ -677,10 +675,8 @@ def test_the_views_path_refuses_one_repeated_point_and_drops_repeats_before_sear
                        1000.0)
     box = trimesh.creation.box(extents=[0.10, 0.06, 0.04])
     pts = trimesh.sample.sample_surface(box, 5000, seed=1)[0] + [0, 0, 0.02]
-    start = time.process_time()
     result = estimate_views([View(np.r_[np.tile([[0.01, 0.02, 0.0]], (150_000, 1)), pts], origin)], 1000.0)
-    assert time.process_time() - start < 30  # a bound far above its 2 s, far below the 76 s it took
-    assert result.estimate.points_in <= 5001  # the copies are one point
+    assert result.estimate.points_in <= 5001  # the copies are one point (searched as 150,000: 76 s)
     assert result.estimate.volume == pytest.approx(2.4e-4, rel=0.05)
 
 
