@@ -26,7 +26,8 @@ Plus one MCAP metadata record ``tactile_twin.session`` at the start (``schema_ve
 has none), ``scene_dir``, ``seeds`` and ``network`` (JSON), ``side``, ``command``, ``dt``, and ``sensor``, the
 remote's sensor by name (``surface``, ``cameras``), which replay rebuilds and checks: absent from ``twin local``'s
 recordings, which do not know it, and from those made before it was recorded) and
-``tactile_twin.end`` when the recording is closed properly (``messages``, ``duration_s``).
+``tactile_twin.end`` when the recording is closed properly (``messages``, ``duration_s``, ``not_recorded``:
+messages past :data:`MAX_CHANNELS` topics or :data:`MAX_RECORDED_TOPIC` characters).
 
 Times are the recording process's clock (:meth:`sync.clock.Clock.stamp_ns`: wall nanoseconds live,
 simulated nanoseconds headless), taken under one lock as each record is queued and never allowed to go
@@ -204,7 +205,7 @@ class Recorder:
         self._writer.add_metadata("tactile_twin.session", meta)
         self._channels: dict[str, int] = {}
         self._topics: set[str] = set()  # topics logged so far (their channels are made by the writing thread)
-        self.dropped = 0  # messages not recorded: on a topic past MAX_CHANNELS, or a key past MAX_RECORDED_KEY
+        self.dropped = 0  # messages not recorded: on a topic past MAX_CHANNELS, or one past MAX_RECORDED_TOPIC
         self._write_failures = 0
         self._lock = threading.Lock()
         self._last_ns = -1
@@ -270,6 +271,7 @@ class Recorder:
             return
         duration = 0.0 if self._first_ns is None else (self._last_ns - self._first_ns) * 1e-9
         self._writer.add_metadata("tactile_twin.end", {"messages": str(self.messages), "duration_s": repr(duration),
+                                                       "not_recorded": str(self.dropped),
                                                        **{k: str(v) for k, v in end.items()}})
         try:
             self._writer.finish()

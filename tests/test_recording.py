@@ -837,6 +837,7 @@ def test_a_flood_of_new_keys_is_counted_not_recorded_and_the_recording_is_whole(
         r.wire("twin", "received", "twin/x/objects/" + "a" * 2000 + "/pose", b"\x01")  # a key too long to keep
         r.wire("twin", "received", "twin/x/objects/g3/pose", b"\x02")  # a topic it has: recorded
     assert r.dropped == 200 - 40 + 1
+    assert read_recording(path).end["not_recorded"] == str(r.dropped)  # the file says so too
     wire = read_recording(path).wire()
     assert len(wire) == 41 and {w.key for w in wire} == {f"twin/x/objects/g{i}/pose" for i in range(40)}
     said = [m.getMessage() for m in caplog.records]
