@@ -303,8 +303,10 @@ def orient_given(points: np.ndarray, normals: np.ndarray, grid: Grid, occ: Occup
     if against <= GIVEN_AGAINST_SHEET:
         if inward <= GIVEN_INWARD:
             return normals, None
-        return -normals, (f"the given normals point into the object ({100 * inward:.0f} % of those probed): "
-                          f"flipped")
+        # "given": the file's, or (twin estimate with views) turned towards each point's sensor, which a cloud that
+        # came without normals did not give; the message names both.
+        return -normals, (f"the normals (the file's, or turned towards the sensor) point into the object "
+                          f"({100 * inward:.0f} % of those probed): flipped")
     # Re-sign along each sheet: every point's sheet neighbours, the edges' signs from their normals.
     nbr = nearest(tree, points, k)[1][:, 1:]
     rows = np.arange(n)
