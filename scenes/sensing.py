@@ -160,9 +160,10 @@ class CameraSensor:
 
     Every :meth:`observe` and every due :meth:`track` scans the scene with the rig
     (:class:`scenes.cameras.CameraFeed`: ray-cast depth with the Kinect noise model, support plane removed,
-    the rest clustered). An object is the segment nearest its last known position; the first time, the
-    simulator's position labels which segment is which object (a real site would label it once, by hand
-    or by recognition), and is never used again. A segment that an object not yet observed shares with
+    the rest clustered). An object is the segment its ICP model lies on where it is predicted (a segment
+    may hold several: touching objects, or closer than two clustering cells); the first time, the segment
+    nearest its position, which the simulator gives (a real site would label it once, by hand or by
+    recognition), and is never used again. A segment that an object not yet observed shares with
     others is parted at a finer cell where that separates them (``_split_shared``). :meth:`observe` fuses the segment's views with per-point
     sensor origins, orients normals towards each point's camera, closes the base on the support plane
     (``estimation.completion``) and reports the segment's centroid with the world's axes as the object
@@ -611,10 +612,19 @@ class CameraSensor:
 
     def _gated(self, scan) -> dict[str, int]:  # type: ignore[no-untyped-def]
         """Every labelled object's segment at its prediction in ``scan`` (:func:`scenes.association.gate`,
-        computed once per scan)."""
+        computed once per scan): by the overlap of its ICP model placed there, for an object observed."""
         if self._gates is None:
-            self._gates = association.gate(scan.segments, {i: self._predicted(i, scan.time) for i in self._last})
+            placed = {i: self._placed(i, scan.time) for i in self._last if i in self._model}
+            self._gates = association.gate(scan.segments, {i: self._predicted(i, scan.time) for i in self._last},
+                                           placed)
         return self._gates
+
+    def _placed(self, object_id: str, time: float) -> np.ndarray:
+        """The object's ICP model points where it is predicted at ``time`` (world, m): moved by its motion so
+        far and on by its predicted displacement since it was last seen."""
+        model = self._model[object_id][0]
+        motion = self._motion[object_id]
+        return model @ motion[:3, :3].T + motion[:3, 3] + (self._predicted(object_id, time) - self._last[object_id])
 
     def _search(self, scan, object_id: str, *, taken: set[int]) -> int | None:  # type: ignore[no-untyped-def]
         """The nearest segment no object is predicted in, within reach of where ``object_id`` was last seen."""

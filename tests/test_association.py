@@ -5,7 +5,17 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from scenes.association import ASSOCIATION_RADIUS, MAX_SPEED, gate, outsiders, reach, search, sharing
+from scenes.association import (
+    ASSOCIATION_RADIUS,
+    MAX_SPEED,
+    MIN_OVERLAP,
+    gate,
+    outsiders,
+    overlap,
+    reach,
+    search,
+    sharing,
+)
 from scenes.cameras import Segment
 from scenes.restfilter import RestFilter, partial_motion
 
@@ -30,6 +40,35 @@ def test_gate_leaves_out_an_object_standing_clear_of_a_segment_another_stands_ov
     assert outsiders(seg, {"over": over, "beside": beside}) == {"beside"}
     # None over it: nothing tells them apart, both stay.
     assert outsiders(seg, {"x": beside, "y": beside + np.array([0.0, 0.01, 0.0])}) == set()
+
+
+def test_gate_puts_an_observed_object_in_the_segment_its_model_lies_on_not_by_the_nearest_centroid():
+    # The paper's table: one long segment of two large objects; its centroid, between them, is further from the
+    # left object than a small segment beside it is, so the centroid rule gives the left object that speck.
+    left, right = _segment((-0.5, 0, 0.8), half=0.1, n=400), _segment((0.5, 0, 0.8), half=0.1, n=400, seed=1)
+    long = Segment(points=np.concatenate([left.points, right.points]), origins=np.zeros((800, 3)),
+                   geom=np.zeros(800, int))
+    speck = _segment((-0.5, 0.17, 0.8), half=0.01, n=30, seed=2)
+    here = {"left": np.array([-0.5, 0.05, 0.8])}
+    assert gate([long, speck], here) == {}  # by centroid: the speck is nearest, and its grown box misses
+    model = left.points[::2]  # what was seen of it, where it is predicted
+    assert gate([long, speck], here, {"left": model}) == {"left": 0}
+    assert overlap([long, speck], {"left": model}) == {"left": 0}
+    # Placed where nothing is, or half on the segment, it falls back to the centroid rule (none here).
+    away = model + np.array([0.0, 1.0, 0.0])
+    assert overlap([long, speck], {"left": away}) == {}
+    assert gate([long, speck], here, {"left": away}) == {}
+    half_on = np.concatenate([model[: int(len(model) * (MIN_OVERLAP - 0.1))], away[: len(model)]])
+    assert overlap([long, speck], {"left": half_on}) == {}
+    assert overlap([], {"left": model}) == {} and overlap([long], {"left": np.zeros((0, 3))}) == {}
+
+
+def test_overlap_counts_each_model_point_for_the_segment_of_its_nearest_scan_point():
+    a, b = _segment((0.0, 0, 0.8), half=0.03), _segment((0.07, 0, 0.8), half=0.03, seed=1)  # 1 cm apart
+    # A model over a and 2 cm into b's side: most of its points are nearest a's.
+    model = np.random.default_rng(3).uniform([-0.03, -0.03, 0.77], [0.05, 0.03, 0.83], (300, 3))
+    assert overlap([a, b], {"x": model}) == {"x": 0}
+    assert overlap([b, a], {"x": model}) == {"x": 1}
 
 
 def test_sharing_goes_by_the_nearest_point_not_the_centroid():
