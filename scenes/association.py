@@ -2,7 +2,7 @@
 
 A scan's segments (:class:`scenes.cameras.Segment`: points, centroid, box) carry no names. An object is the
 segment its model's points lie on, placed where it is predicted, or for an object not observed yet the segment
-around where it is labelled (:func:`gate`); failing that, the nearest segment no other object is
+of the scan point nearest where it is labelled (:func:`gate`); failing that, the nearest segment no other object is
 predicted in, within how far it could have moved unseen (:func:`search`, :func:`reach`). Objects predicted in
 one segment that stand clear of its footprint are not in it (:func:`outsiders`). :class:`scenes.sensing.CameraSensor`
 keeps the state (predictions, claims, counts, logs); nothing here does.
@@ -53,23 +53,19 @@ def gate(segments: Sequence[Segment], predicted: Mapping[str, np.ndarray],
     """Each object's segment at its ``predicted`` position.
 
     An object with ``placed`` points (its model, (n, 3), moved to where it is predicted) is in the segment
-    that holds at least ``MIN_OVERLAP`` of them (:func:`overlap`), even one it shares with others: the
-    nearest centroid of a segment that holds several large objects is nearer the others' segments than
-    some of its own (the paper's table: a mug 1 m from the centroid of the segment it was in, 0.7 m from
-    another's, was looked for in a 54-point speck and lost). Otherwise (not observed yet, or too little of it
-    lies on any segment) it is in the segment with the nearest centroid, if the position lies inside its box
-    grown by ``ASSOCIATION_RADIUS`` (a large object's centroid, of what was seen, can be far from its
-    frame). Objects a segment's :func:`outsiders` leave out have none."""
+    that holds at least ``MIN_OVERLAP`` of them (:func:`overlap`), even one it shares with others. Otherwise
+    (not observed yet, or too little of it lies on any segment) it is in the segment of the scan point
+    nearest its position, if that segment's box grown by ``ASSOCIATION_RADIUS`` holds the position
+    (:func:`nearest`). Neither is the segment with the nearest centroid: a segment of several large objects
+    has its centroid between them, nearer other segments than some of its own (the paper's table: a mug
+    1 m from the centroid of the segment it was in, 0.7 m from another's, was looked for in a 54-point speck
+    and lost; a staircase sharing a segment with a bridge was never found). Objects a segment's
+    :func:`outsiders` leave out have none."""
     if not segments:
         return {}
-    gates = overlap(segments, {i: p for i, p in (placed or {}).items() if i in predicted})
-    centroids = np.array([seg.centroid for seg in segments])
-    for object_id, here in predicted.items():
-        if object_id in gates:
-            continue
-        k = int(np.argmin(np.linalg.norm(centroids - here, axis=1)))
-        if _grown_box_holds(segments[k], here):
-            gates[object_id] = k
+    index = _indexed(segments)
+    gates = overlap(segments, {i: p for i, p in (placed or {}).items() if i in predicted}, index=index)
+    gates |= nearest(segments, {i: p for i, p in predicted.items() if i not in gates}, index=index)
     by_segment: dict[int, list[str]] = {}
     for object_id, k in gates.items():
         by_segment.setdefault(k, []).append(object_id)
@@ -79,48 +75,59 @@ def gate(segments: Sequence[Segment], predicted: Mapping[str, np.ndarray],
     return gates
 
 
-def overlap(segments: Sequence[Segment], placed: Mapping[str, np.ndarray]) -> dict[str, int]:
-    """Each object's segment by overlap: the one holding at least ``MIN_OVERLAP`` of its ``placed`` points
-    ((n, 3) each), every point counted for the segment of the scan point nearest it, if that is within
-    ``ASSOCIATION_RADIUS``. Objects with no such segment are left out."""
+def _indexed(segments: Sequence[Segment]):  # type: ignore[no-untyped-def]
+    """A k-d tree of every segment's points, and each point's segment index."""
     from scipy.spatial import cKDTree
 
+    which = np.concatenate([np.full(len(seg.points), k) for k, seg in enumerate(segments)])
+    return cKDTree(np.concatenate([seg.points for seg in segments])), which
+
+
+def overlap(segments: Sequence[Segment], placed: Mapping[str, np.ndarray], *, index=None) -> dict[str, int]:  # type: ignore[no-untyped-def]
+    """Each object's segment by overlap: the one holding at least ``MIN_OVERLAP`` of its ``placed`` points
+    ((n, 3) each), every point counted for the segment of the scan point nearest it, if that is within
+    ``ASSOCIATION_RADIUS``. Objects with no such segment are left out. ``index``: :func:`_indexed`'s, if
+    built."""
     placed = {i: p for i, p in placed.items() if len(p)}
     if not segments or not placed:
         return {}
-    which = np.concatenate([np.full(len(seg.points), k) for k, seg in enumerate(segments)])
-    tree = cKDTree(np.concatenate([seg.points for seg in segments]))
+    tree, which = index or _indexed(segments)
     out: dict[str, int] = {}
     for object_id, points in placed.items():
-        distance, nearest = tree.query(points, distance_upper_bound=ASSOCIATION_RADIUS)
-        held = np.bincount(which[nearest[np.isfinite(distance)]], minlength=len(segments))
+        distance, near = tree.query(points, distance_upper_bound=ASSOCIATION_RADIUS)
+        held = np.bincount(which[near[np.isfinite(distance)]], minlength=len(segments))
         k = int(np.argmax(held))
         if held[k] >= MIN_OVERLAP * len(points):
             out[object_id] = k
     return out
 
 
-def sharing(segments: Sequence[Segment], predicted: Mapping[str, np.ndarray]) -> dict[int, list[str]]:
-    """The objects in each segment by the scan's point nearest each ``predicted`` position (its segment, if that
-    segment's box grown by ``ASSOCIATION_RADIUS`` holds the position). Not :func:`gate`'s nearest centroid: a
-    segment of several objects has its centroid between them, nearer other segments than some of its own."""
-    from scipy.spatial import cKDTree
-
+def nearest(segments: Sequence[Segment], predicted: Mapping[str, np.ndarray], *, index=None) -> dict[str, int]:  # type: ignore[no-untyped-def]
+    """Each object's segment by the scan point nearest its ``predicted`` position, if that segment's box grown
+    by ``ASSOCIATION_RADIUS`` holds the position; objects with none are left out. ``index``: as in
+    :func:`overlap`."""
     if not segments or not predicted:
         return {}
-    which = np.concatenate([np.full(len(seg.points), k) for k, seg in enumerate(segments)])
-    tree = cKDTree(np.concatenate([seg.points for seg in segments]))
-    out: dict[int, list[str]] = {}
+    tree, which = index or _indexed(segments)
+    out: dict[str, int] = {}
     for object_id, here in predicted.items():
         k = int(which[tree.query(here)[1]])
         if _grown_box_holds(segments[k], here):
-            out.setdefault(k, []).append(object_id)
+            out[object_id] = k
+    return out
+
+
+def sharing(segments: Sequence[Segment], predicted: Mapping[str, np.ndarray]) -> dict[int, list[str]]:
+    """The objects in each segment by :func:`nearest` (segment index -> object ids)."""
+    out: dict[int, list[str]] = {}
+    for object_id, k in nearest(segments, predicted).items():
+        out.setdefault(k, []).append(object_id)
     return out
 
 
 def search(segments: Sequence[Segment], last: np.ndarray, within: float, *, taken: set[int]) -> int | None:
     """The segment nearest ``last`` (by the distance to its box: a box, not the centroid, for the reason in
-    :func:`sharing`) that is not ``taken`` and no further than ``within`` metres; None if there is none."""
+    :func:`gate`) that is not ``taken`` and no further than ``within`` metres; None if there is none."""
     best, best_d = None, np.inf
     for k, seg in enumerate(segments):
         if k in taken:

@@ -243,12 +243,15 @@ class CameraSensor:
         every :class:`scenes.cameras.Camera`; ``background``, ``rest_window``, ``segmentation_image``: see
         the class.
         """
-        from scenes.cameras import KINECT_V1, CameraFeed, table_ring, table_workspace
+        from scenes.cameras import KINECT_V1, WORKSPACE_HEIGHT, CameraFeed, table_ring, table_workspace
 
         size = None if scene.table is None else scene.table.size
         height = None if scene.table is None else scene.table.height
         rig = table_ring(size, height, count=cameras, **camera)
-        feed = CameraFeed(rig, table_workspace(size, height), noise=KINECT_V1 if noise is None else noise, seed=seed)
+        # Up to the cameras: whatever stands on the table lower than they are is kept whole.
+        above = max(c.position[2] for c in rig) - (0.0 if height is None else height)
+        workspace = table_workspace(size, height, reach=max(WORKSPACE_HEIGHT, above))
+        feed = CameraFeed(rig, workspace, noise=KINECT_V1 if noise is None else noise, seed=seed)
         return cls(feed, track_period=track_period, seed=seed, background=background, rest_window=rest_window,
                    segmentation_image=segmentation_image)
 

@@ -10,6 +10,7 @@ from scenes.association import (
     MAX_SPEED,
     MIN_OVERLAP,
     gate,
+    nearest,
     outsiders,
     overlap,
     reach,
@@ -42,7 +43,7 @@ def test_gate_leaves_out_an_object_standing_clear_of_a_segment_another_stands_ov
     assert outsiders(seg, {"x": beside, "y": beside + np.array([0.0, 0.01, 0.0])}) == set()
 
 
-def test_gate_puts_an_observed_object_in_the_segment_its_model_lies_on_not_by_the_nearest_centroid():
+def test_gate_goes_by_where_an_objects_model_lies_then_by_the_nearest_point_never_the_nearest_centroid():
     # The paper's table: one long segment of two large objects; its centroid, between them, is further from the
     # left object than a small segment beside it is, so the centroid rule gives the left object that speck.
     left, right = _segment((-0.5, 0, 0.8), half=0.1, n=400), _segment((0.5, 0, 0.8), half=0.1, n=400, seed=1)
@@ -50,14 +51,19 @@ def test_gate_puts_an_observed_object_in_the_segment_its_model_lies_on_not_by_th
                    geom=np.zeros(800, int))
     speck = _segment((-0.5, 0.17, 0.8), half=0.01, n=30, seed=2)
     here = {"left": np.array([-0.5, 0.05, 0.8])}
-    assert gate([long, speck], here) == {}  # by centroid: the speck is nearest, and its grown box misses
+    # Not observed yet: the segment of the scan point nearest it (the speck's centroid is the nearest centroid).
+    assert gate([long, speck], here) == {"left": 0} == nearest([long, speck], here)
     model = left.points[::2]  # what was seen of it, where it is predicted
     assert gate([long, speck], here, {"left": model}) == {"left": 0}
     assert overlap([long, speck], {"left": model}) == {"left": 0}
-    # Placed where nothing is, or half on the segment, it falls back to the centroid rule (none here).
+    # Its model decides over the nearest point: predicted beside the speck, it is still where its model lies.
+    by_speck = {"left": np.array([-0.5, 0.17, 0.8])}
+    assert gate([long, speck], by_speck) == {"left": 1}
+    assert gate([long, speck], by_speck, {"left": model}) == {"left": 0}
+    # Placed where nothing is, or half on the segment, it falls back to the nearest point.
     away = model + np.array([0.0, 1.0, 0.0])
     assert overlap([long, speck], {"left": away}) == {}
-    assert gate([long, speck], here, {"left": away}) == {}
+    assert gate([long, speck], by_speck, {"left": away}) == {"left": 1}
     half_on = np.concatenate([model[: int(len(model) * (MIN_OVERLAP - 0.1))], away[: len(model)]])
     assert overlap([long, speck], {"left": half_on}) == {}
     assert overlap([], {"left": model}) == {} and overlap([long], {"left": np.zeros((0, 3))}) == {}
