@@ -575,3 +575,40 @@ def assess(result: PhysicalEstimate, observed: np.ndarray, noise: float, *,
     low, high = honest_bounds(result.volume, result.volume_bounds_m3, total - seen, total, noise=noise,
                               extent=float(result.obb.extents.min()))
     return share, (low, float("inf") if open_past_frame else high)
+
+
+def with_completion(result: PhysicalEstimate, points: np.ndarray, completed: np.ndarray, *,
+                    normals: np.ndarray | None = None) -> PhysicalEstimate:
+    """``result``, the estimate of ``points`` ((n, 3) metres) some of which a sender's completion added where no
+    sensor saw (``completed``, (n,) bool), with the volume interval of what was observed (:func:`assess`, the
+    noise the observed points' own) joined to its own, and, when less than ``COVERAGE_WARNING`` of its surface
+    was observed, a warning saying so. A cloud over the wire (``sync.messages.Cloud.completed``) says which
+    points were completed but not from where they were seen: the one-sided check of :func:`estimate_views`
+    cannot be made here.
+
+    Raises:
+        ValueError: ``completed`` not one flag per point, or ``normals`` not one per point.
+    """
+    from estimation.spacing import surface_noise
+
+    points = np.asarray(points, np.float64)
+    completed = np.asarray(completed, bool)
+    if completed.shape != (len(points),) or (normals is not None and np.shape(normals) != points.shape):
+        raise ValueError(f"with_completion: {len(points)} points, {completed.shape} flags, "
+                         f"{None if normals is None else np.shape(normals)} normals")
+    if not completed.any():
+        return result
+    observed = points[~completed]
+    if len(observed) < tol.MIN_POINTS:
+        share, low, high = 0.0, 0.0, float("inf")
+    else:
+        share, (low, high) = assess(result, observed, surface_noise(observed),
+                                    normals=None if normals is None else np.asarray(normals, np.float64)[~completed])
+    own = result.volume_bounds_m3 or (result.volume, result.volume)
+    bounds = (min(low, own[0]), max(high, own[1]))
+    warnings = result.warnings
+    if share < COVERAGE_WARNING:
+        warnings += (f"only {100 * share:.0f} % of the closed surface was observed; the rest ({100 * completed.mean():.0f} "
+                     f"% of the points) was completed by the sender where no sensor saw: the volume lies in "
+                     f"{bounds[0]:.4g}..{bounds[1]:.4g} m^3",)
+    return replace(result, volume_bounds_m3=bounds, warnings=warnings)

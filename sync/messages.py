@@ -140,6 +140,10 @@ class Cloud(_Msg, tag="cloud"):
     #: The points' unit outward normals (:func:`unpack_normals`), or empty: a camera-based sensor's, turned
     #: towards the camera that saw each point, which the estimate cannot recover from the points alone.
     normals: bytes = b""
+    #: Which points no sensor saw (:func:`unpack_completed`: added by the sender's completion, the base on the
+    #: support plane, a carved or mirrored side), or empty: all observed. The twin's volume interval then
+    #: rests on the observed ones (``estimation.views.with_completion``), as ``twin estimate``'s views do.
+    completed: bytes = b""
 
 
 class Pose(_Msg, tag="pose"):
@@ -327,6 +331,32 @@ def unpack_normals(msg: Cloud) -> np.ndarray | None:
     return normals / length
 
 
+def pack_completed(completed: np.ndarray) -> bytes:
+    """An (n,) bool mask as one bit per point (numpy's ``packbits``, big-endian in each byte), zstd."""
+    import zstandard
+
+    return zstandard.ZstdCompressor(level=_ZSTD_LEVEL).compress(np.packbits(np.asarray(completed, bool)).tobytes())
+
+
+def unpack_completed(msg: Cloud) -> np.ndarray | None:
+    """The (n,) bool mask of a :class:`Cloud`'s completed points in :func:`unpack_points`' order, or None.
+
+    Raises:
+        MessageError: a payload that does not inflate to one bit per point, or set bits past the last point.
+    """
+    if not msg.completed:
+        return None
+    raw = np.frombuffer(_inflate(msg, msg.completed, _completed_size(msg.count), "completed flags"), np.uint8)
+    bits = np.unpackbits(raw)
+    if bits[msg.count:].any():
+        raise MessageError("bad-payload", f"cloud {msg.object_id!r}: completed flags past its {msg.count} points")
+    return bits[:msg.count].astype(bool)
+
+
+def _completed_size(count: int) -> int:
+    return (count + 7) // 8
+
+
 def unpack_points(msg: Cloud) -> np.ndarray:
     """The (n, 3) float64 cloud of a :class:`Cloud` message, metres."""
     width = msg.bits // 8
@@ -369,11 +399,24 @@ def _framed_size(msg: Cloud, payload: bytes, size: int, what: str) -> None:
 
 def cloud_message(object_id: str, points: np.ndarray, *, stamp_ns: int, epoch: int, seq: int,
                   material: str | None, density: float | None, frame_position: np.ndarray,
-                  frame_quat: np.ndarray, quantum: float = CLOUD_QUANTUM, normals: np.ndarray | None = None) -> Cloud:
+                  frame_quat: np.ndarray, quantum: float = CLOUD_QUANTUM, normals: np.ndarray | None = None,
+                  completed: np.ndarray | None = None) -> Cloud:
     """A :class:`Cloud` of ``points`` ((n, 3) metres, world frame), quantised and compressed, with their
     ``normals`` ((n, 3) unit, outward) when given and every one of them is finite and not zero (else the
-    cloud goes without: a receiver would refuse it)."""
+    cloud goes without: a receiver would refuse it), and which of them are ``completed`` ((n,) bool; sent
+    when any is).
+
+    Raises:
+        ValueError: ``normals`` or ``completed`` not one per point.
+    """
     count, bits, origin, data, order = pack_points(points, quantum)
+    flags = b""
+    if completed is not None:
+        completed = np.asarray(completed, bool)
+        if completed.shape != (count,):
+            raise ValueError(f"cloud {object_id!r}: completed flags of shape {completed.shape} for {count} points")
+        if completed.any():
+            flags = pack_completed(completed[order])
     packed = b""
     if normals is not None:
         normals = np.asarray(normals, dtype=np.float64)
@@ -384,7 +427,8 @@ def cloud_message(object_id: str, points: np.ndarray, *, stamp_ns: int, epoch: i
             packed = pack_normals(normals[order] / length[order, None])
     return Cloud(v=VERSION, stamp_ns=stamp_ns, object_id=object_id, epoch=epoch, seq=seq, count=count, bits=bits,
                  quantum=quantum, origin=origin, data=data, material=material, density=density,
-                 frame_position=_vec(frame_position, 3), frame_quat=_vec(frame_quat, 4), normals=packed)
+                 frame_position=_vec(frame_position, 3), frame_quat=_vec(frame_quat, 4), normals=packed,
+                 completed=flags)
 
 
 def as_received(points: np.ndarray, normals: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray | None]:
@@ -507,6 +551,8 @@ def _check_cloud(msg: Cloud) -> None:
     _framed_size(msg, msg.data, 3 * (msg.bits // 8) * msg.count, "points")
     if msg.normals:
         _framed_size(msg, msg.normals, 3 * msg.count, "normals")
+    if msg.completed:
+        _framed_size(msg, msg.completed, _completed_size(msg.count), "completed flags")
 
 
 def _ordinals(msg: Message) -> None:

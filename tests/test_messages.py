@@ -31,6 +31,7 @@ from sync.messages import (
     cloud_message,
     decode,
     encode,
+    unpack_completed,
     unpack_normals,
     unpack_points,
 )
@@ -111,6 +112,36 @@ def test_normals_that_do_not_match_the_points_are_rejected():
     zero = zstandard.ZstdCompressor().compress(np.zeros(3 * 100, np.int8).tobytes())
     with pytest.raises(MessageError) as err:
         unpack_normals(decode(encode(replace(good, normals=zero))))
+    assert err.value.reason == "bad-payload"
+
+
+def test_completed_flags_travel_with_their_points_and_are_checked():
+    rng = np.random.default_rng(4)
+    points = rng.uniform(-0.05, 0.05, (1001, 3)) + np.array([0.0, 0.0, 0.8])  # 1001: the last byte holds one flag
+    completed = points[:, 2] < 0.78  # the lowest fifth: a base the sender added
+    msg = decode(encode(cloud_message("o", points, stamp_ns=0, epoch=0, seq=1, material=None, density=1000.0,
+                                      frame_position=np.zeros(3), frame_quat=IDENTITY, completed=completed)))
+    back, flags = unpack_points(msg), unpack_completed(msg)
+    assert flags is not None and flags.shape == (1001,) and flags.sum() == completed.sum()
+    # Reordered with the points (each on the 0.1 mm grid, so within a quantum of the cut).
+    assert (back[flags, 2] < 0.78 + 1e-4).all() and (back[~flags, 2] > 0.78 - 1e-4).all()
+    # None completed, or no flags: none sent.
+    assert unpack_completed(cloud_message("o", points, stamp_ns=0, epoch=0, seq=1, material=None, density=1.0,
+                                          frame_position=np.zeros(3), frame_quat=IDENTITY,
+                                          completed=np.zeros(1001, bool))) is None
+    assert unpack_completed(_cloud()) is None
+    with pytest.raises(ValueError, match="completed flags of shape"):
+        cloud_message("o", points, stamp_ns=0, epoch=0, seq=1, material=None, density=1.0,
+                      frame_position=np.zeros(3), frame_quat=IDENTITY, completed=completed[:-1])
+    # A payload of the wrong size, not zstd, or with flags past the last point: dropped as malformed.
+    compress = zstandard.ZstdCompressor().compress
+    for payload in (compress(bytes(125)), b"not zstd"):
+        with pytest.raises(MessageError) as err:
+            decode(encode(replace(msg, completed=payload)))
+        assert err.value.reason == "bad-payload"
+    past = decode(encode(replace(msg, completed=compress(bytes(125) + b"\xff"))))  # 126 bytes: the size is right
+    with pytest.raises(MessageError, match="past its 1001 points") as err:
+        unpack_completed(past)
     assert err.value.reason == "bad-payload"
 
 

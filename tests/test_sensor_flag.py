@@ -17,10 +17,11 @@ SMALL = Path(__file__).parent / "data" / "small.toml"
 @pytest.mark.slow
 def test_the_camera_sensor_of_the_flag_builds_every_object_headless(tmp_path):
     from cli.demo import remote_sensor
+    from estimation import estimate, make_cloud
     from scenes.headless import Headless
     from scenes.scenefile import load_scene
     from scenes.sensing import CameraSensor
-    from sync.messages import decode, unpack_normals
+    from sync.messages import decode, unpack_completed, unpack_normals, unpack_points
 
     scene = load_scene(SMALL)
     sensor = remote_sensor("cameras", scene)
@@ -37,6 +38,16 @@ def test_the_camera_sensor_of_the_flag_builds_every_object_headless(tmp_path):
             sent = decode(session.remote._replies[session.remote.keys.object(object_id, "cloud")])  # type: ignore[attr-defined]
             normals = unpack_normals(sent)
             assert normals is not None and normals.shape == (sent.count, 3)
+            # And which points the remote's completion added (the base, what no camera saw): the twin's volume
+            # interval rests on the rest, and holds the true volume.
+            completed = unpack_completed(sent)
+            assert completed is not None and 0 < completed.mean() < 0.6
+            low, high = session.local.twin_object(object_id).estimate.volume_bounds_m3
+            true_volume = session.remote.true_surface(object_id).volume
+            assert low < true_volume < high, (object_id, low, true_volume, high)
+            plain = estimate(make_cloud(unpack_points(sent), normals), 1000.0)  # the completed counted as measured
+            assert plain.volume_bounds_m3 is not None
+            assert low < plain.volume_bounds_m3[0] and high > plain.volume_bounds_m3[1]
 
 
 @pytest.mark.slow

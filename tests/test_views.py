@@ -898,3 +898,33 @@ def test_depth_frames_that_cut_the_object_leave_its_volume_unbounded_above(capsy
     low, high = record["volume_bounds_m3"]
     assert low <= truth and high is None  # JSON has no infinity: null
     assert any("runs out of a depth image's frame" in w for w in record["warnings"])
+
+
+def test_a_clouds_completed_points_widen_its_interval_to_what_was_observed():
+    # What the twin does with a camera cloud's completed flags (sync.messages.Cloud.completed): the interval
+    # rests on the observed points, as estimate_views' does, not on the completed ones counted as measured.
+    import trimesh
+
+    from estimation.views import assess, with_completion
+
+    box = trimesh.creation.box((0.10, 0.06, 0.085))
+    box.apply_translation((0.0, 0.0, 0.0425))
+    points, faces = trimesh.sample.sample_surface(box, 40_000, seed=1)
+    normals = box.face_normals[faces]
+    est = estimate(make_cloud(points, normals), 1000.0)
+    base = points[:, 2] < 1e-6  # the base, closed on the support plane
+    low, high = est.volume_bounds_m3
+    got = with_completion(est, points, base, normals=normals)
+    share, (a, b) = assess(est, points[~base], 0.0, normals=normals[~base])
+    assert 0.8 < share < 0.9  # the base is 0.0060 of 0.0373 m^2
+    assert got.volume_bounds_m3[0] <= min(a, low) + 1e-12 and got.volume_bounds_m3[1] >= max(b, high) - 1e-12
+    assert got.volume_bounds_m3[0] < low - 0.02 * est.volume and got.volume_bounds_m3[1] > high + 0.02 * est.volume
+    assert got.volume_bounds_m3[0] < box.volume < got.volume_bounds_m3[1]
+    assert "completed by the sender" in got.warnings[-1] and got.volume == est.volume and got.mass == est.mass
+    # Nothing completed: the estimate as it was. Almost everything completed: nothing bounds it.
+    assert with_completion(est, points, np.zeros(len(points), bool)) is est
+    almost = np.ones(len(points), bool)
+    almost[:50] = False
+    assert with_completion(est, points, almost).volume_bounds_m3 == (0.0, float("inf"))
+    with pytest.raises(ValueError, match="flags"):
+        with_completion(est, points, base[:-1])

@@ -60,6 +60,7 @@ from sync.messages import (
     SceneInfo,
     decode,
     encode,
+    unpack_completed,
     unpack_normals,
     unpack_points,
 )
@@ -350,6 +351,8 @@ def build_from_cloud(data: bytes, coacd: CoacdSettings, cache_dir: Path | None,
     With ``display``, also a subset of the cloud (world frame at capture) for the rerun view, so the
     loop's process never unpacks a cloud.
     """
+    from estimation.views import with_completion
+
     msg = decode(data)
     assert isinstance(msg, Cloud)
     density, mat = resolve_density(msg.material, msg.density)  # an unknown material raises: no guess
@@ -357,7 +360,10 @@ def build_from_cloud(data: bytes, coacd: CoacdSettings, cache_dir: Path | None,
     points = unpack_points(msg)
     # A camera's normals, turned towards the camera that saw each point, say which side is out where the
     # points alone do not (a thin part, a partial view closed by completion).
-    est = estimate(make_cloud(points, unpack_normals(msg)), density, material=None if mat is None else mat.name)
+    normals, completed = unpack_normals(msg), unpack_completed(msg)
+    est = estimate(make_cloud(points, normals), density, material=None if mat is None else mat.name)
+    if completed is not None:  # what the sender added where no sensor saw: the interval rests on the rest
+        est = with_completion(est, points, completed, normals=normals)
     friction = DEFAULT_FRICTION if mat is None else mat.friction
     obj = object_at_estimate(msg.object_id, est, friction, coacd=coacd, cache_dir=cache_dir)
     if floor is not None:
