@@ -475,10 +475,7 @@ class Recording:
         for r in self.topic(TARGET_TOPIC):
             row = self._object(r)
             t = self._number(row, "sim_time", r.topic, 0.0, latest)
-            if times and t < times[-1]:
-                raise RecordingError(f"{self.path}: a {r.topic} record's sim_time {t:g} s goes back (previous "
-                                     f"{times[-1]:g} s)")
-            times.append(t)
+            times.append(self._not_back(r, t, times[-1] if times else None))
             points.append(self._vector(row, "position", "xyz", r.topic, MAX_COORDINATE))
         return np.array(times, dtype=np.float64), np.array(points, dtype=np.float64).reshape(-1, 3)
 
@@ -487,15 +484,16 @@ class Recording:
 
         Raises:
             RecordingError: a record that is not a JSON object with a ``sim_time`` from 0 to
-                :meth:`latest_time` and a list of ``transforms``, each with a string ``child_frame_id``, a
-                ``translation`` {x, y, z} within :data:`sync.messages.MAX_COORDINATE` m and a ``rotation``
-                {x, y, z, w}.
+                :meth:`latest_time` (ascending: replay looks samples up by time) and a list of ``transforms``,
+                each with a string ``child_frame_id``, a ``translation`` {x, y, z} within
+                :data:`sync.messages.MAX_COORDINATE` m and a ``rotation`` {x, y, z, w}.
         """
         latest = self.latest_time()
         rows: dict[str, list[tuple[float, list[float], list[float]]]] = {}
+        previous: float | None = None
         for r in self.topic(TRUTH_TOPIC):
             msg = self._object(r)
-            t = self._number(msg, "sim_time", r.topic, 0.0, latest)
+            t = previous = self._not_back(r, self._number(msg, "sim_time", r.topic, 0.0, latest), previous)
             transforms = msg.get("transforms")
             if not isinstance(transforms, list):
                 raise RecordingError(f"{self.path}: a {r.topic} record's transforms is not a list")
@@ -553,6 +551,14 @@ class Recording:
                     f"{MAX_REPLAY_SECONDS:g} s)" if what.endswith("time") or what.endswith("time_s") else "")
             raise RecordingError(f"{self.path}: {what} {value:g} is outside [{low:g}, {high:g}]{note}")
         return value
+
+    def _not_back(self, r: Record, t: float, previous: float | None) -> float:
+        """``t``, record ``r``'s ``sim_time``, unless it is earlier than ``previous`` (the last on its topic;
+        None: ``r`` is the first). Equal times pass: two records at one step are not out of order."""
+        if previous is not None and t < previous:
+            raise RecordingError(f"{self.path}: a {r.topic} record's sim_time {t:g} s goes back (previous "
+                                 f"{previous:g} s)")
+        return t
 
     def _vector(self, doc: dict, key: str, axes: str, topic: str, bound: float) -> list[float]:
         v = doc.get(key)

@@ -447,6 +447,30 @@ def test_malformed_records_are_one_line_errors_naming_the_record_and_field(recor
     assert not (tmp_path / "x").exists()
 
 
+@pytest.mark.parametrize("topic", [TARGET_TOPIC, TRUTH_TOPIC])
+def test_records_whose_time_goes_back_are_a_one_line_error_naming_the_record(tmp_path, capsys, topic):
+    """Truth records in reverse time order replayed with no damage and an empty truth comparison (null stats,
+    no objects): replay looks truth samples up by time. Targets were refused; truth now is, the same way."""
+    path = tmp_path / "back.mcap"
+    pose = (np.array([0.0, 0.0, 0.45]), np.array([1.0, 0.0, 0.0, 0.0]))
+    with Recorder(path, clock=SimClock(), metadata={"scene_toml": SMALL.read_text(),
+                                                    "scene_dir": str(SMALL.parent)}) as r:
+        for t in (0.0, 0.5, 0.2) if topic == TARGET_TOPIC else (0.0, 0.2, 0.5):
+            r.target(t, np.array([-0.3, 0.0, 0.56]))
+        for t in (0.0, 0.5, 0.2) if topic == TRUTH_TOPIC else (0.0, 0.2, 0.5):
+            r.truth(t, {"crate": pose})
+    words = f"{topic} record's sim_time 0.2 s goes back (previous 0.5 s)"
+    rec = read_recording(path)
+    assert rec.damage is None  # written whole: inconsistent, not torn
+    read = rec.targets if topic == TARGET_TOPIC else rec.truth
+    with pytest.raises(RecordingError, match=r"goes back \(previous 0\.5 s\)") as caught:
+        read()
+    assert words in str(caught.value)
+    assert main(["replay", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert words in err and err.count("\n") == 1 and "Traceback" not in err, err
+
+
 def test_a_changed_byte_in_the_session_metadata_fails_the_checksum(tmp_path):
     """The scene's density flipped from 700 to 300 replayed another scene without a word: chunk CRCs cover
     messages, not metadata. The data section's CRC covers both."""
