@@ -166,8 +166,7 @@ def source(args: argparse.Namespace, tasks: tuple[str, ...]):  # type: ignore[no
     scene_file = getattr(args, "scene_file", None)
     from cli.record import recorded_scene, recorded_sensor, recorded_targets
     from sync.recording import read_recording
-    from twin.model import scene_reach_corners
-    from twin.runtime import OPERATOR_REACH
+    from twin.model import OPERATOR_REACH, scene_reach_corners
 
     recording = read_recording(args.scene)
     if recording.damage:

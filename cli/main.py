@@ -803,8 +803,7 @@ def _trajectory(args: argparse.Namespace, twin):  # type: ignore[no-untyped-def]
 
 def _cmd_run(args: argparse.Namespace) -> int:
     from twin.loop import steps_per_iteration
-    from twin.model import DEFAULT_PHYSICS, model_reach_corners
-    from twin.runtime import OPERATOR_REACH
+    from twin.model import DEFAULT_PHYSICS, OPERATOR_REACH, model_reach_corners
     from twin.sim import run_paced
     from twin.trajectory import load_trajectory
 

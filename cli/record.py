@@ -228,8 +228,7 @@ def replay(path: str | Path, *, script: Path | None = None, units: str = "m", sc
 
     from scenes.headless import SENSORS, Headless, sensor_for
     from scenes.scenefile import load_scene
-    from twin.model import scene_reach_corners
-    from twin.runtime import OPERATOR_REACH
+    from twin.model import OPERATOR_REACH, scene_reach_corners
     from twin.trajectory import load_trajectory
 
     recording = read_recording(path)

@@ -46,10 +46,10 @@ from sync.recording import Recorder
 from sync.transport import Transport
 from twin.debuglog import OFF, DebugLog
 from twin.loop import LoopStats, run_loop, steps_per_iteration
-from twin.model import add_object, remove_object
+from twin.model import OPERATOR_REACH, add_object, remove_object
 from twin.objects import TwinObject
 from twin.poses import rotation
-from twin.runtime import OPERATOR_REACH, reach_box
+from twin.runtime import reach_box
 from twin.settings import SettingsError
 from twin.sim import Twin
 
@@ -184,9 +184,14 @@ class Remote:
         for spec_obj, obj in zip(scene.objects, truth, strict=True):
             add_object(spec, obj)
             self._remember(spec_obj, obj)
-        self.twin = Twin(spec, background=clock.realtime)
+        try:
+            self.twin = Twin(spec, background=clock.realtime)
+        except ValueError as exc:  # MuJoCo's compiler: a 1 mm sphere at 0.1 kg/m^3 has no inertia it accepts
+            self.link.close()
+            raise SceneError(f"scene {scene.name!r}: MuJoCo could not compile it: {' '.join(str(exc).split())}") from None
         try:
             check_placement(scene.name, self.twin.model, set(self._objects), self.twin.data)
+            self._check_extents(scene)
         except SceneError:
             self.twin.close()
             self.link.close()
@@ -282,6 +287,23 @@ class Remote:
 
         self._actions.put(teleport)
         return done
+
+    def _check_extents(self, scene: SceneSpec) -> None:
+        """Raise a :class:`SceneError` naming the first object whose true surface, where it starts, reaches out
+        of the scene's declared workspace: the twin drops the cloud of an object that does not fit its scene
+        box, and ``twin demo`` waited ten minutes for it (the loader checks positions only; a surface needs
+        its mesh)."""
+        if scene.workspace is None:
+            return
+        low, high = (np.asarray(c, dtype=float) for c in scene.workspace)
+        for object_id, truth in self._objects.items():
+            position, quat = self.twin.pose(object_id)
+            vertices = np.asarray(truth.body_mesh.vertices) @ rotation(quat).T + position  # type: ignore[attr-defined]
+            lo, hi = vertices.min(axis=0), vertices.max(axis=0)
+            if (lo < low).any() or (hi > high).any():
+                raise SceneError(f"scene {scene.name!r}: object {object_id!r} reaches from {np.round(lo, 3).tolist()} to "
+                                 f"{np.round(hi, 3).tolist()} m, out of the workspace (min {list(scene.workspace[0])}, "
+                                 f"max {list(scene.workspace[1])}); the twin would drop its cloud")
 
     def cloud_points(self) -> dict[str, int]:
         """Points per object cloud this remote sends."""

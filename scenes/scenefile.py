@@ -42,9 +42,10 @@ from estimation import tolerances as tol
 from estimation.errors import TwinError
 from estimation.materials import MAX_DENSITY, MIN_DENSITY
 from sync.keys import ID_PATTERN
-from sync.messages import MAX_COORDINATE
+from sync.messages import MAX_COORDINATE, MAX_EE_RADIUS
 from twin.model import (
     DEFAULT_PHYSICS,
+    OPERATOR_REACH,
     RESERVED_IDS,
     SCENE_REACH,
     EndEffectorSpec,
@@ -104,6 +105,9 @@ Positive = Annotated[float, Meta(gt=0)]
 #: would be published and then refused by every twin.
 Density = Annotated[float, Meta(ge=MIN_DENSITY, le=MAX_DENSITY)]
 Size = Annotated[float, Meta(ge=SIZE_RANGE_M[0], le=SIZE_RANGE_M[1])]
+#: The end effector's radius: what the wire carries (:data:`sync.messages.MAX_EE_RADIUS`). A 1.5 m one was
+#: loaded, and every twin dropped the scene's announcement and gave up after 10 s.
+EeRadius = Annotated[float, Meta(ge=SIZE_RANGE_M[0], le=MAX_EE_RADIUS)]
 Vec3 = tuple[float, float, float]
 
 #: A turn, degrees: within a full turn either way (1e300 degrees was accepted, an angle whose remainder
@@ -128,7 +132,7 @@ class TableDoc(Struct, forbid_unknown_fields=True):
 class EndEffectorDoc(Struct, forbid_unknown_fields=True):
     """The operator's sphere."""
 
-    radius: Annotated[Size, Meta(description="sphere radius, m")] = EndEffectorSpec.radius
+    radius: Annotated[EeRadius, Meta(description="sphere radius, m")] = EndEffectorSpec.radius
     position: Annotated[Point3, Meta(description="start position, world frame, m")] = EndEffectorSpec.position
 
 
@@ -429,6 +433,7 @@ def parse_scene(doc: dict, *, base: str | os.PathLike[str] = Path("."),
     ee = EndEffectorSpec()
     if scene.end_effector is not UNSET:
         ee = EndEffectorSpec(radius=scene.end_effector.radius, position=scene.end_effector.position)
+        _check_reach(ee, table)
     workspace = None
     if scene.workspace is not UNSET:
         low, high = scene.workspace.min, scene.workspace.max
@@ -607,6 +612,9 @@ def _translate(message: str, doc: dict) -> str:
     if last == "position" and len(tokens) == 3 and tokens[0] == "objects":
         return f"{where}: must be [x, y] (rest on the table) or [x, y, z], got {value!r}"
     expected = what.partition(",")[0]
+    if tokens == ["end_effector", "radius"] and expected.startswith(("Expected `float` >=", "Expected `float` <=")):
+        return (f"{where}: must be {SIZE_RANGE_M[0]:g} to {MAX_EE_RADIUS:g} m (a fingertip or a tool; what the wire "
+                f"carries), got {_number(value)}")
     if expected.startswith((f"Expected `float` >= {SIZE_RANGE_M[0]}", f"Expected `float` <= {SIZE_RANGE_M[1]}")):
         low, high = SIZE_RANGE_M
         return f"{where}: must be {low:g} to {high:g} m, got {_number(value)}"
@@ -631,6 +639,20 @@ def _translate(message: str, doc: dict) -> str:
         got = f"{len(value)}" if isinstance(value, list | tuple) else _kind(value)
         return f"{where}: expected {shape}, got {got}"
     return f"{where}: {what[:1].lower()}{what[1:]}"  # anything else, in msgspec's own words
+
+
+def _check_reach(ee: EndEffectorSpec, table: TableSpec | None) -> None:
+    """Raise a :class:`SceneError` when the end effector starts outside the operator's reach
+    (:data:`twin.model.OPERATOR_REACH` beyond the table's edges and above its top): the remote drops every
+    operator command outside it, and an experiment from there ran and reported its runs blown up, exit 0."""
+    if table is None:
+        return  # the reach is around the end effector's start
+    low, high = scene_reach_corners(table, ee, OPERATOR_REACH)
+    p = np.asarray(ee.position, dtype=float)
+    if (p < low).any() or (p > high).any():
+        raise SceneError(f"end_effector.position {list(ee.position)} lies outside the operator's reach ({OPERATOR_REACH:g} m "
+                         f"beyond the table's edges and above its top: min {np.round(low, 3).tolist()}, max "
+                         f"{np.round(high, 3).tolist()}); the remote would drop every operator command")
 
 
 def _check_inside(objects: tuple[ObjectSpec, ...], workspace: tuple[Vec3, Vec3]) -> None:

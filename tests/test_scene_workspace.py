@@ -172,8 +172,8 @@ def test_a_scene_specs_boxes_are_the_ones_the_twin_takes_from_the_remotes_announ
 
     from scenes.remote import Remote
     from sync.clock import SimClock
-    from twin.model import SCENE_REACH, scene_reach_corners
-    from twin.runtime import OPERATOR_REACH, reach_box
+    from twin.model import OPERATOR_REACH, SCENE_REACH, scene_reach_corners
+    from twin.runtime import reach_box
 
     scene = parse_scene(doc)
     for spec in (scene, replace(scene, end_effector=None)):  # a spec built in code may have none: the origin
@@ -182,3 +182,58 @@ def test_a_scene_specs_boxes_are_the_ones_the_twin_takes_from_the_remotes_announ
             for mine, twins in zip(scene_reach_corners(spec.table, spec.end_effector, reach), reach_box(info, reach),
                                    strict=True):
                 np.testing.assert_array_equal(mine, twins)
+
+
+def _tight(size_z: float, **extra: object) -> dict:
+    """A small table in a declared box whose top is 10 cm above the table: a box of height ``size_z`` on it."""
+    return {"name": "tight", "table": {"size": [1.0, 0.6, 0.04], "height": 0.5},
+            "end_effector": {"radius": 0.02, "position": [-0.3, 0.0, 0.56]},
+            "workspace": {"min": [-0.8, -0.6, 0.0], "max": [0.8, 0.6, 0.6]},
+            "objects": [{"id": "tall", "primitive": {"type": "box", "size": [0.05, 0.05, size_z]}, "position": [0.1, 0.0]}],
+            **extra}
+
+
+def test_an_object_whose_surface_reaches_out_of_the_declared_box_is_refused_when_the_remote_builds_it(cache):
+    # Its position is inside, so the loader takes it; its top is 8 cm above the box. The twin dropped its cloud,
+    # and `twin demo` waited ten minutes for it; now the remote refuses the scene in one line.
+    from scenes.remote import Remote
+    from sync.clock import SimClock
+    from sync.inprocess import InProcessBus
+
+    clock = SimClock()
+    scene = parse_scene(_tight(0.18))
+    with pytest.raises(SceneError, match=r"^scene 'tight': object 'tall' reaches from .* out of the workspace"):
+        Remote(scene, InProcessBus(clock).transport("remote"), clock=clock, cache_dir=cache)
+    remote = Remote(parse_scene(_tight(0.08)), InProcessBus(clock).transport("remote"), clock=clock, cache_dir=cache)
+    remote.close()  # 8 cm tall: inside
+
+
+def test_a_scene_mujoco_cannot_compile_is_one_scene_error_from_the_remote(cache):
+    # A 1 mm sphere at 0.1 kg/m^3: both in range, but MuJoCo finds no inertia it accepts. `twin build` said so in
+    # one line; the remote (twin remote, demo, experiment, replay --scene) raised MuJoCo's ValueError.
+    from scenes.remote import Remote
+    from sync.clock import SimClock
+    from sync.inprocess import InProcessBus
+
+    doc = _tight(0.08)
+    doc["objects"] = [{"id": "dust", "primitive": {"type": "sphere", "size": [0.001]}, "density": 0.1,
+                       "position": [0.1, 0.0]}]
+    clock = SimClock()
+    with pytest.raises(SceneError, match=r"^scene 'tight': MuJoCo could not compile it: .*inertia.*dust"):
+        Remote(parse_scene(doc), InProcessBus(clock).transport("remote"), clock=clock, cache_dir=cache)
+
+
+@pytest.mark.parametrize(("end_effector", "message"), [
+    # The wire carries radii up to 1 m: a 1.5 m one was loaded, and every twin dropped the scene's announcement.
+    ({"radius": 1.5}, r"^end_effector.radius: must be 0.001 to 1 m .*got 1.5$"),
+    # Outside the operator's reach the remote drops every command: an experiment ran, all blown up, exit 0.
+    ({"position": [0.0, -8.0, 9.0]}, r"^end_effector.position \[0.0, -8.0, 9.0\] lies outside the operator's reach"),
+])
+def test_an_end_effector_the_remote_could_not_use_is_refused_when_loaded(end_effector, message):
+    doc = _tight(0.08)
+    doc["end_effector"] = end_effector
+    with pytest.raises(SceneError, match=message):
+        parse_scene(doc)
+    # At the limits: taken.
+    doc["end_effector"] = {"radius": 1.0, "position": [2.5, 2.3, 2.5]}
+    assert parse_scene(doc).end_effector.radius == 1.0

@@ -168,6 +168,11 @@ def _check_three(record: object, name: str, *, low: float, high: float) -> None:
 #: The twin drops what lies outside (``twin.runtime``); a scene file may not place an object there.
 SCENE_REACH = 10.0
 
+#: How far beyond the table's edges (and above its top) the operator may send the end effector, metres
+#: (without a table: around its start): the twin's default for device targets, the remote's bound for the
+#: operator commands it takes (:class:`scenes.remote.Remote`), and where a scene file's end effector may start.
+OPERATOR_REACH = 2.0
+
 
 def reach_corners(table_size: Sequence[float] | None, table_height: float, ee_position: Sequence[float],
                   reach: float) -> tuple[np.ndarray, np.ndarray]:

@@ -43,6 +43,7 @@ from typing import Literal, overload
 import numpy as np
 
 from estimation import PhysicalEstimate, estimate, make_cloud
+from estimation.errors import TwinError
 from estimation.materials import resolve_density
 from sync.clock import REAL_CLOCK, Clock
 from sync.keys import Keys, any_scene_info
@@ -74,6 +75,7 @@ from twin.history import CORRECTION, STATE, History
 from twin.hold import DEFAULT_HOLD, Hold, HoldSettings
 from twin.loop import LoopStats, run_loop, steps_per_iteration
 from twin.model import (
+    OPERATOR_REACH,
     RESERVED_IDS,
     SCENE_REACH,
     EndEffectorSpec,
@@ -95,8 +97,9 @@ from twin.workers import background_worker
 log = logging.getLogger(__name__)
 
 
-class SyncError(RuntimeError):
-    pass
+class SyncError(TwinError, RuntimeError):
+    """The twin could not join a scene: none answered, or several did (a :class:`TwinError`, so every command
+    says it in one line, exit 2)."""
 
 
 @dataclass(frozen=True)
@@ -177,10 +180,6 @@ MAX_ALIGN_WINDOW = 10.0
 DEFAULT_LOCAL = LocalSettings()
 
 
-#: How far beyond the table's edges (and above its top) the operator may send the end effector, metres
-#: (without a table: around its start): the twin's default for device targets, and the remote's bound for the
-#: operator commands it takes (:class:`scenes.remote.Remote`).
-OPERATOR_REACH = 2.0
 
 
 @dataclass(frozen=True)
