@@ -48,6 +48,8 @@ def test_one_waypoint_is_held_for_ever(tmp_path):
      r"path.csv:2: not CSV \(a stray quote runs this row on to line 1001\)$"),
     # An inline comment ends its row for both readers: the bad row is named, not the commented one.
     ("0,1,2,3 # start\n1,1,2,3\n0.5,1,2,3\n", r"path.csv:3: t = 0.5 s does not increase"),
+    # A quoted '#' is text to numpy, and now line by line too (it was cut there, and read as t = 0).
+    ('"0#1",1,2,3\n', r"path.csv:1: not a number in '0#1,1,2,3'$"),
 ])
 def test_bad_files_are_one_line_errors_naming_file_and_line(tmp_path, text, match):
     with pytest.raises(TrajectoryError, match=match) as err:
@@ -182,6 +184,62 @@ def test_numpy_and_the_line_by_line_reader_agree(tmp_path):
     assert fast is not None and np.array_equal(fast, slow) and fast.shape == (2, 4)
     # What numpy does not read but Python's float does is still read, line by line.
     assert load_trajectory(_write(tmp_path, "0,1_0.0,0,0.5\n", "u.csv"))(0) == pytest.approx([10.0, 0, 0.5])
+
+
+@pytest.mark.parametrize("comment", ['#,"hello\n', '# say "hi\n', "# " + "a" * 200_000 + "\n"])
+@pytest.mark.parametrize("header", ["t,x,y,z\n", ""])
+def test_comments_before_the_data_never_reach_the_csv_parser(tmp_path, comment, header):
+    """A quote in a comment opened a field that ran on ("not CSV"); one over 128 KiB passed csv's field limit."""
+    from twin.trajectory import _read_checked, _read_fast
+
+    for text in (header + comment, comment + header):
+        path = _write(tmp_path, text + "0,-0.3,0,0.56\n1,-0.2,0,0.56\n" + comment)
+        fast, slow = _read_fast(path, 1.0), _read_checked(path, 1.0)
+        assert fast is not None and np.array_equal(fast, slow) and fast.shape == (2, 4)
+        assert load_trajectory(path)(0.5) == pytest.approx([-0.25, 0.0, 0.56])
+
+
+@pytest.mark.parametrize("columns", [1_000, 20_000])
+def test_a_wide_first_row_is_named_before_numpy_allocates_for_it(tmp_path, capsys, columns):
+    """numpy allocates 5,000,001 rows of the first row's columns up front: "out of memory" for a 2 KB file."""
+    from cli.main import main
+
+    path = _write(tmp_path, "t,x,y,z\n" + ",".join(["0"] * columns) + "\n")
+    with pytest.raises(TrajectoryError, match=rf"path.csv:2: expected 4 columns t,x,y,z, got {columns}$"):
+        load_trajectory(path)
+    assert main(["run", str(SMALL), "--script", str(path)]) == 2
+    err = capsys.readouterr().err.lstrip("\n")
+    assert err.count("\n") == 1 and f"expected 4 columns t,x,y,z, got {columns}" in err, err
+
+
+def test_an_overlong_line_is_refused_without_being_read_whole(tmp_path):
+    """A 60 MB line of values took 2.6 GB split into cells, then was "out of memory"."""
+    import tracemalloc
+
+    wide = _write(tmp_path, "t,x,y,z\n" + "0," * 5_000_000 + "0\n", "wide.csv")  # 10 MB
+    tracemalloc.start()
+    try:
+        with pytest.raises(TrajectoryError, match=r"wide.csv:2: a line of more than 65,536 characters where a row "
+                                                  r"t,x,y,z was expected$"):
+            load_trajectory(wide)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 2**20, peak  # bytes: the line's first 64 KiB, not its 5 million cells
+    from twin.trajectory import MAX_LINE_CHARS
+
+    # After a good row: numpy refuses it, and the line-by-line reader names it.
+    later = _write(tmp_path, "0,0,0,0.5\n" + "0," * MAX_LINE_CHARS + "0\n", "later.csv")
+    with pytest.raises(TrajectoryError, match=r"later.csv:2: a line of more than"):
+        load_trajectory(later)
+    # A row of exactly the limit is read, and "\r\n" split by the limit still ends one line: line 4 is named.
+    row = "0,0,0,0." + "5" * (MAX_LINE_CHARS - 8)
+    exact = _write(tmp_path, f"t,x,y,z\r\n{row}\r\n1,0,0,0.5\r\n0.5,0,0,0.5\r\n", "exact.csv")
+    with pytest.raises(TrajectoryError, match=r"exact.csv:4: t = 0.5 s does not increase"):
+        load_trajectory(exact)
+    assert load_trajectory(_write(tmp_path, f"{row}\r\n1,0,0,0.5\r\n", "ok.csv"))(0.0) == pytest.approx([0, 0, 5 / 9])
+    with pytest.raises(TrajectoryError, match=r"long.csv:1: a line of more than"):
+        load_trajectory(_write(tmp_path, f"{row}5\r\n1,0,0,0.5\r\n", "long.csv"))
 
 
 def test_too_large_files_and_too_many_waypoints_are_refused(tmp_path, monkeypatch):

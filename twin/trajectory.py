@@ -10,6 +10,7 @@ import warnings
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TextIO
 
 import numpy as np
 
@@ -30,6 +31,10 @@ MAX_TRAJECTORY_BYTES = 128 * 2**20
 
 #: Most waypoints a trajectory may hold: more than an hour at 1 kHz. 32 bytes each in memory.
 MAX_WAYPOINTS = 5_000_000
+
+#: Longest a line may be before its ``#`` comment, characters: a row of four numbers is under 100. A 60 MB line
+#: of 30 million values took 2.6 GB split into cells; a comment may run on, as it is never split.
+MAX_LINE_CHARS = 64 * 2**10
 
 #: Times that look like milliseconds: a script running this long (seconds) whose target never moves faster
 #: than :data:`MS_SLOWEST_PEAK` (m/s), but would at a thousand times the speed, is warned about (a 1 m push
@@ -196,10 +201,10 @@ def load_trajectory(path: str | Path, *, units: str = "m") -> Waypoints:
         ``trajectory(t) -> (3,) float64``, metres, world frame: a :class:`Waypoints`.
 
     Raises:
-        TrajectoryError: the file is not a regular file, is too large, or cannot be read, a row has other than
-            four columns or a value that is not a finite number, a position beyond
-            :data:`sync.messages.MAX_COORDINATE` (what the wire carries), there are no waypoints or too many,
-            the times do not increase.
+        TrajectoryError: the file is not a regular file, is too large, or cannot be read, a line is longer than
+            :data:`MAX_LINE_CHARS` before its comment, a row has other than four columns or a value that is not a
+            finite number, a position beyond :data:`sync.messages.MAX_COORDINATE` (what the wire carries), there
+            are no waypoints or too many, the times do not increase.
         UnitsError: ``units`` is not one of m, cm, mm.
     """
     path = Path(path)
@@ -229,15 +234,17 @@ def _cannot_read(path: Path, exc: BaseException) -> TrajectoryError:
 
 def _rows(path: Path) -> Iterator[tuple[int, list[str]]]:
     """(line number where it starts, stripped cells) of each row that is not blank, a ``#`` comment or the
-    header row; a ``#`` ends a row (as ``numpy.loadtxt`` reads it, so both readers see the same rows).
+    header row; a ``#`` outside quotes ends a row (as ``numpy.loadtxt`` reads it, so both readers see the same
+    rows), and the comment after it never reaches the CSV parser (:func:`_uncommented_lines`).
 
     Raises:
-        TrajectoryError: the file cannot be read or decoded, or is not CSV (a stray quote).
+        TrajectoryError: the file cannot be read or decoded, has a line longer than :data:`MAX_LINE_CHARS`
+            before its comment, or is not CSV (a stray quote).
     """
     try:
         # utf-8-sig: a spreadsheet's CSV starts with a byte-order mark, which made the header "not a number".
         with path.open(encoding="utf-8-sig", newline="") as fh:
-            reader = csv.reader(fh)
+            reader = csv.reader(_uncommented_lines(path, fh))
             first = True
             try:
                 while True:
@@ -250,7 +257,7 @@ def _rows(path: Path) -> Iterator[tuple[int, list[str]]]:
                     if any("\n" in c or "\r" in c for c in row):
                         raise TrajectoryError(f"{path}:{start}: not CSV (a stray quote runs this row on to line "
                                               f"{reader.line_num})")
-                    cells = _uncommented([c.strip() for c in row])
+                    cells = [c.strip() for c in row]
                     if not cells or cells == [""]:
                         continue
                     if first:
@@ -264,13 +271,49 @@ def _rows(path: Path) -> Iterator[tuple[int, list[str]]]:
         raise _cannot_read(path, exc) from None
 
 
-def _uncommented(cells: list[str]) -> list[str]:
-    """The cells before a ``#`` (which ends a row, an inline comment included), stripped."""
-    for k, cell in enumerate(cells):
-        if "#" in cell:
-            head = cell.split("#", 1)[0].strip()
-            return cells[:k] + ([head] if head or k else [])
-    return cells
+def _uncommented_lines(path: Path, fh: TextIO) -> Iterator[str]:
+    """Each line of ``fh`` up to its comment (:func:`_before_comment`), one a line so the CSV parser counts
+    lines as the file does. A comment's text went through the parser before: a quote in one before the data
+    opened a field that ran on ("not CSV"), and one over 128 KiB passed csv's field limit.
+
+    Raises:
+        TrajectoryError: a line longer than :data:`MAX_LINE_CHARS` before its comment, refused before it is
+            split into cells (a 60 MB line of values took 2.6 GB) or read whole.
+    """
+    for number, line in enumerate(_bounded_lines(fh, MAX_LINE_CHARS), 1):
+        content = _before_comment(line)
+        if len(content.rstrip("\r\n")) > MAX_LINE_CHARS:
+            raise TrajectoryError(f"{path}:{number}: a line of more than {MAX_LINE_CHARS:,} characters where a row "
+                                  f"t,x,y,z was expected")
+        yield content
+
+
+def _bounded_lines(fh: TextIO, most: int) -> Iterator[str]:
+    """Each line of ``fh``, its end kept; of a line longer than ``most`` characters only the first ``most`` + 1,
+    without its end: the rest is read ``most`` + 1 characters at a time and dropped, never held whole."""
+    size = most + 1
+    split_crlf = False  # the last piece was cut at "\r" by the size limit: its "\n" comes next, alone
+    within = False  # the last piece did not end its line
+    while piece := fh.readline(size):
+        if split_crlf and piece == "\n":  # not a blank line: the end of the one before
+            split_crlf = False
+            continue
+        split_crlf = len(piece) == size and piece.endswith("\r")
+        if not within:
+            yield piece
+        within = not piece.endswith(("\n", "\r"))
+
+
+def _before_comment(line: str) -> str:
+    """``line`` up to its first ``#`` outside quotes, then ended anew; ``line`` itself when it has none. As in
+    ``numpy.loadtxt``, a ``"`` opens or closes a quote wherever it stands, and a quoted ``#`` is text."""
+    if "#" not in line:
+        return line
+    parts = line.split('"')
+    for k in range(0, len(parts), 2):  # the even parts are outside quotes ('""' in a quote closes and reopens)
+        if "#" in parts[k]:
+            return '"'.join([*parts[:k], parts[k].split("#", 1)[0]]) + "\n"
+    return line
 
 
 def _read_fast(path: Path, scale: float) -> np.ndarray | None:
@@ -285,7 +328,11 @@ def _read_fast(path: Path, scale: float) -> np.ndarray | None:
         first = next(rows, None)
     finally:
         rows.close()  # closes the file now, not when the generator is collected
-    skip = 0 if first is None else first[0] - 1
+    if first is None or len(first[1]) != len(TRAJECTORY_HEADER):
+        # numpy allocates max_rows times the first row's columns before it reads on: a 2 KB file of one
+        # 1000-value row asked for 40 GB ("out of memory"). None (no rows) too: the line-by-line reader says.
+        return None
+    skip = first[0] - 1
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", UserWarning)  # "input contained no data": no waypoints, said below
