@@ -280,6 +280,7 @@ def _estimate_auto(
             progress(f"refining with up to {min(len(local), budget):,} points (the first pass left "
                      f"{100 * doubt:.2g} % of the volume in doubt)")
             run = _auto_pass(cloud, box, local, spacing, noise, budget, density, viewpoint, stages)
+    run = _at_sparse_spacing(run, cloud, box, local, spacing, noise, density, viewpoint, stages, warnings, progress)
 
     t0 = time.perf_counter()
     props, surface, h = run.props, run.surface, run.h
@@ -434,9 +435,10 @@ class _AutoPass:
 
 
 def _auto_pass(cloud: PointCloud, box: OrientedBox, local: np.ndarray, spacing: float, noise: float,
-               budget: int, density: float, viewpoint: np.ndarray | None, stages: dict[str, float]) -> _AutoPass:
+               budget: int, density: float, viewpoint: np.ndarray | None, stages: dict[str, float], *,
+               min_cell: float = 0.0) -> _AutoPass:
     """Thin ``local`` ((n, 3) metres, box frame; ``spacing`` and ``noise`` metres) to ``budget`` points
-    and reconstruct; stage seconds are added to ``stages``."""
+    and reconstruct, with a fine cell of at least ``min_cell`` metres; stage seconds are added to ``stages``."""
     from scipy.spatial import cKDTree
 
     from estimation.curvature import bulge_volumes, corrected
@@ -469,7 +471,7 @@ def _auto_pass(cloud: PointCloud, box: OrientedBox, local: np.ndarray, spacing: 
         spacing = point_spacing(points)
     if normals is not None:
         normals = box.to_local(normals, direction=True)
-    h = max(tol.FINE_CELL_SPACINGS * spacing, tol.FINE_CELL_NOISE * noise)
+    h = max(tol.FINE_CELL_SPACINGS * spacing, tol.FINE_CELL_NOISE * noise, min_cell)
     ratio = _coarse_ratio(box.extents, h, refine=normals is None and viewpoint is None)
     coarse = grid_around(points, ratio * h)
     t0 = lap("downsample", t0)
@@ -545,6 +547,43 @@ def _auto_pass(cloud: PointCloud, box: OrientedBox, local: np.ndarray, spacing: 
     lap("mass_properties", t0)
     return _AutoPass(points=points, normals=normals, h=h, surface=surface, props=props, closing=occ.closing,
                      hole=hole, thin=thin, encloses=occ.encloses, sealed=sealed, note=note)
+
+
+def _at_sparse_spacing(run: _AutoPass, cloud: PointCloud, box: OrientedBox, local: np.ndarray, spacing: float,
+                       noise: float, density: float, viewpoint: np.ndarray | None, stages: dict[str, float],
+                       warnings: list[str], progress: Callable[[str], None]) -> _AutoPass:
+    """``run``, or a pass at the cell of the cloud's sparsest parts when ``run`` left more than
+    ``tol.LEAK_UNMEASURED_SHARE`` of its surface unmeasured because the points are spaced unevenly.
+
+    The cell follows the typical spacing; where part of the surface is sampled far more sparsely (a side
+    a scanner saw from afar, views of unequal resolution), the gaps there are holes at that cell, wider than
+    the flood fill closes, and the surface is a shell around nothing (a ball sampled 100 times less densely
+    on one half: -95 %). The sparsest ``tol.SPARSE_AREA_SHARE`` of the area sets the cell of a second pass
+    (``spacing.sparse_spacing``) when it is ``tol.UNEVEN_SPACING`` times the first pass's or more; that
+    pass is taken if it leaves at most half as much unmeasured, and the warnings say so. (Its coarse grid may be
+    too coarse to hold an inside, ``encloses`` false, and still close the surface: a 10 cm ball at 5 mm cells.)
+    """
+    from estimation.spacing import sparse_spacing
+
+    unmeasured = run.surface.unmeasured_area / max(_area(run.surface), 1e-30)
+    if unmeasured <= tol.LEAK_UNMEASURED_SHARE:
+        return run
+    sparse = tol.FINE_CELL_SPACINGS * sparse_spacing(local, tol.SPARSE_AREA_SHARE)
+    if sparse < tol.UNEVEN_SPACING * run.h:
+        return run
+    progress(f"reconstructing again at the sparsest parts' {1000 * sparse:.3g} mm spacing ({100 * unmeasured:.0f} % of "
+             f"the surface was unmeasured at {1000 * run.h:.3g} mm)")
+    coarse = _auto_pass(cloud, box, local, spacing, noise, tol.POINT_BUDGET, density, viewpoint, stages, min_cell=sparse)
+    left = coarse.surface.unmeasured_area / max(_area(coarse.surface), 1e-30)
+    if left > unmeasured / 2:
+        log.info("uneven spacing: a pass at %.3g mm left %.1f %% unmeasured (%.1f %% at %.3g mm); not taken",
+                 1000 * coarse.h, 100 * left, 100 * unmeasured, 1000 * run.h)
+        return run
+    warnings.append(f"the points are spaced unevenly ({1000 * spacing:.2g} mm typically, {1000 * sparse:.2g} mm over the "
+                    f"sparsest {100 * tol.SPARSE_AREA_SHARE:.0f} % of the surface): estimated at {1000 * coarse.h:.2g} mm "
+                    f"cells, which the sparse parts fill ({100 * unmeasured:.0f} % of the surface was unmeasured at the "
+                    f"typical spacing); finer detail where the points are dense is not resolved")
+    return coarse
 
 
 def _coarse_ratio(extents: np.ndarray, h: float, *, refine: bool) -> int:

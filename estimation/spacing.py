@@ -65,14 +65,39 @@ def point_spacing(points: np.ndarray, tree=None) -> float:  # type: ignore[no-un
     Args:
         points: (n, 3) float64, metres. tree: a ``cKDTree`` over ``points`` (built when None).
     """
+    local = local_spacings(points, tree)
+    return float(np.median(local)) if len(local) else 0.0
+
+
+def sparse_spacing(points: np.ndarray, share: float) -> float:
+    """The spacing the sparsest ``share`` (0-1) of the surface's area is sampled at, metres: the
+    :func:`local_spacings` quantile weighted by the area each point stands for (its spacing squared).
+
+    A cloud sampled evenly reads about 1.3 times :func:`point_spacing` at a share of 0.1; one whose half
+    is sampled 30 times less densely (a side a scanner saw from afar), 6.5 times.
+    """
+    local = np.sort(local_spacings(points))
+    if not len(local):
+        return 0.0
+    area = np.cumsum(local**2)
+    return float(local[min(int(np.searchsorted(area, (1.0 - share) * area[-1])), len(local) - 1)])
+
+
+def local_spacings(points: np.ndarray, tree=None) -> np.ndarray:  # type: ignore[no-untyped-def]
+    """Each sampled point's spacing, metres (``SAMPLE`` of them, spread by index): ``sqrt(pi / k) r_k`` with
+    ``r_k`` the distance to its ``k``-th neighbour (see :func:`point_spacing`); empty for fewer than 2 points.
+
+    Args:
+        points: (n, 3) float64, metres. tree: a ``cKDTree`` over ``points`` (built when None).
+    """
     if len(points) < 2:
-        return 0.0  # one distinct position: no neighbour to be spaced from (check_estimable says so)
+        return np.zeros(0)  # one distinct position: no neighbour to be spaced from (check_estimable says so)
     if tree is None and len(points) > SPACING_SUBSET:
         # A uniform subset of m of the n points is spaced sqrt(n / m) times wider; building its tree
         # instead of the full one is what makes this cheap on a million points.
         step = -(-len(points) // SPACING_SUBSET)  # ceil: the subset holds at most SPACING_SUBSET points
         subset = points[::step]
-        return point_spacing(subset) * float(np.sqrt(len(subset) / len(points)))
+        return local_spacings(subset) * float(np.sqrt(len(subset) / len(points)))
     tree = query_tree(points) if tree is None else tree
     k = min(SPACING_NEIGHBOURS, len(points) - 1)
     sample = points[:: max(1, len(points) // SAMPLE)]
@@ -84,8 +109,8 @@ def point_spacing(points: np.ndarray, tree=None) -> float:  # type: ignore[no-un
 
         distinct = points[distinct_rows(points)]
         if len(distinct) < len(points):
-            return point_spacing(distinct)
-    return float(np.sqrt(np.pi / k) * np.median(dist[:, -1]))
+            return local_spacings(distinct)
+    return np.sqrt(np.pi / k) * dist[:, -1]
 
 
 def surface_noise(points: np.ndarray, tree=None, *, own_sheet: bool = False) -> float:  # type: ignore[no-untyped-def]

@@ -168,6 +168,15 @@ NOISE_CURVATURE_MIN_CELLS = 0.05
 #: noisy mugs 1.2-1.3 %); clutter20's cereal box, its 28 x 19 cm back unseen, 44 %.
 LEAK_UNMEASURED_SHARE = 0.1
 
+#: The share of the surface's area whose spacing (``spacing.sparse_spacing``) says where a cloud is sampled
+#: most sparsely: a tenth, so a few stray sparse patches do not set it, and a side seen from afar does.
+SPARSE_AREA_SHARE = 0.1
+
+#: A cloud is spaced unevenly when its sparsest parts' spacing is this many times the cell it was estimated
+#: at: an evenly sampled one reads 1.3 times its typical spacing (44 shapes of ``scenes.shapes``: 1.30-1.31),
+#: one sampled three times less densely on one half 2.1, ten times 3.7 (``estimate._at_sparse_spacing``).
+UNEVEN_SPACING = 2.0
+
 #: Closed parts of one mesh overlap when the sum over its faces exceeds their union's volume by more than this
 #: fraction of it (``estimation.meshparts``); a cavity lies in a part when their intersection is its volume to
 #: within it. Parts whose bounding boxes overlap while they do not (a rod through a ring, a ball in a cavity)
