@@ -61,7 +61,10 @@ def remote_sensor(name: str, scene):  # type: ignore[no-untyped-def]
 
 
 def _remote_main(scene_path: str, endpoint: str, zenoh_config: str | None, ready, stop, results,  # type: ignore[no-untyped-def]
-                 record: str | None = None, sensor: str = "surface") -> None:
+                 record: str | None = None, sensor: str = "surface", discard=None) -> None:
+    """The remote's process: ``ready`` set once its scene is published, runs until ``stop``, then puts its
+    counters (or ``{"error": ...}``) on ``results``; its recording is kept unless ``discard`` was set (the twin
+    never started)."""
     from cli.record import open_recorder, recording_transport
     from scenes.remote import Remote
     from scenes.scenefile import load_scene
@@ -99,7 +102,10 @@ def _remote_main(scene_path: str, endpoint: str, zenoh_config: str | None, ready
         if feed is not None:
             said["sensor_stats"] = dataclasses.asdict(feed.stats)
         remote.close()
-        if recorder is not None:
+        keep = discard is None or not discard.is_set()
+        if recorder is not None and not keep:
+            recorder.discard()  # the twin never started: an earlier FILE.remote.mcap stays as it was
+        elif recorder is not None:
             try:  # before the results: a recording that could not be put in place is the parent's error
                 recorder.close()
             except TwinError as exc:
@@ -108,7 +114,7 @@ def _remote_main(scene_path: str, endpoint: str, zenoh_config: str | None, ready
     finally:
         session.close()
         if recorder is not None:
-            recorder.close() if started else recorder.discard()
+            recorder.close() if started and (discard is None or not discard.is_set()) else recorder.discard()
 
 
 def run_demo(*, duration: float = 5.0, scene_path: Path | None = None, zenoh_config: str | None = None,
@@ -141,10 +147,10 @@ def run_demo(*, duration: float = 5.0, scene_path: Path | None = None, zenoh_con
         check_demo_records(record, (scene_path, Path(zenoh_config) if zenoh_config else None))
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     ctx = mp.get_context("spawn")
-    ready, stop, results = ctx.Event(), ctx.Event(), ctx.Queue()
+    ready, stop, discard, results = ctx.Event(), ctx.Event(), ctx.Event(), ctx.Queue()
     remote_record = None if record is None else str(remote_record_path(record))
     remote = ctx.Process(target=_remote_main, args=(str(scene_path), endpoint, zenoh_config, ready, stop, results,
-                                                    remote_record, sensor))
+                                                    remote_record, sensor, discard))
     console.print(f"[bold]tactile-twin demo[/bold]: remote scene {scene_path.name} on {endpoint} (peer mode)")
     t0 = time.perf_counter()
     remote.start()
@@ -165,6 +171,7 @@ def run_demo(*, duration: float = 5.0, scene_path: Path | None = None, zenoh_con
     try:
         session = open_session(make_config(connect=[endpoint], config_file=zenoh_config, insecure_flag=None))
     except BaseException:  # the remote runs for a day unless told: it printed the error, then never exited
+        discard.set()
         stop.set()
         remote.join(timeout=10)
         if remote.is_alive():
@@ -213,6 +220,8 @@ def run_demo(*, duration: float = 5.0, scene_path: Path | None = None, zenoh_con
         estimates = object_estimates(local)
         poses = {i: local.twin.pose(i) for i in local.objects}
     finally:
+        if local is None:
+            discard.set()  # before stop: the remote then drops its recording too
         stop.set()
         if local is not None:
             local.close()

@@ -723,6 +723,40 @@ def test_demo_refuses_a_remote_recording_path_it_must_not_replace_before_startin
     assert sorted(p.name for p in tmp_path.iterdir()) == ["dd.remote.mcap", "notes.remote.mcap"]
 
 
+@pytest.mark.parametrize("twin_started", [False, True])
+def test_the_demos_remote_keeps_an_earlier_recording_when_the_twin_never_started(tmp_path, twin_started):
+    """The remote records in its own process; when the twin then failed to start (a scene no twin could join),
+    the remote still put its recording over an earlier FILE.remote.mcap, exit 2. The parent now tells it to
+    discard (``discard`` set before ``stop``); a session that ran replaces the file as before."""
+    import multiprocessing as mp
+
+    from cli.demo import _remote_main
+    from sync.zenoh_transport import free_port
+
+    earlier = tmp_path / "demo.remote.mcap"
+    with Recorder(earlier, clock=SimClock(), metadata={"note": "earlier"}):
+        pass
+    before = earlier.read_bytes()
+    ctx = mp.get_context("spawn")
+    ready, stop, discard, results = ctx.Event(), ctx.Event(), ctx.Event(), ctx.Queue()
+    remote = ctx.Process(target=_remote_main, args=(str(SMALL), f"tcp/127.0.0.1:{free_port()}", None, ready, stop,
+                                                    results, str(earlier), "surface", discard))
+    remote.start()
+    try:
+        assert ready.wait(120)
+        if not twin_started:
+            discard.set()
+        stop.set()
+        said = results.get(timeout=60)
+    finally:
+        remote.join(timeout=30)
+        if remote.is_alive():
+            remote.terminate()
+    assert "error" not in said
+    assert (earlier.read_bytes() == before) is (not twin_started)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["demo.remote.mcap"]  # no partial file left
+
+
 # -- the remote's sensor ----------------------------------------------------------------------------------------
 
 ONE_CAN = """name = "onecan"
