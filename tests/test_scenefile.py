@@ -66,7 +66,8 @@ def _top(**top: object) -> dict:
         (_top(table={"height": INF}), r"^table.height: must be finite, got inf$"),
         (_top(table={"height": 0}), r"^table.height: must be 0.001 to 100 m, got 0.0$"),
         (_top(table={"size": [1e-300, 1, 1]}), r"^table.size\[0\]: must be 0.001 to 100 m, got 1e-300$"),
-        (_top(end_effector={"radius": 1e300}), r"^end_effector.radius: must be 0.001 to 100 m, got 1e\+300$"),
+        (_top(end_effector={"radius": 1e300}), r"^end_effector.radius: must be 0.001 to 1 m \(a fingertip or a tool; what "
+         r"the wire carries\), got 1e\+300$"),
         (_scene(primitive={"type": "sphere", "size": [1e10]}),
          r"^object 'mug' primitive.size\[0\]: must be 0.001 to 100 m, got 10000000000.0$"),
         (_scene(primitive={"type": "sphere", "size": [1e-300]}),
