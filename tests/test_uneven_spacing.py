@@ -35,7 +35,7 @@ def test_the_sparse_spacing_tells_an_uneven_cloud_from_an_even_one():
 
 
 @pytest.mark.parametrize("mesh", [BALL, BOX], ids=["ball", "box"])
-@pytest.mark.parametrize("thinning", [1 / 15, 1 / 30])
+@pytest.mark.parametrize("thinning", [pytest.param(1 / 15, marks=pytest.mark.slow), 1 / 30])  # the default run is near 10 min
 def test_a_cloud_sparse_on_one_side_is_estimated_at_the_sparse_spacing(mesh, thinning):
     est = estimate(make_cloud(_uneven(mesh, thinning)), 1000.0)
     assert est.volume == pytest.approx(mesh.volume, rel=0.005)
