@@ -723,6 +723,7 @@ def test_demo_refuses_a_remote_recording_path_it_must_not_replace_before_startin
     assert sorted(p.name for p in tmp_path.iterdir()) == ["dd.remote.mcap", "notes.remote.mcap"]
 
 
+@pytest.mark.slow  # a remote process each; the default run is near its 10 minutes
 @pytest.mark.parametrize("twin_started", [False, True])
 def test_the_demos_remote_keeps_an_earlier_recording_when_the_twin_never_started(tmp_path, twin_started):
     """The remote records in its own process; when the twin then failed to start (a scene no twin could join),

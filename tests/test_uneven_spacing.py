@@ -35,7 +35,8 @@ def test_the_sparse_spacing_tells_an_uneven_cloud_from_an_even_one():
 
 
 @pytest.mark.parametrize("mesh", [BALL, BOX], ids=["ball", "box"])
-@pytest.mark.parametrize("thinning", [pytest.param(1 / 15, marks=pytest.mark.slow), 1 / 30])  # the default run is near 10 min
+@pytest.mark.slow  # 2-3 s each, and the default run is near its 10 minutes
+@pytest.mark.parametrize("thinning", [1 / 15, 1 / 30])
 def test_a_cloud_sparse_on_one_side_is_estimated_at_the_sparse_spacing(mesh, thinning):
     est = estimate(make_cloud(_uneven(mesh, thinning)), 1000.0)
     assert est.volume == pytest.approx(mesh.volume, rel=0.005)
@@ -43,6 +44,7 @@ def test_a_cloud_sparse_on_one_side_is_estimated_at_the_sparse_spacing(mesh, thi
     assert any("spaced unevenly" in w for w in est.warnings), est.warnings
 
 
+@pytest.mark.slow
 def test_an_even_cloud_is_estimated_at_its_own_spacing_and_says_nothing_of_it():
     est = estimate(make_cloud(_uneven(BALL, 1.0)), 1000.0)
     assert est.volume == pytest.approx(BALL.volume, rel=0.001)
