@@ -290,7 +290,7 @@ def _estimate_auto(
     doubt = run.hole + run.thin + curved
     bounds = (max(0.0, props.volume - doubt), props.volume + doubt)
     bounds = _one_sheet(run, surface, noise, bounds, warnings)  # first: when it holds, what follows is said of (0, inf)
-    unmeasured = surface.unmeasured_area / max(_area(surface), 1e-30)
+    unmeasured = _unmeasured_share(surface)
     if run.hole > tol.VOLUME_DOUBT_FRACTION * props.volume:
         warnings.append(f"{100 * unmeasured:.1f} % of the surface "
                         f"was not measured (holes closed by a {run.closing}-cell shell): the volume is "
@@ -565,7 +565,7 @@ def _at_sparse_spacing(run: _AutoPass, cloud: PointCloud, box: OrientedBox, loca
     """
     from estimation.spacing import sparse_spacing
 
-    unmeasured = run.surface.unmeasured_area / max(_area(run.surface), 1e-30)
+    unmeasured = _unmeasured_share(run.surface)
     if unmeasured <= tol.LEAK_UNMEASURED_SHARE:
         return run
     sparse = tol.FINE_CELL_SPACINGS * sparse_spacing(local, tol.SPARSE_AREA_SHARE)
@@ -574,7 +574,7 @@ def _at_sparse_spacing(run: _AutoPass, cloud: PointCloud, box: OrientedBox, loca
     progress(f"reconstructing again at the sparsest parts' {1000 * sparse:.3g} mm spacing ({100 * unmeasured:.0f} % of "
              f"the surface was unmeasured at {1000 * run.h:.3g} mm)")
     coarse = _auto_pass(cloud, box, local, spacing, noise, tol.POINT_BUDGET, density, viewpoint, stages, min_cell=sparse)
-    left = coarse.surface.unmeasured_area / max(_area(coarse.surface), 1e-30)
+    left = _unmeasured_share(coarse.surface)
     if left > unmeasured / 2:
         log.info("uneven spacing: a pass at %.3g mm left %.1f %% unmeasured (%.1f %% at %.3g mm); not taken",
                  1000 * coarse.h, 100 * left, 100 * unmeasured, 1000 * run.h)
@@ -668,6 +668,11 @@ def _drop_strays(cloud: PointCloud, warnings: list[str], keep: bool) -> tuple[Po
 
 def _area(surface) -> float:  # type: ignore[no-untyped-def]
     return float(triangle_areas(surface.vertices[surface.faces]).sum())
+
+
+def _unmeasured_share(surface) -> float:  # type: ignore[no-untyped-def]
+    """The share (0-1) of ``surface``'s area no point measured (``DualSurface.unmeasured_area`` over its area)."""
+    return surface.unmeasured_area / max(_area(surface), 1e-30)
 
 
 def _estimate_from_surface(

@@ -581,7 +581,7 @@ def with_completion(result: PhysicalEstimate, points: np.ndarray, completed: np.
                     normals: np.ndarray | None = None) -> PhysicalEstimate:
     """``result``, the estimate of ``points`` ((n, 3) metres) some of which a sender's completion added where no
     sensor saw (``completed``, (n,) bool), with the volume interval of what was observed (:func:`assess`, the
-    noise the observed points' own) joined to its own, and, when less than ``COVERAGE_WARNING`` of its surface
+    noise the observed points' own; it widens the estimate's own interval), and, when less than ``COVERAGE_WARNING`` of its surface
     was observed, a warning saying so. A cloud over the wire (``sync.messages.Cloud.completed``) says which
     points were completed but not from where they were seen: the one-sided check of :func:`estimate_views`
     cannot be made here.
@@ -600,12 +600,10 @@ def with_completion(result: PhysicalEstimate, points: np.ndarray, completed: np.
         return result
     observed = points[~completed]
     if len(observed) < tol.MIN_POINTS:
-        share, low, high = 0.0, 0.0, float("inf")
+        share, bounds = 0.0, (0.0, float("inf"))
     else:
-        share, (low, high) = assess(result, observed, surface_noise(observed),
-                                    normals=None if normals is None else np.asarray(normals, np.float64)[~completed])
-    own = result.volume_bounds_m3 or (result.volume, result.volume)
-    bounds = (min(low, own[0]), max(high, own[1]))
+        share, bounds = assess(result, observed, surface_noise(observed),
+                               normals=None if normals is None else np.asarray(normals, np.float64)[~completed])
     warnings = result.warnings
     if share < COVERAGE_WARNING:
         warnings += (f"only {100 * share:.0f} % of the closed surface was observed; the rest ({100 * completed.mean():.0f} "
