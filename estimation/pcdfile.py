@@ -12,6 +12,11 @@ octomap use ``sensor_origin_``; the rotation does not move an origin and is not 
 default ``VIEWPOINT 0 0 0 1 0 0 0`` is what every writer puts there when it knows nothing, so it is read
 as "no viewpoint" (None), not as a sensor at the origin; a sensor that is at the origin is written with the
 quaternion's w = -1 (the same rotation) so that it reads back.
+
+PCL's ``vp_x vp_y vp_z`` fields (``pcl::PointWithViewpoint``) are each point's sensor origin, in the points'
+frame and units: they become per-point sensor origins, (n, 3). A file with those fields and a non-default
+VIEWPOINT says two things about where its sensors stood, and is refused rather than one of them picked.
+Per-point origins are not written to PCD (``save_cloud`` refuses them; .npz keeps them).
 """
 
 from __future__ import annotations
@@ -56,6 +61,9 @@ _PCD_KEYS = ("VERSION", "FIELDS", "SIZE", "TYPE", "COUNT", "WIDTH", "HEIGHT", "V
 PCD_FLOAT32_ERROR_M = 1e-6
 #: The PCD format's default VIEWPOINT (no translation, identity rotation w x y z): "no viewpoint known".
 _DEFAULT_VIEWPOINT = (0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0)
+#: PCL's normal fields (pcl::Normal) and per-point viewpoint fields (pcl::PointWithViewpoint), x y z order.
+_NORMAL_FIELDS = ("normal_x", "normal_y", "normal_z")
+_VP_FIELDS = ("vp_x", "vp_y", "vp_z")
 
 
 def read_pcd(path: Path, max_points: int) -> Columns:
@@ -72,6 +80,9 @@ def read_pcd(path: Path, max_points: int) -> Columns:
         key = words[0].upper()
         if key not in _PCD_KEYS:
             raise CloudFileError(f"{path}: not a PCD file (unexpected header line {line[:60]!r})")
+        if key in header:
+            # The last line won: a second VIEWPOINT moved the sensor and the estimate went on, exit 0.
+            raise CloudFileError(f"{path}: the PCD header gives {key} twice")
         header[key] = words[1:]
     for key in ("FIELDS", "SIZE", "TYPE"):
         if key not in header:
@@ -103,11 +114,16 @@ def read_pcd(path: Path, max_points: int) -> Columns:
     for axis in "xyz":
         if axis not in names or counts[names.index(axis)] != 1:
             raise CloudFileError(f"{path}: the PCD file has no scalar {axis} field (has {fields})")
-    for name in ("normal_x", "normal_y", "normal_z"):
-        if name in names and counts[names.index(name)] != 1:
-            raise CloudFileError(f"{path}: the PCD field {name!r} has COUNT {counts[names.index(name)]}; a normal's "
-                                 f"fields hold one value each")
+    for group, what in ((_NORMAL_FIELDS, "a normal's"), (_VP_FIELDS, "a viewpoint's")):
+        for name in group:
+            if name in names and counts[names.index(name)] != 1:
+                raise CloudFileError(f"{path}: the PCD field {name!r} has COUNT {counts[names.index(name)]}; {what} "
+                                     f"fields hold one value each")
     origins = _viewpoint(path, header.get("VIEWPOINT"))
+    per_point = _has_vp_fields(path, names)
+    if per_point and origins is not None:
+        raise CloudFileError(f"{path}: the PCD file gives per-point vp_x vp_y vp_z fields and a VIEWPOINT "
+                             f"{' '.join(header['VIEWPOINT'])[:80]}; which sensor origin holds is ambiguous")
     dtype = np.dtype([(nm, "<" + c, (k,)) if k != 1 else (nm, "<" + c) for nm, c, k in zip(names, codes, counts, strict=True)])
     data = header["DATA"][0].lower() if header["DATA"] else ""
     if data == "ascii":
@@ -120,10 +136,13 @@ def read_pcd(path: Path, max_points: int) -> Columns:
         if len(table) != n:
             raise CloudFileError(f"{path}: truncated: claims {n} points, read {len(table)}")
     elif data == "binary_compressed":
+        if per_point:  # open3d reads no vp fields: the origins would be lost without a word
+            raise CloudFileError(f"{path}: a binary_compressed PCD's vp_x vp_y vp_z fields are not read; save it as "
+                                 f"binary or ascii")
         # open3d decompresses, and reads an 8-byte float field of a compressed PCD as 0: a valid file was all points
         # at the origin ("all points are identical").
         odd = [f"{nm} ({kinds[names.index(nm)]} {sizes[names.index(nm)]})" for nm in
-               ("x", "y", "z", "normal_x", "normal_y", "normal_z") if nm in names and codes[names.index(nm)] != "f4"]
+               ("x", "y", "z", *_NORMAL_FIELDS) if nm in names and codes[names.index(nm)] != "f4"]
         if odd:
             raise CloudFileError(f"{path}: a binary_compressed PCD is read with 4-byte float coordinates and normals only, "
                                  f"this one has {', '.join(odd)}; save it as binary or ascii")
@@ -131,10 +150,13 @@ def read_pcd(path: Path, max_points: int) -> Columns:
     else:
         raise CloudFileError(f"{path}: unknown PCD DATA kind {data[:40]!r}; use ascii, binary or binary_compressed")
     types = {nm: np.dtype(c) for nm, c in zip(names, codes, strict=True)}
-    cols = columns_from(table, types, normals=("normal_x", "normal_y", "normal_z"), colors=None, sensor_origins=origins)
+    cols = columns_from(table, types, normals=_NORMAL_FIELDS, colors=None, sensor_origins=origins)
+    if per_point:
+        origins = _point_viewpoints(path, table, cols.points)
+        cols = Columns(cols.points, cols.normals, cols.colors, origins)
     colour_field = next((f for f in ("rgb", "rgba") if f in names and counts[names.index(f)] == 1), None)
     if colour_field is not None:
-        cols = Columns(cols.points, cols.normals, _pcd_colors(table[colour_field], types[colour_field]), origins)
+        cols = Columns(cols.points, cols.normals, _pcd_colors(table[colour_field], types[colour_field]), cols.sensor_origins)
     return cols
 
 
@@ -149,6 +171,34 @@ def _pcd_points(path: Path, header: dict[str, list[str]]) -> int:
     if width is None:
         raise CloudFileError(f"{path}: the PCD header has neither POINTS nor WIDTH")
     return width * height
+
+
+def _has_vp_fields(path: Path, names: list[str]) -> bool:
+    """Whether the fields hold PCL's per-point viewpoint, all three of vp_x vp_y vp_z.
+
+    Raises:
+        CloudFileError: some of the three but not all.
+    """
+    missing = [name for name in _VP_FIELDS if name not in names]
+    if 0 < len(missing) < len(_VP_FIELDS):
+        raise CloudFileError(f"{path}: the PCD file has per-point viewpoint fields but no {' '.join(missing)} "
+                             f"(a point's sensor origin needs vp_x vp_y vp_z)")
+    return not missing
+
+
+def _point_viewpoints(path: Path, table: np.ndarray | dict[str, np.ndarray], points: np.ndarray) -> np.ndarray:
+    """Each point's sensor origin from its vp_x vp_y vp_z: (n, 3) float64, file units, the points' frame.
+
+    Raises:
+        CloudFileError: a finite point whose viewpoint holds NaN or inf. A point that is itself NaN (an
+            organised cloud's hole) is dropped with its viewpoint, whatever that holds.
+    """
+    vp = np.column_stack([np.asarray(table[name], dtype=np.float64) for name in _VP_FIELDS])
+    bad = int((~np.isfinite(vp).all(axis=1) & np.isfinite(points).all(axis=1)).sum())
+    if bad:
+        raise CloudFileError(f"{path}: {bad} of {len(vp)} points have NaN or inf in vp_x vp_y vp_z; a point's "
+                             f"sensor origin must be finite")
+    return vp
 
 
 def _viewpoint(path: Path, words: list[str] | None) -> np.ndarray | None:

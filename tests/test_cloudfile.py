@@ -52,6 +52,28 @@ def write_ply(path: Path, columns: dict[str, np.ndarray], *, fmt: str = "binary_
     return path
 
 
+def write_pcd(path: Path, columns: dict[str, np.ndarray], *, data: str = "binary",
+              viewpoint: str = "0 0 0 1 0 0 0") -> Path:
+    """A PCD writer independent of the library's: any scalar fields and types, any VIEWPOINT."""
+    kinds = {"f": "F", "u": "U", "i": "I"}
+    dtype = np.dtype([(k, "<" + v.dtype.str[1:]) for k, v in columns.items()])
+    n = len(next(iter(columns.values())))
+    table = np.empty(n, dtype)
+    for k, v in columns.items():
+        table[k] = v
+    head = (f"# .PCD v0.7\nVERSION 0.7\nFIELDS {' '.join(columns)}\n"
+            f"SIZE {' '.join(str(v.dtype.itemsize) for v in columns.values())}\n"
+            f"TYPE {' '.join(kinds[v.dtype.kind] for v in columns.values())}\nCOUNT {' '.join('1' for _ in columns)}\n"
+            f"WIDTH {n}\nHEIGHT 1\nVIEWPOINT {viewpoint}\nPOINTS {n}\nDATA {data}\n")
+    with path.open("wb") as fh:
+        fh.write(head.encode())
+        if data == "ascii":
+            np.savetxt(fh, table, fmt=["%.17g" if v.dtype.kind == "f" else "%d" for v in columns.values()])
+        else:
+            fh.write(table.tobytes())
+    return path
+
+
 def xyz_columns(points: np.ndarray, dtype: str = "f4") -> dict[str, np.ndarray]:
     return {axis: points[:, i].astype(dtype) for i, axis in enumerate("xyz")}
 
@@ -179,6 +201,84 @@ def test_pcd_hand_written_binary_with_padding_and_count(tmp_path):
     np.testing.assert_array_equal(back.points[:, 0], np.arange(n))
     np.testing.assert_array_equal(back.normals, np.tile([0.0, 0.0, 1.0], (n, 1)))
     np.testing.assert_allclose(back.colors, np.tile([1.0, 128 / 255, 1 / 255], (n, 1)))
+
+
+PCD_HEAD = ("VERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH 2\nHEIGHT 1\n"
+            "VIEWPOINT 0 0 1 1 0 0 0\nPOINTS 2\n")
+
+
+@pytest.mark.parametrize("key", ["VERSION", "FIELDS", "SIZE", "TYPE", "COUNT", "WIDTH", "HEIGHT", "VIEWPOINT", "POINTS"])
+def test_a_pcd_header_key_given_twice_is_refused(tmp_path, key):
+    # The last line won: a second "VIEWPOINT 5 5 5 1 0 0 0" moved the sensor and estimate_views gave a wrong
+    # volume with exit 0. Even a repeat that agrees is refused: a header is not read two ways.
+    line = next(line for line in PCD_HEAD.splitlines() if line.startswith(key))
+    again = "VIEWPOINT 5 5 5 1 0 0 0" if key == "VIEWPOINT" else line
+    path = tmp_path / "x.pcd"
+    path.write_text(PCD_HEAD.replace(line + "\n", f"{line}\n{again}\n") + "DATA ascii\n1 2 3\n4 5 6\n")
+    with pytest.raises(CloudFileError, match=rf"^{re.escape(str(path))}: the PCD header gives {key} twice$"):
+        load_cloud(path)
+    path.write_text(PCD_HEAD + "DATA ascii\n1 2 3\n4 5 6\n")  # the same header with each key once reads
+    np.testing.assert_array_equal(load_cloud(path).sensor_origins, [[0.0, 0.0, 1.0]] * 2)
+
+
+@pytest.mark.parametrize("data", ["binary", "ascii"])
+def test_pcd_vp_fields_are_per_point_sensor_origins(tmp_path, cloud, data):
+    """PCL's PointWithViewpoint: vp_x vp_y vp_z are each point's sensor origin, in the points' units (they
+    were ignored, and the views were refused for having no sensor origin)."""
+    n = len(cloud)
+    points = cloud.points * 1000  # millimetres
+    origins = np.where(np.arange(n)[:, None] % 2, [0.0, 0.0, 800.0], [600.0, -50.0, 400.0])  # two sensors
+    points[3], origins[3] = np.nan, np.nan  # an organised cloud's hole: dropped with its viewpoint
+    columns = {**xyz_columns(points, "f8"), "intensity": np.arange(n, dtype="u2"),
+               "vp_x": origins[:, 0].astype("f4"), "vp_y": origins[:, 1].astype("f4"), "vp_z": origins[:, 2].astype("f4"),
+               "normal_x": cloud.normals[:, 0].astype("f4"), "normal_y": cloud.normals[:, 1].astype("f4"),
+               "normal_z": cloud.normals[:, 2].astype("f4")}
+    path = write_pcd(tmp_path / "vp.pcd", columns, data=data)
+    back = load_cloud(path, scale=0.001)
+    keep = np.arange(n) != 3
+    assert back.dropped_nonfinite == 1 and back.sensor_origins.shape == (n - 1, 3)
+    np.testing.assert_allclose(back.points, points[keep] / 1000, rtol=1e-15)
+    np.testing.assert_allclose(back.sensor_origins, origins[keep] / 1000, rtol=1e-15)  # scaled as the points are
+    np.testing.assert_allclose(back.normals, cloud.normals[keep], atol=1e-6)
+    # Per-point origins are not written back as a VIEWPOINT: .pcd refuses them, .npz keeps them.
+    with pytest.raises(CloudFileError, match=r"cannot hold the cloud's per-point sensor_origins \(\.npz can"):
+        save_cloud(back, tmp_path / "again.pcd")
+    save_cloud(back, tmp_path / "again.npz")
+    np.testing.assert_array_equal(load_cloud(tmp_path / "again.npz").sensor_origins, back.sensor_origins)
+
+
+@pytest.mark.parametrize("present", [("vp_x",), ("vp_x", "vp_z"), ("vp_y", "vp_z")])
+def test_a_pcd_with_some_vp_fields_is_refused(tmp_path, cloud, present):
+    columns = {**xyz_columns(cloud.points), **{name: np.zeros(len(cloud), "f4") for name in present}}
+    path = write_pcd(tmp_path / "part.pcd", columns)
+    missing = " ".join(name for name in ("vp_x", "vp_y", "vp_z") if name not in present)
+    with pytest.raises(CloudFileError, match=rf"^{re.escape(str(path))}: the PCD file has per-point viewpoint fields "
+                                             rf"but no {missing} \(a point's sensor origin needs vp_x vp_y vp_z\)$"):
+        load_cloud(path)
+
+
+@pytest.mark.parametrize("data", ["binary", "ascii"])
+@pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])
+def test_a_pcd_vp_field_that_is_not_finite_is_refused(tmp_path, cloud, data, bad):
+    origins = np.tile([0.0, 0.0, 1.0], (len(cloud), 1))
+    origins[[7, 9], 1] = bad
+    columns = {**xyz_columns(cloud.points), **{f"vp_{a}": origins[:, i].astype("f4") for i, a in enumerate("xyz")}}
+    path = write_pcd(tmp_path / "nan.pcd", columns, data=data)
+    with pytest.raises(CloudFileError, match=rf"^{re.escape(str(path))}: 2 of 500 points have NaN or inf in vp_x "
+                                             r"vp_y vp_z; a point's sensor origin must be finite$"):
+        load_cloud(path)
+
+
+def test_pcd_vp_fields_and_a_viewpoint_are_ambiguous(tmp_path, cloud):
+    columns = {**xyz_columns(cloud.points), **{f"vp_{a}": np.full(len(cloud), 0.5, "f4") for a in "xyz"}}
+    path = write_pcd(tmp_path / "both.pcd", columns, viewpoint="0 0 2 1 0 0 0")
+    with pytest.raises(CloudFileError, match=rf"^{re.escape(str(path))}: the PCD file gives per-point vp_x vp_y vp_z "
+                                             r"fields and a VIEWPOINT 0 0 2 1 0 0 0; which sensor origin holds is "
+                                             r"ambiguous$"):
+        load_cloud(path)
+    # With the format's default VIEWPOINT ("none known") the fields are the origins.
+    write_pcd(path, columns)
+    np.testing.assert_array_equal(load_cloud(path).sensor_origins, np.full((len(cloud), 3), 0.5))
 
 
 def test_npz_sensor_origins(tmp_path, cloud):
@@ -434,6 +534,11 @@ def test_bad_ply_is_one_line_error(tmp_path, content, match):
          r"the PCD field 'n' has COUNT 2000000000, more than the 4096"),
         ("FIELDS x y z normal_x normal_y normal_z\nSIZE 4 4 4 4 4 4\nTYPE F F F F F F\nCOUNT 1 1 1 2 1 1\nPOINTS 1\n"
          "DATA ascii\n1 2 3 0 0 0 1\n", r"the PCD field 'normal_x' has COUNT 2; a normal's fields hold one value each"),
+        ("FIELDS x y z vp_x vp_y vp_z\nSIZE 4 4 4 4 4 4\nTYPE F F F F F F\nCOUNT 1 1 1 1 1 3\nPOINTS 1\n"
+         "DATA ascii\n1 2 3 0 0 0 0 1\n", r"the PCD field 'vp_z' has COUNT 3; a viewpoint's fields hold one value each"),
+        # open3d would decompress the points and drop the viewpoints
+        ("FIELDS x y z vp_x vp_y vp_z\nSIZE 4 4 4 4 4 4\nTYPE F F F F F F\nPOINTS 1\nDATA binary_compressed\n",
+         r"a binary_compressed PCD's vp_x vp_y vp_z fields are not read; save it as binary or ascii"),
     ],
 )
 def test_bad_pcd_is_one_line_error(tmp_path, content, match):
