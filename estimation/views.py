@@ -26,7 +26,7 @@ import numpy as np
 
 from estimation import tolerances as tol
 from estimation.carving import DepthView
-from estimation.cloud import check_sensor_origin, check_spread, distinct_rows
+from estimation.cloud import check_range, check_sensor_origin, check_spread, distinct_rows
 from estimation.completion import ONE_SIDED, close_on_plane, honest_bounds, mean_view_direction
 from estimation.contracts import as_points, shown
 from estimation.coverage import coverage
@@ -480,6 +480,7 @@ def estimate_views(views: list[View], density: float, *, support: Plane | str | 
         check_sensor_origin(view.origin, label)
         if len(view.points) == 0:
             raise CloudError(f"{label}: the view has no points")
+        check_range(view.points, f"{label}: coordinates")  # before fusing, which would lose whose they are
     points, origins = fuse_views([(v.points, v.origin) for v in views])
     view_of = np.repeat(np.arange(len(views)), [len(v.points) for v in views])  # no view is empty (above)
     # Before the spacing and the noise: a 1-pixel depth frame (one point) or one of 1e300 m depths was an

@@ -984,3 +984,12 @@ def test_a_view_that_shows_none_of_the_object_is_named(views):
     got = estimate_views([View(p0, o0), View(p1, o1), View(table, o1, name="table only")], 1000.0,
                          support=(0.0, 0.0, 1.0, -TOP))
     assert any(w.startswith("none of the points of table only lie on the object") for w in got.warnings)
+
+
+def test_a_view_reaching_too_far_is_named(views):
+    """Coordinates beyond range are refused naming the view they came from (a PCD of doubles under a SIZE 4
+    header read as 3.4e38 m, and the error did not say which of the files it was)."""
+    (p0, o0), (p1, o1) = views
+    wild = np.vstack([p1, [[3.4e38, 0.0, 0.0]]])
+    with pytest.raises(CloudError, match=r"^wild\.pcd: coordinates reach 3\.4e\+38 m from the origin"):
+        estimate_views([View(p0, o0, name="good.pcd"), View(wild, o1, name="wild.pcd")], 1000.0, support="auto")
