@@ -261,12 +261,20 @@ def depth_view(depth: np.ndarray, camera: Intrinsics, rotation: np.ndarray,
         points (n, 3) float64 metres world frame (pixels on depth edges dropped), and the origin (3,).
 
     Raises:
-        CloudError: the image size does not match the intrinsics.
+        CloudError: the image size does not match the intrinsics, or every pixel with a depth is on an edge.
     """
     from estimation.fusion import edge_mask
 
     # Pixels on a depth edge are where real sensors return "flying pixels" between the object and what is
     # behind it; the sensor's sigma is unknown here, so the jump threshold is fusion's smallest (1 cm).
-    depth = np.where(edge_mask(depth, 0.0), np.nan, depth)
+    edges = edge_mask(depth, 0.0)
+    valid = np.isfinite(depth) & (depth > 0)
+    if valid.any() and not (valid & ~edges).any():
+        # Every return on an edge: millimetres read as metres (--depth-scale 1) step a metre a pixel, and the
+        # view was refused as one "with no points".
+        raise CloudError(f"every pixel with a depth lies on a depth edge (its neighbours more than 1 cm nearer or "
+                         f"further): the depths run {float(depth[valid].min()):.4g}..{float(depth[valid].max()):.4g} m; "
+                         f"is the depth scale right (0.001 for millimetres)?")
+    depth = np.where(edges, np.nan, depth)
     points, _ = depth_to_points(depth, camera, rotation, position)
     return points, np.asarray(position, dtype=np.float64)

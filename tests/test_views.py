@@ -993,3 +993,17 @@ def test_a_view_reaching_too_far_is_named(views):
     wild = np.vstack([p1, [[3.4e38, 0.0, 0.0]]])
     with pytest.raises(CloudError, match=r"^wild\.pcd: coordinates reach 3\.4e\+38 m from the origin"):
         estimate_views([View(p0, o0, name="good.pcd"), View(wild, o1, name="wild.pcd")], 1000.0, support="auto")
+
+
+def test_a_depth_image_at_the_wrong_scale_says_so():
+    """Millimetres read as metres (--depth-scale 1) step a metre or more from pixel to pixel: every pixel is on a
+    depth edge. That was refused as "the view has no points"; the error now names the depths and the scale."""
+    from estimation.depthimage import depth_view, intrinsics
+
+    rows, cols = np.mgrid[0:48, 0:64]
+    depth = 400.0 + 3.0 * rows + 2.0 * cols  # a tilted plane about half a metre away, in millimetres
+    camera = intrinsics(60.0, 60.0, 32.0, 24.0, width=64, height=48)
+    with pytest.raises(CloudError, match=r"the depths run 400\.\.667 m; is the depth scale right"):
+        depth_view(depth, camera, np.eye(3), np.zeros(3))
+    points, _ = depth_view(depth / 1000.0, camera, np.eye(3), np.zeros(3))
+    assert len(points) > 0.8 * depth.size
