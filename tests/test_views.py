@@ -87,6 +87,7 @@ def test_two_views_with_the_support_plane_found_hold_the_truth(capsys, pcds, vie
     assert record["volume_m3"] == pytest.approx(VOLUME, rel=0.15)
     assert 0.5 < record["coverage"] < 1.0  # the base and the far faces were not seen
     assert record["views"] == {"count": 2, "points": [len(p) for p, _ in views]}
+    assert record["points_in"] == sum(len(p) for p, _ in views)  # read, not what fusion thinned them to
     assert record["support_plane"] == pytest.approx([0, 0, 1, -TOP], abs=2e-3)
     assert any("closed on the support plane" in w for w in record["warnings"])
     assert any("rests on completion" in w for w in record["warnings"])
