@@ -42,6 +42,11 @@ from estimation.inertia import MassProperties, from_moments, triangle_areas
 #: ``QEF_RELATIVE_EIGENVALUE``: about 25 degrees. An edge turning more than that is a crease, not a bulge.
 CREASE_ANGLE = 2.0 * float(np.arctan(np.sqrt(QEF_RELATIVE_EIGENVALUE)))
 
+#: Radians. An edge of about a cell turns by its length over the radius, so a part two cells across turns at
+#: most about a radian an edge: a larger turn between smooth ends is a crease the contouring missed (a thin
+#: tube's rims turn 70-180 degrees), or a part thinner than that, whose doubt the thin-wall term holds.
+UNRESOLVED_MAX_TURN = 1.0
+
 
 def bulge_volumes(vertices: np.ndarray, faces: np.ndarray, normals: np.ndarray,
                   smooth: np.ndarray | None = None) -> np.ndarray:
@@ -56,18 +61,37 @@ def bulge_volumes(vertices: np.ndarray, faces: np.ndarray, normals: np.ndarray,
     Returns:
         (f,) float64 m^3, signed: positive where the surface bulges out of the facet (convex).
     """
+    return slivers(vertices, faces, normals, smooth)[0]
+
+
+def unresolved_volumes(vertices: np.ndarray, faces: np.ndarray, normals: np.ndarray,
+                       smooth: np.ndarray | None = None) -> np.ndarray:
+    """What :func:`bulge_volumes` leaves out on smooth patches, unsigned: (f,) m^3, each facet's slivers over
+    the edges whose ends are both smooth yet whose normals turn past ``CREASE_ANGLE`` (and not past
+    ``UNRESOLVED_MAX_TURN``). There the surface curves faster than the cells resolve (a 2 mm wire at 0.55 mm
+    cells turns 31 degrees an edge, was taken for creases all round, and came out -2.5 % with no word): how
+    far the volume may be off. Arguments as :func:`bulge_volumes`."""
+    return slivers(vertices, faces, normals, smooth)[1]
+
+
+def slivers(vertices: np.ndarray, faces: np.ndarray, normals: np.ndarray,
+            smooth: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """(bulge, unresolved): (f,) m^3 each, :func:`bulge_volumes` and :func:`unresolved_volumes` in one pass."""
     faces = np.asarray(faces, dtype=np.int64)
     if smooth is None:
         smooth = np.ones(len(vertices), dtype=bool)
-    cos_crease = np.cos(CREASE_ANGLE)
-    heights = np.zeros(len(faces))
+    cos_crease, cos_sharp = np.cos(CREASE_ANGLE), np.cos(UNRESOLVED_MAX_TURN)
+    heights, missed = np.zeros(len(faces)), np.zeros(len(faces))
     for a, b in ((0, 1), (1, 2), (2, 0)):
         i, j = faces[:, a], faces[:, b]
         ni, nj = normals[i], normals[j]
         h = np.einsum("ij,ij->i", vertices[j] - vertices[i], nj - ni) / 8
-        ok = smooth[i] & smooth[j] & (np.einsum("ij,ij->i", ni, nj) > cos_crease)
-        heights += np.where(ok, h, 0.0)
-    return triangle_areas(vertices[faces]) / 3 * heights
+        both = smooth[i] & smooth[j]
+        turn = np.einsum("ij,ij->i", ni, nj)
+        heights += np.where(both & (turn > cos_crease), h, 0.0)
+        missed += np.where(both & (turn <= cos_crease) & (turn > cos_sharp), np.abs(h), 0.0)
+    third = triangle_areas(vertices[faces]) / 3
+    return third * heights, third * missed
 
 
 def corrected(props: MassProperties, vertices: np.ndarray, faces: np.ndarray,
