@@ -42,13 +42,19 @@ def write_ply(path: Path, columns: dict[str, np.ndarray], *, fmt: str = "binary_
         table[k] = v
     props = "".join(f"property {names[v.dtype.str[1:]]} {k}\n" for k, v in columns.items())
     header = f"ply\nformat {fmt} 1.0\ncomment test\n{before}element vertex {n if count is None else count}\n{props}{after}end_header\n"
+    return _write_table(path, header, table, columns, ascii=fmt == "ascii", tail=after_bytes)
+
+
+def _write_table(path: Path, header: str, table: np.ndarray, columns: dict[str, np.ndarray], *, ascii: bool,
+                 tail: bytes = b"") -> Path:
+    """``header``, then ``table`` as text (floats to 17 digits) or raw bytes, then ``tail``."""
     with path.open("wb") as fh:
         fh.write(header.encode())
-        if fmt == "ascii":
+        if ascii:
             np.savetxt(fh, table, fmt=["%.17g" if v.dtype.kind == "f" else "%d" for v in columns.values()])
         else:
             fh.write(table.tobytes())
-        fh.write(after_bytes)
+        fh.write(tail)
     return path
 
 
@@ -65,13 +71,7 @@ def write_pcd(path: Path, columns: dict[str, np.ndarray], *, data: str = "binary
             f"SIZE {' '.join(str(v.dtype.itemsize) for v in columns.values())}\n"
             f"TYPE {' '.join(kinds[v.dtype.kind] for v in columns.values())}\nCOUNT {' '.join('1' for _ in columns)}\n"
             f"WIDTH {n}\nHEIGHT 1\nVIEWPOINT {viewpoint}\nPOINTS {n}\nDATA {data}\n")
-    with path.open("wb") as fh:
-        fh.write(head.encode())
-        if data == "ascii":
-            np.savetxt(fh, table, fmt=["%.17g" if v.dtype.kind == "f" else "%d" for v in columns.values()])
-        else:
-            fh.write(table.tobytes())
-    return path
+    return _write_table(path, head, table, columns, ascii=data == "ascii")
 
 
 def xyz_columns(points: np.ndarray, dtype: str = "f4") -> dict[str, np.ndarray]:
