@@ -391,7 +391,7 @@ def _sensors_above(plane: Plane, views: list[View], what: str) -> None:
     for k, view in enumerate(views):
         height = plane.height(np.atleast_2d(view.origin))  # type: ignore[arg-type]
         if (height <= 0).any():
-            raise CloudError(f"{what}: the sensor of {view.name or f'view {k + 1}'} lies "
+            raise CloudError(f"{what}: the sensor of {_label(view, k)} lies "
                              f"{1000 * -float(height.min()):.4g} mm below it, and a camera sees what rests on a "
                              f"plane from above (is the normal up into the object's side, the plane in the views' "
                              f"frame and units?)")
@@ -423,10 +423,15 @@ def _not_through(points: np.ndarray, plane: Plane, h: np.ndarray, cut: float, ob
 def _every_view_on_it(views: list[View], view_of: np.ndarray, obj: np.ndarray, warnings: list[str]) -> None:
     """Warn of the views none of whose points is on the object (``obj``, (n,) bool; ``view_of`` (n,) view index)."""
     seen = np.bincount(view_of[obj], minlength=len(views))
-    missing = [v.name or f"view {k + 1}" for k, v in enumerate(views) if seen[k] == 0]
+    missing = [_label(v, k) for k, v in enumerate(views) if seen[k] == 0]
     if missing:
         warnings.append(f"none of the points of {_listed(missing)} lie on the object (only the table or other "
                         f"things in view, or a view in another frame or units?)")
+
+
+def _label(view: View, k: int) -> str:
+    """How messages name the ``k``-th view (from 0): its name, else "view k+1"."""
+    return view.name or f"view {k + 1}"
 
 
 def _listed(names: list[str]) -> str:
@@ -473,7 +478,7 @@ def estimate_views(views: list[View], density: float, *, support: Plane | str | 
     if isinstance(seed, bool) or not isinstance(seed, numbers.Integral) or seed < 0:
         raise SettingsError(f"seed must be a whole number >= 0, got {shown(seed)}")
     for k, view in enumerate(views):
-        label = view.name or f"view {k + 1}"
+        label = _label(view, k)
         if view.origin is None:
             raise CloudError(f"{label}: no sensor origin (no VIEWPOINT header or vp_x vp_y vp_z fields; a VIEWPOINT of "
                              f"0 0 0 1 0 0 0, the PCD default, is read as unknown; pass --viewpoint X Y Z)")
@@ -569,7 +574,7 @@ def estimate_views(views: list[View], density: float, *, support: Plane | str | 
         # A view that cannot be pictured carves nothing; the others still carve what they saw through (until
         # session 41 one such view, eight points or a stray behind its sensor, stopped every view carving, and a
         # box seen by two cameras came out -67 %, silently).
-        unpictured = [v.name or f"view {k + 1}" for k, (v, p) in enumerate(zip(views, pictures, strict=True)) if p is None]
+        unpictured = [_label(v, k) for k, (v, p) in enumerate(zip(views, pictures, strict=True)) if p is None]
         if unpictured:
             warnings.append(f"{_listed(unpictured)} could not be pictured as a depth image (too few points, or spread "
                             f"wider than a camera sees): {'it does' if len(unpictured) == 1 else 'they do'} not carve "
