@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 import re
 import subprocess
 import sys
@@ -820,15 +821,22 @@ def test_an_ascii_pcd_colour_no_uint32_holds_is_black_without_a_warning(tmp_path
     assert cloud.colors[3] == pytest.approx(np.array([0xFF, 0x80, 0x01]) / 255.0)
 
 
-def test_a_mesh_file_with_few_vertices_says_it_is_a_mesh(tmp_path):
+def test_a_mesh_file_says_it_is_a_mesh(tmp_path, caplog):
     import trimesh
 
     trimesh.creation.box([0.05, 0.04, 0.03]).export(tmp_path / "box.ply")
     with pytest.raises(CloudFileError, match=r"box\.ply: a mesh of 8 vertices and 12 faces, not a point cloud"):
         load_cloud(tmp_path / "box.ply")
-    dense = trimesh.creation.icosphere(4, 0.05)  # a mesh with enough vertices is read as its vertices
+    dense = trimesh.creation.icosphere(4, 0.05)  # a mesh with enough vertices is read as its vertices, and says so
     dense.export(tmp_path / "sphere.ply")
-    assert len(load_cloud(tmp_path / "sphere.ply")) == len(dense.vertices)
+    with caplog.at_level(logging.WARNING, logger="estimation"):
+        assert len(load_cloud(tmp_path / "sphere.ply")) == len(dense.vertices)
+    assert f"a mesh of {len(dense.vertices)} vertices and {len(dense.faces)} faces: its faces are ignored" in caplog.text
+    caplog.clear()
+    write_ply(tmp_path / "cloud.ply", xyz_columns(dense.vertices, "f4"))  # the same vertices without faces: no word
+    with caplog.at_level(logging.WARNING, logger="estimation"):
+        load_cloud(tmp_path / "cloud.ply")
+    assert "a mesh" not in caplog.text
 
 
 def _npy_bytes(rows: int, claimed: int | None = None) -> bytes:
