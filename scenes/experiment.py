@@ -250,6 +250,11 @@ def check_condition(c: Condition) -> None:
 # -- tasks -----------------------------------------------------------------------------------------------
 
 
+#: ``_sweep``: metres the end effector is moved at most, at most in one step, the gap that is a touch, and the
+#: most steps (each closes the gap to the nearest geom; a face is met in one, an edge in a few dozen).
+SWEEP_REACH, SWEEP_STEP, SWEEP_TOUCH, SWEEP_STEPS = 5.0, 0.5, 1e-6, 200
+
+
 def _ray(model, data, start: np.ndarray, direction: np.ndarray) -> float:  # type: ignore[no-untyped-def]
     """Distance (metres) from ``start`` along the unit ``direction`` to the first movable geom, or inf."""
     import mujoco
@@ -260,6 +265,36 @@ def _ray(model, data, start: np.ndarray, direction: np.ndarray) -> float:  # typ
     geom = np.zeros(1, dtype=np.int32)
     dist = mujoco.mj_ray(model, data, np.asarray(start, float), np.asarray(direction, float), None, 0, ee, geom)
     return math.inf if dist < 0 else float(dist)
+
+
+def _sweep(model, data, start: np.ndarray, direction: np.ndarray) -> float:  # type: ignore[no-untyped-def]
+    """How far (metres) the end effector's sphere, centred at ``start``, moves along the unit ``direction`` before it
+    touches a movable geom, or inf: advanced by its distance to the nearest (``mj_geomDistance``), which it cannot
+    close in less. A ray from its centre missed what lies below it (a rod 8 mm tall under a 20 mm sphere 23 mm up:
+    the push went for the box behind, through the rod)."""
+    import mujoco
+
+    from twin.model import EE_BODY
+
+    ee = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, EE_BODY)
+    (ball,) = [g for g in np.flatnonzero(model.geom_bodyid == ee) if model.geom_type[g] == mujoco.mjtGeom.mjGEOM_SPHERE]
+    collides = (model.geom_contype != 0) | (model.geom_conaffinity != 0)
+    movable = np.flatnonzero(collides & (model.body_weldid[model.geom_bodyid] != 0) & (model.geom_bodyid != ee))
+    saved = data.geom_xpos[ball].copy()
+    try:
+        travelled = 0.0
+        for _ in range(SWEEP_STEPS):
+            if travelled >= SWEEP_REACH:
+                break
+            data.geom_xpos[ball] = start + travelled * direction
+            gap = min((mujoco.mj_geomDistance(model, data, int(ball), int(g), SWEEP_STEP, None) for g in movable),
+                      default=SWEEP_STEP)
+            if gap <= SWEEP_TOUCH:
+                return travelled
+            travelled += gap
+        return math.inf if travelled >= SWEEP_REACH else travelled
+    finally:
+        data.geom_xpos[ball] = saved
 
 
 def _piecewise(times: Sequence[float], points: Sequence[np.ndarray]) -> Callable[[float], np.ndarray]:
@@ -306,10 +341,9 @@ def plan_task(task: str, scene: SceneSpec, model, data, *, speed: float = 1.0): 
     if task == "push":
         h = max(float(c[2]), floor + radius + 0.003)
         a = np.array([start[0], start[1], h])
-        reach = _ray(model, data, a, d)
-        if not math.isfinite(reach):
+        touch = _sweep(model, data, a, d)
+        if not math.isfinite(touch):
             raise ExperimentError(f"push: nothing in the way of the end effector towards {target!r}")
-        touch = reach - radius
         go(a, 0.4)
         go(a + d * (touch - APPROACH_GAP), max(0.3, (touch - APPROACH_GAP) / 0.15))
         go(a + d * (touch + 0.10), 1.0)  # 10 cm at 0.1 m/s

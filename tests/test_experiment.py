@@ -235,3 +235,52 @@ def test_a_blow_up_is_a_speed_in_metres_or_a_spin_past_what_a_hand_makes():
     assert _absurd(twin, none)
     twin.data.qvel[0] = 0.0
     assert _absurd(twin, np.array([0.0, 0.0, np.inf]))
+
+
+LOW = """
+name = "low"
+[table]
+size = [1.0, 0.6, 0.04]
+height = 0.5
+[end_effector]
+radius = 0.02
+position = [-0.3, 0.0, 0.56]
+[[objects]]
+id = "slab"
+primitive = { type = "box", size = [0.06, 0.2, 0.008] }
+density = 700
+position = [0.0, 0.0]
+points = 4000
+[[objects]]
+id = "wall"
+primitive = { type = "box", size = [0.04, 0.3, 0.1] }
+density = 700
+position = [0.3, 0.0]
+points = 4000
+"""
+
+
+def test_a_push_meets_an_object_lower_than_the_end_effector_centre(cache):
+    """The push finds what the sphere touches first, not what a ray from its centre meets: an 8 mm slab under a 20 mm
+    sphere (centre 23 mm up) is pushed from its near face, not ploughed through towards the wall behind it."""
+    import numpy as np
+    import tomllib
+
+    from scenes.experiment import plan_task
+    from scenes.remote import Remote
+    from scenes.scenefile import parse_scene
+    from sync.clock import SimClock
+    from sync.inprocess import InProcessBus
+
+    clock = SimClock()
+    remote = Remote(parse_scene(tomllib.loads(LOW)), InProcessBus(clock).transport("remote"), clock=clock,
+                    cache_dir=cache)
+    try:
+        trajectory, duration = plan_task("push", remote.scene, remote.twin.model, remote.twin.data)
+        path = np.array([trajectory(t) for t in np.linspace(0.0, duration, 2001)])
+        assert path[:, 2].min() == pytest.approx(0.5 + 0.02 + 0.003, abs=1e-9)  # the push's height: 3 mm clear
+        # The sphere meets the slab's near top edge (x = -0.03, 15 mm below its centre) with its centre
+        # sqrt(20^2 - 15^2) mm short of it, and pushes 10 cm on from there.
+        assert path[:, 0].max() - 0.10 == pytest.approx(-0.03 - np.sqrt(0.02**2 - 0.015**2), abs=2e-4)
+    finally:
+        remote.close()
