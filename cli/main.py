@@ -705,15 +705,16 @@ def _cmd_build(args: argparse.Namespace) -> int:
                                     "warnings": list(o.estimate.warnings),
                                     "mjcf": str(path.parent / "objects" / f"{o.id}.xml")}
                                    for o in built.objects]}))
+        _print_warnings(built)  # stderr, as without --json: the JSON holds them too, but stdout may go to a file
         return 0
     _print_objects(built)
+    _print_warnings(built)
     print(f"wrote {path}, objects/<id>.xml and estimates.json in {path.parent} ({built.seconds:.1f} s)")
     return 0
 
 
 def _print_objects(built) -> None:  # type: ignore[no-untyped-def]
     from rich.console import Console
-    from rich.markup import escape
     from rich.table import Table
 
     table = Table(title=f"scene {built.scene.name}")
@@ -725,6 +726,13 @@ def _print_objects(built) -> None:  # type: ignore[no-untyped-def]
                       "yes" if o.hull_cached else "no", "-" if secs is None else f"{secs:.1f}",
                       o.estimate.material or f"{o.estimate.mass.density:g} kg/m^3")
     Console().print(table)
+
+
+def _print_warnings(built) -> None:  # type: ignore[no-untyped-def]
+    """Each object's estimate's warnings on stderr, with or without --json."""
+    from rich.console import Console
+    from rich.markup import escape
+
     # Said here (on stderr, as every warning), not only counted in the progress lines and kept in
     # estimates.json: a 1 mm disc's +400 % mass comes with the estimate's own warning that the volume is not
     # known. One line each (no wrapping), and escaped: a "[...]" in a warning is text, not rich markup.

@@ -96,6 +96,10 @@ def table_top(scene: SceneSpec) -> float | None:
     return None if scene.table is None else scene.table.height
 
 
+def table_size(scene: SceneSpec) -> tuple[float, float, float] | None:
+    return None if scene.table is None else scene.table.size
+
+
 def build_scene(scene: SceneSpec, *, coacd: CoacdSettings = DEFAULT_SETTINGS, cache_dir: Path | None = None,
                 progress: bool = True, physics: PhysicsSettings = DEFAULT_PHYSICS,
                 on_object: OnObject | None = None, workers: int | None = None) -> BuiltScene:
@@ -154,19 +158,21 @@ def default_workers(objects: int) -> int:
 
 
 def build_object(spec: ObjectSpec, *, table_top: float | None, coacd: CoacdSettings = DEFAULT_SETTINGS,
-                 cache_dir: Path | None = None) -> tuple[TwinObject, ObjectReport]:
+                 cache_dir: Path | None = None,
+                 table_size: tuple[float, float, float] | None = None) -> tuple[TwinObject, ObjectReport]:
     """One object of a scene, ready for the model, and how it was built: its estimate
     (:func:`scenes.sources.estimate_object`), then its visual mesh, hulls and placement
     (:func:`scenes.sources.prepare_objects`). What runs in each build worker.
 
     Raises:
-        SceneError: the object cannot be estimated.
+        SceneError: the object cannot be estimated, or rests on neither the table nor the floor
+            (:func:`scenes.sources.placement`).
     """
     cpu0, t0 = time.process_time(), time.perf_counter()
     est, friction = estimate_object(spec)
     t1 = time.perf_counter()
     (obj,) = prepare_objects([spec], table_top=table_top, coacd=coacd, cache_dir=cache_dir, progress=False,
-                             estimates=[(est, friction)])
+                             estimates=[(est, friction)], table_size=table_size)
     t2 = time.perf_counter()
     # Measured again here (a hull of the ~3000-face visual mesh: milliseconds) so the report says whether
     # CoACD was skipped by the very rule twin.decompose applied, even though prepare_objects returns hulls only.
@@ -181,7 +187,7 @@ def build_object(spec: ObjectSpec, *, table_top: float | None, coacd: CoacdSetti
 def _build_objects(scene: SceneSpec, *, coacd: CoacdSettings, cache_dir: Path | None, workers: int,
                    on_object: OnObject | None, progress: bool) -> list[tuple[TwinObject, ObjectReport]]:
     """:func:`build_object` for every object, in scene order whatever order they finish in."""
-    specs, top = scene.objects, table_top(scene)
+    specs, top, size = scene.objects, table_top(scene), table_size(scene)
     results: list[tuple[TwinObject, ObjectReport] | None] = [None] * len(specs)
     bar = ProgressBar(progress and on_object is None, len(specs), "objects")
 
@@ -194,9 +200,9 @@ def _build_objects(scene: SceneSpec, *, coacd: CoacdSettings, cache_dir: Path | 
     try:
         if workers == 1 or len(specs) < 2:
             for i, s in enumerate(specs):
-                finished(i, build_object(s, table_top=top, coacd=coacd, cache_dir=cache_dir))
+                finished(i, build_object(s, table_top=top, coacd=coacd, cache_dir=cache_dir, table_size=size))
         else:
-            _build_in_pool(specs, top, coacd, cache_dir, workers, finished)
+            _build_in_pool(specs, top, coacd, cache_dir, workers, finished, table_size=size)
     finally:
         bar.close()
     return [r for r in results if r is not None]
@@ -218,7 +224,8 @@ def start_order(specs: tuple[ObjectSpec, ...]) -> list[int]:
 
 
 def _build_in_pool(specs: tuple[ObjectSpec, ...], top: float | None, coacd: CoacdSettings, cache_dir: Path | None,
-                   workers: int, finished: Callable[[int, tuple[TwinObject, ObjectReport]], None]) -> None:
+                   workers: int, finished: Callable[[int, tuple[TwinObject, ObjectReport]], None], *,
+                   table_size: tuple[float, float, float] | None = None) -> None:
     import multiprocessing as mp
     from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
     from concurrent.futures.process import BrokenProcessPool
@@ -229,7 +236,8 @@ def _build_in_pool(specs: tuple[ObjectSpec, ...], top: float | None, coacd: Coac
     # workers die with this process.
     pool = ProcessPoolExecutor(workers, mp_context=mp.get_context("spawn"), initializer=background_worker)
     try:
-        pending = {pool.submit(build_object, specs[i], table_top=top, coacd=coacd, cache_dir=cache_dir): i
+        pending = {pool.submit(build_object, specs[i], table_top=top, coacd=coacd, cache_dir=cache_dir,
+                               table_size=table_size): i
                    for i in start_order(specs)}
         while pending:
             ready, _ = wait(pending, return_when=FIRST_COMPLETED)

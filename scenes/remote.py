@@ -179,7 +179,8 @@ class Remote:
         self._withheld: set[str] = set()  # objects never published (nothing observed): no cloud, no pose yet
         top = scene.table.height if scene.table else None
         truth = prepare_objects(scene.objects, table_top=top, cache_dir=cache_dir, progress=progress,
-                                estimates=[reference_estimate(s) for s in scene.objects])
+                                estimates=[reference_estimate(s) for s in scene.objects],
+                                table_size=scene.table.size if scene.table else None)
         spec = scene.empty_spec()
         for spec_obj, obj in zip(scene.objects, truth, strict=True):
             add_object(spec, obj)
@@ -223,12 +224,14 @@ class Remote:
         and the Future raises :class:`SceneError` naming what it overlaps.
         """
         top = self.scene.table.height if self.scene.table else None
+        # A position given is where the object goes: the table's edges judge only where its spec rests it.
+        size = self.scene.table.size if self.scene.table and position is None else None
         prepared: list[TwinObject] = []
         done: Future = Future()
 
         def edit(model_spec) -> None:  # type: ignore[no-untyped-def]
             (obj,) = prepare_objects([spec], table_top=top, cache_dir=self._cache_dir, progress=False,
-                                     estimates=[reference_estimate(spec)])
+                                     estimates=[reference_estimate(spec)], table_size=size)
             if position is not None:
                 obj = replace(obj, position=np.asarray(position, float))
             add_object(model_spec, obj)
