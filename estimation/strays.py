@@ -54,8 +54,30 @@ def islands(points: np.ndarray, spacing: float) -> Islands:
     The cell is ``STRAY_CELL_SPACINGS`` spacings of the cloud thinned to ``ISLAND_POINTS``: past that, a
     denser scan resolves nothing more that a stray could spoil (the reconstruction works on fewer points
     still, ``tolerances.POINT_BUDGET``), and a cell fixed by the data keeps the work linear in the points,
-    with no sort (a million points: 46 ms, ``bench/strays.py``).
+    with no sort (a million points: 46 ms, ``bench/strays.py``). Where that finds strays or several parts and the
+    points lie along lines at least ``tolerances.LINE_GAP_CELLS`` spacings apart (``spacing.line_gap``), the
+    cell is ``STRAY_CELL_SPACINGS`` times the lines' gap instead.
     """
+    n = len(points)
+    if n == 0 or not spacing > 0:
+        return Islands(np.ones(n, dtype=bool), 0, 0, 1, (1.0,))
+    cell = STRAY_CELL_SPACINGS * spacing * max(1.0, float(np.sqrt(n / ISLAND_POINTS)))
+    found = _islands(points, cell)
+    if found.strays or found.parts > 1:
+        # Points along lines far apart (a laser line scanner's slices): the spacing is read along them, and where the
+        # lines part wider than the cell (a ball's slices near its poles), whole lines fell apart as strays (an 8 cm ball
+        # sliced every 2 mm lost its caps, 558 points). The gap between the lines is the spacing that counts there.
+        from estimation.spacing import line_gap
+        from estimation.tolerances import LINE_GAP_CELLS
+
+        gap = line_gap(points)
+        if gap >= LINE_GAP_CELLS * spacing and STRAY_CELL_SPACINGS * gap > cell:
+            found = _islands(points, STRAY_CELL_SPACINGS * gap)
+    return found
+
+
+def _islands(points: np.ndarray, cell: float) -> Islands:
+    """:func:`islands` with cells of ``cell`` metres."""
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
 
@@ -63,9 +85,6 @@ def islands(points: np.ndarray, spacing: float) -> Islands:
 
     n = len(points)
     everything = Islands(np.ones(n, dtype=bool), 0, 0, 1, (1.0,))
-    if n == 0 or not spacing > 0:
-        return everything
-    cell = STRAY_CELL_SPACINGS * spacing * max(1.0, float(np.sqrt(n / ISLAND_POINTS)))
     low, high = column_bounds(points)
     dims = np.floor((high - low) / cell).astype(np.int64) + 3  # a margin: every neighbour offset stays in range
     total = float(np.prod(dims.astype(np.float64)))
