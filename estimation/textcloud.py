@@ -1,7 +1,7 @@
 """Text point clouds: .xyz/.xyzn/.xyzrgb/.pts and .txt/.csv/.asc, read and written.
 
-Read through ``numpy.loadtxt``, one row a point, values separated by white space or commas. A header row of
-column names, as pandas, spreadsheets and CloudCompare (``//X,Y,Z``) write one, picks the columns by name;
+Read through ``numpy.loadtxt``, one row a point, values separated by white space, commas or semicolons. A header
+row of column names, as pandas, spreadsheets and CloudCompare (``//X,Y,Z``) write one, picks the columns by name;
 without one, the suffix says what the columns are (.txt/.csv/.asc: 3, 6 or 9 columns). A Leica .pts starts
 with its point count. Before the file is read whole its line lengths and count are checked in blocks, so a
 huge or binary file under a text suffix is refused in bounded memory.
@@ -79,7 +79,11 @@ def read_text(path: Path, max_points: int) -> Columns:
         if not any(line.split("#", 1)[0].strip() for line in lines):
             raise CloudFileError(f"{path}: a header row and no rows of numbers after it")
     first = _first_content(lines)
-    delimiter = "," if first is not None and "," in lines[first] else None
+    delimiter = None if first is None else _delimiter(lines[first])
+    if delimiter == ";" and "," in lines[first].split("#", 1)[0]:
+        # A spreadsheet set to a decimal comma writes '0,12;0,05;0,3': numpy named '0,12' as not a number.
+        raise CloudFileError(f"{path}: line {first + first_line} has decimal commas ({lines[first].strip()[:60]!r}): "
+                             f"write the numbers with '.' decimals")
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # loadtxt warns (to stderr) on a file of comments only; make it an error
         try:
@@ -153,7 +157,7 @@ def _header_row(path: Path, lines: list[str], first_line: int = 1) -> _HeaderRow
         return None
     line = lines[index]
     stripped = line.split("#", 1)[0].strip().removeprefix("//")  # '#' starts a comment, as numpy.loadtxt reads it
-    tokens = [t.strip().strip("'\"").lower() for t in (stripped.split(",") if "," in stripped else stripped.split())]
+    tokens = [t.strip().strip("'\"").lower() for t in stripped.split(_delimiter(stripped))]
     if any(_is_number(t) for t in tokens):
         return None
     found: dict[str, tuple[int, int, int] | None] = {}
@@ -174,6 +178,12 @@ def _header_row(path: Path, lines: list[str], first_line: int = 1) -> _HeaderRow
         log.info("%s: columns left out (not x y z, nx ny nz or r g b): %s", path,
                  ", ".join(repr(t) for i, t in enumerate(tokens) if i not in used))
     return _HeaderRow(index, len(tokens), found)
+
+
+def _delimiter(line: str) -> str | None:
+    """What separates the values of ``line``: ';' (a spreadsheet set to decimal commas), ',' or white space (None)."""
+    text = line.split("#", 1)[0]
+    return ";" if ";" in text else "," if "," in text else None
 
 
 def _ragged_row(lines: list[str], delimiter: str | None) -> tuple[int, str] | None:

@@ -340,6 +340,18 @@ def test_text_columns_are_taken_by_the_header_rows_names(tmp_path, cloud):
     np.testing.assert_array_equal(load_cloud(tmp_path / "q.xyz").points, cloud.points)
 
 
+def test_a_semicolon_separated_csv_is_read_and_decimal_commas_are_named(tmp_path, cloud):
+    """A spreadsheet set to a decimal comma separates its values with ';': read with '.' decimals; with decimal commas
+    ('0,12;0,05') one line naming them (numpy said "could not convert string '177997;0' to float64")."""
+    (tmp_path / "semi.csv").write_text("X;Y;Z\n" + _rows(cloud.points, ";"))
+    np.testing.assert_array_equal(load_cloud(tmp_path / "semi.csv").points, cloud.points)
+    (tmp_path / "bare.csv").write_text(_rows(cloud.points, ";"))
+    np.testing.assert_array_equal(load_cloud(tmp_path / "bare.csv").points, cloud.points)
+    (tmp_path / "comma.csv").write_text("x;y;z\n0,177997;0,05;0,3\n0,2;0,1;0,4\n")
+    with pytest.raises(CloudFileError, match=r"comma\.csv: line 2 has decimal commas .*write the numbers with '\.' decimals"):
+        load_cloud(tmp_path / "comma.csv")
+
+
 def test_a_first_row_of_numbers_with_a_comment_is_data_not_a_header(tmp_path, cloud):
     rows = _rows(cloud.points, " ").splitlines()
     (tmp_path / "c.xyz").write_text(rows[0] + "  # the first point\n" + "\n".join(rows[1:]) + "\n")
