@@ -354,7 +354,10 @@ def plan_task(task: str, scene: SceneSpec, model, data, *, speed: float = 1.0): 
         above = np.array([c[0], c[1], c[2] + 0.5])
         top = above[2] - _ray(model, data, above, np.array([0.0, 0.0, -1.0]))
         if not math.isfinite(top):
-            raise ExperimentError(f"press: no top surface found on {target!r}")
+            raise ExperimentError(f"press: a ray straight down through the centre of mass of {target!r} meets nothing (a ring or "
+                                  f"a tube, open there?): press needs a top surface above the centre of mass of the "
+                                  f"object nearest the end effector; use --tasks push, or start the end effector nearer "
+                                  f"another object")
         clear = top + radius + 0.02
         go(np.array([start[0], start[1], max(clear, start[2])]), 0.3)
         go(np.array([c[0], c[1], max(clear, start[2])]), max(0.3, float(np.linalg.norm(flat)) / 0.2))

@@ -284,3 +284,32 @@ def test_a_push_meets_an_object_lower_than_the_end_effector_centre(cache):
         assert path[:, 0].max() - 0.10 == pytest.approx(-0.03 - np.sqrt(0.02**2 - 0.015**2), abs=2e-4)
     finally:
         remote.close()
+
+
+def test_a_press_on_a_ring_says_why_it_cannot(cache):
+    """A ring's centre of mass is in its hole: the ray down meets nothing, and the message says so (it said "no top
+    surface found on 'ring'")."""
+    import tomllib
+
+    from scenes.experiment import ExperimentError, plan_task
+    from scenes.remote import Remote
+    from scenes.scenefile import parse_scene
+    from sync.clock import SimClock
+    from sync.inprocess import InProcessBus
+
+    ring = LOW.split("[[objects]]")[0] + """[[objects]]
+id = "ring"
+primitive = { type = "torus", size = [0.04, 0.01] }
+density = 700
+position = [0.0, 0.0]
+points = 4000
+"""
+    clock = SimClock()
+    remote = Remote(parse_scene(tomllib.loads(ring)), InProcessBus(clock).transport("remote"), clock=clock,
+                    cache_dir=cache)
+    try:
+        with pytest.raises(ExperimentError, match=r"press: a ray straight down through the centre of mass of 'ring' meets "
+                                                  r"nothing \(a ring or a tube, open there\?\).*--tasks push"):
+            plan_task("press", remote.scene, remote.twin.model, remote.twin.data)
+    finally:
+        remote.close()
