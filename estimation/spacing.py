@@ -77,11 +77,15 @@ def sparse_spacing(points: np.ndarray, share: float) -> float:
     A cloud sampled evenly reads about 1.3 times :func:`point_spacing` at a share of 0.1; one whose half
     is sampled 30 times less densely (a side a scanner saw from afar), 6.5 times.
     """
-    local = np.sort(local_spacings(points))
-    if not len(local):
-        return 0.0
-    area = np.cumsum(local**2)
-    return float(local[min(int(np.searchsorted(area, (1.0 - share) * area[-1])), len(local) - 1)])
+    local = local_spacings(points)
+    return _area_quantile(local, local**2, 1.0 - share) if len(local) else 0.0
+
+
+def _area_quantile(values: np.ndarray, areas: np.ndarray, q: float) -> float:
+    """The ``q`` (0-1) quantile of ``values`` ((n,), n > 0) weighted by the ``areas`` ((n,)) their points stand for."""
+    order = np.argsort(values, kind="stable")
+    cumulative = np.cumsum(areas[order])
+    return float(values[order][min(int(np.searchsorted(cumulative, q * cumulative[-1])), len(values) - 1)])
 
 
 #: Each widening step of :func:`line_gap` thins by voxels this many times wider than the last. Under the noise a
@@ -205,9 +209,8 @@ def _next_line(reference: np.ndarray, tree, sample: np.ndarray, direction: np.nd
     found = off.any(axis=1)
     if found.mean() < 0.5:
         return 0.0
-    gaps = np.sort(np.where(found, np.where(off, dist[:, 1:], np.inf).min(axis=1), dist[:, -1]))
-    area = np.cumsum(gaps)
-    return float(gaps[min(int(np.searchsorted(area, 0.5 * area[-1])), len(gaps) - 1)])
+    gaps = np.where(found, np.where(off, dist[:, 1:], np.inf).min(axis=1), dist[:, -1])
+    return _area_quantile(gaps, gaps, 0.5)
 
 
 def local_spacings(points: np.ndarray, tree=None) -> np.ndarray:  # type: ignore[no-untyped-def]
