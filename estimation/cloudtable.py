@@ -12,6 +12,7 @@ Used by ``plyfile``, ``pcdfile``, ``textcloud`` and ``numpycloud``; ``cloudfile`
 
 from __future__ import annotations
 
+import logging
 import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -21,6 +22,8 @@ import numpy as np
 
 from estimation.cloud import PointCloud
 from estimation.errors import CloudFileError
+
+log = logging.getLogger(__name__)
 
 #: Headers longer than this are not searched for their end. Real PLY/PCD headers are under 1 KB even with
 #: comments; the bound keeps a large non-cloud file with a cloud suffix from being scanned whole.
@@ -209,12 +212,17 @@ def columns_from(
     return Columns(points, nrm, col, sensor_origins)
 
 
-def split_columns(table: np.ndarray) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
-    """x y z, x y z nx ny nz, x y z r g b, or x y z nx ny nz r g b."""
-    if table.ndim != 2 or table.shape[1] not in (3, 6, 9):
-        raise CloudFileError(f"expected 3, 6 or 9 columns (xyz, normals, colours), got shape {table.shape}")
+def split_columns(table: np.ndarray, where: object = "the table") -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
+    """x y z, x y z nx ny nz, x y z r g b, x y z nx ny nz r g b, or x y z and one value more (a lidar's
+    intensity, as KITTI and many scanners write it, or a homogeneous w), which is left out with a warning
+    naming ``where``: refusing it turned away a common file, and dropping it in silence hid a w that is not 1."""
+    if table.ndim != 2 or table.shape[1] not in (3, 4, 6, 9):
+        raise CloudFileError(f"expected 3, 4, 6 or 9 columns (xyz, an intensity, normals, colours), got shape {table.shape}")
     points = table[:, :3]
-    if table.shape[1] == 3:
+    if table.shape[1] in (3, 4):
+        if table.shape[1] == 4:
+            log.warning("%s: 4 columns: read as x y z, the 4th left out (an intensity? if it is a homogeneous w, divide "
+                        "by it first)", where)
         return points, None, None
     if table.shape[1] == 9:
         return points, table[:, 3:6], table[:, 6:9]

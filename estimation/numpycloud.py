@@ -1,6 +1,6 @@
 """NumPy point clouds: .npy (x y z [nx ny nz] [r g b] columns) and .npz (named arrays), read and written.
 
-An .npy is read as 3, 6 or 9 columns; an .npz by its ``points``, ``normals``, ``colors`` and
+An .npy is read as 3, 4 (the 4th left out), 6 or 9 columns; an .npz by its ``points``, ``normals``, ``colors`` and
 ``sensor_origins`` arrays. Every array's header (shape, dtype) is checked against ``max_points`` and the
 bytes that follow it before any data is read, and arrays of Python objects are refused, never unpickled.
 ``depthimage`` reads .npy depth images through the same checked header.
@@ -89,12 +89,12 @@ def read_numpy(path: Path, max_points: int) -> Columns:
         # row cap (an 800 MB (100000000,) file reached 1.6 GB before its shape was refused).
         shape, dtype = npy_header(path)
         check_real(path, dtype, "a cloud array")
-        if len(shape) != 2 or shape[1] not in (3, 6, 9):
-            raise CloudFileError(f"{path}: expected an (n, 3), (n, 6) or (n, 9) array (xyz, normals, colours), "
-                                 f"got shape {shape}")
+        if len(shape) != 2 or shape[1] not in (3, 4, 6, 9):
+            raise CloudFileError(f"{path}: expected an (n, 3), (n, 4), (n, 6) or (n, 9) array (xyz, an intensity, "
+                                 f"normals, colours), got shape {shape}")
         check_max_points(path, shape[0], max_points)
         table = np.load(path, mmap_mode="r", allow_pickle=False)
-        return Columns(*split_columns(np.array(table)))
+        return Columns(*split_columns(np.array(table), path))
     with zipfile.ZipFile(path) as archive:
         names = [name for name in archive.namelist() if name.endswith(".npy")]
         if len(set(names)) != len(names):

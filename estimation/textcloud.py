@@ -2,7 +2,7 @@
 
 Read through ``numpy.loadtxt``, one row a point, values separated by white space, commas or semicolons. A header
 row of column names, as pandas, spreadsheets and CloudCompare (``//X,Y,Z``) write one, picks the columns by name;
-without one, the suffix says what the columns are (.txt/.csv/.asc: 3, 6 or 9 columns). A Leica .pts starts
+without one, the suffix says what the columns are (.txt/.csv/.asc/.xyz: 3, 4 (the 4th left out), 6 or 9 columns). A Leica .pts starts
 with its point count. Before the file is read whole its line lengths and count are checked in blocks, so a
 huge or binary file under a text suffix is refused in bounded memory.
 """
@@ -105,11 +105,15 @@ def read_text(path: Path, max_points: int) -> Columns:
         if table.shape[1] != named.width:
             raise CloudFileError(f"{path}: the header row names {named.width} columns, the rows hold {table.shape[1]}")
         return named.columns(table)
-    if suffix in (".txt", ".csv", ".asc"):
-        return Columns(*split_columns(table))
+    if suffix in (".txt", ".csv", ".asc") or (suffix == ".xyz" and table.shape[1] in (4, 6, 9)):
+        # An .xyz holds whatever its writer put after x y z (CloudCompare: normals, colours or both; a lidar:
+        # an intensity): read as a .txt is, where its 6 columns were once left out in silence.
+        return Columns(*split_columns(table, path))
     need = {".xyz": 3, ".xyzn": 6, ".xyzrgb": 6, ".pts": 3}[suffix]
     if table.shape[1] < need:
         raise CloudFileError(f"{path}: a {suffix} file needs at least {need} columns, got {table.shape[1]}")
+    if suffix == ".xyz" and table.shape[1] > 3:
+        log.warning("%s: %d columns: read as x y z, the other %d left out", path, table.shape[1], table.shape[1] - 3)
     points = table[:, :3]
     if suffix == ".xyzn":
         return Columns(points, table[:, 3:6])

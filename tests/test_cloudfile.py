@@ -581,8 +581,49 @@ def test_text_without_numbers(tmp_path, capfd, suffix, content):
     assert capfd.readouterr() == ("", "")
 
 
+def _columns_text(table: np.ndarray) -> str:
+    return "".join(" ".join(repr(float(v)) for v in row) + "\n" for row in table)
+
+
+@pytest.mark.parametrize("name", ["c.npy", "c.xyz", "c.txt"])
+def test_a_fourth_column_is_left_out_with_a_warning(tmp_path, caplog, cloud, name):
+    # x y z intensity, as KITTI and lidars write it: an (n, 4) .npy was refused while a 4-column .xyz dropped
+    # its 4th column without a word (a homogeneous w that is not 1 would have gone unnoticed).
+    table = np.hstack([cloud.points, np.linspace(0.0, 255.0, len(cloud))[:, None]])
+    path = tmp_path / name
+    if name.endswith(".npy"):
+        np.save(path, table)
+    else:
+        path.write_text(_columns_text(table))
+    with caplog.at_level(logging.WARNING, logger="estimation"):
+        back = load_cloud(path)
+    np.testing.assert_allclose(back.points, cloud.points, rtol=0, atol=1e-12)
+    assert back.normals is None and back.colors is None
+    assert [r.getMessage() for r in caplog.records] == [
+        f"{path}: 4 columns: read as x y z, the 4th left out (an intensity? if it is a homogeneous w, divide by it "
+        f"first)"]
+
+
+def test_an_xyz_file_keeps_its_normals_colours_or_says_what_it_left_out(tmp_path, caplog, cloud):
+    # CloudCompare writes normals and colours into .xyz after x y z; they were left out in silence.
+    normals = cloud.points / np.linalg.norm(cloud.points, axis=1, keepdims=True)
+    colours = np.tile([255.0, 128.0, 0.0], (len(cloud), 1))
+    (tmp_path / "n.xyz").write_text(_columns_text(np.hstack([cloud.points, normals])))
+    (tmp_path / "c.xyz").write_text(_columns_text(np.hstack([cloud.points, colours])))
+    (tmp_path / "w.xyz").write_text(_columns_text(np.hstack([cloud.points, normals, colours[:, :1]])))
+    with caplog.at_level(logging.WARNING, logger="estimation"):
+        with_normals, with_colours = load_cloud(tmp_path / "n.xyz"), load_cloud(tmp_path / "c.xyz")
+        assert not caplog.records
+        seven = load_cloud(tmp_path / "w.xyz")
+    np.testing.assert_allclose(with_normals.normals, normals, atol=1e-9)
+    assert with_normals.colors is None and with_colours.normals is None
+    np.testing.assert_allclose(with_colours.colors, colours / 255.0)
+    assert seven.normals is None and seven.colors is None
+    assert [r.getMessage() for r in caplog.records] == [f"{tmp_path / 'w.xyz'}: 7 columns: read as x y z, the other 4 left out"]
+
+
 @pytest.mark.parametrize(("shape", "dtype", "match"), [
-    ((10_000_000,), "<f8", r"expected an \(n, 3\), \(n, 6\) or \(n, 9\) array .* got shape \(10000000,\)"),
+    ((10_000_000,), "<f8", r"expected an \(n, 3\), \(n, 4\), \(n, 6\) or \(n, 9\) array .* got shape \(10000000,\)"),
     ((2_000_000, 3, 2), "<f8", r"got shape \(2000000, 3, 2\)"),
     ((2000, 3), "<c16", r"must hold real numbers \(integer or float\), got complex128"),
     ((2000, 3), "|b1", r"must hold real numbers \(integer or float\), got bool"),
