@@ -63,6 +63,20 @@ CELLS_PER_EXTENT = 48
 #: footprint's area).
 MAX_CELLS_PER_EXTENT = 128
 
+#: Unseen space between two objects goes to the one whose observed points are nearer. Against what stands on an
+#: object or what it stands on (other points higher than its ``100 - SPLIT_PERCENTILE`` percentile height, or lower
+#: than its ``SPLIT_PERCENTILE``, less ``SPLIT_BAND_CELLS`` cells for the noise where the two meet), a height
+#: difference counts this many times a distance across: at each height an object's sides are what bound it, and a
+#: cube's hidden top was nearer the sides of the cube on it. Against a neighbour beside it, plainly: counted so
+#: against every neighbour, two touching boxes of one height parted irregularly, the nearest sides 3 cm off
+#: either way deciding by noise (tests/test_cameras.py's touching pair failed its frame check). Median / max |volume error| over
+#: bench/stacks.py's stacks at 3 cameras (written; drawn at random), ``--split-weight`` 1: 2.2 / 30.2, 4.1 / 15.0 %;
+#: 3: 2.3 / 31.1, 2.3 / 10.2 %; 6: 2.1 / 28.8, 1.7 / 9.7 %; 12: 1.7 / 25.5, 1.4 / 8.4 %, where two boxes side by
+#: side go -2.2, -2.4, -2.4 and -4.8 %.
+SPLIT_VERTICAL_WEIGHT = 6.0
+SPLIT_PERCENTILE = 1.0
+SPLIT_BAND_CELLS = 2
+
 #: The region carved: the observed points' shadow on the plane, closed over gaps of up to this many point
 #: spacings (dropouts, the sparse far side of a view) ...
 FOOTPRINT_CLOSING_SPACINGS = 2.0
@@ -548,6 +562,17 @@ def carve(points: np.ndarray, views: Sequence[DepthView], plane: Plane, *, other
     lo = np.floor(local[:, :2].min(axis=0) / cell).astype(np.int64) - pad
     hi = np.floor(local[:, :2].max(axis=0) / cell).astype(np.int64) + pad + 1
     top = int(np.ceil(local[:, 2].max() / cell)) + 1
+    if others is not None and len(others):
+        other = as_points(others, "others")
+        theirs_local = (other - centre) @ axes.T
+        theirs_local[:, 2] = plane.height(other)
+        # Up to another object's lowest point above this one's highest: what lies between is hidden from every
+        # camera (a box's top under a book that overhangs it: -17.9 % when the solid stopped at the box's highest
+        # seen point) and may be either's; the split below decides.
+        inside = ((theirs_local[:, :2] >= lo * cell) & (theirs_local[:, :2] <= hi * cell)).all(axis=1)
+        above = theirs_local[inside & (theirs_local[:, 2] > local[:, 2].max()), 2]
+        if len(above):
+            top = max(top, int(np.ceil(float(above.min()) / cell)) + 1)
     shape = (int(hi[0] - lo[0]), int(hi[1] - lo[1]), max(top, 1))
     origin = centre - plane.offset * up + (lo[0] * cell) * e1 + (lo[1] * cell) * axes[1]
     carving = Carving(np.zeros(shape, dtype=bool), origin, axes, float(cell))
@@ -562,6 +587,17 @@ def carve(points: np.ndarray, views: Sequence[DepthView], plane: Plane, *, other
     shadow = ndimage.binary_closing(shadow | rest, iterations=closing)
     if not known.all():
         shadow |= ndimage.binary_dilation(ndimage.binary_closing(rest, iterations=closing), iterations=grow)
+    if others is not None and len(others):
+        # Where another object's points lie above this one's, within the convex hull of its shadow, its top is
+        # hidden, not seen empty as a ring's hole is (a cube under a smaller one: its shadow the ring of its sides,
+        # -45.6 %; two cameras saw two of them, -92.6 %).
+        over = carving.index_of(as_points(others, "others"))
+        over = over[((over[:, :2] >= 0) & (over[:, :2] < np.array(shape[:2]))).all(axis=1)
+                    & (over[:, 2] > seen[:, 2].max())]
+        if len(over):
+            covered = np.zeros(shape[:2], dtype=bool)
+            covered[over[:, 0], over[:, 1]] = True
+            shadow |= _convex_cells(shadow) & ndimage.binary_closing(covered, iterations=closing)
     fi, fj = np.nonzero(shadow)
     k = np.arange(shape[2])
     index = np.stack([np.repeat(fi, shape[2]), np.repeat(fj, shape[2]), np.tile(k, len(fi))], axis=1)
@@ -576,14 +612,37 @@ def carve(points: np.ndarray, views: Sequence[DepthView], plane: Plane, *, other
         if len(theirs):
             mine_far = np.ones(shape, dtype=bool)
             mine_far[seen[:, 0], seen[:, 1], seen[:, 2]] = False
-            their_far = np.ones(shape, dtype=bool)
-            their_far[theirs[:, 0], theirs[:, 1], theirs[:, 2]] = False
-            solid &= ndimage.distance_transform_edt(mine_far) <= ndimage.distance_transform_edt(their_far)
+            # Points above this object's or below its lowest are of what stands on it or what it stands on: heights
+            # count SPLIT_VERTICAL_WEIGHT times against those; a neighbour beside it is split with plainly.
+            low, high = np.percentile(seen[:, 2], [SPLIT_PERCENTILE, 100 - SPLIT_PERCENTILE])
+            stacked = (theirs[:, 2] > high - SPLIT_BAND_CELLS) | (theirs[:, 2] < low + SPLIT_BAND_CELLS)
+            for group, sampling in ((theirs[~stacked], None), (theirs[stacked], (1.0, 1.0, SPLIT_VERTICAL_WEIGHT))):
+                if len(group):
+                    their_far = np.ones(shape, dtype=bool)
+                    their_far[group[:, 0], group[:, 1], group[:, 2]] = False
+                    solid &= (ndimage.distance_transform_edt(mine_far, sampling=sampling)
+                              <= ndimage.distance_transform_edt(their_far, sampling=sampling))
     # Only what hangs together with the observed points is this object.
     labels, _ = ndimage.label(solid)
     ids = np.unique(labels[seen[:, 0], seen[:, 1], seen[:, 2]])
     solid &= np.isin(labels, ids[ids > 0])
     return carving
+
+
+def _convex_cells(mask: np.ndarray) -> np.ndarray:
+    """The cells of a 2D grid whose centres lie in the convex hull of ``mask``'s True cells (their corners)."""
+    from scipy.spatial import ConvexHull, QhullError
+
+    i, j = np.nonzero(mask)
+    corners = (np.stack([i, j], axis=1)[:, None, :] + np.array([[0, 0], [0, 1], [1, 0], [1, 1]])).reshape(-1, 2)
+    try:
+        hull = ConvexHull(corners)
+    except (QhullError, ValueError):
+        return mask.copy()
+    ci, cj = np.indices(mask.shape)
+    centres = np.stack([ci.ravel() + 0.5, cj.ravel() + 0.5], axis=1)
+    inside = (centres @ hull.equations[:, :2].T + hull.equations[:, 2] <= 1e-9).all(axis=1)
+    return inside.reshape(mask.shape) | mask
 
 
 def silhouette_reach(points: np.ndarray, origins: np.ndarray, normals: np.ndarray, views: Sequence[DepthView],

@@ -28,6 +28,9 @@ With depth images (:mod:`estimation.carving`), what is still open after the obse
 images is filled from the solid the cameras did not carve away (an unseen side face lies on it), and a
 mirrored or turned point the cameras saw through is dropped. Without them, the base is closed as above.
 
+An object standing on another (a can on a box, the top box of a stack) is closed on that object's top, not on
+the table (:func:`resting_on`): the top shows around its base, facing up, on every side.
+
 An object a camera's frame cuts where no other view looked (:func:`estimation.carving.open_past_frame`) is
 closed as seen, without a half turn (the silhouette's sides and the space seen past the object, which place
 its axis, may be the frame's), and flagged: its volume has no upper bound.
@@ -109,6 +112,13 @@ MIRROR_BAND = 0.25
 #: that many in the band left.
 MIRROR_MIN_POINTS = 30
 
+#: The lower half's points must span this share of its height above the cut (their 5th to 95th percentile):
+#: a box standing on another of its size, whose top hides, showed its lower half as a noise band 2 mm deep at
+#: its rim, which reflected onto itself and mirrored its top onto the table, through the box under it (+94.5 %).
+#: A ball seen from cameras 35 degrees above the table shows about 0.8 of its lower half; a flat nut, the
+#: plane's removal having taken the rest, the whole band left.
+MIRROR_MIN_SPAN = 0.25
+
 #: The mirror test's tolerance: this many noise sigmas plus ``MIRROR_CELLS`` cells.
 MIRROR_SIGMAS = 3.0
 MIRROR_CELLS = 1.5
@@ -136,6 +146,28 @@ OUTSIDE_CELLS = 4.0
 
 #: "On its outside": within this cosine of the surface's normal (60 degrees).
 OUTSIDE_COSINE = 0.5
+
+#: Resting on another object (:func:`resting_on`): other objects' points count as a support within this many
+#: cells of the object's shadow (the top of what it stands on shows around its base) ...
+SUPPORT_REACH_CELLS = 4.0
+
+#: ... no higher than the object's lowest points (this percentile of their heights: a few of a can's points
+#: fell 5 mm into the box under it, flying pixels the segmentation image gave it) by more than this many noise
+#: sigmas ...
+SUPPORT_LOWEST_PERCENTILE = 1.0
+SUPPORT_SIGMAS = 3.0
+
+#: ... where their surface faces up: a normal within about 25 degrees of the plane's (a neighbour's upright
+#: side, beside the object, does not) ...
+SUPPORT_COSINE = 0.9
+
+#: ... with at least this many of them ...
+SUPPORT_MIN_POINTS = 20
+
+#: ... around the object: seen from its shadow's centre, no gap between them wider than this (degrees). A
+#: neighbour's low top beside it (a book lying flat against a box) spans one side, under 180 degrees; the
+#: top of a larger box under a can shows on every side.
+SUPPORT_MAX_GAP_DEG = 150.0
 
 
 @dataclass(frozen=True)
@@ -244,7 +276,7 @@ class Closed:
 
 
 def mirror_image(points: np.ndarray, normals: np.ndarray, plane: Plane, *, noise: float,
-                 cell: float) -> tuple[np.ndarray, np.ndarray, float] | None:
+                 cell: float, cut: float = 0.0) -> tuple[np.ndarray, np.ndarray, float] | None:
     """The upper half of an object resting on ``plane``, reflected in the plane at half its height, if the
     visible lower half supports it (see the module docstring).
 
@@ -252,6 +284,7 @@ def mirror_image(points: np.ndarray, normals: np.ndarray, plane: Plane, *, noise
         points, normals: (n, 3) float64, world frame: observed points (metres) and unit outward normals.
         plane: the support plane, normal up into the object's side.
         noise: metres, the points' sigma. cell: metres, about the point spacing.
+        cut: metres: the height below which observed points went with the plane.
 
     Returns:
         (points, normals, share): every reflected upper-half point with its reflected normal and the share
@@ -278,6 +311,8 @@ def mirror_image(points: np.ndarray, normals: np.ndarray, plane: Plane, *, noise
     if share < MIRROR_SHARE:
         return None
     low = h[lower]
+    if np.subtract(*np.percentile(low, [95, 5])) < MIRROR_MIN_SPAN * (middle - cut):
+        return None
     band = low < low.min() + MIRROR_BAND * (middle - low.min())
     if band.sum() >= MIRROR_MIN_POINTS and hit[band].mean() < MIRROR_SHARE:
         return None
@@ -379,7 +414,8 @@ def close_on_plane(points: np.ndarray, origins: np.ndarray, normals: np.ndarray,
     half (:func:`mirror_image`); then, with ``views``, the half-turned image of one-sided views
     (:func:`half_turn_axis`; not into ``others``) and the carved solid's surface
     (:func:`estimation.carving.carve`, ``others`` as there), else the base on the plane
-    (:func:`close_bottom`). With ``views``, mirrored points some camera saw through are dropped, and an object
+    (:func:`close_bottom`). All of it on the top of another object when it stands on one (:func:`resting_on`),
+    on ``plane`` otherwise. With ``views``, mirrored points some camera saw through are dropped, and an object
     a frame cuts where no view looked past it gets no half turn (``Completion.open_past_frame``).
 
     Args:
@@ -398,6 +434,8 @@ def close_on_plane(points: np.ndarray, origins: np.ndarray, normals: np.ndarray,
     """
     pts = as_points(points, "points")
     completion = Completion(np.zeros((0, 3)), np.zeros((0, 3)), 0.0)
+    if plane is not None and len(pts) and others is not None and len(others):
+        plane = resting_on(pts, others, plane, cell=cell, noise=noise) or plane
     if plane is not None and len(pts):
         completion = _complete(pts, np.asarray(normals, dtype=np.float64), np.asarray(origins, dtype=np.float64),
                                plane, cell=cell, cut=cut, noise=noise, views=views, others=others)
@@ -409,6 +447,61 @@ def close_on_plane(points: np.ndarray, origins: np.ndarray, normals: np.ndarray,
                   completion=completion)
 
 
+def resting_on(points: np.ndarray, others: np.ndarray, plane: Plane, *, cell: float, noise: float) -> Plane | None:
+    """The plane through the top of another object this one stands on, or None (it stands on ``plane``).
+
+    Completion closes an object down to the plane it rests on: a can on a box closed down to the table
+    took the box's inside under it as its own (+32 %; the mirror image, at half the height above the table,
+    put the can's top inside the box). The box's top shows around the can's base, facing up, just below its
+    lowest points, on every side (``SUPPORT_*``); a neighbour's side or a low top beside the object does not.
+
+    Args:
+        points: (n, 3) metres, world frame: the object's observed points.
+        others: (m, 3) metres: other objects' observed points.
+        plane: the support plane the scene stands on (normal up).
+        cell: metres, about the point spacing. noise: metres, the points' sigma.
+
+    Returns:
+        ``plane`` raised to the support's median height (parallel to it), or None.
+    """
+    from scipy.spatial import cKDTree
+
+    pts = as_points(points, "points")
+    other = as_points(others, "others")
+    up = np.asarray(plane.normal, dtype=np.float64)
+    reach = SUPPORT_REACH_CELLS * cell
+    e1 = np.cross(up, [1.0, 0.0, 0.0] if abs(up[0]) < 0.9 else [0.0, 1.0, 0.0])
+    e1 /= np.linalg.norm(e1)
+    basis = np.stack([e1, np.cross(up, e1)], axis=1)  # (3, 2): coordinates in the plane
+    flat, other_flat = pts @ basis, other @ basis
+    low, high = flat.min(axis=0) - 2 * reach, flat.max(axis=0) + 2 * reach
+    around = other[(other_flat >= low).all(axis=1) & (other_flat <= high).all(axis=1)]
+    if len(around) < SUPPORT_MIN_POINTS:
+        return None
+    # Within reach of the object's shadow, and not above its lowest points.
+    lowest = float(np.percentile(plane.height(pts), SUPPORT_LOWEST_PERCENTILE))
+    candidates = around[(cKDTree(flat).query(around @ basis, workers=-1)[0] <= reach)
+                        & (plane.height(around) <= lowest + SUPPORT_SIGMAS * noise)]
+    if len(candidates) < SUPPORT_MIN_POINTS:
+        return None
+    # Facing up: each candidate's plane, from its neighbours among the other points around.
+    patches = around[cKDTree(around).query(candidates, k=min(TOP_NEIGHBOURS, len(around)), workers=-1)[1]]
+    patches = patches - patches.mean(axis=1, keepdims=True)
+    normal = np.linalg.eigh(patches.transpose(0, 2, 1) @ patches)[1][:, :, 0]
+    support = candidates[np.abs(normal @ up) >= SUPPORT_COSINE]
+    if len(support) < SUPPORT_MIN_POINTS:
+        return None
+    # On every side of it.
+    offset = support @ basis - flat.mean(axis=0)
+    angles = np.sort(np.arctan2(offset[:, 1], offset[:, 0]))
+    if np.degrees(np.diff(np.concatenate([angles, angles[:1] + 2 * np.pi])).max()) > SUPPORT_MAX_GAP_DEG:
+        return None
+    height = float(np.median(plane.height(support)))
+    if height <= 0.0:
+        return None
+    return Plane(up, float(plane.offset) - height, plane.rms, plane.inliers)
+
+
 def _complete(points: np.ndarray, normals: np.ndarray, origins: np.ndarray, plane: Plane, *, cell: float, cut: float,
               noise: float, views: Sequence[DepthView] | None, others: np.ndarray | None) -> Completion:
     """What :func:`close_on_plane` adds (arguments as there)."""
@@ -417,7 +510,7 @@ def _complete(points: np.ndarray, normals: np.ndarray, origins: np.ndarray, plan
     oriented = bool(np.isfinite(normals).all())
     mirrored = turned = np.zeros((0, 3)), np.zeros((0, 3))
     if oriented:
-        image = mirror_image(points, normals, plane, noise=noise, cell=cell)
+        image = mirror_image(points, normals, plane, noise=noise, cell=cell, cut=cut)
         if image is not None:
             mirrored = _not_seen_through(_new(image[0], image[1], points, NEW_SURFACE_CELLS * cell), views, cell)
     open_past = False

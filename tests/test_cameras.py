@@ -788,3 +788,54 @@ def test_icp_gives_the_same_bits_every_time_and_one_target_serves_many_sources()
     again = [register(source, prepared, init=np.eye(4), max_distance=0.01) for _ in range(2)]
     assert all(a.transform.tobytes() == fits[0].transform.tobytes() for a in again)
     assert fits[0].covariance is not None and np.allclose(again[1].covariance, fits[0].covariance, rtol=0, atol=0)
+
+
+STACKS = {
+    # A 6 cm cube on an 8 cm one: the lower's shadow a ring (the upper hides its top), left open as a
+    # ring's hole: -45.6 %, and the upper took the lower's top as its own: +14.7 %.
+    "cube_on_cube": [("lower", "box", [0.08, 0.08, 0.08], [0.0, 0.0, 0.04]),
+                     ("upper", "box", [0.06, 0.06, 0.06], [0.0, 0.0, 0.1105])],
+    # A can on a box, closed down to the table and mirrored about half its height above it: +32.4 %.
+    "can_on_box": [("box", "box", [0.12, 0.12, 0.04], [0.0, 0.0, 0.02]),
+                   ("can", "cylinder", [0.03, 0.08], [0.0, 0.0, 0.0805])],
+    # Three boxes: -56.4, -21.0, +11.7 %.
+    "three_high": [("bottom", "box", [0.10, 0.10, 0.10], [0.0, 0.0, 0.05]),
+                   ("middle", "box", [0.08, 0.08, 0.08], [0.0, 0.0, 0.1405]),
+                   ("top", "box", [0.05, 0.05, 0.05], [0.0, 0.0, 0.206])],
+}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", sorted(STACKS))
+def test_objects_stacked_on_one_another_are_each_closed_on_what_they_stand_on(tmp_path, name):
+    """Three cameras, sigma 1 mm: each object of a stack from its own view, closed where no camera saw (what
+    another object hides: its top, the base it stands on) to within a few per cent. Heights are above the
+    table top (0.5 m)."""
+    from estimation import estimate, make_cloud
+    from scenes.cameras import SIGMA_1MM
+    from scenes.remote import Remote
+    from scenes.scenefile import load_scene
+    from scenes.sources import reference_estimate
+    from sync.clock import SimClock
+    from sync.inprocess import InProcessBus
+    from sync.messages import as_received
+
+    lines = [f'name = "{name}"', "[table]", "size = [1.0, 0.6, 0.04]", "height = 0.5"]
+    for object_id, kind, size, (x, y, z) in STACKS[name]:
+        lines += ["[[objects]]", f'id = "{object_id}"', f'primitive = {{ type = "{kind}", size = {size} }}',
+                  'material = "wood_pine"', f"position = [{x}, {y}, {0.5 + z}]"]
+    (tmp_path / "stack.toml").write_text("\n".join(lines) + "\n")
+    scene = load_scene(tmp_path / "stack.toml")
+    clock = SimClock()
+    remote = Remote(scene, InProcessBus(clock, {}).transport("remote"), clock=clock, publish=False)
+    sensor = CameraSensor.for_scene(scene, seed=1, noise=SIGMA_1MM)
+    errors = {}
+    try:
+        for spec in scene.objects:
+            seen = sensor.observe(remote, spec.id, 0, shot=1)
+            truth = reference_estimate(spec)[0]
+            result = estimate(make_cloud(*as_received(seen.points, seen.normals)), truth.mass.density)
+            errors[spec.id] = round(100 * (result.volume / truth.volume - 1), 1)
+    finally:
+        remote.close()
+    assert max(map(abs, errors.values())) < 5.0, errors

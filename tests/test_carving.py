@@ -17,7 +17,7 @@ from estimation.carving import (
     free_space,
     silhouette_reach,
 )
-from estimation.completion import mirror_image
+from estimation.completion import mirror_image, resting_on
 from estimation.segmentation import Plane
 from scenes.cameras import EXACT, CameraFeed
 from tests.test_cameras import BOX, TABLE_TOP, VOLUME, WORKSPACE, _model, _rig
@@ -413,3 +413,68 @@ def test_a_box_both_frames_cut_has_no_top_to_its_interval():
     assert whole.estimate.volume == pytest.approx(truth, rel=0.05)
     assert low <= truth <= high < float("inf")
     assert not any("frame" in w for w in whole.warnings)
+
+
+def _box_surface(lo, hi, spacing: float, rng: np.random.Generator, *, top: bool = True) -> np.ndarray:
+    """Points on a box's sides (and top) about ``spacing`` apart, world frame, metres."""
+    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
+    faces = []
+    for axis in range(3):
+        for side in (lo, hi):
+            if axis == 2 and (side is lo or not top):
+                continue
+            area = np.prod(np.delete(hi - lo, axis))
+            p = rng.uniform(lo, hi, size=(int(area / spacing**2), 3))
+            p[:, axis] = side[axis]
+            faces.append(p)
+    return np.concatenate(faces)
+
+
+def _can_surface(centre, radius: float, bottom: float, height: float, spacing: float,
+                 rng: np.random.Generator) -> np.ndarray:
+    n_side, n_top = int(2 * np.pi * radius * height / spacing**2), int(np.pi * radius**2 / spacing**2)
+    a, z = rng.uniform(0, 2 * np.pi, n_side), rng.uniform(bottom, bottom + height, n_side)
+    side = np.stack([centre[0] + radius * np.cos(a), centre[1] + radius * np.sin(a), z], axis=1)
+    r, b = radius * np.sqrt(rng.uniform(0, 1, n_top)), rng.uniform(0, 2 * np.pi, n_top)
+    cap = np.stack([centre[0] + r * np.cos(b), centre[1] + r * np.sin(b), np.full(n_top, bottom + height)], axis=1)
+    return np.concatenate([side, cap])
+
+
+def test_a_can_on_a_box_rests_on_the_boxs_top_and_not_on_the_table():
+    # Closed down to the table, a can on a box took the box's inside under it as its own: +32 % from three
+    # cameras (the mirror image, about half its height above the table, put its top inside the box).
+    rng = np.random.default_rng(0)
+    box = _box_surface([-0.06, -0.06, 0.0], [0.06, 0.06, 0.04], 0.002, rng)
+    can = _can_surface([0.01, -0.005], 0.03, 0.04, 0.08, 0.002, rng)
+    box = box[np.hypot(box[:, 0] - 0.01, box[:, 1] + 0.005) > 0.03]  # the can hides the top under it
+    support = resting_on(can, box, FLOOR, cell=0.002, noise=0.0005)
+    assert support is not None
+    np.testing.assert_allclose(support.normal, FLOOR.normal)
+    assert support.height(np.array([[0.0, 0.0, 0.04]]))[0] == pytest.approx(0.0, abs=1e-3)
+    # Its upper half, mirrored about its own middle, is its underside on the box, not inside the box.
+    normals = np.where((can[:, 2] > 0.12 - 1e-9)[:, None], [0.0, 0.0, 1.0], 0.0)
+    normals[:, :2] += np.where((can[:, 2] > 0.12 - 1e-9)[:, None], 0.0, (can[:, :2] - [0.01, -0.005]) / 0.03)
+    image = mirror_image(can, normals, support, noise=0.0005, cell=0.002)
+    assert image is not None
+    assert image[0][:, 2].min() == pytest.approx(0.04, abs=0.002)
+    assert mirror_image(can, normals, FLOOR, noise=0.0005, cell=0.002)[0][:, 2].min() < 0.005  # on the table
+
+
+@pytest.mark.parametrize("case", ["beside a box", "beside a flat book", "between four boxes", "alone"])
+def test_an_object_on_the_table_rests_on_the_table(case):
+    # A neighbour's upright side, or a low top on one side of it (a book lying flat against a box), is not
+    # what it stands on.
+    rng = np.random.default_rng(1)
+    box = _box_surface([0.0, 0.0, 0.0], [0.08, 0.08, 0.08], 0.002, rng)
+    box = box[box[:, 2] > 0.004]  # what the plane's removal leaves
+    others = {"beside a box": _box_surface([0.081, 0.0, 0.0], [0.16, 0.08, 0.12], 0.002, rng),
+              "beside a flat book": _box_surface([0.081, -0.04, 0.0], [0.30, 0.12, 0.008], 0.002, rng),
+              "between four boxes": np.concatenate([
+                  _box_surface(lo, hi, 0.002, rng) for lo, hi in (([0.081, 0.0, 0.0], [0.16, 0.08, 0.12]),
+                                                                  ([-0.081, 0.0, 0.0], [-0.001, 0.08, 0.12]),
+                                                                  ([0.0, 0.081, 0.0], [0.08, 0.16, 0.12]),
+                                                                  ([0.0, -0.081, 0.0], [0.08, -0.001, 0.12]))]),
+              "alone": np.zeros((0, 3))}[case]
+    others = others[others[:, 2] > 0.004] if len(others) else others
+    # noise 2 mm: the book's top (8 mm) is within the 3 sigmas below the box's lowest points (4 mm) that a support may lie
+    assert resting_on(box, others, FLOOR, cell=0.002, noise=0.002) is None
