@@ -567,8 +567,7 @@ def carve(points: np.ndarray, views: Sequence[DepthView], plane: Plane, *, other
         theirs_local = (other - centre) @ axes.T
         theirs_local[:, 2] = plane.height(other)
         # Up to another object's lowest point above this one's highest: what lies between is hidden from every
-        # camera (a box's top under a book that overhangs it: -17.9 % when the solid stopped at the box's highest
-        # seen point) and may be either's; the split below decides.
+        # camera (a box's upper sides under a book that overhangs it) and may be either's; the split below decides.
         inside = ((theirs_local[:, :2] >= lo * cell) & (theirs_local[:, :2] <= hi * cell)).all(axis=1)
         above = theirs_local[inside & (theirs_local[:, 2] > local[:, 2].max()), 2]
         if len(above):
@@ -577,6 +576,7 @@ def carve(points: np.ndarray, views: Sequence[DepthView], plane: Plane, *, other
     origin = centre - plane.offset * up + (lo[0] * cell) * e1 + (lo[1] * cell) * axes[1]
     carving = Carving(np.zeros(shape, dtype=bool), origin, axes, float(cell))
     seen = np.clip(carving.index_of(pts), 0, np.array(shape) - 1)
+    theirs = carving.index_of(other) if others is not None and len(others) else np.zeros((0, 3), np.int64)
     # The footprint: the shadow of the observed points, each grown by what its camera may have missed past
     # it, gaps closed; the shadow of points whose camera is not known, gaps closed, grown by a spacing.
     shadow = np.zeros(shape[:2], dtype=bool)
@@ -587,41 +587,37 @@ def carve(points: np.ndarray, views: Sequence[DepthView], plane: Plane, *, other
     shadow = ndimage.binary_closing(shadow | rest, iterations=closing)
     if not known.all():
         shadow |= ndimage.binary_dilation(ndimage.binary_closing(rest, iterations=closing), iterations=grow)
-    if others is not None and len(others):
-        # Where another object's points lie above this one's, within the convex hull of its shadow, its top is
-        # hidden, not seen empty as a ring's hole is (a cube under a smaller one: its shadow the ring of its sides,
-        # -45.6 %; two cameras saw two of them, -92.6 %).
-        over = carving.index_of(as_points(others, "others"))
-        over = over[((over[:, :2] >= 0) & (over[:, :2] < np.array(shape[:2]))).all(axis=1)
-                    & (over[:, 2] > seen[:, 2].max())]
-        if len(over):
-            covered = np.zeros(shape[:2], dtype=bool)
-            covered[over[:, 0], over[:, 1]] = True
-            shadow |= _convex_cells(shadow) & ndimage.binary_closing(covered, iterations=closing)
+    # Where another object's points lie above this one's, within the convex hull of its shadow, its top is hidden,
+    # not seen empty as a ring's hole is (an 8 cm cube under a 6 cm one, its shadow the ring of its sides: -49.9 %
+    # at 3 cameras; at 2 they saw two of a cube's sides, no ring: -92.6 %; bench/stacks.py before session 43).
+    over = theirs[((theirs[:, :2] >= 0) & (theirs[:, :2] < np.array(shape[:2]))).all(axis=1)
+                  & (theirs[:, 2] > seen[:, 2].max())]
+    if len(over):
+        covered = np.zeros(shape[:2], dtype=bool)
+        covered[over[:, 0], over[:, 1]] = True
+        shadow |= _convex_cells(shadow) & ndimage.binary_closing(covered, iterations=closing)
     fi, fj = np.nonzero(shadow)
     k = np.arange(shape[2])
     index = np.stack([np.repeat(fi, shape[2]), np.repeat(fj, shape[2]), np.tile(k, len(fi))], axis=1)
     keep = ~free_space(carving.centres(index), views, slack=FREE_CELLS * cell)
     solid = carving.solid
     solid[index[keep, 0], index[keep, 1], index[keep, 2]] = True
-    if others is not None and len(others):
-        # Unseen space between two objects is split by the nearest observed point, on the grid (a distance
-        # transform): other objects' points outside the grid are too far to claim a voxel of the footprint.
-        theirs = carving.index_of(as_points(others, "others"))
-        theirs = theirs[((theirs >= 0) & (theirs < np.array(shape))).all(axis=1)]
-        if len(theirs):
-            mine_far = np.ones(shape, dtype=bool)
-            mine_far[seen[:, 0], seen[:, 1], seen[:, 2]] = False
-            # Points above this object's or below its lowest are of what stands on it or what it stands on: heights
-            # count SPLIT_VERTICAL_WEIGHT times against those; a neighbour beside it is split with plainly.
-            low, high = np.percentile(seen[:, 2], [SPLIT_PERCENTILE, 100 - SPLIT_PERCENTILE])
-            stacked = (theirs[:, 2] > high - SPLIT_BAND_CELLS) | (theirs[:, 2] < low + SPLIT_BAND_CELLS)
-            for group, sampling in ((theirs[~stacked], None), (theirs[stacked], (1.0, 1.0, SPLIT_VERTICAL_WEIGHT))):
-                if len(group):
-                    their_far = np.ones(shape, dtype=bool)
-                    their_far[group[:, 0], group[:, 1], group[:, 2]] = False
-                    solid &= (ndimage.distance_transform_edt(mine_far, sampling=sampling)
-                              <= ndimage.distance_transform_edt(their_far, sampling=sampling))
+    # Unseen space between two objects is split by the nearest observed point, on the grid (a distance
+    # transform): other objects' points outside the grid are too far to claim a voxel of the footprint.
+    theirs = theirs[((theirs >= 0) & (theirs < np.array(shape))).all(axis=1)]
+    if len(theirs):
+        mine_far = np.ones(shape, dtype=bool)
+        mine_far[seen[:, 0], seen[:, 1], seen[:, 2]] = False
+        # Points above this object's or below its lowest are of what stands on it or what it stands on: heights
+        # count SPLIT_VERTICAL_WEIGHT times against those; a neighbour beside it is split with plainly.
+        low, high = np.percentile(seen[:, 2], [SPLIT_PERCENTILE, 100 - SPLIT_PERCENTILE])
+        stacked = (theirs[:, 2] > high - SPLIT_BAND_CELLS) | (theirs[:, 2] < low + SPLIT_BAND_CELLS)
+        for group, sampling in ((theirs[~stacked], None), (theirs[stacked], (1.0, 1.0, SPLIT_VERTICAL_WEIGHT))):
+            if len(group):
+                their_far = np.ones(shape, dtype=bool)
+                their_far[group[:, 0], group[:, 1], group[:, 2]] = False
+                solid &= (ndimage.distance_transform_edt(mine_far, sampling=sampling)
+                          <= ndimage.distance_transform_edt(their_far, sampling=sampling))
     # Only what hangs together with the observed points is this object.
     labels, _ = ndimage.label(solid)
     ids = np.unique(labels[seen[:, 0], seen[:, 1], seen[:, 2]])

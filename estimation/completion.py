@@ -466,40 +466,40 @@ def resting_on(points: np.ndarray, others: np.ndarray, plane: Plane, *, cell: fl
     """
     from scipy.spatial import cKDTree
 
+    from estimation.carving import plane_frame
+
     pts = as_points(points, "points")
     other = as_points(others, "others")
-    up = np.asarray(plane.normal, dtype=np.float64)
+    centre, axes, local = plane_frame(pts, plane)  # local[:, :2]: the shadow, about its centroid
     reach = SUPPORT_REACH_CELLS * cell
-    e1 = np.cross(up, [1.0, 0.0, 0.0] if abs(up[0]) < 0.9 else [0.0, 1.0, 0.0])
-    e1 /= np.linalg.norm(e1)
-    basis = np.stack([e1, np.cross(up, e1)], axis=1)  # (3, 2): coordinates in the plane
-    flat, other_flat = pts @ basis, other @ basis
-    low, high = flat.min(axis=0) - 2 * reach, flat.max(axis=0) + 2 * reach
-    around = other[(other_flat >= low).all(axis=1) & (other_flat <= high).all(axis=1)]
+    other_flat = (other - centre) @ axes[:2].T
+    low, high = local[:, :2].min(axis=0) - 2 * reach, local[:, :2].max(axis=0) + 2 * reach
+    near = (other_flat >= low).all(axis=1) & (other_flat <= high).all(axis=1)
+    around, around_flat = other[near], other_flat[near]
     if len(around) < SUPPORT_MIN_POINTS:
         return None
     # Within reach of the object's shadow, and not above its lowest points.
-    lowest = float(np.percentile(plane.height(pts), SUPPORT_LOWEST_PERCENTILE))
-    candidates = around[(cKDTree(flat).query(around @ basis, workers=-1)[0] <= reach)
-                        & (plane.height(around) <= lowest + SUPPORT_SIGMAS * noise)]
-    if len(candidates) < SUPPORT_MIN_POINTS:
+    lowest = float(np.percentile(local[:, 2], SUPPORT_LOWEST_PERCENTILE))
+    candidate = ((cKDTree(local[:, :2]).query(around_flat, workers=-1)[0] <= reach)
+                 & (plane.height(around) <= lowest + SUPPORT_SIGMAS * noise))
+    if candidate.sum() < SUPPORT_MIN_POINTS:
         return None
     # Facing up: each candidate's plane, from its neighbours among the other points around.
-    patches = around[cKDTree(around).query(candidates, k=min(TOP_NEIGHBOURS, len(around)), workers=-1)[1]]
+    patches = around[cKDTree(around).query(around[candidate], k=min(TOP_NEIGHBOURS, len(around)), workers=-1)[1]]
     patches = patches - patches.mean(axis=1, keepdims=True)
     normal = np.linalg.eigh(patches.transpose(0, 2, 1) @ patches)[1][:, :, 0]
-    support = candidates[np.abs(normal @ up) >= SUPPORT_COSINE]
+    facing = np.abs(normal @ axes[2]) >= SUPPORT_COSINE
+    support, offset = around[candidate][facing], around_flat[candidate][facing]
     if len(support) < SUPPORT_MIN_POINTS:
         return None
     # On every side of it.
-    offset = support @ basis - flat.mean(axis=0)
     angles = np.sort(np.arctan2(offset[:, 1], offset[:, 0]))
     if np.degrees(np.diff(np.concatenate([angles, angles[:1] + 2 * np.pi])).max()) > SUPPORT_MAX_GAP_DEG:
         return None
     height = float(np.median(plane.height(support)))
     if height <= 0.0:
         return None
-    return Plane(up, float(plane.offset) - height, plane.rms, plane.inliers)
+    return Plane(axes[2], float(plane.offset) - height, plane.rms, plane.inliers)
 
 
 def _complete(points: np.ndarray, normals: np.ndarray, origins: np.ndarray, plane: Plane, *, cell: float, cut: float,
