@@ -66,7 +66,7 @@ def drawn(count: int, seed: int) -> Iterator[tuple[str, list[Object]]]:
         levels = int(rng.integers(2, 4))
         for level in range(levels):
             if level:
-                below, centre = size, centre
+                below = size
                 kind = str(rng.choice(["box", "box", "cylinder", "sphere"])) if level == levels - 1 else "box"
                 half = below[:2] / 2
                 if kind == "box":

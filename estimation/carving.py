@@ -562,21 +562,20 @@ def carve(points: np.ndarray, views: Sequence[DepthView], plane: Plane, *, other
     lo = np.floor(local[:, :2].min(axis=0) / cell).astype(np.int64) - pad
     hi = np.floor(local[:, :2].max(axis=0) / cell).astype(np.int64) + pad + 1
     top = int(np.ceil(local[:, 2].max() / cell)) + 1
-    if others is not None and len(others):
-        other = as_points(others, "others")
-        theirs_local = (other - centre) @ axes.T
-        theirs_local[:, 2] = plane.height(other)
-        # Up to another object's lowest point above this one's highest: what lies between is hidden from every
-        # camera (a box's upper sides under a book that overhangs it) and may be either's; the split below decides.
-        inside = ((theirs_local[:, :2] >= lo * cell) & (theirs_local[:, :2] <= hi * cell)).all(axis=1)
-        above = theirs_local[inside & (theirs_local[:, 2] > local[:, 2].max()), 2]
-        if len(above):
-            top = max(top, int(np.ceil(float(above.min()) / cell)) + 1)
+    other = as_points(others, "others") if others is not None and len(others) else np.zeros((0, 3))
+    theirs_local = (other - centre) @ axes.T
+    theirs_local[:, 2] = plane.height(other)
+    # Up to another object's lowest point above this one's highest: what lies between is hidden from every camera
+    # (a box's upper sides under a book that overhangs it) and may be either's; the split below decides.
+    inside = ((theirs_local[:, :2] >= lo * cell) & (theirs_local[:, :2] <= hi * cell)).all(axis=1)
+    above = theirs_local[inside & (theirs_local[:, 2] > local[:, 2].max()), 2]
+    if len(above):
+        top = max(top, int(np.ceil(float(above.min()) / cell)) + 1)
     shape = (int(hi[0] - lo[0]), int(hi[1] - lo[1]), max(top, 1))
     origin = centre - plane.offset * up + (lo[0] * cell) * e1 + (lo[1] * cell) * axes[1]
     carving = Carving(np.zeros(shape, dtype=bool), origin, axes, float(cell))
     seen = np.clip(carving.index_of(pts), 0, np.array(shape) - 1)
-    theirs = carving.index_of(other) if others is not None and len(others) else np.zeros((0, 3), np.int64)
+    theirs = carving.index_of(other)
     # The footprint: the shadow of the observed points, each grown by what its camera may have missed past
     # it, gaps closed; the shadow of points whose camera is not known, gaps closed, grown by a spacing.
     shadow = np.zeros(shape[:2], dtype=bool)

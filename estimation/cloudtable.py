@@ -219,10 +219,10 @@ def split_columns(table: np.ndarray, where: object = "the table") -> tuple[np.nd
     if table.ndim != 2 or table.shape[1] not in (3, 4, 6, 9):
         raise CloudFileError(f"expected 3, 4, 6 or 9 columns (xyz, an intensity, normals, colours), got shape {table.shape}")
     points = table[:, :3]
+    if table.shape[1] == 4:
+        log.warning("%s: 4 columns: read as x y z, the 4th left out (an intensity? if it is a homogeneous w, divide "
+                    "by it first)", where)
     if table.shape[1] in (3, 4):
-        if table.shape[1] == 4:
-            log.warning("%s: 4 columns: read as x y z, the 4th left out (an intensity? if it is a homogeneous w, divide "
-                        "by it first)", where)
         return points, None, None
     if table.shape[1] == 9:
         return points, table[:, 3:6], table[:, 6:9]

@@ -484,12 +484,13 @@ def resting_on(points: np.ndarray, others: np.ndarray, plane: Plane, *, cell: fl
                  & (plane.height(around) <= lowest + SUPPORT_SIGMAS * noise))
     if candidate.sum() < SUPPORT_MIN_POINTS:
         return None
+    candidates, offset = around[candidate], around_flat[candidate]
     # Facing up: each candidate's plane, from its neighbours among the other points around.
-    patches = around[cKDTree(around).query(around[candidate], k=min(TOP_NEIGHBOURS, len(around)), workers=-1)[1]]
+    patches = around[cKDTree(around).query(candidates, k=min(TOP_NEIGHBOURS, len(around)), workers=-1)[1]]
     patches = patches - patches.mean(axis=1, keepdims=True)
     normal = np.linalg.eigh(patches.transpose(0, 2, 1) @ patches)[1][:, :, 0]
     facing = np.abs(normal @ axes[2]) >= SUPPORT_COSINE
-    support, offset = around[candidate][facing], around_flat[candidate][facing]
+    support, offset = candidates[facing], offset[facing]
     if len(support) < SUPPORT_MIN_POINTS:
         return None
     # On every side of it.
