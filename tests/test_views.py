@@ -173,6 +173,7 @@ def test_a_rigid_motion_of_views_and_plane_keeps_the_volume(views):
         assert run(rot, rng.uniform(-2, 2, 3)) == pytest.approx(base, rel=0.002)
 
 
+@pytest.mark.slow  # ~15 s: in CI's slow run, to keep the default run under ten minutes
 def test_views_past_the_point_cap_are_thinned_first(monkeypatch):
     """Fused views of more than ``tolerances.VIEW_POINTS`` are thinned to about that many measured points
     before anything fits normals to them (a 4096 x 4096 depth frame took minutes and more memory than the
