@@ -134,6 +134,7 @@ def run_demo(*, duration: float = 5.0, scene_path: Path | None = None, zenoh_con
     divergence, force, sync events). The remote process logs nothing.
     """
     from cli.record import open_recorder, recording_transport
+    from scenes.scenefile import load_scene
     from sync.clock import REAL_CLOCK
     from sync.zenoh_transport import SessionError, ZenohTransport, free_port, make_config, open_session
     from twin.decompose import ProgressBar
@@ -143,6 +144,7 @@ def run_demo(*, duration: float = 5.0, scene_path: Path | None = None, zenoh_con
 
     console = Console(quiet=not progress, stderr=True)
     scene_path = scene_path or default_scene()
+    push_by = np.asarray(load_scene(scene_path).push, dtype=float)  # here too: a bad scene fails before the remote starts
     if record is not None:  # both files, before the remote starts: a refused one costs nothing
         check_demo_records(record, (scene_path, Path(zenoh_config) if zenoh_config else None))
     endpoint = f"tcp/127.0.0.1:{free_port()}"
@@ -207,7 +209,7 @@ def run_demo(*, duration: float = 5.0, scene_path: Path | None = None, zenoh_con
         console.print(f"all {len(local.objects)} objects touchable in the twin after {sync_s:.1f} s"
                       + (f" ({refused} cloud(s) refused: see the warnings above)" if refused > 0 else ""))
         start = local.twin.data.mocap_pos[0].copy()
-        push = push_trajectory(start, start + np.array([2.2, 0.0, -0.12]), duration, start_time=local.twin.time)
+        push = push_trajectory(start, start + push_by, duration, start_time=local.twin.time)
         # The latency target is the push phase's (the live stack's own); poses while objects were being
         # estimated (keyframes, competing with the estimation workers for the two cores) are reported apart.
         pushed_from = len(local.report.pose_latency)
