@@ -131,14 +131,13 @@ MIRROR_CELLS = 1.5
 #: where few points lie near the top: the correction assumes they all do. The centroids have a quarter of
 #: the noise, so whatever the top's shape the correction is a quarter as large, and so is its error
 #: (tests/test_carving.py's noisy ring; the clutter's hex nut in bench/cameras.py went from +13.6 % to
-#: +8.1 % at 3 cameras). A reflected point that would lie below the plane lies on it. Unless the top is flat
-#: (:func:`flat_top_height`): then the top is its points' mean height, and its reflected noise stays where it
-#: falls, down to ``FLAT_WINDOW_SIGMAS`` below the plane.
+#: +8.1 % at 3 cameras). A reflected point that would lie below the plane lies on it. A flat top
+#: (:func:`flat_top`) is its points' mean height, and its image is the base, on the plane.
 TOP_PERCENTILE = 99.5
 TOP_NOISE_SIGMAS = 2.58
 TOP_NEIGHBOURS = 16
 
-#: A flat top (:func:`flat_top_height`): at least ``FLAT_MIN_POINTS`` points (their mean then within 0.07 sigma)
+#: A flat top (:func:`flat_top`): at least ``FLAT_MIN_POINTS`` points (their mean then within 0.07 sigma)
 #: facing within 18 degrees of up, inside ``FLAT_WINDOW_SIGMAS`` of the top, their mean within ``FLAT_MEAN_SIGMAS``
 #: of it. On noisy synthetic tops (sigma 0.75-1 mm, 12 draws each) a 10 x 10 cm slab was flat in 12, its height
 #: within 0.01 sigma on average; a 4 cm ball in none; a ring's curved top in 1. Kept for what it did to boxy scenes
@@ -313,9 +312,9 @@ def mirror_image(points: np.ndarray, normals: np.ndarray, plane: Plane, *, noise
     k = min(TOP_NEIGHBOURS, len(pts))
     centroids = plane.height(pts[nearest(tree, pts, k)[1]].mean(axis=1))
     top = float(np.percentile(centroids, TOP_PERCENTILE)) - TOP_NOISE_SIGMAS * noise / np.sqrt(k)
-    flat = flat_top_height(pts, nrm, plane, noise)
+    flat = flat_top(pts, nrm, plane, noise)
     if flat is not None:
-        top = flat
+        top = float(h[flat].mean())
     middle = 0.5 * max(top, 0.0)
     lower = h < middle  # whatever the plane's removal left of it
     if lower.sum() < MIRROR_MIN_POINTS:
@@ -332,26 +331,27 @@ def mirror_image(points: np.ndarray, normals: np.ndarray, plane: Plane, *, noise
     if band.sum() >= MIRROR_MIN_POINTS and hit[band].mean() < MIRROR_SHARE:
         return None
     upper = h >= middle
-    # Nothing lies below the plane the object rests on: a reflected point that would (a top read a little low)
-    # lies on it. A flat top's height is measured, not read off a percentile, and its noise reflected is the
-    # base's: half of it lands below the plane, and lifted onto it, the base sat ~0.4 sigma high (a 9 mm disc
-    # -4.6 % at 3 cameras); it is left there, down to the noise's reach.
-    depth = 2.0 * (h[upper] - middle) - h[upper]  # below the plane, once reflected
-    allowed = FLAT_WINDOW_SIGMAS * noise if flat is not None else 0.0
-    drop = np.where(depth > allowed, h[upper], 2.0 * (h[upper] - middle))
+    # Nothing lies below the plane the object rests on: a reflected point that would (its top's noise, a top read
+    # a little low) lies on it. A flat top's image is the base itself, on the plane: reflected, half its noise
+    # landed below the plane and, lifted onto it, the base sat ~0.4 sigma high (a 9 mm disc -4.6 % at 3 cameras);
+    # left below, the reconstruction averaged it but its lowest bumps stood the collision hull on them (a soup
+    # can at rest 1.4 -> 2.2 mm off the reference, bench/camera_fidelity.py).
+    drop = np.minimum(2.0 * (h[upper] - middle), h[upper])
+    if flat is not None:
+        drop = np.where(flat[upper], h[upper], drop)
     out = pts[upper] - drop[:, None] * up
     return out, nrm[upper] - 2.0 * (nrm[upper] @ up)[:, None] * up, share
 
 
-def flat_top_height(points: np.ndarray, normals: np.ndarray, plane: Plane, noise: float) -> float | None:
-    """Metres above ``plane``: the height of a flat top, the mean height of its points; None where the top is not
-    flat (or too few points say so).
+def flat_top(points: np.ndarray, normals: np.ndarray, plane: Plane, noise: float) -> np.ndarray | None:
+    """(n,) bool: the points of a flat top, or None where the top is not flat (or too few points say so).
 
     ``points`` (n, 3) metres and their outward unit ``normals``, world frame; ``noise`` metres, the points'
     sigma. The top is flat where the points facing up (``FLAT_FACING_COSINE``) within ``FLAT_WINDOW_SIGMAS``
     noise sigmas of the highest neighbourhoods' height (neighbours along the plane, blind to the noise in the
     heights) are ``FLAT_MIN_POINTS`` or more and centred on it (``FLAT_MEAN_SIGMAS``): a plane's noise is
-    symmetric, while on a curved top the points in that window lie mostly below it.
+    symmetric, while on a curved top the points in that window lie mostly below it. Their mean height is the
+    top's.
     """
     from scipy.spatial import cKDTree
 
@@ -362,10 +362,9 @@ def flat_top_height(points: np.ndarray, normals: np.ndarray, plane: Plane, noise
     centroids = h[nearest(cKDTree(shadow), shadow, k)[1]].mean(axis=1)
     top = float(np.percentile(centroids, TOP_PERCENTILE)) - TOP_NOISE_SIGMAS * noise / np.sqrt(k)
     window = (normals @ up > FLAT_FACING_COSINE) & (np.abs(h - top) < FLAT_WINDOW_SIGMAS * noise)
-    if window.sum() < FLAT_MIN_POINTS:
+    if window.sum() < FLAT_MIN_POINTS or abs(float(h[window].mean()) - top) > FLAT_MEAN_SIGMAS * noise:
         return None
-    mean = float(h[window].mean())
-    return mean if abs(mean - top) <= FLAT_MEAN_SIGMAS * noise else None
+    return window
 
 
 def half_turn_axis(points: np.ndarray, origins: np.ndarray, plane: Plane, views: Sequence[DepthView], *,

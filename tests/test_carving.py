@@ -18,9 +18,8 @@ from estimation.carving import (
     silhouette_reach,
 )
 from estimation.completion import (
-    FLAT_WINDOW_SIGMAS,
     MIRROR_MIN_POINTS,
-    flat_top_height,
+    flat_top,
     mirror_image,
     resting_on,
 )
@@ -204,18 +203,22 @@ def _noisy_slab(seed: int, sigma: float) -> tuple[np.ndarray, np.ndarray]:
 
 def test_a_flat_top_under_noise_is_mirrored_onto_the_table_without_a_lift():
     """Half a flat top's noise, reflected, lands below the table. Lifted onto it, the mirrored base sat about 0.4
-    sigma high (a 9 mm disc -4.6 % at 3 cameras, bench/camera_tables.py); a flat top's noise now stays where it
-    falls, and its height is its points' mean."""
+    sigma high (a 9 mm disc -4.6 % at 3 cameras, bench/camera_tables.py); a flat top's image is now the base
+    itself, on the table, and the top's height its points' mean."""
     sigma = 0.00075
     slab, normals = _noisy_slab(5, sigma)
-    assert flat_top_height(slab, normals, FLOOR, sigma) == pytest.approx(0.009, abs=0.1 * sigma)
+    top = flat_top(slab, normals, FLOOR, sigma)
+    assert top is not None and float(slab[top, 2].mean()) == pytest.approx(0.009, abs=0.1 * sigma)
     image = mirror_image(slab, normals, FLOOR, noise=sigma, cell=0.001, cut=0.003)
     assert image is not None
     mirrored, mirrored_normals, _ = image
     base = mirrored_normals[:, 2] < -0.9
     assert base.sum() > 5000
     assert abs(float(mirrored[base, 2].mean())) < 0.1 * sigma  # 0.5 sigma up before
-    assert mirrored[:, 2].min() >= -FLAT_WINDOW_SIGMAS * sigma - 1e-12
+    assert mirrored[:, 2].min() >= 0.0  # nothing below the table
+    # The sides' image meets the base: the slab's mirrored height is its top's.
+    sides = np.abs(mirrored_normals[:, 2]) < 0.1
+    assert mirrored[sides, 2].min() == pytest.approx(0.0, abs=4 * sigma)
 
 
 def test_a_curved_top_is_not_flat():
@@ -225,9 +228,9 @@ def test_a_curved_top_is_not_flat():
     points, normals = _sphere(20000, 0.02, rng)
     seen = points[:, 2] > 0.006
     noisy = points[seen] + rng.normal(0.0, 0.001, (int(seen.sum()), 3))
-    assert flat_top_height(noisy, normals[seen], FLOOR, 0.001) is None
+    assert flat_top(noisy, normals[seen], FLOOR, 0.001) is None
     slab, slab_normals = _noisy_slab(7, 0.001)  # the control: the same noise on a flat top
-    assert flat_top_height(slab, slab_normals, FLOOR, 0.001) is not None
+    assert flat_top(slab, slab_normals, FLOOR, 0.001) is not None
 
 
 def test_a_noise_band_at_a_rim_is_not_a_lower_half():
