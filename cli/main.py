@@ -908,8 +908,8 @@ def _sensor_option(p: argparse.ArgumentParser, *, replay: bool = False) -> None:
                    help="what the remote publishes: 'surface' (default: whole true surfaces, simulator poses) or "
                         "'cameras' (3 ray-cast depth cameras around the table with a Kinect v1 noise model, "
                         "segmented and fused, ICP poses; not the default: on the demo's paper scene volumes are off "
-                        "by 5.4 %% at the median and up to 17.0 %% (three objects touch; each is cut from their "
-                        "segment by the simulator's segmentation image); the 20-object clutter 1.5 / 7.3 %%; "
+                        "by 5.1 %% at the median and up to 17.0 %% (three objects touch; each is cut from their "
+                        "segment by the simulator's segmentation image); the 20-object clutter 1.1 / 7.3 %%; "
                         "bench/results/cameras.txt)")
 
 
