@@ -309,12 +309,13 @@ def mirror_image(points: np.ndarray, normals: np.ndarray, plane: Plane, *, noise
     up = plane.normal
     h = plane.height(pts)
     tree = cKDTree(pts)
-    k = min(TOP_NEIGHBOURS, len(pts))
-    centroids = plane.height(pts[nearest(tree, pts, k)[1]].mean(axis=1))
-    top = float(np.percentile(centroids, TOP_PERCENTILE)) - TOP_NOISE_SIGMAS * noise / np.sqrt(k)
     flat = flat_top(pts, nrm, plane, noise)
     if flat is not None:
         top = float(h[flat].mean())
+    else:
+        k = min(TOP_NEIGHBOURS, len(pts))
+        centroids = plane.height(pts[nearest(tree, pts, k)[1]].mean(axis=1))
+        top = float(np.percentile(centroids, TOP_PERCENTILE)) - TOP_NOISE_SIGMAS * noise / np.sqrt(k)
     middle = 0.5 * max(top, 0.0)
     lower = h < middle  # whatever the plane's removal left of it
     if lower.sum() < MIRROR_MIN_POINTS:
