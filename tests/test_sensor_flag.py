@@ -33,7 +33,9 @@ def test_the_camera_sensor_of_the_flag_builds_every_object_headless(tmp_path):
         for object_id in ("crate", "can"):  # built from the cameras' clouds, not the true meshes
             est = session.local.twin.model.body(object_id).mass[0]
             true = session.remote.twin.model.body(object_id).mass[0]
-            assert 0.5 < est / true < 2.0 and est != pytest.approx(true, rel=1e-3)
+            # Not the true mesh's mass, which a build from it gives to rounding (1e-3 was asked before session 44's
+            # flat tops put the crate within 0.014 % of it).
+            assert 0.5 < est / true < 2.0 and est != pytest.approx(true, rel=1e-6)
             # The cameras' normals (turned towards each point's camera) went with the cloud.
             sent = decode(session.remote._replies[session.remote.keys.object(object_id, "cloud")])  # type: ignore[attr-defined]
             normals = unpack_normals(sent)
