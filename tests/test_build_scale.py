@@ -58,6 +58,7 @@ def builds(tmp_path_factory):  # type: ignore[no-untyped-def]
     return out
 
 
+@pytest.mark.slow  # the builds fixture: 11 s
 def test_near_convex_objects_skip_coacd_and_concave_ones_are_decomposed(builds):
     built, _ = builds[2]
     reports = {i: r for i, r in built.reports.items()}
@@ -75,6 +76,7 @@ def test_near_convex_objects_skip_coacd_and_concave_ones_are_decomposed(builds):
         assert len(hulls[oid]) >= 2
 
 
+@pytest.mark.slow  # the builds fixture: 11 s
 def test_a_pool_build_writes_the_same_files_as_an_in_process_one(builds):
     (one, xml1), (two, xml2) = builds[1], builds[2]
     assert (one.workers, two.workers) == (1, 2)
@@ -91,6 +93,7 @@ def test_a_pool_build_writes_the_same_files_as_an_in_process_one(builds):
             assert (xml1.parent / rel).read_bytes() == (xml2.parent / rel).read_bytes(), rel
 
 
+@pytest.mark.slow  # the builds fixture: 11 s
 def test_objects_that_may_need_coacd_start_first_and_come_back_in_scene_order(builds):
     built, _ = builds[2]
     specs = built.scene.objects
@@ -98,6 +101,7 @@ def test_objects_that_may_need_coacd_start_first_and_come_back_in_scene_order(bu
     assert [o.id for o in built.objects] == [s.id for s in specs]
 
 
+@pytest.mark.slow  # the builds fixture: 11 s
 def test_the_collision_primitive_is_fitted_in_the_worker_and_used_in_the_model(builds):
     built, xml = builds[2]
     kinds = {o.id: None if o.primitive is None else o.primitive.kind for o in built.objects}
@@ -135,6 +139,7 @@ def test_workers_must_be_positive(tmp_path):
         build_scene(scene, cache_dir=tmp_path, progress=False, workers=0)
 
 
+@pytest.mark.slow  # the builds fixture: 11 s
 def test_scene_points_key_is_what_lowers_the_sample_count(builds):
     built, _ = builds[1]
     est = {o.id: o.estimate for o in built.objects}

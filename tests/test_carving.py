@@ -462,6 +462,7 @@ def test_the_frames_border_is_not_the_objects_edge():
     assert closed.completion.open_past_frame and closed.completion.turned == 0
 
 
+@pytest.mark.slow  # 11 s
 def test_a_box_both_frames_cut_has_no_top_to_its_interval():
     """Two narrow cameras see 60 % of a box's length, its far end out of both frames: the estimate is of the
     part seen (-32 %), and the interval stopped at 0.89 of the truth, saying the volume lay in it. Nothing the

@@ -38,6 +38,7 @@ def fidelity(tmp_path_factory) -> dict[str, Fidelity]:
     return {e.id: compare(SCENE, e, r) for e, r in zip(est, ref, strict=True)}
 
 
+@pytest.mark.slow  # the fixture estimates and builds 20 objects twice: 21 s
 @pytest.mark.parametrize("oid", IDS)
 def test_mass_com_inertia_match_the_true_mesh(fidelity, oid):
     f = fidelity[oid]
@@ -46,6 +47,7 @@ def test_mass_com_inertia_match_the_true_mesh(fidelity, oid):
     assert f.inertia_error < 0.02
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("oid", IDS)
 def test_dropped_object_rests_like_the_reference(fidelity, oid):
     f = fidelity[oid]
