@@ -1,8 +1,9 @@
 """Headless replay speed, as a multiple of real time, and the twin's own stepping rate, against a baseline.
 
-Two tables, each run for the current configuration and for the baseline (every object colliding with its
-CoACD hulls, no primitives: the configuration before ``twin.model`` substituted MuJoCo primitives), in this
-one process, so machine load hits both alike. Times are this process's CPU time (``time.process_time``;
+Two tables, each run for the current configuration, for the baseline (every object colliding with its
+CoACD hulls and with the table's box: the configuration before ``twin.model`` substituted MuJoCo primitives)
+and for the step between (primitives, the table's box: before ``twin.tabletop`` let objects wholly over the
+table collide with its top as a plane), in this one process, so machine load hits all alike. Times are this process's CPU time (``time.process_time``;
 the machine's two cores are shared) with wall time beside it.
 
 1. The twin C' alone (clutter20, its model as the headless session built it from estimated clouds):
@@ -44,7 +45,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from scenes.headless import Headless
 from scenes.scenefile import load_scene
+from twin.model import COLLIDES
 from twin.sim import Twin
+from twin.tabletop import PLANE_NAME
 from twin.trajectory import push_trajectory
 
 SCENES = {
@@ -55,16 +58,26 @@ SCENES = {
 KICK_EVERY = 0.5  # seconds between kicks: sliding friction stops a 0.3 m/s object in well under a second
 
 
+def box_table(spec) -> None:  # type: ignore[no-untyped-def]
+    """Every object collides with the table's box: drop the top's plane (``twin.tabletop``)."""
+    for geom in list(spec.geoms):
+        if geom.name == PLANE_NAME:
+            spec.delete(geom)
+
+
 def meshes_only(spec) -> None:  # type: ignore[no-untyped-def]
-    """The baseline collision: drop every ``<id>/primitive`` geom and let the hulls collide again."""
+    """The baseline collision: the table's box, and every ``<id>/primitive`` geom dropped and the hulls
+    colliding again."""
+    box_table(spec)
     for geom in list(spec.geoms):
         if geom.name.endswith("/primitive"):
             spec.delete(geom)
         elif "/hull" in geom.name:
-            geom.contype, geom.conaffinity = 1, 1
+            geom.contype, geom.conaffinity = COLLIDES, 1
 
 
-CONFIGS: dict[str, Callable[[object], None] | None] = {"baseline (hulls)": meshes_only, "current": None}
+CONFIGS: dict[str, Callable[[object], None] | None] = {"baseline (hulls)": meshes_only,
+                                                        "primitives, table box": box_table, "current": None}
 
 
 def _kick(twin: Twin, rng: np.random.Generator) -> None:

@@ -31,7 +31,7 @@ OVERLAP_DEPTH = 0.002
 SUPPORT_DEPTH = 0.01
 
 #: The scene's world geoms as messages name them, by their ``twin.model`` names.
-_FIXED = {"table": "the table", "floor": "the floor"}
+_FIXED = {"table": "the table", "table/top": "the table", "floor": "the floor"}
 
 
 @dataclass(frozen=True)

@@ -17,7 +17,7 @@ from scipy.spatial.transform import Rotation
 from estimation import estimate, from_mesh
 from scenes.paper_objects import paper_object
 from scenes.sampling import sample_surface
-from twin.model import EndEffectorSpec, TableSpec, add_object, new_spec
+from twin.model import COLLIDES, EndEffectorSpec, TableSpec, add_object, new_spec
 from twin.objects import MIN_CAPSULE_RADIUS, PRIMITIVE_MIN_FILL, fit_primitive, object_at_estimate
 
 
@@ -118,7 +118,7 @@ def test_an_estimated_box_cloud_collides_as_a_box_of_its_size_and_pose(tmp_path)
     geoms = _geoms(model, "crate")
     g = geoms["crate/primitive"]
     assert model.geom_type[g] == mujoco.mjtGeom.mjGEOM_BOX
-    assert model.geom_contype[g] == 1 and model.geom_conaffinity[g] == 1
+    assert model.geom_contype[g] == COLLIDES and model.geom_conaffinity[g] == 1
     # Every hull is still there to look at, and none collides.
     hulls = [i for name, i in geoms.items() if "/hull" in name]
     assert len(hulls) == len(obj.hulls) and all(model.geom_contype[i] == 0 == model.geom_conaffinity[i] for i in hulls)
@@ -163,7 +163,7 @@ def test_the_paper_mug_stays_meshes(tmp_path):
     assert "mug/primitive" not in geoms
     hulls = [i for name, i in geoms.items() if "/hull" in name]
     assert len(hulls) == len(obj.hulls) > 1
-    assert all(model.geom_contype[i] == 1 and model.geom_type[i] == mujoco.mjtGeom.mjGEOM_MESH for i in hulls)
+    assert all(model.geom_contype[i] == COLLIDES and model.geom_type[i] == mujoco.mjtGeom.mjGEOM_MESH for i in hulls)
 
 
 def test_primitives_off_keeps_the_hulls_colliding(tmp_path):
@@ -173,7 +173,7 @@ def test_primitives_off_keeps_the_hulls_colliding(tmp_path):
     add_object(spec, obj, primitives=False)
     model = spec.compile()
     assert "b/primitive" not in _geoms(model, "b")
-    assert model.geom_contype[_geoms(model, "b")["b/hull0"]] == 1
+    assert model.geom_contype[_geoms(model, "b")["b/hull0"]] == COLLIDES
 
 
 def test_a_box_in_the_synchronised_twin_rests_where_the_remote_box_rests():

@@ -46,6 +46,7 @@ def _one_line(exc: pytest.ExceptionInfo, *names: str) -> None:
     ("sleep", "no"),
     ("elliptic", None),
     ("multiccd", NAN),
+    ("table_plane", "yes"),
     ("iterations", 0),
     ("iterations", -5),       # compiled and ran
     ("iterations", 2.5),

@@ -18,7 +18,7 @@ from estimation.errors import SettingsError
 from scenes.build import build_scene, write_scene
 from scenes.scenefile import SceneError, load_scene, parse_scene
 from twin.decompose import CoacdSettings, decompose
-from twin.model import add_object
+from twin.model import COLLIDES, add_object
 from twin.sim import Twin, run_paced
 from twin.trajectory import push_trajectory
 
@@ -63,9 +63,9 @@ def test_visual_geoms_do_not_collide(built):
             assert model.geom_contype[g] == 0 and model.geom_conaffinity[g] == 0
         if "/hull" in name:  # a hull collides unless a primitive collides for its object (twin.model)
             primitive = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, name.split("/")[0] + "/primitive") >= 0
-            assert model.geom_contype[g] == (0 if primitive else 1)
+            assert model.geom_contype[g] == (0 if primitive else COLLIDES)
         if name.endswith("/primitive"):
-            assert model.geom_contype[g] == 1
+            assert model.geom_contype[g] == COLLIDES
 
 
 def test_objects_rest_on_the_table(built):

@@ -4,8 +4,9 @@ Every object body has a free joint, an explicit inertial (the estimate: MuJoCo m
 from the hulls, whose union is not the object), a visual mesh that does not collide (group 1), and
 its CoACD hulls as colliding meshes (group 3). An object that is nearly a box, capsule or sphere
 (:func:`twin.objects.collision_primitive`) collides as that MuJoCo primitive instead; its hulls
-stay in group 3 for viewers but collide with nothing. Each element's ``info`` names the object it came
-from, so a compile error points back to it.
+stay in group 3 for viewers but collide with nothing. The table is a box, and its top is also a plane
+(group 3) that objects wholly over the table collide with instead (:mod:`twin.tabletop`). Each element's
+``info`` names the object it came from, so a compile error points back to it.
 """
 
 from __future__ import annotations
@@ -21,12 +22,17 @@ from estimation.errors import MaterialError, SettingsError
 from sync.messages import MAX_COORDINATE, MAX_SCENE_SIZE, MIN_SIZE
 from twin.objects import TwinObject
 from twin.settings import check_number, check_type
+from twin.tabletop import BOX_BIT, PLANE_BIT, PLANE_NAME
 
 #: Physics step for the haptic loop: 1 kHz.
 TIMESTEP = 0.001
 
 #: Visual geoms neither collide nor are collided with.
 VISUAL_GROUP, COLLISION_GROUP = 1, 3
+
+#: The contact type of what collides: bit 1 (objects, the end effector, the floor, with each other) and the
+#: table box's bit (:mod:`twin.tabletop` swaps it for its top plane's under an object wholly over the table).
+COLLIDES = 1 | BOX_BIT
 
 #: Names of the end-effector bodies (the twin's API for operator devices).
 EE_TARGET, EE_BODY = "ee_target", "ee"
@@ -58,6 +64,8 @@ class PhysicsSettings:
         elliptic: elliptic friction cones (pyramidal ones let resting stacks creep at 1 kHz).
         multiccd: several contact points per convex pair, so a box rests on its face, not a corner.
         iterations: constraint solver iterations (MuJoCo's default 100; resting scenes converge in 1-3).
+        table_plane: objects wholly over the table collide with its top as a plane, not its box
+            (:mod:`twin.tabletop`; the same contacts at a fraction of the cost).
     """
 
     timestep: float = TIMESTEP
@@ -65,18 +73,19 @@ class PhysicsSettings:
     elliptic: bool = True
     multiccd: bool = True
     iterations: int = 100
+    table_plane: bool = True
 
     def __post_init__(self) -> None:
         """Refuse what MuJoCo would take and then run wrongly: a timestep of 0 compiled and ended in a
         ZeroDivisionError in :func:`twin.run_paced`, -0.001 s in a loop of "-1000 Hz"; -5 iterations compiled.
 
         Raises:
-            SettingsError: ``timestep`` not a finite number above 0 (seconds); ``sleep``, ``elliptic`` or
-                ``multiccd`` not True or False; ``iterations`` not a whole number from 1 to
+            SettingsError: ``timestep`` not a finite number above 0 (seconds); ``sleep``, ``elliptic``,
+                ``multiccd`` or ``table_plane`` not True or False; ``iterations`` not a whole number from 1 to
                 :data:`MAX_ITERATIONS`.
         """
         check_number(self, "timestep", low_ok=False)
-        for name in ("sleep", "elliptic", "multiccd"):
+        for name in ("sleep", "elliptic", "multiccd", "table_plane"):
             check_type(self, name, bool, "True or False")
         check_number(self, "iterations", low=1, whole=True)
         if self.iterations > MAX_ITERATIONS:
@@ -241,11 +250,20 @@ def new_spec(name: str, *, table: TableSpec | None = None, end_effector: EndEffe
         t = table
         from estimation.materials import material
 
+        friction = [material(t.material).friction, 0.005, 0.0001]
+        # Objects collide with the box through BOX_BIT in their contact type, or, wholly over it, with the
+        # plane of its top through PLANE_BIT (twin.tabletop switches them); neither has a contact type.
         top = spec.worldbody.add_geom(name="table", type=mujoco.mjtGeom.mjGEOM_BOX,
                                       size=[t.size[0] / 2, t.size[1] / 2, t.size[2] / 2],
                                       pos=[0, 0, t.height - t.size[2] / 2], rgba=[0.55, 0.4, 0.3, 1],
-                                      friction=[material(t.material).friction, 0.005, 0.0001])
+                                      friction=friction, contype=0, conaffinity=BOX_BIT)
         top.info = "table"
+        if physics.table_plane:
+            plane = spec.worldbody.add_geom(name=PLANE_NAME, type=mujoco.mjtGeom.mjGEOM_PLANE,
+                                            size=[t.size[0] / 2, t.size[1] / 2, 0.1], pos=[0, 0, t.height],
+                                            friction=friction, contype=0, conaffinity=PLANE_BIT,
+                                            group=COLLISION_GROUP, rgba=[0.55, 0.4, 0.3, 0.3])
+            plane.info = "table top (plane)"
     if end_effector is not None:
         add_end_effector(spec, end_effector)
     return spec
@@ -263,7 +281,7 @@ def add_end_effector(spec, ee: EndEffectorSpec) -> None:  # type: ignore[no-unty
     body.sleep = mujoco.mjtSleepPolicy.mjSLEEP_NEVER
     body.add_freejoint()
     geom = body.add_geom(type=mujoco.mjtGeom.mjGEOM_SPHERE, size=[ee.radius, 0, 0], mass=0.2,
-                         rgba=[0.2, 0.6, 0.9, 1])
+                         rgba=[0.2, 0.6, 0.9, 1], contype=COLLIDES)
     geom.info = "end effector"
     weld = spec.add_equality(type=mujoco.mjtEq.mjEQ_WELD, name1=EE_TARGET, name2=EE_BODY,
                              objtype=mujoco.mjtObj.mjOBJ_BODY)
@@ -309,7 +327,7 @@ def add_object(spec, obj: TwinObject, *, rgba: tuple[float, float, float, float]
     if primitive is not None:
         g = body.add_geom(name=f"{obj.id}/primitive", type=_geom_types()[primitive.kind], size=list(primitive.size),
                           pos=primitive.position.tolist(), quat=primitive.quat.tolist(), group=COLLISION_GROUP,
-                          friction=friction, rgba=hull_colour(0), mass=0)
+                          friction=friction, rgba=hull_colour(0), mass=0, contype=COLLIDES)
         g.info = f"object {obj.id} {primitive.kind} (fill {primitive.fill:.3f})"
     for k, (v, f) in enumerate(obj.hulls):
         name = f"{obj.id}/hull{k}"
@@ -319,7 +337,7 @@ def add_object(spec, obj: TwinObject, *, rgba: tuple[float, float, float, float]
         # Under a primitive the hulls are only to look at: no contact type, no affinity.
         g = body.add_geom(name=name, type=mujoco.mjtGeom.mjGEOM_MESH, meshname=name, group=COLLISION_GROUP,
                           friction=friction, rgba=hull_colour(k), mass=0,
-                          contype=0 if primitive is not None else 1, conaffinity=0 if primitive is not None else 1)
+                          contype=0 if primitive is not None else COLLIDES, conaffinity=0 if primitive is not None else 1)
         g.info = f"object {obj.id} hull {k}"
 
 

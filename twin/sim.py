@@ -18,6 +18,7 @@ from twin.debuglog import OFF, DebugLog
 from twin.loop import LoopStats, run_loop, steps_per_iteration
 from twin.model import EE_BODY, EE_TARGET, add_object, free_joint, remove_object
 from twin.objects import TwinObject
+from twin.tabletop import CHECK_EVERY, TopPlane, top_plane
 from twin.trajectory import Trajectory
 
 log = logging.getLogger(__name__)
@@ -107,6 +108,8 @@ class Twin:
         self._pending: deque[tuple[Future, Callable[[], None] | None, Callable[[Exception], None] | None]] = deque()
         self._ids_of, self._ids = None, []  # object_ids() of this model
         self._index_of, self._index = None, {}  # joint() look-ups of this model
+        self._top_of, self._top, self._over = None, None, None  # twin.tabletop of this model, its switches
+        self._top_wait = 0  # steps until the next twin.tabletop decision
 
     def __enter__(self) -> Twin:
         self._check_open()
@@ -158,7 +161,16 @@ class Twin:
         d = self.data
         if not self._finite():  # a bad write since the last step: catch it before the solver spreads it
             self._recover()
-        mujoco.mj_step(self.model, d, n)
+        if self._top_of is not self.model:
+            self._top_of, self._top, self._top_wait = self.model, top_plane(self.model, exclude=self._ee_body()), 0
+            self._over = None if self._top is None else np.zeros(len(self._top.bodies), bool)
+        top = self._top
+        if top is None:
+            mujoco.mj_step(self.model, d, n)
+        else:
+            for _ in range(n):
+                self._switch_top(top)
+                mujoco.mj_step(self.model, d)
         if not self._finite():  # the step itself blew up: put back what it touched
             self._recover()
         elif self._good is None:
@@ -166,6 +178,27 @@ class Twin:
         else:
             self._good[0][:] = d.qpos
             self._good[1][:] = d.qvel
+
+    def _switch_top(self, top: TopPlane) -> None:
+        """Objects wholly over the table collide with its top plane (:mod:`twin.tabletop`), decided every
+        :data:`~twin.tabletop.CHECK_EVERY` steps and at the step after :meth:`set_pose` or
+        :meth:`set_velocity`. A sleeping object does not move: nothing to decide while every object sleeps."""
+        self._top_wait -= 1
+        if self._top_wait > 0:
+            return
+        self._top_wait = CHECK_EVERY
+        d = self.data
+        if not d.body_awake[top.bodies].any():
+            return
+        over = top.over(d.qpos, d.qvel, self.model.opt.timestep)
+        if not np.array_equal(over, self._over):
+            top.switch(self.model, over)
+            self._over = over
+
+    def _ee_body(self) -> int:
+        import mujoco
+
+        return mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_BODY, EE_BODY)
 
     def _finite(self) -> bool:
         return bool(np.isfinite(self.data.qpos).all() and np.isfinite(self.data.qvel).all())
@@ -406,6 +439,7 @@ class Twin:
         angular = _vector(angular, 3, MAX_ANGULAR_SPEED, what + "angular velocity", "rad/s", norm=True)
         self.data.qvel[adr:adr + 3] = linear
         self.data.qvel[adr + 3:adr + 6] = xmat.T @ angular  # MuJoCo keeps it in body axes
+        self._top_wait = 0
 
     def _dof(self, object_id: str) -> tuple[int, np.ndarray]:
         body, _, dof = self.joint(object_id)
@@ -444,6 +478,7 @@ class Twin:
         quat = quat / biggest
         self.data.qpos[adr:adr + 3] = position
         self.data.qpos[adr + 3:adr + 7] = quat / np.linalg.norm(quat)
+        self._top_wait = 0
         if forward:
             mujoco.mj_forward(self.model, self.data)
 
