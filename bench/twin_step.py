@@ -152,6 +152,7 @@ def main(argv: list[str] | None = None) -> int:
     levers: list[tuple[str, list[TwinObject], PhysicsSettings, int | None]] = [
         ("naive: fine CoACD, no sleep (baseline)", naive, baseline_physics, None),
         ("our CoACD settings, no sleep", ours, baseline_physics, None),
+        ("our CoACD settings, no sleep, the top a plane", ours, replace(baseline_physics, table_plane=True), None),
         ("  + sleep, the table's box (before twin.tabletop)", ours, replace(DEFAULT_PHYSICS, table_plane=False), None),
         ("  + sleep, the top a plane (default)", ours, DEFAULT_PHYSICS, None),
         ("  + sleep, 32 vertices per hull", ours, DEFAULT_PHYSICS, 32),
