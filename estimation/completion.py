@@ -314,8 +314,7 @@ def mirror_image(points: np.ndarray, normals: np.ndarray, plane: Plane, *, noise
         top = float(h[flat].mean())
     else:
         k = min(TOP_NEIGHBOURS, len(pts))
-        centroids = plane.height(pts[nearest(tree, pts, k)[1]].mean(axis=1))
-        top = float(np.percentile(centroids, TOP_PERCENTILE)) - TOP_NOISE_SIGMAS * noise / np.sqrt(k)
+        top = _percentile_top(plane.height(pts[nearest(tree, pts, k)[1]].mean(axis=1)), noise, k)
     middle = 0.5 * max(top, 0.0)
     lower = h < middle  # whatever the plane's removal left of it
     if lower.sum() < MIRROR_MIN_POINTS:
@@ -360,12 +359,17 @@ def flat_top(points: np.ndarray, normals: np.ndarray, plane: Plane, noise: float
     h = plane.height(points)
     shadow = points - np.outer(h, up)
     k = min(TOP_NEIGHBOURS, len(points))
-    centroids = h[nearest(cKDTree(shadow), shadow, k)[1]].mean(axis=1)
-    top = float(np.percentile(centroids, TOP_PERCENTILE)) - TOP_NOISE_SIGMAS * noise / np.sqrt(k)
+    top = _percentile_top(h[nearest(cKDTree(shadow), shadow, k)[1]].mean(axis=1), noise, k)
     window = (normals @ up > FLAT_FACING_COSINE) & (np.abs(h - top) < FLAT_WINDOW_SIGMAS * noise)
     if window.sum() < FLAT_MIN_POINTS or abs(float(h[window].mean()) - top) > FLAT_MEAN_SIGMAS * noise:
         return None
     return window
+
+
+def _percentile_top(heights: np.ndarray, noise: float, k: int) -> float:
+    """The top's height, metres, from the heights of neighbourhood centroids of ``k`` points each: their
+    ``TOP_PERCENTILE``, less what that percentile adds to the centroids' noise (``noise`` / sqrt(k))."""
+    return float(np.percentile(heights, TOP_PERCENTILE)) - TOP_NOISE_SIGMAS * noise / np.sqrt(k)
 
 
 def half_turn_axis(points: np.ndarray, origins: np.ndarray, plane: Plane, views: Sequence[DepthView], *,
