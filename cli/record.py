@@ -286,7 +286,10 @@ def replay(path: str | Path, *, script: Path | None = None, units: str = "m", sc
         for tick in range(ticks):
             session.tick(trajectory)
             if progress is not None and ((tick + 1) % report_every == 0 or tick + 1 == ticks):
-                progress("replaying", (tick + 1) * session.dt, ticks * session.dt)
+                # In the summary's figure, the duration, not the whole steps that cover it (1.6649 s read
+                # "1.67" as 1,665 steps and "1.66" in the summary).
+                done = duration if tick + 1 == ticks else min((tick + 1) * session.dt, duration)
+                progress("replaying", done, duration)
             t = session.remote.twin.time
             while k < len(checks) and checks[k] < t - _SAME_TIME:
                 k += 1  # a sample time this replay stepped past (another scene, another step)
