@@ -44,8 +44,9 @@ CONDITIONS = {
 
 
 def run_scene(name: str | Path, cameras: int, noise_name: str = "KINECT_V1", camera: dict | None = None,
-              normals: bool = True) -> dict:
-    """One scene (a name in scenes/data, or a scene file's path) scanned by ``cameras`` cameras: see the module."""
+              normals: bool = True, seed: int = 1) -> dict:
+    """One scene (a name in scenes/data, or a scene file's path) scanned by ``cameras`` cameras: see the module.
+    ``seed``: the cameras' noise draws."""
     from estimation import estimate, make_cloud
     from estimation.errors import TwinError
     from estimation.spacing import surface_noise
@@ -65,7 +66,7 @@ def run_scene(name: str | Path, cameras: int, noise_name: str = "KINECT_V1", cam
     remote = Remote(scene, InProcessBus(clock, {}).transport("remote"), clock=clock, publish=False)
     # rest_window=1: the tracking column is one scan's fit; bench/rest_tracking.py follows the default
     # tracker, which averages its fits at rest, over many scans (its first would be half this fit).
-    sensor = CameraSensor.for_scene(scene, cameras=cameras, seed=1, noise=getattr(cams, noise_name), rest_window=1,
+    sensor = CameraSensor.for_scene(scene, cameras=cameras, seed=seed, noise=getattr(cams, noise_name), rest_window=1,
                                     **(camera or {}))
     scan = sensor._current(remote, force=True)
     errors, unseen, fuse_s, est_s = {}, [], 0.0, 0.0
