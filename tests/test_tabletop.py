@@ -143,3 +143,51 @@ def test_a_plane_with_a_table_and_none_without_or_when_turned_off():
     assert plane(new_spec("t", table=TABLE)) >= 0
     assert plane(new_spec("t")) < 0
     assert plane(new_spec("t", table=TABLE, physics=PhysicsSettings(table_plane=False))) < 0
+
+
+def test_an_object_teleported_off_the_table_leaves_the_plane_at_once(shapes):
+    """A write that carries an object under the table (a snapped correction, Remote.move) must not leave it on
+    the top's plane until the next decision: the plane has no depth limit and would launch it up through the
+    table."""
+    cache, box, _ = shapes
+    with _twin([_object(cache, "a", box, (0.0, 0.0, TOP + 0.021))]) as twin:
+        twin.step(20)
+        assert _contype(twin, "a") == {PLANE_BIT}
+        twin.set_pose("a", np.array([0.0, 0.0, 0.021]), np.array([1.0, 0, 0, 0]))  # on the floor, under the table
+        assert _contype(twin, "a") == {BOX_BIT}
+        assert not {int(g) for g in twin.data.contact.geom[:twin.data.ncon].ravel()} & {twin.model.geom("table/top").id}
+        twin.step(100)
+        assert twin.pose("a")[0][2] < 0.05
+
+
+def test_a_sleeping_object_set_moving_is_decided_at_the_next_step(shapes):
+    cache, box, _ = shapes
+    with _twin([_object(cache, "a", box, (0.2, 0.0, TOP + 0.021))], sleep=True) as twin:
+        twin.step(2000)
+        assert not twin.data.body_awake[twin.model.body("a").id] and _contype(twin, "a") == {PLANE_BIT}
+        # 5 m/s towards the edge 0.1 m away: its outline would pass it before the next decision.
+        twin.set_velocity("a", np.array([5.0, 0.0, 0.0]), np.zeros(3))
+        twin.step()
+        assert _contype(twin, "a") == {BOX_BIT}
+
+
+def test_a_model_another_twin_stepped_starts_on_the_box(shapes):
+    cache, box, _ = shapes
+    spec = new_spec("t", table=TABLE, physics=PhysicsSettings(sleep=False))
+    add_object(spec, _object(cache, "a", box, (0.0, 0.0, TOP + 0.021)))
+    model = spec.compile()
+    with Twin(spec, model) as first:
+        first.step(20)
+        assert _contype(first, "a") == {PLANE_BIT}
+    with Twin(spec, model) as second:
+        second.step(0)
+        assert _contype(second, "a") == {BOX_BIT}
+
+
+def test_a_plane_that_is_not_the_boxs_top_is_not_used(shapes):
+    cache, box, _ = shapes
+    with _twin([_object(cache, "a", box, (0.0, 0.0, TOP + 0.021))]) as twin:
+        twin.model.geom_pos[twin.model.geom("table/top").id][2] += 0.05  # as a hand-edited scene.xml might
+        twin.step(20)
+        assert _contype(twin, "a") == {BOX_BIT}
+        assert abs(twin.pose("a")[0][2] - 0.02 - TOP) < 2e-3

@@ -205,6 +205,7 @@ class Hold:
             a.hold_at = (a.qpos[k].ravel(), held.ravel(), a.qvel[k].ravel())
             data.qpos[a.hold_at[0]] = a.hold_at[1]
             data.qvel[a.hold_at[2]] = 0.0
+            twin.moved(a.body[k])  # drawn by a share of its stray: maybe off the table's edge
         return [a.ids[j] for j in np.flatnonzero(newly)]
 
     def _rebuild_with(self, model) -> _Arrays | None:  # type: ignore[no-untyped-def]

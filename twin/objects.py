@@ -75,8 +75,8 @@ FACE_CONE_DEG = 60.0
 #: a median-fitted box or sphere may get wrong in and out together (the fill only sees the net). Each box
 #: face is cut into 3 x 3 patches and a sphere into 24; a patch's distance is its median (noise averages
 #: out, shape does not). Measured: camera-built boxes and spheres 0.005-0.028 at sigma 1 mm and 0.019-0.050
-#: with the Kinect model where accepted (``bench/camera_fidelity.py``'s "collides as"; the Kinect dice and
-#: tennis ball are refused); cylinders, jars and bottles as boxes 0.12-0.13 at fills of 0.91-0.92, the
+#: with the Kinect model where accepted (``bench/camera_fidelity.py``'s "collides as"; the Kinect dice is
+#: refused); cylinders, jars and bottles as boxes 0.12-0.13 at fills of 0.91-0.92, the
 #: paper's cone 0.28-0.31 at 0.94-0.95 (``bench/replay.py --fills``). tests/test_primitives.py refuses an
 #: octagonal prism and an ellipsoid with axes 1 : 1 : 0.9, whose fills alone would pass. The same tolerance
 #: as the fill's: the primitive is within 6 % of the object, net and gross.

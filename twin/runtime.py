@@ -1159,6 +1159,8 @@ class Local:
             bad = ids[int(np.flatnonzero(~np.isfinite(new).all(axis=1))[0])]
             raise ValueError(f"object {bad!r}: pose must be finite with a non-zero quaternion")
         data.qpos[qpos] = new  # no mj_forward: the next step computes positions (as set_pose(forward=False))
+        if snap.any():  # a snap may carry an object off the table in one step
+            twin.moved(body[snap])
         # Angular velocity: MuJoCo keeps it in body axes; the correction is in world axes.
         xmat, vel = data.xmat[body].reshape(-1, 3, 3), data.qvel[dof]
         ang = np.matmul(xmat, vel[:, 3:, None])[:, :, 0] + step[:, 9:]

@@ -6,7 +6,7 @@ import logging
 import math
 import numbers
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
 
 import numpy as np
@@ -77,7 +77,8 @@ class Twin:
         """
         Args:
             spec: the scene's ``mujoco.MjSpec``; later edits copy it.
-            model: ``spec`` compiled (None: compiled here).
+            model: ``spec`` compiled (None: compiled here). The twin steps it and switches its objects'
+                contact bits between the table's box and its top plane (:mod:`twin.tabletop`).
             background: compile :meth:`edit_async` edits in a thread (see the class).
 
         Raises:
@@ -109,7 +110,7 @@ class Twin:
         self._ids_of, self._ids = None, []  # object_ids() of this model
         self._index_of, self._index = None, {}  # joint() look-ups of this model
         self._top_of, self._top, self._over = None, None, None  # twin.tabletop of this model, its switches
-        self._top_wait = 0  # steps until the next twin.tabletop decision
+        self._top_wait, self._top_forced = 0, True  # steps until the next twin.tabletop decision; decide even asleep
 
     def __enter__(self) -> Twin:
         self._check_open()
@@ -162,8 +163,11 @@ class Twin:
         if not self._finite():  # a bad write since the last step: catch it before the solver spreads it
             self._recover()
         if self._top_of is not self.model:
-            self._top_of, self._top, self._top_wait = self.model, top_plane(self.model, exclude=self._ee_body()), 0
+            self._top_of, self._top = self.model, top_plane(self.model, exclude=self._ee_body())
             self._over = None if self._top is None else np.zeros(len(self._top.bodies), bool)
+            if self._top is not None:  # a model another Twin stepped may hold plane bits: every object on the box
+                self._top.switch(self.model, self._over)
+            self._top_wait, self._top_forced = 0, True
         top = self._top
         if top is None:
             mujoco.mj_step(self.model, d, n)
@@ -188,12 +192,31 @@ class Twin:
             return
         self._top_wait = CHECK_EVERY
         d = self.data
-        if not d.body_awake[top.bodies].any():
+        # A body a write woke wakes only in the next mj_step: a forced decision does not wait for it.
+        if not self._top_forced and not d.body_awake[top.bodies].any():
             return
+        self._top_forced = False
         over = top.over(d.qpos, d.qvel, self.model.opt.timestep)
         if not np.array_equal(over, self._over):
             top.switch(self.model, over)
             self._over = over
+
+    def moved(self, bodies: Sequence[int] | np.ndarray) -> None:
+        """Say that ``bodies`` (body ids) were moved by a write to ``data.qpos``, not by a step: each goes back
+        to colliding with the table's box at once, and the next step decides again (:mod:`twin.tabletop`).
+
+        A write can carry an object off the table (a snapped correction, a hold); left on the top's plane, it
+        would meet that plane wherever it landed, under the table too, until the next decision.
+        :meth:`set_pose` calls it itself.
+        """
+        self._top_wait, self._top_forced = 0, True
+        top, over = self._top, self._over
+        if top is None or over is None or self._top_of is not self.model:
+            return
+        off = over & np.isin(top.bodies, np.asarray(bodies, int))
+        if off.any():
+            self._over = over & ~off
+            top.switch(self.model, self._over)
 
     def _ee_body(self) -> int:
         import mujoco
@@ -218,6 +241,7 @@ class Twin:
                 continue
             d.qpos[q:q + 7] = good_q[q:q + 7]
             d.qvel[v:v + 6] = 0.0
+            self.moved([int(m.jnt_bodyid[j])])
             bad.append((mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_JOINT, j) or f"joint {j}").removesuffix("/free"))
         rest = ~np.isfinite(d.qvel)  # anything else (not a free body): stop it
         d.qvel[rest] = 0.0
@@ -439,7 +463,7 @@ class Twin:
         angular = _vector(angular, 3, MAX_ANGULAR_SPEED, what + "angular velocity", "rad/s", norm=True)
         self.data.qvel[adr:adr + 3] = linear
         self.data.qvel[adr + 3:adr + 6] = xmat.T @ angular  # MuJoCo keeps it in body axes
-        self._top_wait = 0
+        self._top_wait, self._top_forced = 0, True  # its travel to the next decision is at this speed
 
     def _dof(self, object_id: str) -> tuple[int, np.ndarray]:
         body, _, dof = self.joint(object_id)
@@ -466,7 +490,7 @@ class Twin:
         import mujoco
 
         self._check_open()
-        _, adr, _ = self.joint(object_id)
+        body, adr, _ = self.joint(object_id)
         position = _vector(position, 3, MAX_COORDINATE, f"object {object_id!r}: position", "m")
         quat = np.asarray(quat, dtype=np.float64)
         biggest = float(np.abs(quat).max()) if quat.shape == (4,) else math.nan
@@ -478,7 +502,7 @@ class Twin:
         quat = quat / biggest
         self.data.qpos[adr:adr + 3] = position
         self.data.qpos[adr + 3:adr + 7] = quat / np.linalg.norm(quat)
-        self._top_wait = 0
+        self.moved([body])
         if forward:
             mujoco.mj_forward(self.model, self.data)
 
