@@ -74,7 +74,7 @@ class TopPlane:
 
     def switch(self, model, over: np.ndarray) -> None:  # type: ignore[no-untyped-def]
         """Set each body's colliding geoms to the plane (``over``) or the box. A geom whose contact type is 0
-        (taken out of every collision, e.g. :meth:`scenes.remote.Remote`'s refused objects) stays 0."""
+        (taken out of every collision, as the remote takes out an object it refuses) stays 0."""
         types = model.geom_contype[self.geoms]
         bit = np.where(over[self.owner], PLANE_BIT, BOX_BIT)
         model.geom_contype[self.geoms] = np.where(types != 0, (types & ~(BOX_BIT | PLANE_BIT)) | bit, 0)
