@@ -167,7 +167,7 @@ class Twin:
             self._over = None if self._top is None else np.zeros(len(self._top.bodies), bool)
             if self._top is not None:  # a model another Twin stepped may hold plane bits: every object on the box
                 self._top.switch(self.model, self._over)
-            self._top_wait, self._top_forced = 0, True
+            self._decide_next_step()
         top = self._top
         if top is None:
             mujoco.mj_step(self.model, d, n)
@@ -201,6 +201,10 @@ class Twin:
             top.switch(self.model, over)
             self._over = over
 
+    def _decide_next_step(self) -> None:
+        """The next step decides which objects are over the table (:mod:`twin.tabletop`), asleep or not."""
+        self._top_wait, self._top_forced = 0, True
+
     def moved(self, bodies: Sequence[int] | np.ndarray) -> None:
         """Say that ``bodies`` (body ids) were moved by a write to ``data.qpos``, not by a step: each goes back
         to colliding with the table's box at once, and the next step decides again (:mod:`twin.tabletop`).
@@ -209,7 +213,7 @@ class Twin:
         would meet that plane wherever it landed, under the table too, until the next decision.
         :meth:`set_pose` calls it itself.
         """
-        self._top_wait, self._top_forced = 0, True
+        self._decide_next_step()
         top, over = self._top, self._over
         if top is None or over is None or self._top_of is not self.model:
             return
@@ -278,7 +282,7 @@ class Twin:
         if self._mocap is None:
             raise LookupError("this scene has no end effector")
         m, d = self.model, self.data
-        ee = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, EE_BODY)
+        ee = self._ee_body()
         total, f6 = np.zeros(3), np.zeros(6)
         for i in range(d.ncon):
             c = d.contact[i]
@@ -463,7 +467,7 @@ class Twin:
         angular = _vector(angular, 3, MAX_ANGULAR_SPEED, what + "angular velocity", "rad/s", norm=True)
         self.data.qvel[adr:adr + 3] = linear
         self.data.qvel[adr + 3:adr + 6] = xmat.T @ angular  # MuJoCo keeps it in body axes
-        self._top_wait, self._top_forced = 0, True  # its travel to the next decision is at this speed
+        self._decide_next_step()  # its travel to the next decision is at this speed
 
     def _dof(self, object_id: str) -> tuple[int, np.ndarray]:
         body, _, dof = self.joint(object_id)
