@@ -3,8 +3,8 @@
 Two tables, each run for the current configuration, for the baseline (every object colliding with its
 CoACD hulls and with the table's box: the configuration before ``twin.model`` substituted MuJoCo primitives)
 and for the step between (primitives, the table's box: before ``twin.tabletop`` let objects wholly over the
-table collide with its top as a plane), in this one process, so machine load hits all alike. Times are this process's CPU time (``time.process_time``;
-the machine's two cores are shared) with wall time beside it.
+table collide with its top as a plane), in this one process, so machine load hits all alike. Times are this
+process's CPU time (``time.process_time``; the machine's two cores are shared) with wall time beside it.
 
 1. The twin C' alone (clutter20, its model as the headless session built it from estimated clouds):
    steps/s (best of two runs) with every body awake (sleeping off, every object kicked at 0.2-0.4 m/s every 0.5 s, the end
