@@ -508,7 +508,8 @@ class Recording:
                 for i, v in rows.items()}
 
     def end_time(self) -> float | None:
-        """The twin time the end record says the session stopped at (None: no end record, or none given).
+        """The twin time the end record says the session stopped at (None: no end record, or none given, or a
+        damaged recording whose intact records end before it).
 
         Raises:
             RecordingError: ``twin_time_s`` is not a number from 0 to :meth:`latest_time`.
@@ -520,6 +521,10 @@ class Recording:
             t = float(raw)
         except (ValueError, TypeError, OverflowError):
             raise RecordingError(f"{self.path}: the end record's twin_time_s {raw!r} is not a number") from None
+        if self.damage is not None and math.isfinite(t) and t > self.latest_time():
+            # Damaged chunks at the end took the records up to the stop with them: the intact part replays (to
+            # its last target or truth), and the damage note says what was lost, not this time.
+            return None
         return self._in_range(t, "the end record's twin_time_s", 0.0, self.latest_time())
 
     # checks of decoded fields: one line naming the record kind and the field

@@ -20,6 +20,7 @@ from sync.clock import SimClock
 from sync.messages import decode
 from sync.recording import (
     FORCE_TOPIC,
+    RECORDED_TIME_SLACK_S,
     SCHEMA_VERSION,
     TARGET_TOPIC,
     TRUTH_TOPIC,
@@ -620,6 +621,34 @@ def test_a_damaged_chunk_mid_file_is_skipped_and_the_rest_replays(recorded, cach
     captured = capsys.readouterr()
     assert captured.err.count("damaged chunk skipped") == 1 and "warning" in captured.err
     assert json.loads(captured.out)["duration_s"] == pytest.approx(SECONDS, abs=0.01)
+
+
+def test_damaged_chunks_at_the_end_are_reported_and_what_comes_before_replays(recorded, cache, tmp_path, capsys):
+    """Damaged chunks covering the last second and more left the end record's stop time past the intact records'
+    span: the replay was refused for that time, without a word of the damage. The damage is said and the intact
+    part replays, to its last target."""
+    path, _, _ = recorded
+    whole = read_recording(path)
+    data = bytearray(path.read_bytes())
+    chunks = _chunk_offsets(bytes(data))
+    lost = [c for c in chunks if c[0] > chunks[len(chunks) // 2][0]]  # the second half of the session
+    for start, length in lost:
+        data[start + 9 + length // 2] ^= 0x55
+    damaged = tmp_path / "tail.mcap"
+    damaged.write_bytes(bytes(data))
+    rec = read_recording(damaged)
+    assert rec.damage is not None and f"{len(lost)} damaged chunks skipped" in rec.damage, rec.damage
+    assert rec.end is not None and rec.span_s + RECORDED_TIME_SLACK_S < SECONDS  # the stop is past what is left
+    assert rec.end_time() is None
+    assert main(["replay", str(damaged), "--json", "--cache-dir", str(cache)]) == 0
+    captured = capsys.readouterr()
+    assert "damaged chunks skipped" in captured.err and "warning" in captured.err, captured.err
+    assert 0 < json.loads(captured.out)["duration_s"] < SECONDS - 1.0
+    assert 0 < len(rec.topic(TARGET_TOPIC)) < len(whole.topic(TARGET_TOPIC))
+    # An undamaged recording's stop past its records is still refused: that is a forged or broken end record.
+    with pytest.raises(RecordingError, match="the end record's twin_time_s"):
+        Recording(path, whole.metadata, whole.records[: len(whole.records) // 4], whole.end, None,
+                  whole.counts).end_time()
 
 
 def test_a_folder_a_pipe_or_a_device_is_named_not_read(tmp_path, capsys):
