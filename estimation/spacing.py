@@ -372,7 +372,9 @@ def _sheet(patches: np.ndarray, centre: np.ndarray, normal: np.ndarray,
         last, sigma = sigma, float(np.sqrt(np.median(smallest[count > 3]) / kept_variance)) if (count > 3).any() else sigma
         fitted = (count > 3)[:, None]
         centre, normal = np.where(fitted, mean, centre), np.where(fitted, vectors[:, :, 0], normal)
-        if abs(sigma - last) <= SHEET_SETTLED * sigma:
+        if abs(sigma - last) <= SHEET_SETTLED * sigma or (sigma == 0 and fitted.any()):
+            # 0 measured is exact points on their sheets, not "no spread yet": keeping all in the next pass took
+            # in a wall's other face (a clean 2 mm ruler at 1 mm spacing read 0.98 mm of noise and came out 3.3x).
             break
     return sigma, centre, normal
 

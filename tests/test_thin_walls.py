@@ -28,6 +28,20 @@ def test_a_walls_other_face_is_not_read_as_noise(sigma):
     assert surface_noise(cloud.points) == pytest.approx(sigma, rel=0.15)
 
 
+@pytest.mark.parametrize("extents", [(0.3, 0.03, 0.002), (0.1, 0.1, 0.002)])
+def test_a_clean_plate_two_spacings_thick_reads_no_noise_and_keeps_its_thickness(extents):
+    # 20,000 points, about 1 mm apart, on a 2 mm plate: the sheet cut measured its own face exactly (0), took 0
+    # for "no spread yet" and kept the other face in its next pass: 0.98 mm of noise, cells of 2 mm and a
+    # 300 x 30 x 2 mm ruler 3.3x its volume (interval 0 to unbounded).
+    mesh = trimesh.creation.box(extents=extents)
+    mesh.apply_transform(trimesh.transformations.random_rotation_matrix(np.random.default_rng(0).random(3)))
+    cloud = sample_surface(mesh, 20_000, seed=0, with_normals=False)
+    assert surface_noise(cloud.points, own_sheet=True) < 1e-6
+    result = estimate(make_cloud(cloud.points), 1000.0)
+    assert result.volume == pytest.approx(mesh.volume, rel=0.05)
+    assert result.volume_bounds_m3[0] <= mesh.volume <= result.volume_bounds_m3[1]
+
+
 def test_a_thin_walled_ball_with_a_little_noise_is_not_filled_solid():
     # With the wall read as 1.5 mm of noise the cell was the wall's thickness and the ball came out solid:
     # +558 %, no warning.
