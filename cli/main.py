@@ -273,7 +273,7 @@ def _parser() -> argparse.ArgumentParser:
     dens.add_argument("--density", type=float, help="kg/m^3")
     dens.add_argument("--material", help="a name or alias from the material table (e.g. wood_oak, PLA, "
                                           "aluminum; list: twin materials)")
-    _units_option(p, "the file")
+    _units_option(p, "the file", checked=True)
     p.add_argument("--method", default="auto", choices=["auto", "obb", "hull", "surface"])
     p.add_argument("--viewpoint", type=float, nargs=3, metavar=("X", "Y", "Z"), action="append",
                    help="sensor position (file units) to orient estimated normals towards; once per VIEW, in "
@@ -432,7 +432,7 @@ def _cmd_estimate(args: argparse.Namespace) -> int:
     from estimation.units import unit_scale
     from estimation.views import assess, estimate_views
 
-    scale = unit_scale(args.units)
+    scale = unit_scale(args.units or "m")
     if args.mesh_out is not None:  # before the work, and before anything is written
         check_mesh_file(args.mesh_out, args.views, "--mesh-out", suffixes=MESH_SUFFIXES)
     density, mat = resolve_density(args.material, args.density)
@@ -442,6 +442,8 @@ def _cmd_estimate(args: argparse.Namespace) -> int:
         t0 = time.perf_counter()
         loaded = _estimate_views(args, scale)
         views = [v for v, _ in loaded]
+        if args.units is None and args.intrinsics is None:
+            _check_units(views)
         read = time.perf_counter() - t0
         single = len(views) == 1 and views[0].origin is None and support is None
         progress = _estimate_progress(sum(len(v.points) for v in views))
@@ -535,7 +537,7 @@ def _estimate_views(args: argparse.Namespace, scale: float) -> list[tuple]:  # t
         raise TwinError(f"--viewpoint given {len(args.viewpoint)} times for {n} views: give it once per VIEW, in order")
     if not depth and (args.depth_scale is not None or args.viewpoint_pose is not None):
         raise TwinError("--depth-scale and --viewpoint-pose are for depth images: pass --intrinsics FX FY CX CY")
-    if depth and args.units != "m":
+    if depth and args.units not in (None, "m"):
         raise TwinError("--units is for point files: a depth image's unit is set by --depth-scale")
     if depth and args.viewpoint is not None:
         raise TwinError("a depth image's sensor origin is its camera: give --viewpoint-pose, not --viewpoint")
@@ -889,10 +891,41 @@ def _run_with_viewer(twin, args, trajectory):  # type: ignore[no-untyped-def]
     return stats
 
 
-def _units_option(p: argparse.ArgumentParser, what: str) -> None:
+def _units_option(p: argparse.ArgumentParser, what: str, *, checked: bool = False) -> None:
     """``--units``: the length unit of ``what`` (the names of :data:`estimation.units.UNIT_SCALE`, written out:
-    importing it loads numpy, which ``--help`` does not need)."""
-    p.add_argument("--units", default="m", choices=["m", "cm", "mm"], help=f"units of {what} (default m)")
+    importing it loads numpy, which ``--help`` does not need). ``checked``: not given, it is metres and an object
+    of an implausible size is refused (:func:`_check_units`); None then stands for "not given"."""
+    if checked:
+        p.add_argument("--units", default=None, choices=["m", "cm", "mm"],
+                       help=f"units of {what} (default m; an object outside {_PLAUSIBLE} across is then refused "
+                            f"as probably in other units: give --units m to take it as metres)")
+    else:
+        p.add_argument("--units", default="m", choices=["m", "cm", "mm"], help=f"units of {what} (default m)")
+
+
+#: tolerances.PLAUSIBLE_EXTENT_M as --help says it (written out: importing it loads numpy).
+_PLAUSIBLE = "2 mm to 5 m"
+
+
+def _check_units(views) -> None:  # type: ignore[no-untyped-def]
+    """Refuse views whose object, read as metres, is a size no object here is (a 5 cm cube written in mm read as
+    50 m across and 125 m^3); --units, given, says the size is meant and only warns."""
+    import numpy as np
+
+    from estimation import tolerances as tol
+    from estimation.obb import oriented_box
+    from estimation.units import units_warning
+
+    points = np.concatenate([v.points for v in views])
+    if len(points) < 4 or not np.isfinite(points).all() or np.abs(points).max() > tol.MAX_COORDINATE_M:
+        return  # too few to have a size, or out of any range: the estimate says what is wrong with them
+    extents = oriented_box(points[:: max(1, len(points) // 100_000)]).extents
+    if extents.max() < tol.MIN_EXTENT_M:
+        return
+    hint = units_warning(extents)
+    if hint is not None:
+        raise TwinError(f"{hint.split(';')[0]}, outside the {_PLAUSIBLE} an object here is: the file is probably in "
+                        f"other units (give --units mm or --units cm, or --units m to take it as metres)")
 
 
 def _sensor_option(p: argparse.ArgumentParser, *, replay: bool = False) -> None:

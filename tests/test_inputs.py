@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import logging
 import re
 
@@ -529,6 +530,32 @@ def test_a_failed_estimate_prints_only_its_error_line_though_it_logged_warnings_
     good.write_text("\n".join(rows) + "\n")
     run = subprocess.run([sys.executable, "-m", "cli.main", "estimate", str(good)], capture_output=True, text=True)
     assert run.returncode == 0 and "dropped 1 of 3001 points" in run.stderr, run.stderr
+
+
+def test_a_cloud_in_other_units_is_refused_unless_units_are_given(tmp_path, capsys):
+    """A 5 cm cube written in mm, estimated without --units, came out 125 m^3 and 1.6e8 kg with exit 0 and a
+    warning; `twin build` refused the same file. Without --units it is refused; --units says what is meant."""
+    from cli.main import _PLAUSIBLE, main
+    from estimation import tolerances as tol
+
+    low, high = tol.PLAUSIBLE_EXTENT_M
+    assert _PLAUSIBLE == f"{low * 1000:g} mm to {high:g} m"
+    cube = np.asarray(sample_surface(trimesh.creation.box(extents=(0.05, 0.04, 0.03)), 5000, seed=0).points)
+    for name, scale, said in [("mm.xyz", 1000.0, " m across, outside the 2 mm to 5 m"),
+                              ("km.xyz", 1e-3, " mm across, outside the 2 mm to 5 m")]:
+        path = tmp_path / name
+        np.savetxt(path, cube * scale)
+        before = path.read_bytes()
+        assert main(["estimate", str(path), "--density", "1000"]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and said in err and "give --units mm or --units cm" in err, err
+        assert path.read_bytes() == before
+    path = tmp_path / "mm.xyz"
+    assert main(["estimate", str(path), "--density", "1000", "--units", "mm", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["volume_m3"] == pytest.approx(6e-5, rel=0.01)
+    assert main(["estimate", str(path), "--density", "1000", "--units", "m", "--json"]) == 0  # meant: a warning
+    out = json.loads(capsys.readouterr().out)
+    assert out["volume_m3"] == pytest.approx(6e4, rel=0.01) and any("m across" in w for w in out["warnings"])
 
 
 @pytest.mark.parametrize(("argv", "message"), [
