@@ -23,6 +23,7 @@ from estimation.cloudtable import (
     byte_colors,
     check_binary_size,
     check_max_points,
+    check_row_widths,
     check_text_size,
     columns_from,
     header_count,
@@ -133,7 +134,7 @@ def read_ply(path: Path, max_points: int) -> Columns:
     check_max_points(path, vertex.count, max_points)
     order = _PLY_FORMATS[fmt]
     if order is None:
-        table, types = _read_ply_ascii(path, size, offset, elements, index)
+        table, types = _read_ply_ascii(path, size, offset, elements, index, head[:offset].count(b"\n") + 1)
     else:
         table, types = _read_ply_binary(path, size, offset, elements, index, order)
     faces = sum(e.count for e in elements if e.name == "face")
@@ -194,8 +195,9 @@ def _read_ply_binary(
 
 
 def _read_ply_ascii(
-    path: Path, size: int, offset: int, elements: list[_PlyElement], index: int
+    path: Path, size: int, offset: int, elements: list[_PlyElement], index: int, first_line: int
 ) -> tuple[dict[str, np.ndarray], dict[str, np.dtype]]:
+    """The vertex element ``elements[index]`` of the text from ``offset``, the file's line ``first_line``."""
     vertex = elements[index]
     if vertex.lists:
         raise CloudFileError(f"{path}: the PLY vertex element has list properties {sorted(vertex.lists)}; not supported")
@@ -204,15 +206,9 @@ def _read_ply_ascii(
     check_text_size(path, size, offset, vertex.count, nprops, "vertices")
     rows, trailing = read_rows(path, offset, skip + vertex.count, nprops)
     lines = rows[skip : skip + vertex.count]
-    if len(lines) < vertex.count or (lines and not lines[-1].strip()):
-        present = sum(1 for line in lines if line.strip())
-        raise CloudFileError(f"{path}: truncated: the header claims {vertex.count} vertices but the file holds {present}")
+    check_row_widths(path, lines, vertex.count, nprops, first_line + skip, "vertices",
+                     "the vertex element's properties")
     values = parse_numbers(b" ".join(lines))
-    if values.size != vertex.count * nprops:
-        raise CloudFileError(
-            f"{path}: the {vertex.count} vertex lines hold {values.size} values, not {vertex.count} x {nprops} "
-            "properties (truncated or malformed)"
-        )
     if len(elements) == index + 1 and trailing:
         log.warning("%s: text after the %d vertices the header claims; ignored", path, vertex.count)
     table = values.reshape(vertex.count, nprops)
