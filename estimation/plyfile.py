@@ -87,6 +87,8 @@ def _parse_ply_header(path: Path, head: bytes) -> tuple[str, list[_PlyElement], 
                 raise CloudFileError(f"{path}: unknown PLY format {words[1][:40]!r}; use one of {list(_PLY_FORMATS)}")
             fmt = words[1]
         elif key == "element" and len(words) == 3:
+            if any(e.name == words[1] for e in elements):  # the second block of vertices was skipped in silence
+                raise CloudFileError(f"{path}: the PLY header declares element {words[1][:40]!r} twice")
             elements.append(_PlyElement(words[1], header_count(path, words[2], f"element {words[1][:40]!r}"), [], {}))
         elif key == "property" and len(words) >= 3:
             if not elements:
@@ -212,9 +214,36 @@ def _read_ply_ascii(
     if len(elements) == index + 1 and trailing:
         log.warning("%s: text after the %d vertices the header claims; ignored", path, vertex.count)
     table = values.reshape(vertex.count, nprops)
+    _check_integers(path, table, vertex.props, lines, first_line + skip)
     structured = {name: table[:, i] for i, (name, _) in enumerate(vertex.props)}
     types = {name: np.dtype(code) for name, code in vertex.props}  # type: ignore[arg-type]
     return structured, types
+
+
+def _check_integers(path: Path, table: np.ndarray, props: list[tuple[str, str | None]], lines: list[bytes],
+                    first_line: int) -> None:
+    """Raise on the first value of ``table`` ((n, properties) float64, as read from ``lines``, the file's from
+    ``first_line``) that its integer property's type cannot hold: a uchar x of -250 and an int x of 0.0068 were
+    taken as written.
+
+    Raises:
+        CloudFileError: the value, its line and its property's type.
+    """
+    bad_row, bad_col = len(table), 0
+    for col, (_, code) in enumerate(props):
+        dtype = np.dtype(code)
+        if dtype.kind in "iu":
+            info = np.iinfo(dtype)
+            values = table[:bad_row, col]
+            with np.errstate(invalid="ignore"):  # NaN fits no integer: refused as not whole
+                fits = (values == np.round(values)) & (values >= info.min) & (values <= info.max)
+            if not fits.all():
+                bad_row, bad_col = int(np.argmin(fits)), col
+    if bad_row < len(table):
+        name, dtype = props[bad_col][0], np.dtype(props[bad_col][1])
+        token = lines[bad_row].split()[bad_col].decode("latin-1")[:40]
+        raise CloudFileError(f"{path}: line {first_line + bad_row}: {token!r} does not fit the vertex property {name!r} "
+                             f"({dtype.name}: whole numbers {np.iinfo(dtype).min} to {np.iinfo(dtype).max})")
 
 
 def write_ply(cloud: PointCloud, path: Path, *, ascii: bool) -> None:

@@ -533,6 +533,14 @@ PLY_HEAD = "ply\nformat binary_little_endian 1.0\nelement vertex 1\n"
         ("ply\nformat ascii 1.0\nelement vertex 2\n" + XYZ_FLOAT + "end_header\n1 2 3\n4 5 x\n", r"unreadable \(text that is not a number among the values\)"),
         ("ply\nformat ascii 1.0\nelement vertex 2\n" + XYZ_FLOAT + "end_header\n1 2 3\n4 5 6 7\n",
          r"line 9 holds 4 values where the vertex element's properties give 3$"),
+        # The second block of vertices was skipped in silence.
+        ("ply\nformat ascii 1.0\nelement vertex 1\n" + XYZ_FLOAT + "element vertex 1\n" + XYZ_FLOAT
+         + "end_header\n1 2 3\n4 5 6\n", r"the PLY header declares element 'vertex' twice$"),
+        # Values the declared type cannot hold were taken as written.
+        ("ply\nformat ascii 1.0\nelement vertex 2\nproperty uchar x\nproperty uchar y\nproperty uchar z\nend_header\n"
+         "1 2 3\n68 -250 7\n", r"line 9: '-250' does not fit the vertex property 'y' \(uint8: whole numbers 0 to 255\)$"),
+        ("ply\nformat ascii 1.0\nelement vertex 1\nproperty int x\nproperty float y\nproperty float z\nend_header\n"
+         "0.0068 0.5 0.5\n", r"line 8: '0.0068' does not fit the vertex property 'x' \(int32: whole numbers -2147483648"),
         ("ply\nformat ascii 1.0\nfrobnicate 3\nend_header\n", r"unexpected PLY header line 'frobnicate 3'"),
         ("ply\nformat ascii 1.0\nelement edge 1\nproperty int a\nend_header\n", r"the PLY header has no vertex element"),
         # Past int64 it was "Python int too large to convert to C ssize_t" from the line split
