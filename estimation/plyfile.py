@@ -207,6 +207,13 @@ def _read_ply_ascii(
     skip = sum(e.count for e in elements[:index])
     check_text_size(path, size, offset, vertex.count, nprops, "vertices")
     rows, trailing = read_rows(path, offset, skip + vertex.count, nprops)
+    present = len(rows) - (bool(rows) and not rows[-1])  # the lines after the header; not the empty one past the end
+    seen = 0
+    for before in elements[:index]:
+        seen += before.count
+        if seen > present:  # else it was "claims 3000 vertices but the file holds 0" for a face count of 1e15
+            raise CloudFileError(f"{path}: truncated: PLY element {before.name!r} ({before.count} rows) before the "
+                                 f"vertices runs past the end of the file ({present} lines after the header)")
     lines = rows[skip : skip + vertex.count]
     check_row_widths(path, lines, vertex.count, nprops, first_line + skip, "vertices",
                      "the vertex element's properties")

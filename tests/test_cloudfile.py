@@ -541,6 +541,10 @@ PLY_HEAD = "ply\nformat binary_little_endian 1.0\nelement vertex 1\n"
          "1 2 3\n68 -250 7\n", r"line 9: '-250' does not fit the vertex property 'y' \(uint8: whole numbers 0 to 255\)$"),
         ("ply\nformat ascii 1.0\nelement vertex 1\nproperty int x\nproperty float y\nproperty float z\nend_header\n"
          "0.0068 0.5 0.5\n", r"line 8: '0.0068' does not fit the vertex property 'x' \(int32: whole numbers -2147483648"),
+        # It was "the header claims 1 vertices but the file holds 0": the faces before them are what does not fit.
+        ("ply\nformat ascii 1.0\nelement face 1000000000000000\nproperty list uchar int vertex_indices\nelement vertex 1\n"
+         + XYZ_FLOAT + "end_header\n3 0 1 2\n1 2 3\n", r"truncated: PLY element 'face' \(1000000000000000 rows\) "
+         r"before the vertices runs past the end of the file \(2 lines after the header\)$"),
         ("ply\nformat ascii 1.0\nfrobnicate 3\nend_header\n", r"unexpected PLY header line 'frobnicate 3'"),
         ("ply\nformat ascii 1.0\nelement edge 1\nproperty int a\nend_header\n", r"the PLY header has no vertex element"),
         # Past int64 it was "Python int too large to convert to C ssize_t" from the line split
