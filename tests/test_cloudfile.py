@@ -336,6 +336,20 @@ def test_a_text_cloud_with_a_byte_order_mark(tmp_path, cloud):
         np.testing.assert_array_equal(load_cloud(tmp_path / f"c{suffix}").points, cloud.points)
 
 
+@pytest.mark.parametrize(("encoding", "name"), [
+    ("utf-16", "UTF-16"), ("utf-16-le", "UTF-16"), ("utf-16-be", "UTF-16"), ("utf-32", "UTF-32"), ("utf-32-le", "UTF-32"),
+])
+def test_a_utf16_or_utf32_text_cloud_is_named_as_such(tmp_path, cloud, encoding, name):
+    # Notepad's UTF-16 was read byte by byte: "line 1 is not numbers ...: 'ÿþ0\x00.\x000\x00...'".
+    path = tmp_path / "c.xyz"
+    path.write_bytes(_rows(cloud.points, " ").encode(encoding))  # "utf-16" and "utf-32" write a byte-order mark
+    with pytest.raises(CloudFileError, match=rf"^{re.escape(str(path))}: the file is {name} encoded; save it as UTF-8 "
+                                             rf"or ASCII$"):
+        load_cloud(path)
+    path.write_bytes(_rows(cloud.points, " ").encode("ascii"))
+    assert len(load_cloud(path)) == len(cloud)
+
+
 def _rows(table: np.ndarray, sep: str) -> str:
     return "".join(sep.join(repr(float(v)) for v in row) + "\n" for row in table)
 
