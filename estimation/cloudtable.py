@@ -158,6 +158,29 @@ def read_rows(path: Path, offset: int, rows: int, values: int) -> tuple[list[byt
     return b"".join(chunks).split(b"\n")[:rows], trailing
 
 
+def check_row_widths(path: Path, rows: list[bytes], claimed: int, values: int, first_line: int, what: str,
+                     width: str) -> None:
+    """Raise unless ``claimed`` ``rows`` (from :func:`read_rows`) each hold ``values`` whitespace-separated values.
+
+    Only the total was checked: two points a line with blank lines between them loaded, and a line with one
+    value too many next to one with one too few moved a point's coordinates along. ``first_line``: the file's
+    line number of ``rows[0]``; ``what``: the rows' name ("points"); ``width``: where ``values`` comes from.
+
+    Raises:
+        CloudFileError: the first row holding another number of values, by its line, or "truncated" when the
+            file ends there (no row after it holds anything).
+    """
+    counts = np.zeros(claimed, dtype=np.int64)
+    counts[: len(rows)] = [len(row.split()) for row in rows[:claimed]]  # 0.2 s a million rows; numpy's took 0.9
+    bad = np.flatnonzero(counts != values)
+    if not len(bad):
+        return
+    first = int(bad[0])
+    if counts[first] < values and not counts[first + 1 :].any():
+        raise CloudFileError(f"{path}: truncated: the header claims {claimed} {what} but the file holds {first}")
+    raise CloudFileError(f"{path}: line {first_line + first} holds {counts[first]} values where {width} give {values}")
+
+
 # --- the table ---------------------------------------------------------------------------------------
 
 

@@ -97,6 +97,8 @@ def read_depth(path: str | Path, *, scale: float | None = None) -> np.ndarray:
     check_input_file(path)
     try:
         raw = _read_raw(path)
+    except CloudFileError:
+        raise  # an OSError too, with its own message: wrapped, it read "cannot read X: X: not a PNG"
     except OSError as exc:  # a permission denied was a traceback (the point cloud readers said it in a line)
         raise CloudFileError(f"cannot read {path}: {exc.strerror or exc}") from None
     if raw.size == 0:

@@ -32,6 +32,7 @@ from estimation.cloudtable import (
     byte_colors,
     check_binary_size,
     check_max_points,
+    check_row_widths,
     check_text_size,
     columns_from,
     header_count,
@@ -127,7 +128,7 @@ def read_pcd(path: Path, max_points: int) -> Columns:
     dtype = np.dtype([(nm, "<" + c, (k,)) if k != 1 else (nm, "<" + c) for nm, c, k in zip(names, codes, counts, strict=True)])
     data = header["DATA"][0].lower() if header["DATA"] else ""
     if data == "ascii":
-        table = _read_pcd_ascii(path, size, offset, n, names, counts)
+        table = _read_pcd_ascii(path, size, offset, n, names, counts, len(lines) + 1)
     elif data == "binary":
         check_binary_size(path, size, offset, n, dtype.itemsize, "points")
         if size != offset + n * dtype.itemsize:
@@ -224,17 +225,15 @@ def _viewpoint(path: Path, words: list[str] | None) -> np.ndarray | None:
 
 
 def _read_pcd_ascii(
-    path: Path, size: int, offset: int, n: int, names: list[str], counts: list[int]
+    path: Path, size: int, offset: int, n: int, names: list[str], counts: list[int], first_line: int
 ) -> dict[str, np.ndarray]:
+    """The fields of ``n`` text rows from ``offset``, the file's line ``first_line``."""
     width = sum(counts)
     check_text_size(path, size, offset, n, width, "points")
     rows, trailing = read_rows(path, offset, n, width)
+    check_row_widths(path, rows, n, width, first_line, "points", "the header's FIELDS and COUNT")
     values = parse_numbers(b" ".join(rows))
-    if values.size < n * width:
-        raise CloudFileError(
-            f"{path}: truncated: the header claims {n} points but the file holds {values.size // width}"
-        )
-    if values.size > n * width or trailing:
+    if trailing:
         log.warning("%s: text after the %d points the header claims; ignored", path, n)
     table = values[: n * width].reshape(n, width)
     starts = np.cumsum([0, *counts])

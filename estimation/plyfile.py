@@ -23,6 +23,7 @@ from estimation.cloudtable import (
     byte_colors,
     check_binary_size,
     check_max_points,
+    check_row_widths,
     check_text_size,
     columns_from,
     header_count,
@@ -86,6 +87,8 @@ def _parse_ply_header(path: Path, head: bytes) -> tuple[str, list[_PlyElement], 
                 raise CloudFileError(f"{path}: unknown PLY format {words[1][:40]!r}; use one of {list(_PLY_FORMATS)}")
             fmt = words[1]
         elif key == "element" and len(words) == 3:
+            if any(e.name == words[1] for e in elements):  # the second block of vertices was skipped in silence
+                raise CloudFileError(f"{path}: the PLY header declares element {words[1][:40]!r} twice")
             elements.append(_PlyElement(words[1], header_count(path, words[2], f"element {words[1][:40]!r}"), [], {}))
         elif key == "property" and len(words) >= 3:
             if not elements:
@@ -133,7 +136,7 @@ def read_ply(path: Path, max_points: int) -> Columns:
     check_max_points(path, vertex.count, max_points)
     order = _PLY_FORMATS[fmt]
     if order is None:
-        table, types = _read_ply_ascii(path, size, offset, elements, index)
+        table, types = _read_ply_ascii(path, size, offset, elements, index, head[:offset].count(b"\n") + 1)
     else:
         table, types = _read_ply_binary(path, size, offset, elements, index, order)
     faces = sum(e.count for e in elements if e.name == "face")
@@ -194,8 +197,9 @@ def _read_ply_binary(
 
 
 def _read_ply_ascii(
-    path: Path, size: int, offset: int, elements: list[_PlyElement], index: int
+    path: Path, size: int, offset: int, elements: list[_PlyElement], index: int, first_line: int
 ) -> tuple[dict[str, np.ndarray], dict[str, np.dtype]]:
+    """The vertex element ``elements[index]`` of the text from ``offset``, the file's line ``first_line``."""
     vertex = elements[index]
     if vertex.lists:
         raise CloudFileError(f"{path}: the PLY vertex element has list properties {sorted(vertex.lists)}; not supported")
@@ -203,22 +207,50 @@ def _read_ply_ascii(
     skip = sum(e.count for e in elements[:index])
     check_text_size(path, size, offset, vertex.count, nprops, "vertices")
     rows, trailing = read_rows(path, offset, skip + vertex.count, nprops)
+    present = len(rows) - (bool(rows) and not rows[-1])  # the lines after the header; not the empty one past the end
+    seen = 0
+    for before in elements[:index]:
+        seen += before.count
+        if seen > present:  # else it was "claims 3000 vertices but the file holds 0" for a face count of 1e15
+            raise CloudFileError(f"{path}: truncated: PLY element {before.name!r} ({before.count} rows) before the "
+                                 f"vertices runs past the end of the file ({present} lines after the header)")
     lines = rows[skip : skip + vertex.count]
-    if len(lines) < vertex.count or (lines and not lines[-1].strip()):
-        present = sum(1 for line in lines if line.strip())
-        raise CloudFileError(f"{path}: truncated: the header claims {vertex.count} vertices but the file holds {present}")
+    check_row_widths(path, lines, vertex.count, nprops, first_line + skip, "vertices",
+                     "the vertex element's properties")
     values = parse_numbers(b" ".join(lines))
-    if values.size != vertex.count * nprops:
-        raise CloudFileError(
-            f"{path}: the {vertex.count} vertex lines hold {values.size} values, not {vertex.count} x {nprops} "
-            "properties (truncated or malformed)"
-        )
     if len(elements) == index + 1 and trailing:
         log.warning("%s: text after the %d vertices the header claims; ignored", path, vertex.count)
     table = values.reshape(vertex.count, nprops)
+    _check_integers(path, table, vertex.props, lines, first_line + skip)
     structured = {name: table[:, i] for i, (name, _) in enumerate(vertex.props)}
     types = {name: np.dtype(code) for name, code in vertex.props}  # type: ignore[arg-type]
     return structured, types
+
+
+def _check_integers(path: Path, table: np.ndarray, props: list[tuple[str, str | None]], lines: list[bytes],
+                    first_line: int) -> None:
+    """Raise on the first value of ``table`` ((n, properties) float64, as read from ``lines``, the file's from
+    ``first_line``) that its integer property's type cannot hold: a uchar x of -250 and an int x of 0.0068 were
+    taken as written.
+
+    Raises:
+        CloudFileError: the value, its line and its property's type.
+    """
+    bad_row, bad_col = len(table), 0
+    for col, (_, code) in enumerate(props):
+        dtype = np.dtype(code)
+        if dtype.kind in "iu":
+            info = np.iinfo(dtype)
+            values = table[:bad_row, col]
+            with np.errstate(invalid="ignore"):  # NaN fits no integer: refused as not whole
+                fits = (values == np.round(values)) & (values >= info.min) & (values <= info.max)
+            if not fits.all():
+                bad_row, bad_col = int(np.argmin(fits)), col
+    if bad_row < len(table):
+        name, dtype = props[bad_col][0], np.dtype(props[bad_col][1])
+        token = lines[bad_row].split()[bad_col].decode("latin-1")[:40]
+        raise CloudFileError(f"{path}: line {first_line + bad_row}: {token!r} does not fit the vertex property {name!r} "
+                             f"({dtype.name}: whole numbers {np.iinfo(dtype).min} to {np.iinfo(dtype).max})")
 
 
 def write_ply(cloud: PointCloud, path: Path, *, ascii: bool) -> None:

@@ -54,11 +54,40 @@ def _scan_text(path: Path, max_points: int) -> None:
                              f"(at most {MAX_TEXT_LINE:,}): not a text point cloud")
 
 
+#: Byte-order marks of the wide Unicode encodings, UTF-32's first: its little-endian mark starts with UTF-16's.
+_WIDE_MARKS = ((codecs.BOM_UTF32_LE, "UTF-32"), (codecs.BOM_UTF32_BE, "UTF-32"),
+               (codecs.BOM_UTF16_LE, "UTF-16"), (codecs.BOM_UTF16_BE, "UTF-16"))
+#: Bytes ASCII text is made of: tab, line ends, the printable characters.
+_ASCII_TEXT = np.array([9, 10, 13, *range(32, 127)], dtype=np.uint8)
+#: Bytes from a file's start :func:`wide_encoding` looks at.
+ENCODING_SAMPLE = 4096
+
+
+def wide_encoding(head: bytes) -> str | None:
+    """The encoding, "UTF-16" or "UTF-32", when ``head`` (a file's first bytes) starts with its byte-order mark or
+    is ASCII text in it without one (each character next to one NUL byte, or three); else None.
+
+    Notepad and PowerShell's ``>`` write UTF-16: read byte by byte, its rows were "not numbers" quoted as garbage.
+    """
+    for mark, name in _WIDE_MARKS:
+        if head.startswith(mark):
+            return name
+    sample = head[:ENCODING_SAMPLE]
+    for width in (4, 2):
+        units = np.frombuffer(sample[: len(sample) // width * width], np.uint8).reshape(-1, width)
+        nul = (units == 0).all(axis=0)  # the byte positions of a character that are NUL throughout
+        if len(units) > 1 and nul.sum() == width - 1 and np.isin(units[:, ~nul], _ASCII_TEXT).all():
+            return f"UTF-{8 * width}"
+    return None
+
+
 def read_text(path: Path, max_points: int) -> Columns:
     suffix = path.suffix.lower()
     _scan_text(path, max_points)
     # A spreadsheet's CSV starts with a UTF-8 byte-order mark: "could not convert string 'ï»¿0.1'".
     text = path.read_bytes().removeprefix(codecs.BOM_UTF8)
+    if (encoding := wide_encoding(text)) is not None:
+        raise CloudFileError(f"{path}: the file is {encoding} encoded; save it as UTF-8 or ASCII")
     if text.count(b"\n") > max_points + 1:
         raise CloudFileError(f"{path}: more than max_points={max_points} lines (pass a larger max_points if real)")
     claimed = None

@@ -490,6 +490,10 @@ def _object(o: ObjectDoc, index: int, base: Path, doc: dict) -> ObjectSpec:
             _check_mesh_file(value, where)  # type: ignore[arg-type]
     elif source == "primitive":
         value = {"type": o.primitive.__struct_config__.tag, "size": o.primitive.size}  # type: ignore[union-attr]
+        if isinstance(o.primitive, TorusDoc) and o.primitive.size[1] >= o.primitive.size[0]:
+            # Its tube would cross the axis: a self-intersecting mesh whose signed volume is not the solid's.
+            raise SceneError(f"{where} primitive.size: a torus's minor radius must be less than its major radius "
+                             f"(size = [major, minor]), got {list(o.primitive.size)}")
     else:
         _paper(value, where)
     if o.material is not UNSET and o.density is not UNSET:

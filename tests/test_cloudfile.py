@@ -290,6 +290,10 @@ def test_npz_sensor_origins(tmp_path, cloud):
         back = load_cloud(tmp_path / "o.npz")
         np.testing.assert_array_equal(back.sensor_origins, original.sensor_origins)
 
+PCD_HEAD_4 = "FIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH 4\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS 4\nDATA ascii\n"
+PLY_HEAD_4 = "ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\nproperty float z\nend_header\n"
+
+
 @pytest.mark.parametrize(("name", "text", "line"), [
     ("r.xyz", "0 0 0\n1 0 0\n0 1\n0 0 1\n", 3),
     ("r.xyz", "# scan\n\n0 0 0\n1 0 0 7\n", 4),  # comments and blank lines count as the editor counts them
@@ -308,12 +312,42 @@ def test_a_ragged_text_cloud_names_its_first_bad_line(tmp_path, name, text, line
     assert re.search(r"line \d+ holds \d+ values where the rows before hold \d+$", message), message
 
 
+@pytest.mark.parametrize(("name", "text", "line"), [
+    # Two points a line and a blank line after each: the total was right, and the file loaded.
+    ("r.pcd", PCD_HEAD_4 + "0 0 0 1 0 0\n\n0 1 0 0 0 1\n\n", 10),
+    # One value too many, then one too few: the point between them moved along a coordinate.
+    ("r.pcd", PCD_HEAD_4 + "0 0 0\n1 0 0 5\n0 1\n0 0 1\n", 11),
+    ("r.ply", PLY_HEAD_4 + "0 0 0\n1 0 0 5\n0 1\n0 0 1\n", 9),
+    ("r.ply", PLY_HEAD_4 + "0 0 0\n\n1 0 0\n0 1 0\n0 0 1\n", 9),  # a blank line among the rows
+])
+def test_a_ragged_pcd_or_ply_names_its_first_bad_line(tmp_path, name, text, line):
+    path = tmp_path / name
+    path.write_bytes(text.encode())
+    with pytest.raises(CloudFileError, match=rf"^{re.escape(str(path))}: line {line} holds \d+ values where the "
+                                             rf"(header's FIELDS and COUNT|vertex element's properties) give 3$"):
+        load_cloud(path)
+
+
 def test_a_text_cloud_with_a_byte_order_mark(tmp_path, cloud):
     for suffix in (".xyz", ".csv"):
         sep = "," if suffix == ".csv" else " "
         rows = "".join(sep.join(repr(float(v)) for v in p) + "\n" for p in cloud.points)
         (tmp_path / f"c{suffix}").write_bytes(b"\xef\xbb\xbf" + rows.encode())
         np.testing.assert_array_equal(load_cloud(tmp_path / f"c{suffix}").points, cloud.points)
+
+
+@pytest.mark.parametrize(("encoding", "name"), [
+    ("utf-16", "UTF-16"), ("utf-16-le", "UTF-16"), ("utf-16-be", "UTF-16"), ("utf-32", "UTF-32"), ("utf-32-le", "UTF-32"),
+])
+def test_a_utf16_or_utf32_text_cloud_is_named_as_such(tmp_path, cloud, encoding, name):
+    # Notepad's UTF-16 was read byte by byte: "line 1 is not numbers ...: 'ÿþ0\x00.\x000\x00...'".
+    path = tmp_path / "c.xyz"
+    path.write_bytes(_rows(cloud.points, " ").encode(encoding))  # "utf-16" and "utf-32" write a byte-order mark
+    with pytest.raises(CloudFileError, match=rf"^{re.escape(str(path))}: the file is {name} encoded; save it as UTF-8 "
+                                             rf"or ASCII$"):
+        load_cloud(path)
+    path.write_bytes(_rows(cloud.points, " ").encode("ascii"))
+    assert len(load_cloud(path)) == len(cloud)
 
 
 def _rows(table: np.ndarray, sep: str) -> str:
@@ -511,7 +545,20 @@ PLY_HEAD = "ply\nformat binary_little_endian 1.0\nelement vertex 1\n"
         ("ply\nformat binary_little_endian 1.0\nelement face 1\nproperty list uchar int vertex_indices\n"
          "element vertex 1\n" + XYZ_FLOAT + "end_header\n", r"cannot skip PLY element 'face'"),
         ("ply\nformat ascii 1.0\nelement vertex 2\n" + XYZ_FLOAT + "end_header\n1 2 3\n4 5 x\n", r"unreadable \(text that is not a number among the values\)"),
-        ("ply\nformat ascii 1.0\nelement vertex 2\n" + XYZ_FLOAT + "end_header\n1 2 3\n4 5 6 7\n", r"hold 7 values, not 2 x 3"),
+        ("ply\nformat ascii 1.0\nelement vertex 2\n" + XYZ_FLOAT + "end_header\n1 2 3\n4 5 6 7\n",
+         r"line 9 holds 4 values where the vertex element's properties give 3$"),
+        # The second block of vertices was skipped in silence.
+        ("ply\nformat ascii 1.0\nelement vertex 1\n" + XYZ_FLOAT + "element vertex 1\n" + XYZ_FLOAT
+         + "end_header\n1 2 3\n4 5 6\n", r"the PLY header declares element 'vertex' twice$"),
+        # Values the declared type cannot hold were taken as written.
+        ("ply\nformat ascii 1.0\nelement vertex 2\nproperty uchar x\nproperty uchar y\nproperty uchar z\nend_header\n"
+         "1 2 3\n68 -250 7\n", r"line 9: '-250' does not fit the vertex property 'y' \(uint8: whole numbers 0 to 255\)$"),
+        ("ply\nformat ascii 1.0\nelement vertex 1\nproperty int x\nproperty float y\nproperty float z\nend_header\n"
+         "0.0068 0.5 0.5\n", r"line 8: '0.0068' does not fit the vertex property 'x' \(int32: whole numbers -2147483648"),
+        # It was "the header claims 1 vertices but the file holds 0": the faces before them are what does not fit.
+        ("ply\nformat ascii 1.0\nelement face 1000000000000000\nproperty list uchar int vertex_indices\nelement vertex 1\n"
+         + XYZ_FLOAT + "end_header\n3 0 1 2\n1 2 3\n", r"truncated: PLY element 'face' \(1000000000000000 rows\) "
+         r"before the vertices runs past the end of the file \(2 lines after the header\)$"),
         ("ply\nformat ascii 1.0\nfrobnicate 3\nend_header\n", r"unexpected PLY header line 'frobnicate 3'"),
         ("ply\nformat ascii 1.0\nelement edge 1\nproperty int a\nend_header\n", r"the PLY header has no vertex element"),
         # Past int64 it was "Python int too large to convert to C ssize_t" from the line split

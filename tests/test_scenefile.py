@@ -68,6 +68,10 @@ def _top(**top: object) -> dict:
         (_top(table={"size": [1e-300, 1, 1]}), r"^table.size\[0\]: must be 0.001 to 100 m, got 1e-300$"),
         (_top(end_effector={"radius": 1e300}), r"^end_effector.radius: must be 0.001 to 1 m \(a fingertip or a tool; what "
          r"the wire carries\), got 1e\+300$"),
+        # Its tube crossed the axis: a self-intersecting mesh whose signed volume is not the solid's.
+        (_scene(primitive={"type": "torus", "size": [0.01, 0.05]}), r"^object 'mug' primitive.size: a torus's minor "
+         r"radius must be less than its major radius \(size = \[major, minor\]\), got \[0.01, 0.05\]$"),
+        (_scene(primitive={"type": "torus", "size": [0.03, 0.03]}), r"minor radius must be less than its major"),
         (_scene(primitive={"type": "sphere", "size": [1e10]}),
          r"^object 'mug' primitive.size\[0\]: must be 0.001 to 100 m, got 10000000000.0$"),
         (_scene(primitive={"type": "sphere", "size": [1e-300]}),

@@ -34,6 +34,12 @@ def test_one_waypoint_is_held_for_ever(tmp_path):
 @pytest.mark.parametrize("text, match", [
     ("t,x,y\n0,1,2\n", r"path.csv:1: expected 4 columns t,x,y,z, got 3$"),
     ("t,x,y,z\n0,1,2,3\n1,1,2\n", r"path.csv:3: expected 4 columns"),
+    # "got 1" alone left the reason to be guessed.
+    ("0 -0.3 0 0.56\n1 0 0 0.56\n", r"path.csv:1: expected 4 columns t,x,y,z, got 1 \(separated by white space; the "
+     r"separator must be a comma\)$"),
+    ("t\tx\ty\tz\n0\t-0.3\t0\t0.56\n", r"path.csv:1: expected 4 columns t,x,y,z, got 1 \(separated by white space"),
+    ("0;-0.3;0;0.56\n", r"path.csv:1: expected 4 columns t,x,y,z, got 1 \(separated by ';'; the separator must be "
+     r"a comma\)$"),
     ("t,x,y,z\n0,1,two,3\n", r"path.csv:2: not a number in '0,1,two,3'$"),
     ("0,1,2,3\n1,nan,2,3\n", r"path.csv:2: non-finite value"),
     ("0,1,2,3\n1,1,2,inf\n", r"path.csv:2: non-finite value"),

@@ -363,7 +363,7 @@ def _read_checked(path: Path, scale: float) -> np.ndarray:
     previous = -math.inf
     for number, cells in _rows(path):
         if len(cells) != 4:
-            raise TrajectoryError(f"{path}:{number}: expected 4 columns t,x,y,z, got {len(cells)}")
+            raise TrajectoryError(f"{path}:{number}: expected 4 columns t,x,y,z, got {len(cells)}{_separator(cells)}")
         try:
             row = [float(c) for c in cells]
         except ValueError:
@@ -382,6 +382,16 @@ def _read_checked(path: Path, scale: float) -> np.ndarray:
     if not values:
         raise TrajectoryError(f"{path}: no waypoints (expected rows t,x,y,z)")
     return np.frombuffer(values, dtype=np.float64).reshape(-1, 4)
+
+
+def _separator(cells: list[str]) -> str:
+    """What a refused row of one cell says when it holds four values split by ';' or white space: 'got 1' alone
+    left the reason to be guessed."""
+    if len(cells) == 1:
+        for separator, name in ((";", "';'"), (None, "white space")):
+            if len(cells[0].split(separator)) == 4:
+                return f" (separated by {name}; the separator must be a comma)"
+    return ""
 
 
 def _shown(cells: list[str], most: int = 80) -> str:
