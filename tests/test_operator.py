@@ -106,8 +106,14 @@ def test_the_end_effector_follows_a_device_and_forces_come_back(twin):
     # Passed on to the remote as commands: its own loop applies them when they arrive (waited for, not timed).
     _run_until(local, lambda: np.allclose(remote.twin.data.mocap_pos[0], free))
     driver.received()  # forget the free-space forces so far
-    # Into the crate (centre 0.53 m high at the table's middle): contact, and a force pushing back in -x.
-    driver.target([-0.05, 0.0, 0.53])
+    # Into the crate (centre 0.53 m high at the table's middle, its face at x = -0.06) as a hand would push, at
+    # 0.1 m/s from in front of it: contact, and a force pushing back in -x. (A jump there, which this test made
+    # before the end effector's speed limit, hit the crate at 2 m/s now and knocked it out of reach.)
+    sent = 1
+    for x in np.linspace(-0.12, -0.05, 71):
+        driver.target([x, 0.0, 0.53])
+        sent += 1
+        local.run(0.01)
     _run_until(local, lambda: np.allclose(local.twin.data.mocap_pos[0], [-0.05, 0.0, 0.53]))
     local.run(0.3)
     forces = driver.received()
@@ -119,7 +125,7 @@ def test_the_end_effector_follows_a_device_and_forces_come_back(twin):
     # Published at 200 Hz of twin time, not at the 1 kHz loop rate.
     times = np.array([f.sim_time for f in forces])
     assert np.median(np.diff(times)) == pytest.approx(0.005, abs=1.5e-3)
-    assert local.report.operator_targets == 2 and not local.report.operator_dropped
+    assert local.report.operator_targets == sent and not local.report.operator_dropped
     recorder.close(twin_time_s=local.twin.time)
     rec = read_recording(recorder.path)
     assert rec.counts[TARGET_TOPIC] > 500 and rec.counts[FORCE_TOPIC] > 5

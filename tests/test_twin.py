@@ -18,7 +18,7 @@ from estimation.errors import SettingsError
 from scenes.build import build_scene, write_scene
 from scenes.scenefile import SceneError, load_scene, parse_scene
 from twin.decompose import CoacdSettings, decompose
-from twin.model import COLLIDES, add_object
+from twin.model import COLLIDES, EE_BODY, add_object
 from twin.sim import Twin, run_paced
 from twin.trajectory import push_trajectory
 
@@ -511,6 +511,38 @@ def test_a_non_finite_object_is_put_back_and_the_rest_of_the_twin_runs_on(built,
             twin.set_pose("crate", np.zeros(3), np.zeros(4))
         with pytest.raises(ValueError, match="finite"):
             twin.set_end_effector(np.array([0.0, np.inf, 0.0]))
+
+
+def test_a_jump_of_the_target_is_followed_at_the_speed_limit(built):
+    """A script jumping the target 0.6 m in a microsecond pulled the sphere through the scene at ~30 m/s (its soft
+    weld closes a gap in ~20 ms) and flung the crate 0.29 m. The target now moves at EE_MAX_SPEED at most."""
+    from twin.sim import EE_MAX_SPEED
+
+    with Twin(built.spec.copy(), background=False) as twin:
+        ee = twin.model.body(EE_BODY).id
+        start = twin.data.mocap_pos[0].copy()
+        goal = start + np.array([0.0, 0.0, 0.3])  # straight up: free space
+        twin.set_end_effector(goal)
+        assert twin.end_effector_goal is not None and np.allclose(twin.end_effector_goal, goal)
+        speeds, dt = [], twin.model.opt.timestep
+        for _ in range(400):
+            before = twin.data.mocap_pos[0].copy()
+            twin.step()
+            speeds.append(np.linalg.norm(twin.data.mocap_pos[0] - before) / dt)
+            speeds.append(float(np.linalg.norm(twin.data.cvel[ee][3:])))
+        assert max(speeds) <= EE_MAX_SPEED * 1.3  # the sphere lags the target a little and catches up
+        assert np.allclose(twin.data.mocap_pos[0], goal) and twin.end_effector_goal is None
+        # steps of several at once move it as far as one at a time would
+        twin.set_end_effector(start)
+        twin.step(10)
+        assert np.linalg.norm(twin.data.mocap_pos[0] - goal) == pytest.approx(10 * EE_MAX_SPEED * dt)
+        # a target within a step's reach is taken at once, as before
+        here = twin.data.mocap_pos[0].copy()
+        twin.set_end_effector(here + 0.001)
+        assert np.allclose(twin.data.mocap_pos[0], here + 0.001) and twin.end_effector_goal is None
+        twin.ee_max_speed = float("nan")
+        with pytest.raises(ValueError, match="ee_max_speed must be a number of m/s above 0"):
+            twin.set_end_effector(here)
 
 
 def test_setters_and_step_refuse_absurd_values_and_leave_the_state_alone(built):

@@ -24,6 +24,13 @@ from twin.trajectory import Trajectory
 log = logging.getLogger(__name__)
 
 
+#: Fastest the end effector's mocap target moves, m/s: a target further than this allows is approached at this
+#: speed, step by step. Human hand motion on a haptic device peaks near 1-2 m/s, and collaborative robots are held
+#: to about that (ISO/TS 15066 speeds of 1-2 m/s); a script that jumped 0.6 m in a microsecond pulled the soft
+#: weld's sphere through the scene at ~30 m/s and flung a crate 0.29 m.
+EE_MAX_SPEED = 2.0
+
+
 class TwinClosedError(TwinError, RuntimeError):
     """A closed :class:`Twin` was asked to step or change."""
 
@@ -111,6 +118,8 @@ class Twin:
         self._index_of, self._index = None, {}  # joint() look-ups of this model
         self._top_of, self._top, self._over = None, None, None  # twin.tabletop of this model, its switches
         self._top_wait, self._top_forced = 0, True  # steps until the next twin.tabletop decision; decide even asleep
+        self.ee_max_speed = EE_MAX_SPEED  # m/s (see EE_MAX_SPEED); inf: the target is taken at once
+        self._ee_goal: np.ndarray | None = None  # where the mocap target is headed, further than one step moves it
 
     def __enter__(self) -> Twin:
         self._check_open()
@@ -169,11 +178,14 @@ class Twin:
                 self._top.switch(self.model, self._over)
             self._decide_next_step()
         top = self._top
-        if top is None:
+        if top is None and self._ee_goal is None:
             mujoco.mj_step(self.model, d, n)
         else:
             for _ in range(n):
-                self._switch_top(top)
+                if self._ee_goal is not None:
+                    self._approach_goal()
+                if top is not None:
+                    self._switch_top(top)
                 mujoco.mj_step(self.model, d)
         if not self._finite():  # the step itself blew up: put back what it touched
             self._recover()
@@ -259,7 +271,9 @@ class Twin:
         return self._mocap is not None
 
     def set_end_effector(self, position: np.ndarray) -> None:
-        """Move the operator's mocap target (world frame, metres).
+        """Move the operator's mocap target (world frame, metres): at once when one step at :attr:`ee_max_speed`
+        reaches it, else at that speed over the next steps (:attr:`end_effector_goal`), as a robot's speed limit
+        would: a jump of the operator's target pulls the end effector through the scene no faster.
 
         Raises:
             LookupError: the scene has no end effector. ValueError: not 3 finite numbers within
@@ -268,7 +282,32 @@ class Twin:
         self._check_open()
         if self._mocap is None:
             raise LookupError("this scene has no end effector")
-        self.data.mocap_pos[self._mocap] = _vector(position, 3, MAX_COORDINATE, "end-effector target", "m")
+        goal = _vector(position, 3, MAX_COORDINATE, "end-effector target", "m")
+        if not float(self.ee_max_speed) > 0:  # NaN or <= 0 would freeze or reverse it: refused on use
+            raise ValueError(f"ee_max_speed must be a number of m/s above 0, got {self.ee_max_speed!r}")
+        here = self.data.mocap_pos[self._mocap]
+        if float(np.linalg.norm(goal - here)) <= self.ee_max_speed * self.model.opt.timestep:
+            here[:] = goal
+            self._ee_goal = None
+        else:  # approached at ee_max_speed, a step at a time (step())
+            self._ee_goal = goal
+
+    @property
+    def end_effector_goal(self) -> np.ndarray | None:
+        """Where the end effector's target is headed (world, metres) while the speed limit holds it back, else None
+        (the target is where :meth:`set_end_effector` put it)."""
+        return None if self._ee_goal is None else self._ee_goal.copy()
+
+    def _approach_goal(self) -> None:
+        """Move the mocap target one step's worth of :attr:`ee_max_speed` towards :attr:`_ee_goal`."""
+        here = self.data.mocap_pos[self._mocap]
+        gap = self._ee_goal - here
+        distance, most = float(np.linalg.norm(gap)), self.ee_max_speed * self.model.opt.timestep
+        if distance <= most:
+            here[:] = self._ee_goal
+            self._ee_goal = None
+        else:
+            here += gap * (most / distance)
 
     def end_effector_force(self) -> np.ndarray:
         """Net contact force the scene exerts on the end effector, world axes, newtons, (3,).
@@ -442,6 +481,8 @@ class Twin:
         old_mocap = self.data.mocap_pos.copy()
         self.model, self.data = model, data
         self._mocap = self._mocap_id()
+        if self._mocap is None:
+            self._ee_goal = None
         if self._mocap is not None and len(old_mocap) == len(data.mocap_pos):
             data.mocap_pos[:] = old_mocap
         mujoco.mj_forward(model, data)
