@@ -366,7 +366,7 @@ def test_a_forged_device_mark_freezes_the_device_no_longer_than_the_mark_expiry(
             seq += 1
             target(goal, 6, seq)
             session.tick()
-        assert np.allclose(local.device_target, goal) and np.allclose(local.twin.data.mocap_pos[0], goal)
+        assert np.allclose(local.device_target, goal) and np.allclose(local.twin.end_effector_goal, goal)
         assert local.report.operator_dropped["out-of-order"] >= seq - 5
         # Forged device ids: at most MAX_SENDERS marks are kept.
         for k in range(MAX_SENDERS + 10):
@@ -383,7 +383,7 @@ def test_the_remote_takes_operator_commands_newest_first_and_inside_the_workspac
             operator.put(Keys("small").operator, OperatorCommand(v=VERSION, stamp_ns=0, epoch=epoch, seq=seq,
                                                                  position=position))
             session.run(0.01)
-            return remote.twin.data.mocap_pos[0].copy()
+            return remote.twin.end_effector_goal  # reached at the end effector's speed limit (twin.sim.EE_MAX_SPEED)
 
         above = (0.0, 0.0, 0.7)
         assert np.allclose(command(above, 5, 100), above)

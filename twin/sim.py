@@ -293,10 +293,16 @@ class Twin:
             self._ee_goal = goal
 
     @property
-    def end_effector_goal(self) -> np.ndarray | None:
-        """Where the end effector's target is headed (world, metres) while the speed limit holds it back, else None
-        (the target is where :meth:`set_end_effector` put it)."""
-        return None if self._ee_goal is None else self._ee_goal.copy()
+    def end_effector_goal(self) -> np.ndarray:
+        """Where the end effector's target is headed (world, metres): the last :meth:`set_end_effector`, which the
+        target reaches at :attr:`ee_max_speed` (it is there already when this equals ``data.mocap_pos``).
+
+        Raises:
+            LookupError: the scene has no end effector.
+        """
+        if self._mocap is None:
+            raise LookupError("this scene has no end effector")
+        return (self.data.mocap_pos[self._mocap] if self._ee_goal is None else self._ee_goal).copy()
 
     def _approach_goal(self) -> None:
         """Move the mocap target one step's worth of :attr:`ee_max_speed` towards :attr:`_ee_goal`."""
