@@ -153,7 +153,7 @@ _NUMBERS: dict[str, tuple[str, float, bool, float]] = {
     # In ms here, an hour at most: sync.netem.MAX_DELAY_S, which said it in seconds ("got 10000000.0" for 1e10 ms).
     "delay_ms": ("--delay", 0.0, True, 3.6e6),
     "jitter_ms": ("--jitter", 0.0, True, 3.6e6),
-    "loss_pct": ("--loss", 0.0, True, 100.0),
+    "loss_pct": ("--loss", 0.0, True, math.inf),  # and below 100: check_args says why, first
     # At least one physics step (twin.model.TIMESTEP): 0.0004 s ran no tick and reported "89x real time".
     "replay_duration": ("--duration", 1e-3, True, math.inf),
 }
@@ -163,11 +163,15 @@ def check_args(args: argparse.Namespace) -> None:
     """Refuse option values no command can use, before the command does any work.
 
     Raises:
-        TwinError: a non-finite or out-of-range number, a non-finite --viewpoint, or a --rerun save path
-            whose folder does not exist or cannot be written.
+        TwinError: a non-finite or out-of-range number (--loss of 100 % or more), a non-finite --viewpoint, or
+            a --rerun save path whose folder does not exist or cannot be written.
     """
     from estimation.contracts import check_number  # here: numpy, which --help does not need
 
+    loss = getattr(args, "loss_pct", None)
+    if loss is not None and loss >= 100:  # the link model takes a loss of 1; a session under it measures nothing
+        raise TwinError(f"--loss must be below 100 (at 100 % every packet is lost both ways and the run would "
+                        f"measure nothing), got {refused_number(loss, 100)}")
     for attr, (flag, low, low_ok, high) in _NUMBERS.items():
         value = getattr(args, attr, None)
         if value is None:
