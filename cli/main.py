@@ -1029,12 +1029,13 @@ class _ReplayProgress:
 
 def _cmd_replay(args: argparse.Namespace) -> int:
     from cli.record import check_replay_inputs, check_replay_out, network_from_options, print_summary, replay
+    from sync.netem import MAX_SEED
 
+    if args.seed is not None and not 0 <= args.seed <= MAX_SEED:  # always: a recording's network takes it too
+        raise TwinError(f"--seed must be a whole number from 0 to {MAX_SEED}, got {args.seed}")
     check_replay_inputs(args.recording)
     if args.out is not None:
         check_replay_out(args.out, args.recording, args.script, args.scene)
-    if args.seed is not None and args.seed < 0:
-        raise TwinError(f"--seed must be >= 0, got {args.seed}")
     network = network_from_options(delay_ms=args.delay_ms, jitter_ms=args.jitter_ms, loss_pct=args.loss_pct,
                                    seed=args.seed or 0)
     with _ReplayProgress() as progress:
