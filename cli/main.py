@@ -163,8 +163,9 @@ def check_args(args: argparse.Namespace) -> None:
     """Refuse option values no command can use, before the command does any work.
 
     Raises:
-        TwinError: a non-finite or out-of-range number (--loss of 100 % or more), a non-finite --viewpoint, or
-            a --rerun save path whose folder does not exist or cannot be written.
+        TwinError: a non-finite or out-of-range number (--loss of 100 % or more), a non-finite --viewpoint,
+            --units other than m without --script, or a --rerun save path whose folder does not exist or cannot
+            be written.
     """
     from estimation.contracts import check_number  # here: numpy, which --help does not need
 
@@ -187,6 +188,10 @@ def check_args(args: argparse.Namespace) -> None:
             raise TwinError(f"--points must be from {MIN_POINTS} to {MAX_POINTS}, got {args.points}")
     if getattr(args, "max_hulls", None) is not None and args.max_hulls != -1 and args.max_hulls < 1:
         raise TwinError(f"--max-hulls must be -1 (no cap) or >= 1, got {args.max_hulls}")
+    # run, local and replay scale only the --script file by --units: without it, --units mm did nothing, silently.
+    if "script" in vars(args) and args.script is None and args.units != "m":
+        raise TwinError(f"--units applies to --script's file, and no --script is given: drop --units {args.units} "
+                        "(everything else is in metres)")
     inputs = _input_files(args)
     if getattr(args, "record", None) is not None:
         _check_writable_file(Path(args.record), "--record")
