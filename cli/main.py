@@ -21,7 +21,7 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import NoReturn
 
-from cli.outputs import check_mesh_file, check_not_input, check_record_file, replace_file
+from cli.outputs import check_mesh_file, check_not_input, check_record_file, replace_file, write_failure
 from estimation.errors import TwinError, refused_number
 from estimation.materials import MAX_DENSITY, MIN_DENSITY
 from twin.settings import MAX_RATE_HZ
@@ -81,15 +81,17 @@ def main(argv: list[str] | None = None) -> int:
         except KeyboardInterrupt:
             return 130
         except OSError as exc:
-            if exc.errno not in _OUTPUT_ERRNOS or exc.filename is not None:
+            # A named file's error is an output's only when the disk is full: EIO may be an input's read.
+            if exc.errno not in _OUTPUT_ERRNOS or (exc.filename is not None and exc.errno not in _FULL_ERRNOS):
                 raise
-            # stdout is full or gone (a full disk, a closed pipe): one line, and no second failure at exit
-            # when Python flushes stdout again.
+            # stdout (or an output file) is full or gone (a full disk, a closed pipe): one line, and no second
+            # failure at exit when Python flushes stdout again.
             _drop_held(held_log)
             os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
-            if exc.errno != errno.EPIPE:  # a closed pipe is the reader's choice (| head): said by no one
-                print(f"twin {args.command}: error: cannot write the output: {exc.strerror}", file=sys.stderr)
-            return 1
+            if exc.errno == errno.EPIPE:  # a closed pipe is the reader's choice (| head): said by no one
+                return 1
+            print(f"twin {args.command}: error: {write_failure(exc, exc.filename or 'the output')}", file=sys.stderr)
+            return EXIT_BAD_INPUT
     if held_log is not None:
         held_log.flush()
     for category, message in held:
@@ -101,6 +103,8 @@ def main(argv: list[str] | None = None) -> int:
 
 #: errno of a failed write to the standard output: a full disk or quota, a closed pipe, an I/O error.
 _OUTPUT_ERRNOS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EPIPE, errno.EIO})
+#: errno of a full disk or quota: only a write (or a file created) fails so, whichever file it names.
+_FULL_ERRNOS = frozenset({errno.ENOSPC, errno.EDQUOT})
 
 #: Warnings kept and shown after a command that succeeded; the rest are counted.
 MAX_HELD_WARNINGS = 20
