@@ -767,8 +767,10 @@ def _load_twin(args: argparse.Namespace):  # type: ignore[no-untyped-def]
         import mujoco
 
         xml = path / "scene.xml"
-        if not xml.is_file():
+        if not xml.exists():
             raise TwinError(f"{path}: no scene.xml (build it with 'twin build')")
+        if not xml.is_file():  # a link to /dev/zero was "no scene.xml"; a FIFO would block MuJoCo's read
+            raise TwinError(f"{xml}: not a regular file (a folder, device or pipe); 'twin build' writes a file there")
         from cli.modelsize import check_model_size
 
         check_model_size(xml)  # MuJoCo expands <replicate> while it parses: a nested pair never came back
