@@ -50,7 +50,8 @@ def add_parser(sub) -> None:  # type: ignore[no-untyped-def]
                    help="one-way delays in ms, each direction, comma-separated (default 0,10,25,50,100,200)")
     p.add_argument("--jitter", type=float, default=0.0,
                    help="jitter in ms (standard deviation, normal; needs jitter <= delay/3 at every delay)")
-    p.add_argument("--loss", type=float, default=0.0, help="independent packet loss, percent, each direction")
+    p.add_argument("--loss", dest="loss_pct", type=float, default=0.0,
+                   help="independent packet loss, percent, each direction, below 100")
     p.add_argument("--mass-scale", default="1",
                    help="twin mass / true mass, comma-separated, each from 0.01 to 100 (default 1)")
     p.add_argument("--seeds", type=int, default=1, help="network seeds per condition (default 1)")
@@ -94,7 +95,7 @@ def parse(args: argparse.Namespace):  # type: ignore[no-untyped-def]
     """The sweep the options describe, checked.
 
     Raises:
-        TwinError: a bad list, a negative or non-finite number, loss over 100 %, jitter the distribution cannot
+        TwinError: a bad list, a negative or non-finite number, jitter the distribution cannot
             take at some delay, an unknown task, or an --out folder with files this command did not write.
     """
     from scenes.experiment import MASS_SCALE_RANGE, SPEED_RANGE, Sweep
@@ -103,15 +104,12 @@ def parse(args: argparse.Namespace):  # type: ignore[no-untyped-def]
     delays = _floats(args.delays, "--delays")
     if min(delays) < 0:
         raise TwinError(f"--delays: a delay cannot be negative, got {refused_number(min(delays), 0)} ms")
-    for flag, value in (("--jitter", args.jitter), ("--loss", args.loss)):
-        if not math.isfinite(value) or value < 0:
-            raise TwinError(f"{flag} must be a finite number >= 0, got {refused_number(value, 0)}")
+    if not math.isfinite(args.jitter) or args.jitter < 0:  # --loss: cli.main.check_args, as for twin replay
+        raise TwinError(f"--jitter must be a finite number >= 0, got {refused_number(args.jitter, 0)}")
     top = MAX_DELAY_S * 1e3  # the link model's bound, in the ms these options take (it says it in seconds)
     for flag, value in (("--delays: a delay", max(delays)), ("--jitter", args.jitter)):
         if value > top:
             raise TwinError(f"{flag} must be at most {top:g} ms (an hour), got {refused_number(value, top)} ms")
-    if args.loss > 100:
-        raise TwinError(f"--loss is a percentage: at most 100, got {refused_number(args.loss, 100)}")
     low, high = SPEED_RANGE
     if not (math.isfinite(args.speed) and low <= args.speed <= high):
         raise TwinError(f"--speed must be from {low:g} to {high:g}, got {refused_number(args.speed, low, high)}")
@@ -137,7 +135,7 @@ def parse(args: argparse.Namespace):  # type: ignore[no-untyped-def]
     if getattr(args, "scene_file", None) is not None and not is_recording(args.scene):
         raise TwinError("--scene is for a recording's scene: the input is a scene file already")
     sweep = Sweep(tasks=tasks, delays=tuple(d / 1e3 for d in delays), jitter=args.jitter / 1e3,
-                  loss=args.loss / 100, mass_scales=masses, seeds=args.seeds, speed=args.speed)
+                  loss=args.loss_pct / 100, mass_scales=masses, seeds=args.seeds, speed=args.speed)
     sweep.conditions()  # every condition checked before any work
     check_output_folder(args.out, marker=MARKER, writes=WRITES, inputs=(args.scene, getattr(args, "scene_file", None)))
     return sweep
@@ -342,7 +340,7 @@ def report(rows, args: argparse.Namespace, plots: list[Path], sensor: str) -> st
     masses = sorted({r.mass_scale for r in rows})
     m1 = 1.0 if 1.0 in masses else masses[0]
     lines = ["# Latency experiment", "",
-             f"Scene `{args.scene}`, delays {args.delays} ms each way, jitter {args.jitter:g} ms, loss {args.loss:g} %, "
+             f"Scene `{args.scene}`, delays {args.delays} ms each way, jitter {args.jitter:g} ms, loss {args.loss_pct:g} %, "
              f"mass scales {args.mass_scale}, {args.seeds} seed(s), tasks {args.tasks}, speed {args.speed:g}, "
              f"the remote's {sensor} sensor. "
              "Force errors are against C's force in the same task with no delay, no loss and the true mass; "

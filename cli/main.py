@@ -21,7 +21,7 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import NoReturn
 
-from cli.outputs import check_mesh_file, check_not_input, check_record_file, replace_file
+from cli.outputs import check_mesh_file, check_not_input, check_record_file, replace_file, write_failure
 from estimation.errors import TwinError, refused_number
 from estimation.materials import MAX_DENSITY, MIN_DENSITY
 from twin.settings import MAX_RATE_HZ
@@ -81,15 +81,17 @@ def main(argv: list[str] | None = None) -> int:
         except KeyboardInterrupt:
             return 130
         except OSError as exc:
-            if exc.errno not in _OUTPUT_ERRNOS or exc.filename is not None:
+            # A named file's error is an output's only when the disk is full: EIO may be an input's read.
+            if exc.errno not in _OUTPUT_ERRNOS or (exc.filename is not None and exc.errno not in _FULL_ERRNOS):
                 raise
-            # stdout is full or gone (a full disk, a closed pipe): one line, and no second failure at exit
-            # when Python flushes stdout again.
+            # stdout (or an output file) is full or gone (a full disk, a closed pipe): one line, and no second
+            # failure at exit when Python flushes stdout again.
             _drop_held(held_log)
             os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
-            if exc.errno != errno.EPIPE:  # a closed pipe is the reader's choice (| head): said by no one
-                print(f"twin {args.command}: error: cannot write the output: {exc.strerror}", file=sys.stderr)
-            return 1
+            if exc.errno == errno.EPIPE:  # a closed pipe is the reader's choice (| head): said by no one
+                return 1
+            print(f"twin {args.command}: error: {write_failure(exc, exc.filename or 'the output')}", file=sys.stderr)
+            return EXIT_BAD_INPUT
     if held_log is not None:
         held_log.flush()
     for category, message in held:
@@ -101,6 +103,8 @@ def main(argv: list[str] | None = None) -> int:
 
 #: errno of a failed write to the standard output: a full disk or quota, a closed pipe, an I/O error.
 _OUTPUT_ERRNOS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EPIPE, errno.EIO})
+#: errno of a full disk or quota: only a write (or a file created) fails so, whichever file it names.
+_FULL_ERRNOS = frozenset({errno.ENOSPC, errno.EDQUOT})
 
 #: Warnings kept and shown after a command that succeeded; the rest are counted.
 MAX_HELD_WARNINGS = 20
@@ -153,7 +157,7 @@ _NUMBERS: dict[str, tuple[str, float, bool, float]] = {
     # In ms here, an hour at most: sync.netem.MAX_DELAY_S, which said it in seconds ("got 10000000.0" for 1e10 ms).
     "delay_ms": ("--delay", 0.0, True, 3.6e6),
     "jitter_ms": ("--jitter", 0.0, True, 3.6e6),
-    "loss_pct": ("--loss", 0.0, True, 100.0),
+    "loss_pct": ("--loss", 0.0, True, math.inf),  # and below 100: check_args says why, first
     # At least one physics step (twin.model.TIMESTEP): 0.0004 s ran no tick and reported "89x real time".
     "replay_duration": ("--duration", 1e-3, True, math.inf),
 }
@@ -163,11 +167,16 @@ def check_args(args: argparse.Namespace) -> None:
     """Refuse option values no command can use, before the command does any work.
 
     Raises:
-        TwinError: a non-finite or out-of-range number, a non-finite --viewpoint, or a --rerun save path
-            whose folder does not exist or cannot be written.
+        TwinError: a non-finite or out-of-range number (--loss of 100 % or more), a non-finite --viewpoint,
+            --units other than m without --script, or a --rerun save path whose folder does not exist or cannot
+            be written.
     """
     from estimation.contracts import check_number  # here: numpy, which --help does not need
 
+    loss = getattr(args, "loss_pct", None)
+    if loss is not None and loss >= 100:  # the link model takes a loss of 1; a session under it measures nothing
+        raise TwinError(f"--loss must be below 100 (at 100 % every packet is lost both ways and the run would "
+                        f"measure nothing), got {refused_number(loss, 100)}")
     for attr, (flag, low, low_ok, high) in _NUMBERS.items():
         value = getattr(args, attr, None)
         if value is None:
@@ -183,6 +192,10 @@ def check_args(args: argparse.Namespace) -> None:
             raise TwinError(f"--points must be from {MIN_POINTS} to {MAX_POINTS}, got {args.points}")
     if getattr(args, "max_hulls", None) is not None and args.max_hulls != -1 and args.max_hulls < 1:
         raise TwinError(f"--max-hulls must be -1 (no cap) or >= 1, got {args.max_hulls}")
+    # run, local and replay scale only the --script file by --units: without it, --units mm did nothing, silently.
+    if "script" in vars(args) and args.script is None and args.units != "m":
+        raise TwinError(f"--units applies to --script's file, and no --script is given: drop --units {args.units} "
+                        "(everything else is in metres)")
     inputs = _input_files(args)
     if getattr(args, "record", None) is not None:
         _check_writable_file(Path(args.record), "--record")
@@ -754,8 +767,10 @@ def _load_twin(args: argparse.Namespace):  # type: ignore[no-untyped-def]
         import mujoco
 
         xml = path / "scene.xml"
-        if not xml.is_file():
+        if not xml.exists():
             raise TwinError(f"{path}: no scene.xml (build it with 'twin build')")
+        if not xml.is_file():  # a link to /dev/zero was "no scene.xml"; a FIFO would block MuJoCo's read
+            raise TwinError(f"{xml}: not a regular file (a folder, device or pipe); 'twin build' writes a file there")
         from cli.modelsize import check_model_size
 
         check_model_size(xml)  # MuJoCo expands <replicate> while it parses: a nested pair never came back
@@ -1025,12 +1040,13 @@ class _ReplayProgress:
 
 def _cmd_replay(args: argparse.Namespace) -> int:
     from cli.record import check_replay_inputs, check_replay_out, network_from_options, print_summary, replay
+    from sync.netem import MAX_SEED
 
+    if args.seed is not None and not 0 <= args.seed <= MAX_SEED:  # always: a recording's network takes it too
+        raise TwinError(f"--seed must be a whole number from 0 to {MAX_SEED}, got {args.seed}")
     check_replay_inputs(args.recording)
     if args.out is not None:
         check_replay_out(args.out, args.recording, args.script, args.scene)
-    if args.seed is not None and args.seed < 0:
-        raise TwinError(f"--seed must be >= 0, got {args.seed}")
     network = network_from_options(delay_ms=args.delay_ms, jitter_ms=args.jitter_ms, loss_pct=args.loss_pct,
                                    seed=args.seed or 0)
     with _ReplayProgress() as progress:

@@ -9,6 +9,7 @@ folder whole.
 
 from __future__ import annotations
 
+import errno
 import os
 import stat
 from collections.abc import Callable, Iterable
@@ -122,20 +123,33 @@ def replace_file(path: Path, write: Callable[[Path], object]) -> None:
     ``write`` leaves ``path`` as it was and no temporary file behind. The file gets the permissions a plain
     ``open()`` would have given it, not ``mkstemp``'s 0600 (:func:`sync.replacing.hidden_sibling`, which
     recordings use too).
+
+    Raises:
+        TwinError: the write or the move failed (a full disk, a folder now at ``path``): :func:`write_failure`.
     """
     from sync.replacing import hidden_sibling
 
     fd, tmp = hidden_sibling(path, path.suffix)
     os.close(fd)
     try:
-        write(tmp)
         try:
+            write(tmp)
             os.replace(tmp, path)
-        except OSError as exc:  # a folder put in its place since the command's checks
-            raise TwinError(f"cannot write {path}: {exc.strerror or exc}") from None
+        except OSError as exc:  # a full disk; a folder put in its place since the command's checks
+            raise TwinError(write_failure(exc, path)) from None
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
+
+
+def write_failure(exc: OSError, what: object) -> str:
+    """Why writing ``what`` (a path, or "the output" for stdout) failed, in one line: a full disk or quota said
+    so, since their ``strerror`` names no file; anything else with the system's reason."""
+    if exc.errno == errno.ENOSPC:
+        return f"no space left writing {what}"
+    if exc.errno == errno.EDQUOT:
+        return f"disk quota exceeded writing {what}"
+    return f"cannot write {what}: {exc.strerror or exc}"
 
 
 def check_record_file(path: Path, inputs: Iterable[Path | None], flag: str = "--record") -> None:

@@ -680,7 +680,10 @@ def read_recording(path: str | Path) -> Recording:
                       f"network or messages may not be what was recorded); using its {len(held)} messages")
         except (McapError, ValueError, struct.error, zlib.error, EOFError, MemoryError, UnicodeDecodeError) as exc:
             # ValueError covers the reader's chunk CRC mismatch; _inflate turns zstd's and lz4's errors into McapError.
-            what = type(exc).__name__ + (f": {exc}" if str(exc) else "")
+            # A name or text field of random bytes: "UnicodeDecodeError: 'utf-8' codec can't ..." named Python's
+            # codec, not the file's fault.
+            what = ("a record's text is not UTF-8" if isinstance(exc, UnicodeDecodeError)
+                    else type(exc).__name__ + (f": {exc}" if str(exc) else ""))
             if metadata is None:
                 raise RecordingError(f"{path}: not a readable tactile-twin recording ({what})") from None
             damage = f"the recording is damaged after {len(held)} messages ({what}); using those"

@@ -95,6 +95,7 @@ def test_a_bad_entry_is_logged_recomputed_and_replaced(tmp_path, caplog, damage,
         hulls, cached = decompose(BOX.vertices, BOX.faces, SETTINGS, cache_dir=tmp_path)
     assert not cached
     assert any(message in r.getMessage() and _entry(tmp_path).name in r.getMessage() for r in caplog.records)
+    assert "pickle" not in caplog.text  # numpy's advice for a file that is no .npz: to load it unsafely
     _same(hulls, good)
     replaced = load_entry(_entry(tmp_path))  # replaced by a verifying entry
     assert replaced is not None

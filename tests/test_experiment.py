@@ -138,7 +138,11 @@ def test_the_cli_writes_every_column_and_the_same_rows_with_workers(rows, cache,
 
 @pytest.mark.parametrize(("extra", "message"), [
     (["--delays", "0,-10"], "--delays: a delay cannot be negative, got -10 ms"),
-    (["--loss", "101"], "--loss is a percentage: at most 100, got 101"),
+    (["--loss", "101"], "--loss must be below 100 .*, got 101"),
+    # Every packet lost was accepted, exit 0: direct teleoperation felt nothing and the rows measured nothing.
+    (["--loss", "100"], "--loss must be below 100 \\(at 100 % every packet is lost both ways and the run would "
+                        "measure nothing\\), got 100$"),
+    (["--loss", "-1"], "--loss must be >= 0, got -1"),
     (["--delays", "0,inf"], "--delays: inf is not a finite number"),
     (["--delays", "0,,50"], "--delays: an empty value in '0,,50'"),  # the empty one was skipped
     (["--mass-scale", "1,"], "--mass-scale: an empty value in '1,'"),

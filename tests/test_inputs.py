@@ -318,7 +318,10 @@ def test_a_refused_density_shows_the_digits_that_refuse_it(box_cloud, density, s
     (["estimate", "c.ply", "--density", "100000.0001"], "--density must be >= 0.1 and <= 100000, got 100000.0001"),
     (["estimate", "c.ply", "--density", "0.0999999999"], "--density must be >= 0.1 and <= 100000, got 0.0999999999"),
     (["run", "s.toml", "--threshold", "1.0000001"], "--threshold must be > 0 and <= 1, got 1.0000001"),
-    (["experiment", "s.toml", "--out", "o", "--loss", "100.00001"], "--loss is a percentage: at most 100, got 100.00001"),
+    (["experiment", "s.toml", "--out", "o", "--loss", "100.00001"], "measure nothing), got 100.00001"),
+    (["replay", "r.mcap", "--loss", "100"], "--loss must be below 100"),  # as twin experiment: one check
+    # Refused only with --delay/--jitter/--loss given, as "seed must be ...", naming no option; else ignored.
+    (["replay", "r.mcap", "--seed", str(10**23)], f"--seed must be a whole number from 0 to {2**64 - 1}, got {10**23}"),
     # In the ms it takes: the link model's message said "in [0, 3600], got 1000000.0", its seconds, no unit.
     (["experiment", "s.toml", "--out", "o", "--delays", "0,3600000.001"],
      "--delays: a delay must be at most 3.6e+06 ms (an hour), got 3600000.001 ms"),

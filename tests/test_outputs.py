@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import errno
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -356,16 +358,35 @@ def test_what_the_readers_only_logged_is_in_the_json_warnings(tmp_path, capsys):
 @pytest.mark.skipif(not Path("/dev/full").exists(), reason="needs /dev/full")
 @pytest.mark.parametrize("command", [["materials"], ["schema", "scene"]])
 def test_output_that_cannot_be_written_is_one_line_and_a_closed_pipe_is_quiet(command):
-    """A full disk is said in one line; a reader that stopped reading is not an error to print."""
+    """A full disk is said in one line, exit 2 (it was 1); a reader that stopped reading is not an error to print."""
     twin = [sys.executable, "-m", "cli.main", *command]
     with open("/dev/full", "w") as full:
         done = subprocess.run(twin, stdout=full, stderr=subprocess.PIPE, text=True, timeout=60, cwd=ROOT)
-    assert done.returncode == 1
-    assert done.stderr == f"twin {command[0]}: error: cannot write the output: No space left on device\n"
+    assert done.returncode == 2
+    assert done.stderr == f"twin {command[0]}: error: no space left writing the output\n"
     gone = subprocess.Popen(twin, stdout=subprocess.PIPE, stderr=subprocess.PIPE, cwd=ROOT)
     gone.stdout.close()  # type: ignore[union-attr]  # the reader left before the first line (| head -0)
     assert gone.wait(timeout=60) == 1 and gone.stderr.read() == b""  # type: ignore[union-attr]
     gone.stderr.close()  # type: ignore[union-attr]
+
+
+@pytest.mark.parametrize(("code", "said"), [(errno.ENOSPC, "no space left writing"),
+                                            (errno.EDQUOT, "disk quota exceeded writing")])
+def test_an_output_file_on_a_full_disk_is_named_in_one_line(tmp_path, capsys, monkeypatch, code, said):
+    """A --mesh-out on a full disk exited 1 with "cannot write the output: No space left on device", naming no
+    file; the file it would replace is left as it was, and no temporary file behind."""
+    cloud = tmp_path / "box.npy"
+    np.save(cloud, trimesh.creation.box(extents=[0.1, 0.06, 0.04]).sample(2000, return_index=False))
+    mesh = tmp_path / "m.stl"
+    mesh.touch()
+
+    def full(*_: object, **__: object) -> None:
+        raise OSError(code, os.strerror(code))
+
+    monkeypatch.setattr(trimesh.Trimesh, "export", full)
+    assert main(["estimate", str(cloud), "--method", "hull", "--mesh-out", str(mesh)]) == 2
+    assert capsys.readouterr().err == f"twin estimate: error: {said} {mesh}\n"
+    assert mesh.read_bytes() == b"" and sorted(p.name for p in tmp_path.iterdir()) == ["box.npy", "m.stl"]
 
 
 def test_mesh_out_replaces_only_a_mesh_it_wrote(tmp_path, capsys):

@@ -170,8 +170,12 @@ def test_bad_recordings_are_one_line_errors(tmp_path, capsys):
     garbage.write_bytes(b"not an mcap file at all" * 10)
     stub = tmp_path / "stub.mcap"
     stub.write_bytes(old.read_bytes()[:20])  # the header only: no metadata survives
+    # Random bytes in the header's text said "(UnicodeDecodeError: 'utf-8' codec can't decode byte 0xff ...)".
+    mangled = tmp_path / "mangled.mcap"
+    mangled.write_bytes(old.read_bytes().replace(b"tactile-twin", b"\xff" * len("tactile-twin"), 1))
     for bad, words in [(old, "schema version 99"), (garbage, "not a readable tactile-twin recording"),
-                       (stub, "not a readable tactile-twin recording"), (tmp_path / "missing.mcap", "no such recording")]:
+                       (stub, "not a readable tactile-twin recording"), (tmp_path / "missing.mcap", "no such recording"),
+                       (mangled, f"{mangled}: not a readable tactile-twin recording (a record's text is not UTF-8)")]:
         assert main(["replay", str(bad)]) == 2
         err = capsys.readouterr().err
         assert words in err and err.count("\n") == 1, err

@@ -287,6 +287,18 @@ def test_held_targets_hold_each_target_until_the_next_and_check_their_reach():
     never.check_reach(SMALL_BOX)
 
 
+@pytest.mark.parametrize("argv", [["run", "s.toml"], ["local"], ["replay", "r.mcap"],
+                                  ["local", "--replay-operator", "r.mcap"]])
+def test_units_without_a_script_is_refused(capsys, argv):
+    """--units scales only the --script file: without one, --units mm was ignored and the run went on in metres."""
+    from cli.main import main
+
+    assert main([*argv, "--units", "mm"]) == 2
+    err = capsys.readouterr().err
+    assert err == (f"twin {argv[0]}: error: --units applies to --script's file, and no --script is given: drop "
+                   "--units mm (everything else is in metres)\n")
+
+
 def test_every_units_option_takes_the_unit_table():
     """--units was written out on four parsers (one helper now): each must offer exactly the units read."""
     import argparse

@@ -367,6 +367,20 @@ def test_cli_errors_and_warnings_of_a_failed_command_are_one_line(tmp_path, caps
     assert cli_main.one_line("a bad input\n  Element name 'x'\n\n") == "a bad input; Element name 'x'"
 
 
+def test_a_built_folder_whose_scene_xml_is_no_file_is_named_so(tmp_path, capsys):
+    """A scene.xml linked to /dev/zero (or a folder) was "no scene.xml (build it with 'twin build')"."""
+    for name, make in (("device", lambda p: p.symlink_to("/dev/zero")), ("folder", lambda p: p.mkdir())):
+        built = tmp_path / name
+        built.mkdir()
+        make(built / "scene.xml")
+        assert main(["run", str(built), "--duration", "0.1"]) == 2
+        assert capsys.readouterr().err == (f"twin run: error: {built / 'scene.xml'}: not a regular file (a folder, "
+                                           "device or pipe); 'twin build' writes a file there\n")
+    (tmp_path / "empty").mkdir()
+    assert main(["run", str(tmp_path / "empty")]) == 2
+    assert "empty: no scene.xml (build it with 'twin build')" in capsys.readouterr().err
+
+
 def test_cli_rerun_save_to_an_unwritable_place_fails_before_any_work(small_scene, tmp_path, capsys):
     out = tmp_path / "built"
     folder = tmp_path / "a-folder.rrd"

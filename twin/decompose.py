@@ -317,6 +317,10 @@ def save_entry(path: Path, hulls: Sequence[Hull]) -> bool:
         return False
 
 
+#: How an .npz archive (a zip file) starts: what every cache entry is.
+_NPZ_MAGIC = b"PK\x03\x04"
+
+
 def load_entry(path: Path) -> list[Hull] | None:
     """The hulls in a cache entry, or None if there is none or it does not verify (with a warning).
 
@@ -328,6 +332,9 @@ def load_entry(path: Path) -> list[Hull] | None:
     if not path.is_file():
         return None
     try:
+        with path.open("rb") as f:  # else numpy takes it for a pickle and advises allow_pickle, never right here
+            if f.read(len(_NPZ_MAGIC)) != _NPZ_MAGIC:
+                raise ValueError("not an .npz archive")
         with np.load(path, allow_pickle=False) as data:
             version = int(data["version"])
             stored = str(data["checksum"])
