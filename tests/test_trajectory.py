@@ -65,12 +65,17 @@ def test_bad_files_are_one_line_errors_naming_file_and_line(tmp_path, text, matc
 
 
 def test_an_unreadable_file_is_a_trajectory_error(tmp_path):
-    with pytest.raises(TrajectoryError, match=r"missing.csv: cannot read trajectory \(FileNotFoundError"):
+    # Python's own words named the exception and repeated the path: "(FileNotFoundError: [Errno 2] ...)".
+    with pytest.raises(TrajectoryError, match=r"missing.csv: cannot read trajectory: No such file or directory$"):
         load_trajectory(tmp_path / "missing.csv")
     binary = tmp_path / "binary.csv"
-    binary.write_bytes(b"\xff\xfe\x00\x01")
-    with pytest.raises(TrajectoryError, match=r"binary.csv: cannot read trajectory \(UnicodeDecodeError"):
+    binary.write_bytes(b"0,0,0,0.6\n\x80\x81\n")
+    with pytest.raises(TrajectoryError, match=r"binary.csv: not UTF-8 text \(byte 0x80 at offset 10\)$"):
         load_trajectory(binary)
+    for data in (b"\xff\xfe\x00\x01", "t,x,y,z\n0,0,0,0.6\n".encode("utf-16-le")):  # Notepad's, with a BOM or not
+        binary.write_bytes(data)
+        with pytest.raises(TrajectoryError, match=r"binary.csv: the file is UTF-16 encoded; save it as UTF-8 or ASCII$"):
+            load_trajectory(binary)
     with pytest.raises(TrajectoryError, match="cannot read trajectory"):
         load_trajectory(tmp_path)  # a directory
 

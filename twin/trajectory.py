@@ -214,10 +214,11 @@ def load_trajectory(path: str | Path, *, units: str = "m") -> Waypoints:
     try:
         size = path.stat().st_size
     except OSError as exc:
-        raise TrajectoryError(f"{path}: cannot read trajectory ({exc.__class__.__name__}: {exc})") from None
+        raise _cannot_read(path, exc) from None
     if path.is_file() and size > MAX_TRAJECTORY_BYTES:
         raise TrajectoryError(f"{path}: trajectory file is {size / 2**20:,.0f} MiB, more than the "
                               f"{MAX_TRAJECTORY_BYTES / 2**20:,.0f} MiB a trajectory may take (thin its waypoints)")
+    _check_encoding(path)
     table = _read_fast(path, scale)
     if table is None:  # numpy refused the file, or it holds a bad value: find which line, and say why
         table = _read_checked(path, scale)
@@ -228,7 +229,27 @@ def load_trajectory(path: str | Path, *, units: str = "m") -> Waypoints:
     return Waypoints(times, points, source=str(path), units=units)
 
 
+def _check_encoding(path: Path) -> None:
+    """Refuse a UTF-16 or UTF-32 file (Notepad's): without a byte-order mark it decodes as UTF-8 text with a NUL
+    after each character, "not a number in 't\\x00,\\x00x...'"."""
+    from estimation.textcloud import ENCODING_SAMPLE, wide_encoding
+
+    try:
+        with path.open("rb") as fh:
+            encoding = wide_encoding(fh.read(ENCODING_SAMPLE))
+    except OSError as exc:
+        raise _cannot_read(path, exc) from None
+    if encoding is not None:
+        raise TrajectoryError(f"{path}: the file is {encoding} encoded; save it as UTF-8 or ASCII")
+
+
 def _cannot_read(path: Path, exc: BaseException) -> TrajectoryError:
+    """The one-line error for a trajectory file that cannot be read (an OSError) or decoded (a UnicodeDecodeError):
+    Python's own text repeated the path and named the exception ("FileNotFoundError: [Errno 2] ...")."""
+    if isinstance(exc, UnicodeDecodeError):
+        return TrajectoryError(f"{path}: not UTF-8 text (byte 0x{exc.object[exc.start]:02x} at offset {exc.start})")
+    if isinstance(exc, OSError) and exc.strerror:
+        return TrajectoryError(f"{path}: cannot read trajectory: {exc.strerror}")
     return TrajectoryError(f"{path}: cannot read trajectory ({exc.__class__.__name__}: {exc})")
 
 
