@@ -40,6 +40,7 @@ from shapes import CONDITIONS, NOISE_MIN_WALL, NOISE_SIGMA, RHO, _stats, errors 
 
 from estimation import estimate  # noqa: E402
 from scenes.sampling import sample_surface  # noqa: E402
+from scenes.shapes import Shape  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results" / "unseen_shapes.txt"
 
@@ -54,33 +55,6 @@ COM_TARGET_MM = 0.2
 #: Warnings are cut to their first clause (the cause) and at most this many characters; the interval they
 #: end with is printed in its own column.
 WARNING_CHARS = 90
-
-
-@dataclass(frozen=True)
-class Solid:
-    """One test object at its pose; what bench/shapes.py's ``errors`` reads of a shape.
-
-    Attributes:
-        name: the maker's name, e.g. ``"beam"``.
-        mesh: closed, consistently wound mesh, metres, at its random pose.
-        min_wall: thinnest wall or plate, metres (the least extent for solid shapes).
-    """
-
-    name: str
-    mesh: trimesh.Trimesh
-    min_wall: float
-
-    @property
-    def volume(self) -> float:
-        return float(self.mesh.volume)
-
-    @property
-    def center_of_mass(self) -> np.ndarray:
-        return np.asarray(self.mesh.center_mass)
-
-    def inertia(self, density: float) -> np.ndarray:
-        """(3, 3) kg m^2 about the centre of mass, world axes."""
-        return np.asarray(self.mesh.moment_inertia) * density
 
 
 # ---- building blocks ----------------------------------------------------------------------------------
@@ -299,7 +273,7 @@ MAKERS: dict[str, Callable[[], tuple[trimesh.Trimesh, float]]] = {
                             coin, beam, cube1cm, capsule, star_prism, blobby, holed_box, thin_torus)}
 
 
-def make_solid(name: str, seed: int) -> Solid:
+def make_solid(name: str, seed: int) -> Shape:
     """``MAKERS[name]``'s solid at a random pose drawn from (seed, its place in MAKERS).
 
     Raises:
@@ -314,7 +288,7 @@ def make_solid(name: str, seed: int) -> Solid:
     pose[:3, :3] = Rotation.random(random_state=int(rng.integers(2 ** 31))).as_matrix()
     pose[:3, 3] = rng.uniform(-1.0, 1.0, 3)  # up to 1 m off the origin, so nothing lines up with a grid
     mesh.apply_transform(pose)
-    return Solid(name, mesh, wall)
+    return Shape(name, "unseen", mesh, wall)  # scenes.shapes' record; the shape is built here
 
 
 # ---- the bench ----------------------------------------------------------------------------------------
@@ -355,7 +329,7 @@ def run(seeds: list[int], points: int) -> list[Row]:
                 t0 = time.perf_counter()
                 try:
                     est = estimate(cloud, RHO)
-                    errs = errors(solid, est.volume, est.mass.center_of_mass, est.mass.inertia)  # type: ignore[arg-type]
+                    errs = errors(solid, est.volume, est.mass.center_of_mass, est.mass.inertia)
                     low, high = est.volume_bounds_m3 or (est.volume, est.volume)
                     interval = (100 * (low / solid.volume - 1), 100 * (high / solid.volume - 1))
                     inside, warnings = bool(low <= solid.volume <= high), tuple(_short(w) for w in est.warnings)
