@@ -455,8 +455,6 @@ def _cmd_estimate(args: argparse.Namespace) -> int:
         t0 = time.perf_counter()
         loaded = _estimate_views(args, scale)
         views = [v for v, _ in loaded]
-        if args.units is None and args.intrinsics is None:
-            _check_units(views)
         read = time.perf_counter() - t0
         single = len(views) == 1 and views[0].origin is None and support is None
         progress = _estimate_progress(sum(len(v.points) for v in views))
@@ -479,6 +477,8 @@ def _cmd_estimate(args: argparse.Namespace) -> int:
                                    progress=progress)
             result, cov, bounds, warnings, plane = (fused.estimate, fused.coverage, fused.volume_bounds_m3,
                                                     fused.warnings, fused.plane)
+        if args.units is None and args.intrinsics is None:
+            _check_units(result.obb.extents)  # the estimate's own box: after the strays and the support plane went
         if args.mesh_out is not None:
             _write_mesh(result.vertices, result.faces, args.mesh_out)
         seconds = time.perf_counter() - t0
@@ -922,25 +922,20 @@ def _units_option(p: argparse.ArgumentParser, what: str, *, checked: bool = Fals
 _PLAUSIBLE = "2 mm to 5 m"
 
 
-def _check_units(views) -> None:  # type: ignore[no-untyped-def]
-    """Refuse views whose object, read as metres, is a size no object here is (a 5 cm cube written in mm read as
-    50 m across and 125 m^3); --units, given, says the size is meant and only warns."""
-    import numpy as np
-
+def _check_units(extents) -> None:  # type: ignore[no-untyped-def]
+    """Refuse an estimate whose object, read as metres, is a size no object here is: ``extents`` (metres) of its
+    box, measured after stray points and the support plane are gone (a 5 cm cube written in mm read as 85 m across
+    and 125 m^3). --units, given, says the size is meant and only warns."""
     from estimation import tolerances as tol
-    from estimation.obb import oriented_box
-    from estimation.units import units_warning
 
-    points = np.concatenate([v.points for v in views])
-    if len(points) < 4 or not np.isfinite(points).all() or np.abs(points).max() > tol.MAX_COORDINATE_M:
-        return  # too few to have a size, or out of any range: the estimate says what is wrong with them
-    extents = oriented_box(points[:: max(1, len(points) // 100_000)]).extents
-    if extents.max() < tol.MIN_EXTENT_M:
-        return
-    hint = units_warning(extents)
-    if hint is not None:
-        raise TwinError(f"{hint.split(';')[0]}, outside the {_PLAUSIBLE} an object here is: the file is probably in "
-                        f"other units (give --units mm or --units cm, or --units m to take it as metres)")
+    largest = float(max(extents))
+    low, high = tol.PLAUSIBLE_EXTENT_M
+    if largest > high:
+        raise TwinError(f"object is {largest:.3g} m across, more than the {_PLAUSIBLE} an object here is: the file is "
+                        f"probably in other units (give --units mm or --units cm, or --units m to take it as metres)")
+    if largest < low:
+        raise TwinError(f"object is {largest * 1000:.3g} mm across, less than the {_PLAUSIBLE} an object here is: "
+                        f"give --units m to take the points as metres")
 
 
 def _sensor_option(p: argparse.ArgumentParser, *, replay: bool = False) -> None:

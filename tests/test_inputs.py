@@ -544,14 +544,16 @@ def test_a_cloud_in_other_units_is_refused_unless_units_are_given(tmp_path, caps
     low, high = tol.PLAUSIBLE_EXTENT_M
     assert _PLAUSIBLE == f"{low * 1000:g} mm to {high:g} m"
     cube = np.asarray(sample_surface(trimesh.creation.box(extents=(0.05, 0.04, 0.03)), 5000, seed=0).points)
-    for name, scale, said in [("mm.xyz", 1000.0, " m across, outside the 2 mm to 5 m"),
-                              ("km.xyz", 1e-3, " mm across, outside the 2 mm to 5 m")]:
+    for name, scale, said, advice in [
+            ("mm.xyz", 1000.0, " m across, more than the 2 mm to 5 m", "give --units mm or --units cm, or --units m"),
+            # a unit larger than the metre is not offered: --units mm or cm would make it smaller still
+            ("km.xyz", 1e-3, " mm across, less than the 2 mm to 5 m", "give --units m to take the points as metres")]:
         path = tmp_path / name
         np.savetxt(path, cube * scale)
         before = path.read_bytes()
         assert main(["estimate", str(path), "--density", "1000"]) == 2
         err = capsys.readouterr().err
-        assert err.count("\n") == 1 and said in err and "give --units mm or --units cm" in err, err
+        assert err.count("\n") == 1 and said in err and advice in err, err
         assert path.read_bytes() == before
     path = tmp_path / "mm.xyz"
     assert main(["estimate", str(path), "--density", "1000", "--units", "mm", "--json"]) == 0
@@ -559,6 +561,13 @@ def test_a_cloud_in_other_units_is_refused_unless_units_are_given(tmp_path, caps
     assert main(["estimate", str(path), "--density", "1000", "--units", "m", "--json"]) == 0  # meant: a warning
     out = json.loads(capsys.readouterr().out)
     assert out["volume_m3"] == pytest.approx(6e4, rel=0.01) and any("m across" in w for w in out["warnings"])
+    # The size is the estimate's, after stray points are dropped: one point 6 m off a cube in metres was refused
+    # as "6.03 m across" by a first version that measured the raw points.
+    stray = tmp_path / "stray.xyz"
+    np.savetxt(stray, np.vstack([cube, [[6.0, 0.0, 0.0]]]))
+    assert main(["estimate", str(stray), "--density", "1000", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["volume_m3"] == pytest.approx(6e-5, rel=0.01) and any("stray" in w for w in out["warnings"])
 
 
 @pytest.mark.parametrize(("argv", "message"), [
