@@ -554,9 +554,22 @@ def test_a_jump_of_the_target_is_followed_at_the_speed_limit(built):
         here = twin.data.mocap_pos[0].copy()
         twin.set_end_effector(here + 0.001)
         assert np.allclose(twin.data.mocap_pos[0], here + 0.001) and np.allclose(twin.end_effector_goal, here + 0.001)
-        twin.ee_max_speed = float("nan")
-        with pytest.raises(ValueError, match="ee_max_speed must be a number of m/s above 0"):
-            twin.set_end_effector(here)
+        # A speed that would freeze the target, drive it away or leave it NaN for good is refused when set.
+        for bad in (float("nan"), 0.0, -2.0, "2", True):
+            with pytest.raises(SettingsError, match="ee_max_speed must be a number of m/s above 0"):
+                twin.ee_max_speed = bad
+        assert twin.ee_max_speed == EE_MAX_SPEED
+        # A target written non-finite (a direct write) is put right by the next set_end_effector, not kept NaN.
+        twin.set_end_effector(here + 0.2)
+        twin.data.mocap_pos[0] = np.nan
+        twin.set_end_effector(here)
+        assert np.array_equal(twin.data.mocap_pos[0], here)
+        twin.set_end_effector(here + 0.2)
+        twin.data.mocap_pos[0] = np.nan
+        twin.step()  # or by the next step: towards its goal
+        assert np.allclose(twin.data.mocap_pos[0], here + 0.2) and np.isfinite(twin.data.qpos).all()
+        twin.ee_max_speed = 10**400  # past the float range: no limit
+        assert twin.ee_max_speed == float("inf")
 
 
 def test_setters_and_step_refuse_absurd_values_and_leave_the_state_alone(built):

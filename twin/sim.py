@@ -118,7 +118,7 @@ class Twin:
         self._index_of, self._index = None, {}  # joint() look-ups of this model
         self._top_of, self._top, self._over = None, None, None  # twin.tabletop of this model, its switches
         self._top_wait, self._top_forced = 0, True  # steps until the next twin.tabletop decision; decide even asleep
-        self.ee_max_speed = EE_MAX_SPEED  # m/s (see EE_MAX_SPEED); inf: the target is taken at once
+        self._ee_max_speed = EE_MAX_SPEED
         self._ee_goal: np.ndarray | None = None  # where the mocap target is headed, further than one step moves it
 
     def __enter__(self) -> Twin:
@@ -181,9 +181,12 @@ class Twin:
         if top is None and self._ee_goal is None:
             mujoco.mj_step(self.model, d, n)
         else:
-            for _ in range(n):
+            for k in range(n):
                 if self._ee_goal is not None:
                     self._approach_goal()
+                elif top is None:  # the goal reached: the rest in one call, as without one
+                    mujoco.mj_step(self.model, d, n - k)
+                    break
                 if top is not None:
                     self._switch_top(top)
                 mujoco.mj_step(self.model, d)
@@ -283,14 +286,29 @@ class Twin:
         if self._mocap is None:
             raise LookupError("this scene has no end effector")
         goal = _vector(position, 3, MAX_COORDINATE, "end-effector target", "m")
-        if not float(self.ee_max_speed) > 0:  # NaN or <= 0 would freeze or reverse it: refused on use
-            raise ValueError(f"ee_max_speed must be a number of m/s above 0, got {self.ee_max_speed!r}")
         here = self.data.mocap_pos[self._mocap]
-        if float(np.linalg.norm(goal - here)) <= self.ee_max_speed * self.model.opt.timestep:
+        # Not "further than a step" (NaN compares false): a target written non-finite is put right at once.
+        if not float(np.linalg.norm(goal - here)) > self._ee_max_speed * self.model.opt.timestep:
             here[:] = goal
             self._ee_goal = None
         else:  # approached at ee_max_speed, a step at a time (step())
             self._ee_goal = goal
+
+    @property
+    def ee_max_speed(self) -> float:
+        """Fastest the end effector's target moves, m/s (:data:`EE_MAX_SPEED`; inf: it jumps to each target)."""
+        return self._ee_max_speed
+
+    @ee_max_speed.setter
+    def ee_max_speed(self, speed: float) -> None:
+        """Raises: SettingsError: not a number above 0 (NaN froze the target at NaN for good, 0 froze it, a
+        negative speed drove it away from its goal)."""
+        if isinstance(speed, bool) or not isinstance(speed, numbers.Real) or not speed > 0:
+            raise SettingsError(f"ee_max_speed must be a number of m/s above 0, got {str(speed)[:40]}")
+        try:
+            self._ee_max_speed = float(speed)
+        except OverflowError:  # an int past the float range
+            self._ee_max_speed = math.inf
 
     @property
     def end_effector_goal(self) -> np.ndarray:
@@ -308,8 +326,8 @@ class Twin:
         """Move the mocap target one step's worth of :attr:`ee_max_speed` towards :attr:`_ee_goal`."""
         here = self.data.mocap_pos[self._mocap]
         gap = self._ee_goal - here
-        distance, most = float(np.linalg.norm(gap)), self.ee_max_speed * self.model.opt.timestep
-        if distance <= most:
+        distance, most = float(np.linalg.norm(gap)), self._ee_max_speed * self.model.opt.timestep
+        if not distance > most:  # NaN too: a target written non-finite meanwhile goes to its goal
             here[:] = self._ee_goal
             self._ee_goal = None
         else:
