@@ -140,6 +140,14 @@ def report(rows: dict[str, dict[str, list]], points: int, count: int, seed: int)
     return "\n".join(lines)
 
 
+def publish(text: str, out: Path | None) -> None:
+    """Print a bench's report and write it to ``out`` (its folder made; None: printed only)."""
+    print(text)
+    if out:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        out.write_text(text + "\n")
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--count", type=int, default=44)
@@ -149,10 +157,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", type=Path, default=RESULTS)
     args = parser.parse_args(argv)
     text = report(run(args.count, args.points, args.seed, not args.no_baseline), args.points, args.count, args.seed)
-    print(text)
-    if args.out:
-        args.out.parent.mkdir(parents=True, exist_ok=True)
-        args.out.write_text(text + "\n")
+    publish(text, args.out)
     return 0
 
 

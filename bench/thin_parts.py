@@ -21,6 +21,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # this checkout's packages, not an installed copy
 
+from shapes import publish  # bench/shapes.py: this script's folder is on sys.path
+
 from estimation import estimate, make_cloud
 from scenes.sampling import sample_surface
 from scenes.shapes import make_parts
@@ -62,10 +64,7 @@ def main(argv: list[str] | None = None) -> int:
                        f"{held:3d}/{len(a):<3d} | {max(coms):6.3f}")
     header = f"{'condition':26s} {'n':>3s} | volume % median  p90      max | in interval | COM mm max"
     text = "\n".join([*lines[:2], header, "-" * len(header), *summary, "", "per part:", *lines[2:]])
-    print(text)
-    if args.out:
-        args.out.parent.mkdir(parents=True, exist_ok=True)
-        args.out.write_text(text + "\n")
+    publish(text, args.out)
     return 0
 
 

@@ -36,7 +36,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))  # this checkout's packages, not an installed copy
 sys.path.insert(0, str(ROOT / "bench"))
 
-from shapes import CONDITIONS, NOISE_MIN_WALL, NOISE_SIGMA, RHO, _stats, errors  # noqa: E402
+from shapes import CONDITIONS, NOISE_MIN_WALL, NOISE_SIGMA, RHO, _stats, errors, publish  # noqa: E402
 
 from estimation import estimate  # noqa: E402
 from scenes.sampling import sample_surface  # noqa: E402
@@ -397,10 +397,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", type=Path, default=RESULTS)
     args = parser.parse_args(argv)
     text = report(run(args.seeds, args.points), args.seeds, args.points)
-    print(text)
-    if args.out:
-        args.out.parent.mkdir(parents=True, exist_ok=True)
-        args.out.write_text(text + "\n")
+    publish(text, args.out)
     return 0
 
 
