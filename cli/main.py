@@ -926,14 +926,13 @@ def _check_units(extents) -> None:  # type: ignore[no-untyped-def]
     """Refuse an estimate whose object, read as metres, is a size no object here is: ``extents`` (metres) of its
     box, measured after stray points and the support plane are gone (a 5 cm cube written in mm read as 85 m across
     and 125 m^3). --units, given, says the size is meant and only warns."""
-    from estimation import tolerances as tol
+    from estimation.units import implausible_size
 
-    largest = float(max(extents))
-    low, high = tol.PLAUSIBLE_EXTENT_M
-    if largest > high:
+    largest, side = float(max(extents)), implausible_size(extents)
+    if side > 0:
         raise TwinError(f"object is {largest:.3g} m across, more than the {_PLAUSIBLE} an object here is: the file is "
                         f"probably in other units (give --units mm or --units cm, or --units m to take it as metres)")
-    if largest < low:
+    if side < 0:
         raise TwinError(f"object is {largest * 1000:.3g} mm across, less than the {_PLAUSIBLE} an object here is: "
                         f"give --units m to take the points as metres")
 

@@ -26,7 +26,7 @@ from estimation.cloud import is_single_origin
 from estimation.errors import TwinError
 from estimation.fusion import oriented_normals
 from estimation.materials import resolve_density
-from estimation.units import unit_scale, units_warning
+from estimation.units import implausible_size, unit_scale
 from scenes.scenefile import ObjectSpec, SceneError
 from sync.messages import MAX_COORDINATE
 from twin.decompose import DEFAULT_SETTINGS, CoacdSettings
@@ -308,11 +308,12 @@ def _check_size(spec: ObjectSpec, extents: np.ndarray) -> None:
     """Refuse a mesh or cloud object whose size (``extents``, metres, in the scene's units) says its file is in other
     units: a cup drawn in mm read as metres is 90 m across and 90,000 t, and failed on where the end effector
     starts; a part in metres read as mm failed in MuJoCo's inertia check."""
-    if units_warning(extents) is None:  # the range ``twin estimate`` warns outside of
+    side = implausible_size(extents)  # the range ``twin estimate`` warns outside of
+    if side == 0:
         return
     largest = float(np.max(extents))
     low, high = tol.PLAUSIBLE_EXTENT_M
-    if largest > high:
+    if side > 0:
         hint = 'if the file is in mm or cm, set units = "mm" or "cm" on the object'
     else:
         hint = 'if the file is in metres, set units = "m" on the object' if spec.units != "m" else \
