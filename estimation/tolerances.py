@@ -95,6 +95,10 @@ REFINE_MIN_FACTOR = 4.0
 #: 0.06 % off with given normals (~1.5 s of CPU for its reconstruction).
 REFINE_POINTS = 120_000
 
+#: Most points a third pass takes when the refined one still leaves more than ``VOLUME_DOUBT_FRACTION`` of the
+#: volume in doubt (``estimate._with_every_point``): all of them, up to the size of the speed target's cloud.
+FULL_POINTS = 1_000_000
+
 #: Occupied voxels per point budget: a random plane through a cube of side v cuts ~(2/3) v^2 of it
 #: (Cauchy: volume over mean width 3/2 v), so a surface of area A touches ~1.5 A / v^2 voxels; the voxel
 #: is widened by sqrt(1.5) to keep POINT_BUDGET, not 1.5 x POINT_BUDGET, points.
