@@ -95,8 +95,8 @@ REFINE_MIN_FACTOR = 4.0
 #: 0.06 % off with given normals (~1.5 s of CPU for its reconstruction).
 REFINE_POINTS = 120_000
 
-#: Most points a third pass takes when the refined one still leaves more than ``VOLUME_DOUBT_FRACTION`` of the
-#: volume in doubt (``estimate._with_every_point``): all of them, up to the size of the speed target's cloud.
+#: Most points the passes after the refining one take while it still leaves more than ``VOLUME_DOUBT_FRACTION``
+#: of the volume in doubt (``estimate._with_more_points``): the size of the speed target's cloud.
 FULL_POINTS = 1_000_000
 
 #: Occupied voxels per point budget: a random plane through a cube of side v cuts ~(2/3) v^2 of it
