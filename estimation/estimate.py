@@ -258,8 +258,8 @@ def _estimate_auto(
     the points grow with the square of the doubt), at least ``tol.REFINE_MIN_FACTOR`` times as many and
     at most ``tol.REFINE_POINTS``. Where the noise sets the cell the second pass is no finer, but it
     averages more points in each cell: skipping it there took the noisy shapes of ``bench/shapes.py`` from
-    0.51 to 1.31 % at worst. Where the refined pass is still in doubt past the warning's threshold, a third
-    runs on more points (``_with_more_points``).
+    0.51 to 1.31 % at worst. Where the refined pass is still in doubt past the warning's threshold and more
+    points would resolve more, further passes take them (``_with_more_points``).
     """
     from estimation.spacing import surface_noise
 
