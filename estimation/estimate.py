@@ -282,8 +282,8 @@ def _estimate_auto(
             progress(f"refining with up to {min(len(local), budget):,} points (the first pass left "
                      f"{100 * doubt:.2g} % of the volume in doubt)")
             first, run = run, _auto_pass(cloud, box, local, spacing, noise, budget, density, viewpoint, stages)
-            run = _with_more_points(first, run, cloud, box, local, spacing, noise, density, viewpoint, stages,
-                                    progress)
+            run = _with_more_points(first, run, budget, cloud, box, local, spacing, noise, density, viewpoint,
+                                    stages, progress)
     run = _at_sparse_spacing(run, cloud, box, local, spacing, noise, density, viewpoint, stages, warnings, progress)
 
     t0 = time.perf_counter()
@@ -571,25 +571,29 @@ def _auto_pass(cloud: PointCloud, box: OrientedBox, local: np.ndarray, spacing: 
                      chordal=float(np.abs(bulge).sum()))
 
 
-def _with_more_points(before: _AutoPass, run: _AutoPass, cloud: PointCloud, box: OrientedBox, local: np.ndarray,
-                      spacing: float, noise: float, density: float, viewpoint: np.ndarray | None,
+def _with_more_points(before: _AutoPass, run: _AutoPass, budget: int, cloud: PointCloud, box: OrientedBox,
+                      local: np.ndarray, spacing: float, noise: float, density: float, viewpoint: np.ndarray | None,
                       stages: dict[str, float], progress: Callable[[str], None]) -> _AutoPass:
-    """``run`` (a refining pass at the ``tol.REFINE_POINTS`` cap, after ``before`` on fewer points), or passes on
-    ``tol.REFINE_MIN_FACTOR`` times more points each, up to all of them or ``tol.FULL_POINTS``, while more points
+    """``run`` (a refining pass thinned to ``budget`` points, after ``before`` on fewer), or passes on budgets
+    ``tol.REFINE_MIN_FACTOR`` times larger each, up to all the points or ``tol.FULL_POINTS``, while more points
     resolve what the last pass could not (:func:`_resolves_more`) and each leaves less in doubt than the one before.
 
-    The cap keeps the time down where the doubt is the width of an interval around a good answer (0.1-0.3 %).
-    Past the warning's threshold it is the answer: the thinning made a wall fewer spacings thick than the cloud
-    has it, and the reconstruction merged its faces (a 1 m I-beam's 4 mm web, 2.3 spacings in 200,000 points and
-    1.8 in the 120,000 kept, came out +7 to +24 %, its interval unbounded; every point: +0.03 %). Where the doubt
-    is surface no point measured (one side of a box), more points measure no more of it: a 300,000-point scan
-    of three faces took 23 s instead of 5 for the same answer.
+    The refining cap keeps the time down where the doubt is the width of an interval around a good answer
+    (0.1-0.3 %). Past the warning's threshold it is the answer: the thinning made a wall fewer spacings thick
+    than the cloud has it, and the reconstruction merged its faces (a 1 m I-beam's 4 mm web, 2.3 spacings in
+    200,000 points and 1.8 in the 120,000 kept, came out +7 to +24 %, its interval unbounded; every point:
+    +0.03 %). Where the doubt is surface no point measured (one side of a box), more points measure no more of
+    it: a 300,000-point scan of three faces took 23 s instead of 5 for the same answer.
     """
     limit = min(len(local), tol.FULL_POINTS)
-    while run.points_used < limit and _resolves_more(before, run, noise):
-        budget = min(limit, int(tol.REFINE_MIN_FACTOR * run.points_used))
-        log.info("refining: volume doubt %.2f %% at %d points, again with %d", 100 * run.doubt, run.points_used, budget)
-        progress(f"refining with {budget:,} points (the last pass left {100 * run.doubt:.2g} % of the volume in doubt)")
+    while budget < limit and _resolves_more(before, run, noise):
+        # The budget, not the points kept: thinning keeps fewer than it asks, and a pass at the limit would
+        # otherwise run again on the same points.
+        budget = min(limit, int(tol.REFINE_MIN_FACTOR * budget))
+        log.info("refining: volume doubt %.2f %% at %d points, again with up to %d", 100 * run.doubt,
+                 run.points_used, budget)
+        progress(f"refining with up to {budget:,} points (the last pass left {100 * run.doubt:.2g} % of the volume "
+                 f"in doubt)")
         finer = _auto_pass(cloud, box, local, spacing, noise, budget, density, viewpoint, stages)
         if finer.doubt >= run.doubt:
             break
@@ -601,13 +605,14 @@ def _resolves_more(before: _AutoPass, run: _AutoPass, noise: float) -> bool:
     """Whether a pass on more points than ``run`` would likely leave less of the volume in doubt: ``run`` leaves
     more than ``tol.VOLUME_DOUBT_FRACTION`` in doubt, its cell is set by the spacing (not the noise, which more
     points would not make finer), and it still merges the faces of walls (its ``thin`` share over that
-    fraction) or measured a good share more of the surface than ``before`` on fewer points
-    (``tol.MEASURED_GAIN``)."""
+    fraction) or left unmeasured at most ``tol.MEASURED_GAIN`` of the surface ``before`` (on fewer points) left
+    unmeasured."""
     if run.doubt <= tol.VOLUME_DOUBT_FRACTION or run.h <= tol.FINE_CELL_NOISE * noise:
         return False
     if run.thin > tol.VOLUME_DOUBT_FRACTION * run.props.volume:
         return True
-    return _unmeasured_share(run.surface) <= tol.MEASURED_GAIN * _unmeasured_share(before.surface)
+    left = _unmeasured_share(before.surface)
+    return left > 0 and _unmeasured_share(run.surface) <= tol.MEASURED_GAIN * left
 
 
 def _at_sparse_spacing(run: _AutoPass, cloud: PointCloud, box: OrientedBox, local: np.ndarray, spacing: float,

@@ -77,7 +77,8 @@ FINE_CELL_NOISE = 2.0
 #: 0.24 % (``.venv/bin/python bench/shapes.py --no-baseline`` with this changed). 30k keeps a million
 #: points within ~0.4 s of CPU. What it costs: walls thinner than two or three spacings of this many
 #: points (a 1.6 mm wall on ~0.03 m^2 of surface) are resolved only when the first pass reports cells
-#: holding both faces of a wall (``estimate._estimate_auto`` then refines, up to ``REFINE_POINTS``).
+#: holding both faces of a wall (``estimate._estimate_auto`` then refines, up to ``REFINE_POINTS``, and past
+#: it where walls stay merged: ``FULL_POINTS``).
 POINT_BUDGET = 30_000
 
 #: 'auto' runs a second, finer pass when the first one's volume bounds (surface it did not measure,
@@ -99,10 +100,10 @@ REFINE_POINTS = 120_000
 #: of the volume in doubt (``estimate._with_more_points``): the size of the speed target's cloud.
 FULL_POINTS = 1_000_000
 
-#: ... and they run only where the last pass measured at most this share of the surface the pass before it left
-#: unmeasured (or still merges walls): finer cells measured more of it there, so the points hold what the cap
-#: thinned away. Measured shares, second pass over first: a star prism's points 0.55-0.63 and an I-beam's
-#: 0.24-0.65 (they shrank again with every point), a scan of three faces of a box 1.00 (the other three unseen).
+#: ... and they run only where the last pass left unmeasured at most this share of what the pass before it left
+#: unmeasured (or still merges walls): finer cells measured more of the surface there, so the points hold what
+#: the cap thinned away. Measured, the second pass's unmeasured share over the first's: a star prism 0.55-0.63 and
+#: an I-beam 0.24-0.65 (both shrank again on all the points), a scan of three faces of a box 1.00 (the rest unseen).
 MEASURED_GAIN = 0.8
 
 #: Occupied voxels per point budget: a random plane through a cube of side v cuts ~(2/3) v^2 of it
@@ -111,7 +112,8 @@ MEASURED_GAIN = 0.8
 VOXELS_PER_AREA = 1.5
 
 #: Most points the views of one object keep when fused (``views.estimate_views``), thinned one per voxel: the
-#: estimate's own speed target is a 1M-point cloud, and it thins to ``REFINE_POINTS`` at most anyway.
+#: estimate's own speed target is a 1M-point cloud, and it thins to ``REFINE_POINTS`` (at most ``FULL_POINTS``
+#: where walls stay merged) anyway.
 VIEW_POINTS = 1_000_000
 
 #: 'auto': coarse cells along the longest side for the flood fill that decides inside and outside away
