@@ -233,7 +233,6 @@ def test_a_holed_ball_whose_wall_is_two_spacings_thick_is_not_filled_in_silence(
     assert result.volume < 2 * mesh.volume
 
 
-
 def _i_beam(length: float, height: float, width: float, flange: float, web: float) -> trimesh.Trimesh:
     import manifold3d
 
@@ -269,6 +268,8 @@ def test_a_web_the_point_cap_would_merge_is_estimated_on_every_point(monkeypatch
 def test_a_scan_of_one_side_does_not_take_more_points_past_the_cap(monkeypatch):
     # Its doubt is the unseen half, which no number of points measures: a 300,000-point scan of three faces of a
     # box took 23 s in passes past the cap instead of 5 s, for the same answer.
+    import importlib
+
     from estimation import tolerances as tol
 
     mesh = trimesh.creation.box(extents=(0.2, 0.15, 0.1))
@@ -281,9 +282,6 @@ def test_a_scan_of_one_side_does_not_take_more_points_past_the_cap(monkeypatch):
     cloud = make_cloud(points[seen])
     monkeypatch.setattr(tol, "POINT_BUDGET", 8_000)
     monkeypatch.setattr(tol, "REFINE_POINTS", 20_000)
-
-    import importlib
-
     module = importlib.import_module("estimation.estimate")  # the module: ``estimation.estimate`` is the function
     budgets: list[int] = []
     one_pass = module._auto_pass
