@@ -556,9 +556,10 @@ def _frame_rotation(o: ObjectDoc, source: str, where: str) -> tuple[Vec3, Vec3, 
         m = rotation(np.asarray(o.quat))  # w x y z, MuJoCo's order; normalised there
     elif o.rotation is not UNSET:
         m = np.asarray(o.rotation, dtype=np.float64)
-        off = float(np.abs(m.T @ m - np.eye(3)).max())
-        det = float(np.linalg.det(m))
-        if off > ROTATION_TOLERANCE or abs(det - 1.0) > ROTATION_TOLERANCE:
+        with np.errstate(over="ignore", invalid="ignore"):  # entries of 1e200 overflow: inf or NaN, refused below
+            off = float(np.abs(m.T @ m - np.eye(3)).max())
+            det = float(np.linalg.det(m))
+        if not (off <= ROTATION_TOLERANCE and abs(det - 1.0) <= ROTATION_TOLERANCE):  # NaN-safe
             raise SceneError(f"{where} rotation: must be a rotation matrix (orthonormal rows, determinant +1); "
                              f"R^T R is {off:.3g} off the identity, determinant {det:.6g}")
         u, _, vt = np.linalg.svd(m)

@@ -130,6 +130,8 @@ def test_a_pcd_viewpoint_is_used_when_the_scene_gives_none(tmp_path):
         ({"rotation": [[1, 0, 0], [0, 1, 0], [0, 0, -1]]}, r"^object 'scan' rotation: must be a rotation matrix .* "
                                                            r"determinant -1$"),
         ({"rotation": [[1, 0, 0], [0, 1.01, 0], [0, 0, 1]]}, r"rotation: must be a rotation matrix .* 0\.0201 off"),
+        # Finite, but R^T R overflows (inf, or NaN where inf meets -inf): refused, without numpy's warnings.
+        ({"rotation": [[1e200, 1e200, 0], [1e200, -1e200, 0], [0, 0, 1]]}, r"rotation: must be a rotation matrix"),
         ({"rotation": [[1, 0, 0], [0, 1, True], [0, 0, 1]]}, r"^object 'scan' rotation\[1\]\[2\]: expected a number, "
                                                               r"got bool True$"),
         ({"quat": [1, 0, 0, 0], "rotation": np.eye(3).tolist()}, r"^object 'scan': give 'quat' or 'rotation', not both$"),
@@ -144,6 +146,7 @@ def test_a_pcd_viewpoint_is_used_when_the_scene_gives_none(tmp_path):
          r"^object 'scan': 'viewpoints' is for cloud sources only"),
     ],
 )
+@pytest.mark.filterwarnings("error")
 def test_bad_poses_are_one_scene_error_naming_the_key(tmp_path, obj, message):
     (tmp_path / "a.ply").write_text("")
     full = {"cloud": "a.ply", **obj}
