@@ -36,10 +36,14 @@ def _alive(pid: int) -> bool:
 def test_workers_end_when_their_parent_is_killed(tmp_path):
     script = tmp_path / "parent.py"
     script.write_text(PARENT)
-    parent = subprocess.Popen([sys.executable, str(script)], stdout=subprocess.PIPE, text=True)
+    # Its stderr to a file: killed, the parent leaves its pool's semaphores to multiprocessing's resource tracker,
+    # which says so ("leaked semaphore objects") on the stderr it inherited, into pytest's output otherwise.
+    err = tmp_path / "parent.err"
+    with err.open("w") as stderr:
+        parent = subprocess.Popen([sys.executable, str(script)], stdout=subprocess.PIPE, stderr=stderr, text=True)
     try:
         pids = [int(p) for p in parent.stdout.readline().split()]
-        assert pids and all(_alive(p) for p in pids)
+        assert pids and all(_alive(p) for p in pids), err.read_text()
         os.kill(parent.pid, signal.SIGKILL)  # no clean shutdown: the kernel is the only one left to tell them
         parent.wait(timeout=10)
         deadline = time.monotonic() + 20
