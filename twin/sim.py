@@ -288,7 +288,7 @@ class Twin:
         goal = _vector(position, 3, MAX_COORDINATE, "end-effector target", "m")
         here = self.data.mocap_pos[self._mocap]
         # Not "further than a step" (NaN compares false): a target written non-finite is put right at once.
-        if not float(np.linalg.norm(goal - here)) > self._ee_max_speed * self.model.opt.timestep:
+        if not math.dist(goal.tolist(), here.tolist()) > self._ee_max_speed * self.model.opt.timestep:
             here[:] = goal
             self._ee_goal = None
         else:  # approached at ee_max_speed, a step at a time (step())
@@ -604,11 +604,15 @@ def _vector(value: object, size: int, limit: float, what: str, unit: str, *, nor
         v = np.asarray(value, dtype=np.float64)
     except (TypeError, ValueError):
         raise SettingsError(f"{what} must be {size} finite numbers, got {_short(value)}") from None
-    if v.shape != (size,) or not np.isfinite(v).all():
+    if v.shape != (size,):
         raise SettingsError(f"{what} must be {size} finite numbers, got {_short(v)}")
-    biggest = float(np.abs(v).max())
-    # The length only under the limit: it is at least the largest component, and 1e300s overflow it.
-    if not (biggest <= limit and (not norm or float(np.linalg.norm(v)) <= limit)):
+    # Python floats, not ufuncs: three numbers are checked several times faster one by one (set_end_effector
+    # runs at every step of a 1 kHz loop).
+    values = v.tolist()
+    if not all(map(math.isfinite, values)):
+        raise SettingsError(f"{what} must be {size} finite numbers, got {_short(v)}")
+    # The length only under the limit: it is at least the largest component (hypot does not overflow).
+    if not (max(map(abs, values), default=0.0) <= limit and (not norm or math.hypot(*values) <= limit)):
         bound = f"at most {limit:g} {unit}" + (" in magnitude" if norm else " in each axis")
         raise SettingsError(f"{what} must be {bound}, got {_short(v)}")
     return v
