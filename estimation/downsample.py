@@ -13,6 +13,25 @@ from estimation.obb import column_bounds
 DENSE_LIMIT = 16_000_000
 
 
+def _rotation(axis_angle: tuple[float, float, float]) -> np.ndarray:
+    """The 3 x 3 rotation of ``axis_angle`` (radians along the axis; Rodrigues' formula)."""
+    v = np.asarray(axis_angle, float)
+    angle = float(np.linalg.norm(v))
+    k = np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]]) / angle
+    return np.eye(3) + np.sin(angle) * k + (1.0 - np.cos(angle)) * (k @ k)
+
+
+#: :func:`voxel_subsample`'s voxels are turned by this rotation off the frame the points are given in. In an
+#: object's own box frame a manufactured object's faces lie along the axes, and a face parallel to the voxels
+#: sits at one offset within them all over it: one point kept per voxel keeps the noise's sparse tail, in the
+#: layer of voxels the face only grazes, as often as its dense middle, so the whole face moved, by up to 0.2 mm
+#: at sigma 0.5 mm (a 20 cm box in 6 poses, 200,000 points: -0.04 to -0.34 %, five faces in of six on the
+#: worst). Turned, the offset runs through the voxels along each face and the tails cancel (+0.01 to +0.06 %).
+#: This turn leaves every axis, face and body diagonal and 2:1 direction of the frame at least 15.7 degrees off
+#: the voxels' axes (the best of 20,000 random rotations, 15.8, rounded).
+LATTICE_TURN = _rotation((-1.79, -0.33, 0.0))
+
+
 def _linear(key: np.ndarray, dims: np.ndarray) -> tuple[np.ndarray, float]:
     """Each row of ``key`` ((n, 3) int64 voxel indices, each below ``dims``) as one int64 in row-major order,
     and the grid's cell count (a float: it may pass int64's range).
@@ -71,7 +90,7 @@ def voxel_subsample(points: np.ndarray, voxel: float) -> np.ndarray:
     Unlike :func:`voxel_downsample` the kept points are measured ones, not centroids: the centroid of a
     patch of a curved surface lies inside it by about ``voxel**2 / (12 R)`` at radius ``R``, which
     shrank a 2 cm sphere by ~0.25 % at 2 mm voxels. Which point of a voxel is kept is arbitrary but
-    deterministic for a given input.
+    deterministic for a given input. The voxels are turned off the points' axes (:data:`LATTICE_TURN`).
 
     Args:
         points: (n, 3) float64, metres.
@@ -80,19 +99,22 @@ def voxel_subsample(points: np.ndarray, voxel: float) -> np.ndarray:
     Returns:
         (m,) int64 indices into ``points``, m = occupied voxels.
     """
-    low, high = column_bounds(points)
+    turned = points @ LATTICE_TURN.T
+    low, high = column_bounds(turned)
     # Measured from the lowest point the coordinates are >= 0, so truncation is the floor.
-    key = ((points - low) * (1.0 / voxel)).astype(np.int64)
+    turned -= low
+    turned *= 1.0 / voxel
+    key = turned.astype(np.int64)
     dims = ((high - low) * (1.0 / voxel)).astype(np.int64) + 1
     linear, cells = _linear(key, dims)
     if cells <= DENSE_LIMIT:
-        # Scatter every point's index into its voxel; one of them survives per voxel.
-        chosen = np.full(int(cells), -1, dtype=np.int64)
-        chosen[linear] = np.arange(len(points))
-        kept = chosen[chosen >= 0]
-        kept.sort()
-        return kept
-    return np.unique(linear, return_index=True)[1]
+        # Scatter every point's index into its voxel and read back which survived: one per voxel. Only
+        # the written slots are read, so the grid is left unset (its untouched pages never cost a thing).
+        chosen = np.empty(int(cells), dtype=np.int64)
+        index = np.arange(len(points))
+        chosen[linear] = index
+        return np.flatnonzero(chosen[linear] == index)
+    return np.sort(np.unique(linear, return_index=True)[1])
 
 
 def thin_to_budget(points: np.ndarray, spacing: float, noise: float, budget: int, *, seed: int = 0) -> np.ndarray:

@@ -14,7 +14,6 @@ from scipy import ndimage
 
 from estimation import estimate
 from estimation import tolerances as tol
-from estimation.downsample import voxel_subsample
 from estimation.dualcontour import QEF_RELATIVE_EIGENVALUE, _pinv_2x2
 from estimation.grid import CLOSING_RADII, _ball_radius2, grid_around, occupancy
 from estimation.implicit import NEIGHBOURS_27, _locate_27
@@ -75,17 +74,6 @@ def test_closed_form_2x2_pseudo_inverse_matches_numpy():
     assert np.abs((got - want) / scale).max() < 1e-8
     # Spreads at or below the floor are dropped whatever their ratio.
     assert not _pinv_2x2(np.array([1e-24]), np.array([0.0]), np.array([1e-24]), 0.05, 1e-20).any()
-
-
-def test_voxel_subsample_keeps_one_measured_point_per_voxel():
-    rng = np.random.default_rng(0)
-    points = rng.normal(size=(20_000, 3))
-    voxel = 0.3
-    kept = voxel_subsample(points, voxel)
-    keys = np.floor((points - points.min(axis=0)) / voxel).astype(np.int64)
-    assert len(kept) == len(np.unique(keys, axis=0))
-    assert len(np.unique(keys[kept], axis=0)) == len(kept)  # one per voxel
-    assert np.all(np.diff(kept) > 0)  # indices of measured points, in order
 
 
 def test_box_frame_points_are_the_box_transform():
