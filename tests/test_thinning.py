@@ -10,7 +10,8 @@ from scipy.spatial.transform import Rotation
 
 import estimation.downsample as downsample
 from estimation import estimate
-from estimation.downsample import LATTICE_TURN, voxel_subsample
+from estimation import tolerances as tol
+from estimation.downsample import LATTICE_TURN, thin_to_budget, voxel_subsample
 from scenes.sampling import sample_surface
 
 
@@ -22,8 +23,7 @@ def test_voxel_subsample_keeps_one_measured_point_per_voxel(dense, monkeypatch):
     points = rng.normal(size=(20_000, 3))
     voxel = 0.3
     kept = voxel_subsample(points, voxel)
-    turned = points @ LATTICE_TURN.T
-    keys = np.floor((turned - turned.min(axis=0)) / voxel).astype(np.int64)
+    keys = np.floor((points - points.min(axis=0)) / voxel).astype(np.int64)
     assert len(kept) == len(np.unique(keys, axis=0))
     assert len(np.unique(keys[kept], axis=0)) == len(kept)  # one per voxel
     assert np.all(np.diff(kept) > 0)  # indices of measured points, in order
@@ -40,12 +40,15 @@ def test_the_lattice_turn_is_a_rotation_clear_of_simple_directions():
 
 @pytest.mark.parametrize("axis", [0, 1, 2])
 def test_a_noisy_face_along_the_axes_keeps_its_place(axis, monkeypatch):
-    """Points of a plane normal to one of the cloud's axes, sigma 0.5 mm, thinned at 2.7 mm voxels: the kept
-    points' mean stays on the plane wherever it sits among the voxels (a point below it sets where they
+    """Points of a plane normal to one of the cloud's axes, sigma 0.5 mm, thinned to 6,000 (2.7 mm voxels): the
+    kept points' mean stays on the plane wherever it sits among the voxels (a point below it sets where they
     begin). The control, voxels along the axes, keeps the noise's sparse tail on one side as often as its
     middle: 0.2-0.4 mm off."""
     rng = np.random.default_rng(axis)
-    n, sigma, voxel = 100_000, 5e-4, 2.7e-3
+    n, sigma, budget = 100_000, 5e-4, 6_000
+    spacing = 0.15 / np.sqrt(n)
+    voxel = spacing * np.sqrt(tol.VOXELS_PER_AREA * n / budget)
+    assert sigma < voxel / 2  # one point per voxel, not a random share
     along = rng.uniform(0.0, 0.15, (n, 2))
     noise = rng.normal(0.0, sigma, n)
     plane = np.insert(along, axis, noise, axis=1)
@@ -55,7 +58,7 @@ def test_a_noisy_face_along_the_axes_keeps_its_place(axis, monkeypatch):
         for start in np.linspace(0.0, voxel, 5)[:-1]:
             anchor = np.zeros((1, 3))
             anchor[0, axis] = -10 * voxel - start  # the lowest point: the voxels' first layer starts there
-            kept = voxel_subsample(np.concatenate([plane, anchor]), voxel)
+            kept = thin_to_budget(np.concatenate([plane, anchor]), spacing, sigma, budget)
             out.append(float(noise[kept[kept < n]].mean()))
         return out
 
