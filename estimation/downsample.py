@@ -24,9 +24,10 @@ def _rotation(axis_angle: tuple[float, float, float]) -> np.ndarray:
 #: :func:`thin_to_budget` turns its voxels by this rotation off the frame the points are given in. In an
 #: object's own box frame a manufactured object's faces lie along the axes, and a face parallel to the voxels
 #: sits at one offset within them all over it: one point kept per voxel keeps the noise's sparse tail, in the
-#: layer of voxels the face only grazes, as often as its dense middle, so the whole face moved, by up to 0.2 mm
-#: at sigma 0.5 mm (a 20 cm box in 6 poses, 200,000 points: -0.04 to -0.34 %, five faces in of six on the
-#: worst). Turned, the offset runs through the voxels along each face and the tails cancel (+0.01 to +0.06 %).
+#: layer of voxels the face only grazes, as often as its dense middle, so the whole face moved (bench/noise_bias.py:
+#: a 20 x 16 x 12 cm box, 200,000 points at sigma 0.5 mm, six poses: -0.115 to -0.334 % where the thinned pass
+#: answered, its faces 0.05-0.13 mm in). Turned, the offset runs through the voxels along each face and the
+#: tails cancel (-0.000 to +0.060 %, every pose).
 #: This turn leaves every axis, face and body diagonal and 2:1 direction of the frame at least 15.7 degrees off
 #: the voxels' axes (the best of 20,000 random rotations, 15.8, rounded).
 LATTICE_TURN = _rotation((-1.79, -0.33, 0.0))
