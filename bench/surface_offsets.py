@@ -28,6 +28,7 @@ sys.path.insert(0, str(ROOT / "bench"))
 from unseen_shapes import CONDITIONS, MAKERS, NOISE_SIGMA, RHO, make_solid  # noqa: E402
 
 from estimation import estimate  # noqa: E402
+from estimation.downsample import thin_to_budget  # noqa: E402
 from scenes.sampling import sample_surface  # noqa: E402
 
 # The module, not the package's function of the same name: the control swaps its thinning.
@@ -66,10 +67,9 @@ def _edge_distance(true: trimesh.Trimesh, points: np.ndarray) -> np.ndarray:
     return out
 
 
-def _random_share(points, spacing, noise, budget, *, seed=0):  # type: ignore[no-untyped-def]
-    if len(points) <= budget:
-        return np.arange(len(points))
-    return np.sort(np.random.default_rng(seed).choice(len(points), budget, replace=False))
+def _random_share(points, spacing, noise, budget, **kw):  # type: ignore[no-untyped-def]
+    """``thin_to_budget``'s own random share, taken whatever the noise (as it takes it past half a voxel)."""
+    return thin_to_budget(points, spacing, np.inf, budget, **kw)
 
 
 def rows(name: str, seed: int) -> list[str]:
