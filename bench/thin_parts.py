@@ -7,7 +7,8 @@ The parts come from ``scenes.shapes.make_parts`` (coils, combs, heatsinks, slott
 rings, nuts, stools; seeded sizes and poses), none of them in ``bench/shapes.py``'s set. At sigma 0.5 mm
 their thinnest features are six to twelve sigmas across, inside the noisy target's "walls >= 3 mm". No
 normals in either condition. Columns: signed volume error %, whether the truth lies in the estimate's
-``volume_bounds_m3``, centre of mass error mm, seconds. Writes bench/results/thin_parts.txt.
+``volume_bounds_m3``, centre of mass error mm, the share of the estimate's normals pointing into the part (against
+the nearest true face's), seconds. Writes bench/results/thin_parts.txt.
 """
 
 from __future__ import annotations
@@ -29,6 +30,17 @@ from scenes.shapes import make_parts
 
 CONDITIONS = {"clean, no normals": 0.0, "noise 0.5 mm, no normals": 0.0005}
 RESULTS = Path(__file__).parent / "results" / "thin_parts.txt"
+
+
+def inside_out(mesh, points: np.ndarray, normals: np.ndarray) -> float:
+    """The share of the estimate's oriented ``normals`` (at its ``points``, world frame) pointing into ``mesh``:
+    against the outward normal of the nearest true face."""
+    import open3d as o3d
+
+    scene = o3d.t.geometry.RaycastingScene()
+    scene.add_triangles(o3d.core.Tensor(mesh.vertices.astype(np.float32)), o3d.core.Tensor(mesh.faces.astype(np.uint32)))
+    face = scene.compute_closest_points(o3d.core.Tensor(np.asarray(points, np.float32)))["primitive_ids"].numpy()
+    return float(np.mean(np.einsum("ij,ij->i", np.asarray(normals), mesh.face_normals[face]) < 0))
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -53,11 +65,13 @@ def main(argv: list[str] | None = None) -> int:
             low, high = est.volume_bounds_m3 or (est.volume, est.volume)
             inside = low <= part.volume <= high
             com = 1000 * float(np.linalg.norm(est.mass.center_of_mass - part.center_of_mass))
+            flipped = 100 * inside_out(part.mesh, est.points, est.normals)
             errors.append(error)
             coms.append(com)
             held += inside
             lines.append(f"    {part.name:22s} thinnest {1000 * part.min_wall:4.1f} mm  volume {error:+8.3f} %  "
-                         f"truth in interval {'yes' if inside else 'no ':3s}  com {com:6.3f} mm  {seconds:5.1f} s")
+                         f"truth in interval {'yes' if inside else 'no ':3s}  com {com:6.3f} mm  "
+                         f"normals inside out {flipped:5.1f} %  {seconds:5.1f} s")
             print(f"[{condition}] {lines[-1].strip()}", file=sys.stderr, flush=True)
         a = np.abs(errors)
         summary.append(f"{condition:26s} {len(a):3d} | {np.median(a):7.3f} {np.percentile(a, 90):7.3f} {a.max():8.3f} | "
