@@ -39,7 +39,7 @@ def test_edges_through_the_noise_inside_a_wall_are_dropped_and_those_along_a_fac
 
 
 def test_where_the_noise_is_under_the_spacing_every_edge_is_kept():
-    points, normals, face, neighbours = _slab(0.003, 1e-6, n=2_000)  # ~0.5 mm apart, no noise to speak of
+    points, normals, _, neighbours = _slab(0.003, 1e-6, n=2_000)  # ~0.5 mm apart, no noise to speak of
     r, c = np.repeat(np.arange(len(points)), 16), neighbours[:, :16].ravel()
     assert on_one_sheet(points, normals, r, c, 1e-6, neighbours).all()
 
