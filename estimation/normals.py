@@ -255,8 +255,9 @@ def on_one_sheet(points: np.ndarray, normals: np.ndarray, r: np.ndarray, c: np.n
     Each point's sheet is placed by the centroid of its nearest ``neighbours`` ((n, >= OWN_SHEET_CENTROID) int,
     itself first), which averages the noise down to sigma / sqrt(OWN_SHEET_CENTROID); an edge whose two centroids
     lie more than SHEET_GAP_SIGMAS sigmas apart along the first point's normal crosses from one sheet to another
-    (a wall's two faces, through the points the noise put inside it). Where the noise is under the point spacing
-    the centroids' gaps come from the sampling and the curvature, not from the noise, and every edge is kept.
+    (a wall's two faces, through the points the noise put inside it). Where SHEET_GAP_SIGMAS sigmas are under the
+    point spacing, the centroids' gaps come from the sampling and the curvature, not from the noise, and every edge
+    is kept (clean clouds, and noisy ones sampled sparsely for their size).
     """
     own = neighbours[:, :OWN_SHEET_CENTROID]
     spacing = float(np.median(np.linalg.norm(points[own[:, 1]] - points, axis=1))) if own.shape[1] > 1 else 0.0
