@@ -26,21 +26,10 @@ from shapes import publish  # bench/shapes.py: this script's folder is on sys.pa
 
 from estimation import estimate, make_cloud
 from scenes.sampling import sample_surface
-from scenes.shapes import make_parts
+from scenes.shapes import inside_out, make_parts
 
 CONDITIONS = {"clean, no normals": 0.0, "noise 0.5 mm, no normals": 0.0005}
 RESULTS = Path(__file__).parent / "results" / "thin_parts.txt"
-
-
-def inside_out(mesh, points: np.ndarray, normals: np.ndarray) -> float:
-    """The share of the estimate's oriented ``normals`` (at its ``points``, world frame) pointing into ``mesh``:
-    against the outward normal of the nearest true face."""
-    import open3d as o3d
-
-    scene = o3d.t.geometry.RaycastingScene()
-    scene.add_triangles(o3d.core.Tensor(mesh.vertices.astype(np.float32)), o3d.core.Tensor(mesh.faces.astype(np.uint32)))
-    face = scene.compute_closest_points(o3d.core.Tensor(np.asarray(points, np.float32)))["primitive_ids"].numpy()
-    return float(np.mean(np.einsum("ij,ij->i", np.asarray(normals), mesh.face_normals[face]) < 0))
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -55,6 +55,17 @@ class Shape:
         return np.asarray(self.mesh.moment_inertia) * density
 
 
+def inside_out(mesh: trimesh.Trimesh, points: np.ndarray, normals: np.ndarray) -> float:
+    """The share of oriented ``normals`` ((n, 3), at ``points``, metres, the mesh's frame) that point into the closed
+    ``mesh``: each against the outward normal of the mesh's face nearest its point."""
+    import open3d as o3d
+
+    scene = o3d.t.geometry.RaycastingScene()
+    scene.add_triangles(o3d.core.Tensor(mesh.vertices.astype(np.float32)), o3d.core.Tensor(mesh.faces.astype(np.uint32)))
+    face = scene.compute_closest_points(o3d.core.Tensor(np.asarray(points, np.float32)))["primitive_ids"].numpy()
+    return float(np.mean(np.einsum("ij,ij->i", np.asarray(normals), mesh.face_normals[face]) < 0))
+
+
 def _box(extents, center=(0.0, 0.0, 0.0)) -> trimesh.Trimesh:  # type: ignore[no-untyped-def]
     return trimesh.creation.box(extents=extents, transform=trimesh.transformations.translation_matrix(center))
 
