@@ -109,12 +109,12 @@ def read_text(path: Path, max_points: int) -> Columns:
             raise CloudFileError(f"{path}: a header row and no rows of numbers after it")
     first = _first_content(lines)
     delimiter = None if first is None else _delimiter(lines[first])
-    if delimiter == ";" and "," in lines[first].split("#", 1)[0]:
-        # A spreadsheet set to a decimal comma writes '0,12;0,05;0,3': numpy named '0,12' as not a number. A
-        # line whose values already have '.' decimals ('0.1,0.2;0.3') mixes two separators instead.
-        fields = lines[first].split("#", 1)[0].strip().split(";")
+    values = "" if first is None else lines[first].split("#", 1)[0]
+    if delimiter == ";" and "," in values:
+        # A spreadsheet set to a decimal comma writes '0,12;0,05;0,3' (a ';' may end the line): numpy named '0,12'
+        # as not a number. A line whose values already have '.' decimals ('0.1,0.2;0.3') mixes two separators.
         shown = repr(lines[first].strip()[:60])
-        if all(_is_number(f.strip().replace(",", ".", 1)) for f in fields):
+        if all(_is_number(f.replace(",", ".", 1)) for f in values.split(";") if f.strip()):
             raise CloudFileError(f"{path}: line {first + first_line} has decimal commas ({shown}): "
                                  f"write the numbers with '.' decimals")
         raise CloudFileError(f"{path}: line {first + first_line} separates its values with both ',' and ';' "

@@ -384,6 +384,9 @@ def test_a_semicolon_separated_csv_is_read_and_decimal_commas_are_named(tmp_path
     (tmp_path / "comma.csv").write_text("x;y;z\n0,177997;0,05;0,3\n0,2;0,1;0,4\n")
     with pytest.raises(CloudFileError, match=r"comma\.csv: line 2 has decimal commas .*write the numbers with '\.' decimals"):
         load_cloud(tmp_path / "comma.csv")
+    (tmp_path / "ends.csv").write_text("x;y;z\n0,177997;0,05;0,3;\n0,2;0,1;0,4;\n")  # a ';' ending each line
+    with pytest.raises(CloudFileError, match=r"ends\.csv: line 2 has decimal commas"):
+        load_cloud(tmp_path / "ends.csv")
     # '.' decimals with ',' and ';' both between values: the separators are named, not decimal commas.
     (tmp_path / "mixed.csv").write_text("0.1,0.2;0.3\n0.2,0.1;0.4\n")
     with pytest.raises(CloudFileError, match=r"mixed\.csv: line 1 separates its values with both ',' and ';'"):
