@@ -87,7 +87,7 @@ def test_a_noisy_wire_thinner_than_the_flood_cells_is_not_filled(seed):
     assert outward.mean() > 0.97  # 0.91 and 0.89 before
 
 
-@pytest.mark.parametrize("seed", [1, 2])
+@pytest.mark.parametrize("seed", [1, pytest.param(2, marks=pytest.mark.slow)])  # 4-5 s each: one in the default run
 def test_a_noisy_3mm_plate_keeps_its_thickness(seed):
     # Six sigmas thick: a point the noise moved into the plate has the other face nearly as close as its own,
     # its wide normal patch spanned both and turned sideways, and only the points moved outward kept planes
@@ -202,8 +202,10 @@ def test_a_hollow_ball_whose_wall_the_noise_merged_says_so(wall):
     assert low <= mesh.volume <= high
 
 
-@pytest.mark.parametrize("mesh", [hollow_ball(0.04, 0.004), trimesh.creation.icosphere(4, 0.03),
-                                  trimesh.creation.box(extents=(0.05, 0.03, 0.02))], ids=["4mm-wall", "ball", "box"])
+@pytest.mark.parametrize("mesh", [  # 5-7 s each: the thin wall in the default run, the solid ones in the slow one
+    pytest.param(hollow_ball(0.04, 0.004), id="4mm-wall"),
+    pytest.param(trimesh.creation.icosphere(4, 0.03), id="ball", marks=pytest.mark.slow),
+    pytest.param(trimesh.creation.box(extents=(0.05, 0.03, 0.02)), id="box", marks=pytest.mark.slow)])
 def test_one_noisy_face_is_not_taken_for_two(mesh):
     cloud = sample_surface(mesh, 100_000, seed=2, noise_sigma=0.0005, with_normals=False)
     result = estimate(make_cloud(cloud.points), 1000.0)
