@@ -53,16 +53,13 @@ class _Completions:
 
 
 def _true_surface(mesh, pos: np.ndarray, quat: np.ndarray):  # type: ignore[no-untyped-def]
-    """An Open3D ray-casting scene of ``mesh`` (body frame) moved to the pose (position, quaternion w x y z)."""
-    import open3d as o3d
-
+    """:func:`scenes.shapes.surface_scene` of ``mesh`` (body frame) moved to the pose (position, quaternion w x y z)."""
+    from scenes.shapes import surface_scene
     from twin.poses import rotation
 
-    vertices = np.asarray(mesh.vertices) @ rotation(quat).T + pos
-    scene = o3d.t.geometry.RaycastingScene()
-    scene.add_triangles(o3d.t.geometry.TriangleMesh.from_legacy(o3d.geometry.TriangleMesh(
-        o3d.utility.Vector3dVector(vertices), o3d.utility.Vector3iVector(np.asarray(mesh.faces)))))
-    return scene
+    world = mesh.copy()
+    world.vertices = np.asarray(mesh.vertices) @ rotation(quat).T + pos
+    return surface_scene(world)
 
 
 def _error(moved: np.ndarray, points: np.ndarray, normals: np.ndarray, on_truth: np.ndarray, density: float,

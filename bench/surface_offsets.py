@@ -43,9 +43,9 @@ EDGE_ANGLE_DEG = 30.0
 def _closest(true: trimesh.Trimesh, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     import open3d as o3d
 
-    scene = o3d.t.geometry.RaycastingScene()
-    scene.add_triangles(o3d.core.Tensor(true.vertices.astype(np.float32)), o3d.core.Tensor(true.faces.astype(np.uint32)))
-    found = scene.compute_closest_points(o3d.core.Tensor(points.astype(np.float32)))
+    from scenes.shapes import surface_scene
+
+    found = surface_scene(true).compute_closest_points(o3d.core.Tensor(points.astype(np.float32)))
     return found["points"].numpy().astype(float), found["primitive_ids"].numpy().astype(int)
 
 

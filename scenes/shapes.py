@@ -55,14 +55,22 @@ class Shape:
         return np.asarray(self.mesh.moment_inertia) * density
 
 
+def surface_scene(mesh: trimesh.Trimesh):  # type: ignore[no-untyped-def]
+    """An Open3D ray-casting scene of ``mesh`` (float32, its own frame): closest points, face ids and signed
+    distances (negative inside) of query points, for measuring an estimate against a true surface."""
+    import open3d as o3d
+
+    scene = o3d.t.geometry.RaycastingScene()
+    scene.add_triangles(o3d.core.Tensor(mesh.vertices.astype(np.float32)), o3d.core.Tensor(mesh.faces.astype(np.uint32)))
+    return scene
+
+
 def inside_out(mesh: trimesh.Trimesh, points: np.ndarray, normals: np.ndarray) -> float:
     """The share of oriented ``normals`` ((n, 3), at ``points``, metres, the mesh's frame) that point into the closed
     ``mesh``: each against the outward normal of the mesh's face nearest its point."""
     import open3d as o3d
 
-    scene = o3d.t.geometry.RaycastingScene()
-    scene.add_triangles(o3d.core.Tensor(mesh.vertices.astype(np.float32)), o3d.core.Tensor(mesh.faces.astype(np.uint32)))
-    face = scene.compute_closest_points(o3d.core.Tensor(np.asarray(points, np.float32)))["primitive_ids"].numpy()
+    face = surface_scene(mesh).compute_closest_points(o3d.core.Tensor(np.asarray(points, np.float32)))["primitive_ids"].numpy()
     return float(np.mean(np.einsum("ij,ij->i", np.asarray(normals), mesh.face_normals[face]) < 0))
 
 
