@@ -606,7 +606,7 @@ def _complete(points: np.ndarray, normals: np.ndarray, origins: np.ndarray, plan
     unknown = np.full_like(turned[0], np.nan)
     carving = carve(np.concatenate([points, turned[0]]), views, plane, others=others, cell=voxel, toward=toward,
                     origins=np.concatenate([origins, unknown]), normals=np.concatenate([normals, unknown]))
-    surface, surface_n = carved_surface(carving, views)
+    surface, surface_n = carved_surface(carving)
     have = np.concatenate(have_p)
     have_normals = np.concatenate(have_n)
     if len(surface):
