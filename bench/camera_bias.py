@@ -13,7 +13,13 @@ bench/camera_tables.py measures the error; this splits it. Each object of a rand
 The true surface is used only to measure, as in the other camera benches. Offsets are signed distances from
 the true surface, outward positive (Open3D's ray-casting scene).
 
-    .venv/bin/python bench/camera_bias.py [--tables 0 1 2 3] [--cameras 3] [--out bench/results/camera_bias.txt]
+What moves the carved points, with the same scenes: ``--noise exact`` (no noise at all) or ``axial`` (1 mm axial
+noise and nothing else of the sensor model: no dropouts, flying pixels, quantisation or incidence term);
+``--margin-sigmas S`` carves with ``estimation.carving.FREE_SIGMAS`` (the noise margin a camera leaves in
+front of its depth) set to S.
+
+    .venv/bin/python bench/camera_bias.py [--tables 0 1 2 3] [--cameras 3] [--noise sigma1mm|axial|exact]
+        [--margin-sigmas S] [--out bench/results/camera_bias.txt]
 """
 
 from __future__ import annotations
@@ -73,11 +79,19 @@ def _error(moved: np.ndarray, points: np.ndarray, normals: np.ndarray, on_truth:
     return 100 * (estimate(make_cloud(*as_received(cloud, normals)), density).volume / truth - 1)
 
 
-def table_rows(seed: int, cameras: int, completions: _Completions) -> list[dict]:
+def _noise(name: str):  # type: ignore[no-untyped-def]
+    """The depth noise model ``--noise`` names."""
+    from dataclasses import replace
+
+    from scenes import cameras as cams
+
+    return {"sigma1mm": cams.SIGMA_1MM, "exact": cams.EXACT, "axial": replace(cams.EXACT, axial_const=1e-3)}[name]
+
+
+def table_rows(seed: int, cameras: int, completions: _Completions, noise: str = "sigma1mm") -> list[dict]:
     """One row per object of random tabletop ``seed``: errors (%) as estimated and with parts moved onto the truth."""
     import open3d as o3d
 
-    from scenes import cameras as cams
     from scenes.remote import Remote
     from scenes.scenefile import load_scene
     from scenes.sensing import CameraSensor
@@ -90,7 +104,7 @@ def table_rows(seed: int, cameras: int, completions: _Completions) -> list[dict]
         scene = load_scene(path)
         clock = SimClock()
         remote = Remote(scene, InProcessBus(clock, {}).transport("remote"), clock=clock, publish=False)
-        sensor = CameraSensor.for_scene(scene, cameras=cameras, seed=1, noise=cams.SIGMA_1MM, rest_window=1, **CAMERA)
+        sensor = CameraSensor.for_scene(scene, cameras=cameras, seed=1, noise=_noise(noise), rest_window=1, **CAMERA)
         rows = []
         for spec in scene.objects:
             completions.last = None
@@ -132,12 +146,21 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--tables", type=int, nargs="+", default=[0, 1, 2, 3], help="random tabletop seeds (default 0-3)")
     ap.add_argument("--cameras", type=int, default=3)
+    ap.add_argument("--noise", choices=("sigma1mm", "axial", "exact"), default="sigma1mm")
+    ap.add_argument("--margin-sigmas", type=float, default=None, help="carve with FREE_SIGMAS set to this")
     ap.add_argument("--out", type=Path, default=ROOT / "bench" / "results" / "camera_bias.txt")
     args = ap.parse_args()
+    import estimation.carving as carving
+
+    if args.margin_sigmas is not None:
+        carving.FREE_SIGMAS = args.margin_sigmas
     completions = _Completions()
-    rows = [row for seed in args.tables for row in table_rows(seed, args.cameras, completions)]
+    rows = [row for seed in args.tables for row in table_rows(seed, args.cameras, completions, args.noise)]
     console = Console(record=True, width=200)
-    detail = Table(title=f"{args.cameras} cameras, sigma 1 mm: volume error % of each object, as estimated and with "
+    condition = {"sigma1mm": "sigma 1 mm", "axial": "1 mm axial noise only", "exact": "exact depth"}[args.noise]
+    if args.margin_sigmas is not None:
+        condition += f", carving margin {args.margin_sigmas:g} sigma"
+    detail = Table(title=f"{args.cameras} cameras, {condition}: volume error % of each object, as estimated and with "
                          "parts of its cloud moved onto the true surface; offsets mm (outward +)")
     keys = ("error", "carved on truth", "completed on truth", "observed on truth", "completed share",
             "observed offset", "carved offset", "other completed offset")
