@@ -79,6 +79,10 @@ def _error(moved: np.ndarray, points: np.ndarray, normals: np.ndarray, on_truth:
     return 100 * (estimate(make_cloud(*as_received(cloud, normals)), density).volume / truth - 1)
 
 
+#: ``--noise``'s names, as the tables' titles say them.
+NOISE_LABELS = {"sigma1mm": "sigma 1 mm", "axial": "1 mm axial noise only", "exact": "exact depth"}
+
+
 def _noise(name: str):  # type: ignore[no-untyped-def]
     """The depth noise model ``--noise`` names."""
     from dataclasses import replace
@@ -146,7 +150,7 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--tables", type=int, nargs="+", default=[0, 1, 2, 3], help="random tabletop seeds (default 0-3)")
     ap.add_argument("--cameras", type=int, default=3)
-    ap.add_argument("--noise", choices=("sigma1mm", "axial", "exact"), default="sigma1mm")
+    ap.add_argument("--noise", choices=tuple(NOISE_LABELS), default="sigma1mm")
     ap.add_argument("--margin-sigmas", type=float, default=None, help="carve with FREE_SIGMAS set to this")
     ap.add_argument("--out", type=Path, default=ROOT / "bench" / "results" / "camera_bias.txt")
     args = ap.parse_args()
@@ -157,7 +161,7 @@ def main() -> int:
     completions = _Completions()
     rows = [row for seed in args.tables for row in table_rows(seed, args.cameras, completions, args.noise)]
     console = Console(record=True, width=200)
-    condition = {"sigma1mm": "sigma 1 mm", "axial": "1 mm axial noise only", "exact": "exact depth"}[args.noise]
+    condition = NOISE_LABELS[args.noise]
     if args.margin_sigmas is not None:
         condition += f", carving margin {args.margin_sigmas:g} sigma"
     detail = Table(title=f"{args.cameras} cameras, {condition}: volume error % of each object, as estimated and with "
