@@ -606,7 +606,11 @@ def _complete(points: np.ndarray, normals: np.ndarray, origins: np.ndarray, plan
     unknown = np.full_like(turned[0], np.nan)
     carving = carve(np.concatenate([points, turned[0]]), views, plane, others=others, cell=voxel, toward=toward,
                     origins=np.concatenate([origins, unknown]), normals=np.concatenate([normals, unknown]))
-    surface, surface_n = carved_surface(carving)
+    # Seen from one side, what closes the back (a half turn placed by the same free-space test, or the
+    # carving alone) lies short of it while the margin pushes the carved faces out: taking back the margin
+    # there only bared that (1 camera: 7.57 -> 7.95 % median over 8 random tabletops x 2 draws).
+    one_sided = float(np.linalg.norm(toward)) >= ONE_SIDED
+    surface, surface_n = carved_surface(carving, () if one_sided else views)
     have = np.concatenate(have_p)
     have_normals = np.concatenate(have_n)
     if len(surface):

@@ -123,6 +123,40 @@ def test_the_carved_solid_holds_the_object_and_not_much_more(count: int):
     assert base.any() and (normals[base, 2] < -0.5).mean() > 0.9
 
 
+def test_the_carved_surface_sits_where_the_camera_measured_not_its_noise_margin_in_front():
+    # A camera straight above a 6 cm square block 3 cm tall, on a table: exact depths, but each pixel says its
+    # noise is 2 mm. The carving stops FREE_SIGMAS of that in front of the block's top (so noise does not carve
+    # into it); the carved surface is taken back to the top the camera measured, within half a voxel.
+    from estimation.carving import FREE_SIGMAS, DepthView
+    from estimation.fusion import Intrinsics, depth_to_points
+
+    height, half, sigma, cell = 0.03, 0.03, 0.002, 0.0013
+    intrinsics = Intrinsics.from_fov(320, 240, 40.0)
+    camera = np.array([0.0, 0.0, 0.6])
+    rotation = np.array([[1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, -1.0]])  # looking down, image y = -world y
+    rays = intrinsics.rays() @ rotation.T  # world directions with camera-z length 1: depth = distance down
+    on_top = camera[:2] + rays[:, :2] * (camera[2] - height)
+    block = (np.abs(on_top) <= half).all(axis=1)
+    depth = np.where(block, camera[2] - height, camera[2]).reshape(intrinsics.height, intrinsics.width)
+    seen = DepthView(depth, np.full(depth.shape, sigma), intrinsics, rotation, camera)
+    views = carving_views([seen], FLOOR, 0.001)
+    points, _ = depth_to_points(depth, intrinsics, rotation, camera)
+    top = points[points[:, 2] > 0.01]
+    # A point of something 10 cm up lets the grid rise past the block's top, which would cap the solid
+    # one voxel above the highest point.
+    carving = carve(top, views, FLOOR, cell=cell, others=np.array([[0.0, 0.0, 0.1]]))
+
+    for given, expected in (((), height + FREE_SIGMAS * sigma), ((views,), height)):
+        surface, normals = carved_surface(carving, *given)
+        inner = (normals[:, 2] > 0.9) & (np.abs(surface[:, :2]) < half - 5 * cell).all(axis=1)
+        assert inner.sum() > 100
+        assert np.median(surface[inner, 2]) == pytest.approx(expected, abs=0.5 * cell)
+    # The base stands on the plane, where no camera's margin is: it does not move.
+    (taken, normals), (left, _) = carved_surface(carving, views), carved_surface(carving)
+    down = normals[:, 2] < -0.9
+    assert down.sum() > 100 and np.array_equal(taken[down], left[down])
+
+
 def test_an_empty_view_carves_nothing():
     scan = _scan(1)
     blank = [type(v)(np.full_like(v.depth, np.nan), v.sigma, v.intrinsics, v.rotation, v.position)
