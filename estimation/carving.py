@@ -343,14 +343,17 @@ def carving_views(views: Sequence[DepthView], plane: Plane | None, plane_margin:
     return out
 
 
-def free_space(points: np.ndarray, views: Sequence[DepthView], *, slack: float = 0.0) -> np.ndarray:
+def free_space(points: np.ndarray, views: Sequence[DepthView], *, slack: float = 0.0,
+               blend_sigma: bool = False) -> np.ndarray:
     """(n,) bool: which ``points`` ((n, 3) metres, world) some view saw through (empty space).
 
     ``views`` as :func:`carving_views` returns them.
     The depth at a point's projection is interpolated bilinearly between the four nearest pixel centres
     (on a slanted surface the nearest pixel's depth is off by up to half a pixel's depth change); a
     point next to a pixel without return or off every image is not free. ``slack`` (metres) is added to
-    the noise margin (see the module docstring).
+    the noise margin (see the module docstring). The margin takes the largest sigma of the four pixels, or
+    with ``blend_sigma`` their sigmas blended as the depth is: beside an object the largest is its edge
+    pixel's, and rays passing it to the plane (sigma 0) carried that margin, leaving the carved solid wider.
     """
     pts = as_points(points, "points")
     free = np.zeros(len(pts), dtype=bool)
@@ -365,7 +368,11 @@ def free_space(points: np.ndarray, views: Sequence[DepthView], *, slack: float =
         ax, ay = x - x0, y - y0
         d = ((1 - ax) * (1 - ay) * depth[y0, x0] + ax * (1 - ay) * depth[y0, x1]
              + (1 - ax) * ay * depth[y1, x0] + ax * ay * depth[y1, x1])
-        s = np.maximum.reduce([sigma[y0, x0], sigma[y0, x1], sigma[y1, x0], sigma[y1, x1]])
+        if blend_sigma:
+            s = ((1 - ax) * (1 - ay) * sigma[y0, x0] + ax * (1 - ay) * sigma[y0, x1]
+                 + (1 - ax) * ay * sigma[y1, x0] + ax * ay * sigma[y1, x1])
+        else:
+            s = np.maximum.reduce([sigma[y0, x0], sigma[y0, x1], sigma[y1, x0], sigma[y1, x1]])
         with np.errstate(invalid="ignore"):
             free |= ok & np.isfinite(d) & (z < d - FREE_SIGMAS * s - slack)
     return free
@@ -520,7 +527,7 @@ def plane_frame(points: np.ndarray, plane: Plane, toward: np.ndarray | None = No
 
 def carve(points: np.ndarray, views: Sequence[DepthView], plane: Plane, *, others: np.ndarray | None = None,
           cell: float | None = None, origins: np.ndarray | None = None, normals: np.ndarray | None = None,
-          toward: np.ndarray | None = None) -> Carving:
+          toward: np.ndarray | None = None, blend_sigma: bool = False) -> Carving:
     """The solid around one object's observed ``points`` that no view saw through.
 
     It stands on the object's footprint: the points' shadow on the plane, gaps closed, and grown by how far
@@ -540,6 +547,7 @@ def carve(points: np.ndarray, views: Sequence[DepthView], plane: Plane, *, other
         cell: voxel size, metres; None: the longest extent over ``CELLS_PER_EXTENT``.
         toward: (3,) the cameras' mean view direction: the grid's axis where the shadow is round
             (:func:`plane_frame`).
+        blend_sigma: the noise margin as :func:`free_space` takes it.
     """
     from scipy import ndimage
 
@@ -598,7 +606,7 @@ def carve(points: np.ndarray, views: Sequence[DepthView], plane: Plane, *, other
     fi, fj = np.nonzero(shadow)
     k = np.arange(shape[2])
     index = np.stack([np.repeat(fi, shape[2]), np.repeat(fj, shape[2]), np.tile(k, len(fi))], axis=1)
-    keep = ~free_space(carving.centres(index), views, slack=FREE_CELLS * cell)
+    keep = ~free_space(carving.centres(index), views, slack=FREE_CELLS * cell, blend_sigma=blend_sigma)
     solid = carving.solid
     solid[index[keep, 0], index[keep, 1], index[keep, 2]] = True
     # Unseen space between two objects is split by the nearest observed point, on the grid (a distance

@@ -157,6 +157,32 @@ def test_the_carved_surface_sits_where_the_camera_measured_not_its_noise_margin_
     assert down.sum() > 100 and np.array_equal(taken[down], left[down])
 
 
+def test_a_blended_noise_margin_frees_rays_passing_beside_an_edge_and_never_the_object():
+    # A camera straight above a 6 cm block 3 cm tall whose pixels say 2 mm of noise, on a table whose pixels
+    # carving_views puts on the plane with none. Beside the block's walls the four pixels a point falls
+    # between mix the two; the largest sigma lends the wall's margin to rays that pass the wall to the table.
+    from estimation.carving import DepthView, free_space
+    from estimation.fusion import Intrinsics
+
+    height, half, sigma = 0.03, 0.03, 0.002
+    intrinsics = Intrinsics.from_fov(320, 240, 40.0)
+    camera = np.array([0.0, 0.0, 0.6])
+    rotation = np.array([[1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, -1.0]])
+    rays = intrinsics.rays() @ rotation.T
+    block = (np.abs(camera[:2] + rays[:, :2] * (camera[2] - height)) <= half).all(axis=1)
+    depth = np.where(block, camera[2] - height, camera[2]).reshape(intrinsics.height, intrinsics.width)
+    views = carving_views([DepthView(depth, np.full(depth.shape, sigma), intrinsics, rotation, camera)], FLOOR, 0.001)
+    x, z = np.meshgrid(np.linspace(half - 0.01, half + 0.01, 201), np.linspace(0.0005, 0.04, 80))
+    points = np.stack([x.ravel(), np.zeros(x.size), z.ravel()], axis=1)
+    inside = (points[:, 0] <= half) & (points[:, 2] <= height)
+
+    widest, blended = free_space(points, views), free_space(points, views, blend_sigma=True)
+    assert not (widest & inside).any() and not (blended & inside).any()
+    beside = blended & ~widest
+    assert beside.sum() >= 20 and (points[beside, 0] > half).all()
+    assert not (widest & ~blended).any()
+
+
 def test_an_empty_view_carves_nothing():
     scan = _scan(1)
     blank = [type(v)(np.full_like(v.depth, np.nan), v.sigma, v.intrinsics, v.rotation, v.position)
