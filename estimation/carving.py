@@ -366,16 +366,20 @@ def free_space(points: np.ndarray, views: Sequence[DepthView], *, slack: float =
         # repeated point, pictured by depth_of_points) has no pixel 1 for them to read.
         x1, y1 = np.minimum(x0 + 1, depth.shape[1] - 1), np.minimum(y0 + 1, depth.shape[0] - 1)
         ax, ay = x - x0, y - y0
-        d = ((1 - ax) * (1 - ay) * depth[y0, x0] + ax * (1 - ay) * depth[y0, x1]
-             + (1 - ax) * ay * depth[y1, x0] + ax * ay * depth[y1, x1])
-        if blend_sigma:
-            s = ((1 - ax) * (1 - ay) * sigma[y0, x0] + ax * (1 - ay) * sigma[y0, x1]
-                 + (1 - ax) * ay * sigma[y1, x0] + ax * ay * sigma[y1, x1])
-        else:
-            s = np.maximum.reduce([sigma[y0, x0], sigma[y0, x1], sigma[y1, x0], sigma[y1, x1]])
+        corners = ((y0, x0), (y0, x1), (y1, x0), (y1, x1))
+        weights = ((1 - ax) * (1 - ay), ax * (1 - ay), (1 - ax) * ay, ax * ay)
+        d = _blend(depth, corners, weights)
+        s = (_blend(sigma, corners, weights) if blend_sigma
+             else np.maximum.reduce([sigma[r, c] for r, c in corners]))
         with np.errstate(invalid="ignore"):
             free |= ok & np.isfinite(d) & (z < d - FREE_SIGMAS * s - slack)
     return free
+
+
+def _blend(image: np.ndarray, corners: tuple, weights: tuple) -> np.ndarray:
+    """``image`` read at each of four pixel ``corners`` ((rows, cols) index arrays) and summed with ``weights``."""
+    (r0, c0), (r1, c1), (r2, c2), (r3, c3) = corners
+    return weights[0] * image[r0, c0] + weights[1] * image[r1, c1] + weights[2] * image[r2, c2] + weights[3] * image[r3, c3]
 
 
 def frame_cut(points: np.ndarray, origins: np.ndarray, views: Sequence[DepthView]) -> tuple[np.ndarray, np.ndarray]:
