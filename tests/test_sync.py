@@ -401,3 +401,40 @@ def test_make_config_takes_lists_of_endpoints_not_a_string():
             make_config(listen=bad)  # type: ignore[arg-type]
         with pytest.raises(SessionError, match="expected a list of endpoint strings"):
             make_config(connect=bad)  # type: ignore[arg-type]
+
+
+def test_the_haptic_loops_messages_travel_first_and_clouds_last(endpoint):
+    """What the receiving session sees of each message's Zenoh priority: poses and the operator's messages at
+    real time (a pose must not queue behind a cloud being sent), clouds at the lowest data priority, anything
+    else (a heartbeat, a removal, a key of no known message) at Zenoh's default; none unbatched (express)."""
+    import threading
+    import time
+
+    import zenoh
+
+    from sync.zenoh_transport import ZenohTransport, open_session
+
+    keys = Keys("qos")
+    sent = [keys.object("a", "pose"), keys.operator, keys.operator_target, keys.operator_force,
+            keys.object("a", "cloud"), keys.heartbeat, keys.object("a", "gone"), "twin/qos/not/a/known/key"]
+    got: dict[str, tuple[object, bool]] = {}
+    arrived = threading.Event()
+
+    def on_sample(sample) -> None:  # type: ignore[no-untyped-def]
+        got[str(sample.key_expr)] = (sample.priority, sample.express)
+        if len(got) == len(sent):
+            arrived.set()
+
+    with open_session(make_config(listen=[endpoint])) as server, open_session(make_config(connect=[endpoint])) as client:
+        client.declare_subscriber("twin/qos/**", on_sample)
+        transport = ZenohTransport(server)
+        deadline = time.monotonic() + 10
+        while not arrived.is_set() and time.monotonic() < deadline:  # until the subscription has reached the server
+            for key in sent:
+                transport.put(key, b"x")
+            arrived.wait(0.2)
+    first = (zenoh.Priority.REAL_TIME, False)
+    assert got == {keys.object("a", "pose"): first, keys.operator: first, keys.operator_target: first,
+                   keys.operator_force: first, keys.object("a", "cloud"): (zenoh.Priority.DATA_LOW, False),
+                   keys.heartbeat: (zenoh.Priority.DATA, False), keys.object("a", "gone"): (zenoh.Priority.DATA, False),
+                   "twin/qos/not/a/known/key": (zenoh.Priority.DATA, False)}
