@@ -165,6 +165,11 @@ def recorded_network(recording: Recording) -> Network | None:
         doc = json.loads(raw)
         if not doc:
             return None
+        if not isinstance(doc, dict):
+            raise TypeError(f"a JSON {type(doc).__name__}, not an object")
+        unknown = sorted(set(doc) - {"uplink", "downlink", "seed"})
+        if unknown:  # a misspelt side would replay with no network at all, and say nothing
+            raise ValueError(f"unknown key {unknown[0][:40]!r}; known: uplink, downlink, seed")
         sides = {}
         for side in ("uplink", "downlink"):
             c = doc.get(side)

@@ -299,7 +299,11 @@ def make_config(*, listen: list[str] | None = None, connect: list[str] | None = 
     source = "" if config_file is None else f"zenoh config {config_file}: "
     if config_file is not None:
         path = Path(config_file)
-        check_config_text(_config_text(path), path)
+        text = _config_text(path)
+        check_config_text(text, path)
+        if path.suffix.lower() in (".json", ".json5") and not _opens_an_object(text):
+            # Zenoh reads "[]" as an empty config: every setting the user meant would be silently dropped.
+            raise SessionError(f"zenoh config {path}: not a JSON5 object ({{ ... }}) at the top level")
         try:
             conf = zenoh.Config.from_file(str(path))
         except Exception as exc:  # zenoh raises its own ZError for JSON5 or schema problems
@@ -402,6 +406,21 @@ def _config_text(path: Path) -> str:
         return path.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as exc:
         raise SessionError(f"zenoh config {path}: cannot read it ({exc})") from None
+
+
+def _opens_an_object(text: str) -> bool:
+    """Whether the first thing in a JSON5 text, past blanks and comments, is ``{``."""
+    i, n = 0, len(text)
+    while i < n:
+        if text[i].isspace():
+            i += 1
+        elif text.startswith("//", i):
+            i = n if (j := text.find("\n", i)) < 0 else j
+        elif text.startswith("/*", i):
+            i = n if (j := text.find("*/", i + 2)) < 0 else j + 2
+        else:
+            return text[i] == "{"
+    return False
 
 
 def check_config_text(text: str, path: Path) -> None:

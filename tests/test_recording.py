@@ -436,6 +436,9 @@ def _rewrite(src: Path, dst: Path, *, topic: str | None = None, data: bytes = b"
     ({"session": {"network": json.dumps({"uplink": None, "downlink": {"delay": "0.05"}, "seed": 0})}}, "delay must be a number"),
     ({"session": {"network": json.dumps({"uplink": None, "downlink": {"reorder": "yes"}, "seed": 0})}}, "reorder must be"),
     ({"session": {"network": json.dumps({"uplink": None, "downlink": None, "seed": 1.5})}}, "seed must be an integer"),
+    # A misspelt side replayed with no network at all, and said nothing.
+    ({"session": {"network": json.dumps({"uplinks": {"delay": 0.05}, "seed": 0})}}, "unknown key 'uplinks'; known: uplink"),
+    ({"session": {"network": json.dumps([{"delay": 0.05}])}}, "a JSON list, not an object"),
     ({"session": {"sensor": "lidar"}}, "the recorded sensor 'lidar' is not one replay knows (surface, cameras)"),
     ({"session": {"sensor": "x" * 10_000}}, "the recorded sensor 'xxxxxxxxxxxxxxxxxxxxxxxx..."),
 ])

@@ -531,6 +531,18 @@ def test_a_bad_zenoh_config_is_one_line_with_its_position(tmp_path, capsys):
     assert err.count("\n") == 1 and "at line 1, column 2" in err and ".rs:" not in err, err
 
 
+@pytest.mark.parametrize("text", ["[]", "// nothing but a comment\n", ""])
+def test_a_json5_zenoh_config_that_is_not_an_object_is_refused(text, tmp_path, capsys):
+    """Zenoh read "[]" as an empty config: whatever the user meant to set was dropped without a word."""
+    from cli.main import main
+
+    path = tmp_path / "z.json5"
+    path.write_text(text)
+    assert main(["local", "--zenoh-config", str(path), "--duration", "0.1"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "not a JSON5 object ({ ... }) at the top level" in err, err
+
+
 @pytest.mark.parametrize("make", ["deep", "huge", "folder", "fifo", "tls fifo", "tls device"])
 def test_a_zenoh_config_or_a_file_it_names_that_cannot_be_a_config_is_refused_in_one_line(make, tmp_path, capsys):
     """A config nested 30,000 deep crashed Zenoh's parser (a segmentation fault); a TLS key that was a FIFO hung
