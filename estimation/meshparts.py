@@ -188,11 +188,13 @@ def overlap_union(vertices: np.ndarray, faces: np.ndarray) -> Overlap | None:
         faces: (f, 3) int64, a closed, consistently wound mesh with duplicate vertices merged.
 
     Returns:
-        None for one part, for parts whose bounding boxes do not overlap, and for parts whose solids do not
+        None for no faces or one part, for parts whose bounding boxes do not overlap, and for parts whose solids do not
         overlap though their boxes do (a rod through a ring, a ball in a cavity). Where the union cannot be
         formed (an inward part inside no outward part, which :func:`turned_outward` turns first; a part
         manifold3d refuses) the record says why, without a surface: whether the parts overlap is then not known.
     """
+    if not len(faces):  # no part at all (a mesh whose faces merged away): nothing to unite
+        return None
     parts = _parts(vertices, faces)
     if parts.count == 1:
         return None

@@ -45,7 +45,8 @@ def source_mesh(spec: ObjectSpec) -> trimesh.Trimesh | None:
     overlap (:func:`_union_of_parts`): the surface of the solid that is the object's truth.
 
     Raises:
-        SceneError: a mesh file that cannot be read or is not a closed surface (with the object's id and the file).
+        SceneError: a mesh file that cannot be read, is not a closed surface or has no triangle with any area (with
+            the object's id and the file).
     """
     from scenes.paper_objects import paper_object
 
@@ -113,9 +114,11 @@ def _closed(mesh: trimesh.Trimesh, spec: ObjectSpec) -> trimesh.Trimesh:
     origin) and its samples one sheet: an open cup's truth weighed 1.0 kg and its twin 0.1 kg, with only a log line.
 
     Raises:
-        SceneError: the surface is still open after the repair (with the object's id, the file and its open edges).
+        SceneError: the surface is still open after the repair (with the object's id, the file and its open edges),
+            or none of its triangles has any area (:func:`_check_area`).
     """
     if mesh.is_watertight and mesh.is_winding_consistent:
+        _check_area(mesh, spec)
         return mesh
     repaired = mesh.copy()
     repaired.merge_vertices(merge_tex=True, merge_norm=True)  # an OBJ's texture seams split its vertices
@@ -124,6 +127,7 @@ def _closed(mesh: trimesh.Trimesh, spec: ObjectSpec) -> trimesh.Trimesh:
     trimesh.repair.fill_holes(repaired)  # a triangle's or a quad's hole only: a larger one is no slip
     opened = _open_edges(repaired)
     if opened == 0:
+        _check_area(repaired, spec)  # before the warning: a repair that left nothing repaired nothing
         if len(repaired.vertices) != len(mesh.vertices) or not np.array_equal(repaired.faces, mesh.faces):
             log.warning("object %r: mesh %s was not closed; repaired (vertices merged, duplicate or zero-area "
                         "faces dropped, winding made consistent, small holes filled)", spec.id, spec.value)
@@ -131,6 +135,24 @@ def _closed(mesh: trimesh.Trimesh, spec: ObjectSpec) -> trimesh.Trimesh:
     raise SceneError(f"object {spec.id!r}: mesh {spec.value} is not a closed surface: {opened} open edge(s) after "
                      f"merging vertices, fixing the winding and filling small holes; its volume, so its mass, is "
                      f"undefined: close it in a mesh editor (fill its holes; give an open shell a wall thickness)")
+
+
+def _check_area(mesh: trimesh.Trimesh, spec: ObjectSpec) -> None:
+    """Refuse a closed mesh (metres) none of whose triangles has any area: it bounds no solid.
+
+    Vertices that merge into one (a mesh nanometres across, or every corner at the same point) leave no face at
+    all, which failed deep in the search for its parts; faces along one line are closed but have no normal, and
+    failed on the samples' zero normals. trimesh's own test of a degenerate face, the one the repair drops by.
+
+    Raises:
+        SceneError: no face with both sides of its bounding rectangle above ``trimesh.tol.merge`` (with the object's
+            id and the file).
+    """
+    if len(mesh.faces) and mesh.nondegenerate_faces().any():
+        return
+    raise SceneError(f"object {spec.id!r}: mesh {spec.value} has no triangle left with any area once its vertices "
+                     f"are merged (its corners all on one point or one line, or its units far too small): it encloses "
+                     f"no volume")
 
 
 def _open_edges(mesh: trimesh.Trimesh) -> int:

@@ -280,3 +280,11 @@ def test_a_mesh_wound_inside_out_whole_is_counted_turned_outward():
     _check_exact(result, [(*box, 1)])
     assert result.warnings == ("the mesh is wound inside out (its faces face inward): counted turned outward "
                                "(0.00024 m^3)",)
+
+
+def test_a_mesh_with_no_faces_has_no_parts_to_unite_or_turn():
+    # A mesh whose faces all merged away: minimum.reduceat raised IndexError on the empty set of parts.
+    from estimation.meshparts import overlap_union, turned_outward
+
+    vertices, faces = np.zeros((1, 3)), np.zeros((0, 3), dtype=np.int64)
+    assert overlap_union(vertices, faces) is None and turned_outward(vertices, faces) is None

@@ -148,6 +148,37 @@ def test_a_closed_mesh_meeting_itself_along_an_edge_is_taken_as_it_is(tmp_path, 
     assert mesh.volume == pytest.approx(2e-3, rel=1e-6) and not caplog.records
 
 
+
+#: Four corners on one line, wound as a closed tetrahedron: every face has zero area.
+_COLLINEAR_OBJ = "v 0 0 0\nv 0.1 0 0\nv 0.2 0 0\nv 0.3 0 0\nf 1 2 3\nf 1 3 4\nf 1 4 2\nf 2 4 3\n"
+
+
+@pytest.mark.parametrize(("name", "content"), [
+    # Twelve triangles whose corners are one point: merged, no face is left (an IndexError in meshparts).
+    ("point.stl", b"\0" * 80 + np.uint32(12).tobytes()
+     + (b"\0" * 12 + np.full(9, 0.05, np.float32).tobytes() + b"\0\0") * 12),
+    # A tetrahedron 1 nm across: its corners merge into one (the same IndexError).
+    ("tiny.obj", "v 0 0 0\nv 1e-9 0 0\nv 0 1e-9 0\nv 0 0 1e-9\nf 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 4\n"),
+    # Closed but flat as a line: its samples' normals were zero ("normals: expected unit vectors").
+    ("line.obj", _COLLINEAR_OBJ),
+], ids=["one-point", "1-nm", "one-line"])
+def test_a_mesh_with_no_triangle_of_any_area_is_one_line(tmp_path, name, content):
+    (tmp_path / name).write_bytes(content if isinstance(content, bytes) else content.encode())
+    spec = parse_scene({"name": "s", "objects": [{"id": "m", "mesh": name, "points": 2000}]}, base=tmp_path).objects[0]
+    with pytest.raises(SceneError, match=rf"^object 'm': mesh .*{name} has no triangle left with any area once its "
+                                         r"vertices are merged .*: it encloses no volume$"):
+        source_mesh(spec)
+
+
+def test_twin_build_refuses_a_mesh_with_no_area_with_exit_2(tmp_path, capsys):
+    (tmp_path / "line.obj").write_text(_COLLINEAR_OBJ)
+    scene = tmp_path / "scene.toml"
+    scene.write_text('name = "s"\n[[objects]]\nid = "rod"\nmesh = "line.obj"\npoints = 2000\n')
+    assert main(["build", str(scene), "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err.splitlines()[-1]
+    assert err.startswith("twin build: error: object 'rod': mesh ") and "it encloses no volume" in err
+    assert not (tmp_path / "out").exists()
+
 def _cross() -> tuple[trimesh.Trimesh, float]:
     """Two closed boxes crossing in one mesh (a CAD assembly), and their union's volume."""
     bar = trimesh.creation.box(extents=(0.12, 0.03, 0.03))
