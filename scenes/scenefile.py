@@ -196,7 +196,7 @@ class ObjectDoc(Struct, forbid_unknown_fields=True):
     mesh: Annotated[Text, Meta(description="mesh file beside or below the scene file (no `..`, not absolute), in `units`")] | UnsetType = UNSET
     cloud: Annotated[Text, Meta(description="point-cloud file beside or below the scene file (no `..`, not absolute), in `units`")] | UnsetType = UNSET
     primitive: PrimitiveDoc | UnsetType = UNSET
-    units: Annotated[Literal["m", "cm", "mm"], Meta(description="units of a mesh or cloud file")] = "m"
+    units: Annotated[Literal["m", "cm", "mm"], Meta(description="mesh and cloud only: units of the file")] = "m"
     material: Annotated[Text, Meta(description="material name or alias: density and friction")] | UnsetType = UNSET
     density: Annotated[Density, Meta(description="kg/m^3, instead of material")] | UnsetType = UNSET
     position: Annotated[tuple[Coordinate, ...], Meta(
@@ -213,7 +213,7 @@ class ObjectDoc(Struct, forbid_unknown_fields=True):
         min_length=1, max_length=MAX_VIEWPOINTS,
         description="cloud only: sensor origins, in the cloud file's frame and units")] | UnsetType = UNSET
     points: Annotated[int, Meta(ge=MIN_POINTS, le=MAX_POINTS,
-                                description="cloud size when sampling a paper/mesh/primitive source")] = 100_000
+                                description="paper, mesh and primitive only: cloud size when sampling the source")] = 100_000
 
 
 class SceneDoc(Struct, forbid_unknown_fields=True):
@@ -419,7 +419,8 @@ def parse_scene(doc: dict, *, base: str | os.PathLike[str] = Path("."),
     Raises:
         TypeError: ``base`` not a path, or ``path`` neither a path nor None.
         SceneError: unknown keys, missing or duplicate ids, wrong types, non-finite or out-of-range values,
-            no or several sources, pose keys on a non-cloud, a matrix that is no rotation, missing files.
+            no or several sources, pose keys on a non-cloud, ``units`` on a source with no file, ``points`` on a
+            cloud, a matrix that is no rotation, missing files.
     """
     if not isinstance(base, str | os.PathLike):
         raise TypeError(f"parse_scene: base must be a folder path (str or os.PathLike), got {type(base).__name__}")
@@ -496,6 +497,7 @@ def _object(o: ObjectDoc, index: int, base: Path, doc: dict) -> ObjectSpec:
                              f"(size = [major, minor]), got {list(o.primitive.size)}")
     else:
         _paper(value, where)
+    _check_source_keys(source, index, doc, where)
     if o.material is not UNSET and o.density is not UNSET:
         raise SceneError(f"{where}: give 'material' or 'density', not both")
     material = None if o.material is UNSET else _material(o.material, f"{where} material")
@@ -505,6 +507,26 @@ def _object(o: ObjectDoc, index: int, base: Path, doc: dict) -> ObjectSpec:
         units=o.units, position=o.position, rotation_deg=o.rotation_deg, points=o.points,
         frame_rotation=frame_rotation, viewpoints=() if o.viewpoints is UNSET else tuple(o.viewpoints),
     )
+
+
+def _check_source_keys(source: str, index: int, doc: dict, where: str) -> None:
+    """Refuse ``units`` on a source that has no file and ``points`` on a cloud: keys that would be ignored.
+
+    Both have defaults, so whether the file wrote them is read from the document itself. Ignored, they misled:
+    ``units = "mm"`` on a 5 m primitive box built a 21 t box and recorded "mm" in estimates.json.
+
+    Raises:
+        SceneError: either key written where it does not apply (``where`` starts the message).
+    """
+    def written(key: str) -> bool:
+        return _lookup(doc, ["objects", index, key])[0]
+
+    if source not in ("mesh", "cloud") and written("units"):
+        size = "in metres" if source == "primitive" else "the paper's"
+        raise SceneError(f"{where}: 'units' is for mesh and cloud sources only (a {source} object has no file: its "
+                         f"size is {size})")
+    if source == "cloud" and written("points"):
+        raise SceneError(f"{where}: 'points' does not apply to a cloud source: its points are the file's")
 
 
 def _check_beside(file: str, what: str) -> None:
