@@ -192,6 +192,7 @@ def check_args(args: argparse.Namespace) -> None:
             raise TwinError(f"--points must be from {MIN_POINTS} to {MAX_POINTS}, got {args.points}")
     if getattr(args, "max_hulls", None) is not None and args.max_hulls != -1 and args.max_hulls < 1:
         raise TwinError(f"--max-hulls must be -1 (no cap) or >= 1, got {args.max_hulls}")
+    _check_cache_dir(getattr(args, "cache_dir", None))
     # run, local and replay scale only the --script file by --units: without it, --units mm did nothing, silently.
     if "script" in vars(args) and args.script is None and args.units != "m":
         raise TwinError(f"--units applies to --script's file, and no --script is given: drop --units {args.units} "
@@ -209,6 +210,25 @@ def check_args(args: argparse.Namespace) -> None:
         if args.command == "build" and out is not None and Path(out).resolve() in Path(rerun[1]).resolve().parents:
             raise TwinError(f"--rerun save {rerun[1]}: inside --out {out}, which the build replaces whole; save it "
                             "beside the folder")
+
+
+def _check_cache_dir(folder: Path | None) -> None:
+    """Refuse a ``--cache-dir`` that is the current folder, as ``--out`` is: ``--cache-dir ''`` (an unset shell
+    variable's) is one, and CoACD's entries (one ``<sha256>.npz`` per mesh) were strewn among the user's files.
+
+    Raises:
+        TwinError: ``folder`` resolves to the current folder.
+    """
+    if folder is None:
+        return
+    try:
+        resolved, here = Path(folder).resolve(), Path.cwd().resolve()
+    except (OSError, RuntimeError):  # no current folder, a loop of links: the cache's own check warns
+        return
+    if resolved == here:
+        raise TwinError(f"--cache-dir {resolved}: is the current folder (so is an empty --cache-dir); the CoACD "
+                        f"cache writes a file per mesh there: give it a folder of its own, or leave --cache-dir out "
+                        f"for the default (see --help)")
 
 
 #: Options naming files a command reads (``local --scene`` is a name, not a file: only paths count).
@@ -405,7 +425,8 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--duration", dest="replay_duration", type=float,
                    help="twin seconds to run (default: as long as the recording; at most 3600)")
     p.add_argument("--out", type=Path, help="folder for summary.json and replay.mcap")
-    p.add_argument("--cache-dir", type=Path, help="CoACD cache (default $TWIN_CACHE_DIR or ~/.cache/tactile-twin)")
+    p.add_argument("--cache-dir", type=Path, help="CoACD cache folder, not the current one (default "
+                   "$TWIN_CACHE_DIR, else $XDG_CACHE_HOME/tactile-twin/coacd, else ~/.cache/tactile-twin/coacd)")
     p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
     p.set_defaults(handler=_cmd_replay)
 
@@ -664,7 +685,8 @@ def _coacd_options(p: argparse.ArgumentParser) -> None:
                    help=f"CoACD concavity, in (0, 1] (default {d.threshold})")
     p.add_argument("--max-hulls", type=int, default=d.max_convex_hull,
                    help=f"CoACD max hulls, >= 1 or -1 for no cap (default {d.max_convex_hull})")
-    p.add_argument("--cache-dir", type=Path, help="CoACD cache (default $TWIN_CACHE_DIR or ~/.cache/tactile-twin)")
+    p.add_argument("--cache-dir", type=Path, help="CoACD cache folder, not the current one (default "
+                   "$TWIN_CACHE_DIR, else $XDG_CACHE_HOME/tactile-twin/coacd, else ~/.cache/tactile-twin/coacd)")
 
 
 def _coacd_settings(args: argparse.Namespace):  # type: ignore[no-untyped-def]

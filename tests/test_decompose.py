@@ -167,3 +167,29 @@ def test_coacd_settings_outside_coacds_ranges_are_refused(change, match):
 
     with pytest.raises(CoacdSettingsError, match=match):
         replace(SETTINGS, **change)
+
+
+@pytest.mark.parametrize("xdg", ["", "relative/cache"])
+def test_an_empty_or_relative_xdg_cache_home_counts_as_unset(monkeypatch, tmp_path, xdg):
+    # Taken as given, they put the cache under the folder the command ran in (./tactile-twin/coacd/<sha>.npz).
+    monkeypatch.setenv("HOME", str(tmp_path))
+    monkeypatch.setenv("TWIN_CACHE_DIR", "")  # empty: unset too
+    monkeypatch.setenv("XDG_CACHE_HOME", xdg)
+    assert dec.default_cache_dir() == tmp_path / ".cache" / "tactile-twin" / "coacd"
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))  # an absolute one is used
+    assert dec.default_cache_dir() == tmp_path / "xdg" / "tactile-twin" / "coacd"
+
+
+@pytest.mark.parametrize("folder", ["", "."])
+def test_a_cache_dir_that_is_the_current_folder_is_refused(monkeypatch, tmp_path, capsys, folder):
+    # ``--cache-dir ''`` wrote <sha>.npz among the user's files, as ``--out ''`` is refused from doing.
+    from cli.main import main
+
+    scene = Path(__file__).parent / "data" / "small.toml"
+    monkeypatch.chdir(tmp_path)
+    assert main(["build", str(scene), "--out", "out", "--cache-dir", folder]) == 2
+    err = capsys.readouterr().err.splitlines()
+    assert err == [f"twin build: error: --cache-dir {tmp_path.resolve()}: is the current folder (so is an empty "
+                   f"--cache-dir); the CoACD cache writes a file per mesh there: give it a folder of its own, or "
+                   f"leave --cache-dir out for the default (see --help)"]
+    assert not any(tmp_path.iterdir())

@@ -163,10 +163,15 @@ FAST_THRESHOLD = 0.02
 
 
 def default_cache_dir() -> Path:
-    """``$TWIN_CACHE_DIR``, else ``$XDG_CACHE_HOME/tactile-twin/coacd``, else ``~/.cache/...``."""
+    """``$TWIN_CACHE_DIR``, else ``$XDG_CACHE_HOME/tactile-twin/coacd``, else ``~/.cache/tactile-twin/coacd``.
+
+    An empty ``TWIN_CACHE_DIR`` counts as unset, and so does an empty or relative ``XDG_CACHE_HOME``, as the XDG
+    Base Directory spec says: taken as given, they put the cache in (or under) whatever folder the command ran in.
+    """
     if env := os.environ.get("TWIN_CACHE_DIR"):
         return Path(env)
-    base = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache"))
+    xdg = os.environ.get("XDG_CACHE_HOME", "")
+    base = Path(xdg) if xdg and Path(xdg).is_absolute() else Path.home() / ".cache"
     return base / "tactile-twin" / "coacd"
 
 
