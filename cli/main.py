@@ -498,8 +498,9 @@ def _cmd_estimate(args: argparse.Namespace) -> int:
                                    progress=progress)
             result, cov, bounds, warnings, plane = (fused.estimate, fused.coverage, fused.volume_bounds_m3,
                                                     fused.warnings, fused.plane)
-        if args.units is None and args.intrinsics is None:
-            _check_units(result.obb.extents)  # the estimate's own box: after the strays and the support plane went
+        if args.units is None:  # depth images too: millimetres read as metres made an 848 m object, exit 0
+            # The estimate's own box: after the strays and the support plane went.
+            _check_units(result.obb.extents, depth=args.intrinsics is not None)
         if args.mesh_out is not None:
             _write_mesh(result.vertices, result.faces, args.mesh_out)
         seconds = time.perf_counter() - t0
@@ -944,19 +945,30 @@ def _units_option(p: argparse.ArgumentParser, what: str, *, checked: bool = Fals
 _PLAUSIBLE = "2 mm to 5 m"
 
 
-def _check_units(extents) -> None:  # type: ignore[no-untyped-def]
+def _check_units(extents, *, depth: bool = False) -> None:  # type: ignore[no-untyped-def]
     """Refuse an estimate whose object, read as metres, is a size no object here is: ``extents`` (metres) of its
     box, measured after stray points and the support plane are gone (a 5 cm cube written in mm read as 85 m across
-    and 125 m^3). --units, given, says the size is meant and only warns."""
+    and 125 m^3). --units, given, says the size is meant and only warns. ``depth``: the views are depth images,
+    whose unit is --depth-scale's (--units mm is refused beside --intrinsics), so the message names that.
+
+    Raises:
+        TwinError: the object's size, the plausible range and the option that sets the unit.
+    """
     from estimation.units import implausible_size
 
     largest, side = float(max(extents)), implausible_size(extents)
+    if side == 0:
+        return
+    size = (f"object is {largest:.3g} m across, more than" if side > 0 else
+            f"object is {largest * 1000:.3g} mm across, less than")
+    if depth:
+        raise TwinError(f"{size} the {_PLAUSIBLE} an object here is: the depth images are probably in other units "
+                        f"(check --depth-scale, metres per depth unit: default 0.001 for integer images, 1 for float "
+                        f".npy; or give --units m to take the size as meant)")
     if side > 0:
-        raise TwinError(f"object is {largest:.3g} m across, more than the {_PLAUSIBLE} an object here is: the file is "
+        raise TwinError(f"{size} the {_PLAUSIBLE} an object here is: the file is "
                         f"probably in other units (give --units mm or --units cm, or --units m to take it as metres)")
-    if side < 0:
-        raise TwinError(f"object is {largest * 1000:.3g} mm across, less than the {_PLAUSIBLE} an object here is: "
-                        f"give --units m to take the points as metres")
+    raise TwinError(f"{size} the {_PLAUSIBLE} an object here is: give --units m to take the points as metres")
 
 
 def _sensor_option(p: argparse.ArgumentParser, *, replay: bool = False) -> None:

@@ -439,6 +439,31 @@ def test_bad_intrinsics_and_poses_are_one_line_errors(capsys, tmp_path, extra, m
     assert re.search(message, err) and err.count("\n") == 1, err
 
 
+@pytest.mark.parametrize(("suffix", "extra", "size"), [
+    (".npy", [], r"624 m across, more than"),  # millimetres saved as float: read as metres
+    (".png", ["--depth-scale", "1"], r"624 m across, more than"),
+    (".png", ["--depth-scale", "1e-6"], r"0\.624 mm across, less than"),
+])
+def test_a_depth_image_in_other_units_is_refused_as_a_point_file_is(capsys, tmp_path, suffix, extra, size):
+    """The units check ran only without --intrinsics: a disc in millimetres read as metres came out an 848 m object
+    with exit 0 (the hint only in the JSON's warnings). It is refused as a point file's is, naming --depth-scale."""
+    rows, cols = np.mgrid[:30, :40]
+    depth = np.full((30, 40), 800, np.uint16)
+    depth[(cols - 20) ** 2 + (rows - 15) ** 2 < 64] = 700
+    image = tmp_path / f"d{suffix}"
+    if suffix == ".npy":
+        np.save(image, depth.astype(np.float32))
+    else:
+        _png(image, depth)
+    mesh = tmp_path / "m.stl"
+    assert main(["estimate", str(image), "--intrinsics", "50", "50", "19.5", "14.5", *extra,
+                 "--mesh-out", str(mesh)]) == 2
+    err = capsys.readouterr().err
+    assert re.fullmatch(rf"twin estimate: error: object is {size} the 2 mm to 5 m an object here is: the depth "
+                        r"images are probably in other units \(check --depth-scale, .*\)\n", err), err
+    assert not mesh.exists()
+
+
 def _npy_claiming(path, shape, *, sparse=False):  # type: ignore[no-untyped-def]
     """An .npy header for ``shape`` float64, then 1 KB of data, or (sparse) a file of its full size with no
     blocks written."""
