@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import codecs
 import logging
+import re
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
@@ -110,15 +111,15 @@ def read_text(path: Path, max_points: int) -> Columns:
     first = _first_content(lines)
     delimiter = None if first is None else _delimiter(lines[first])
     values = "" if first is None else lines[first].split("#", 1)[0]
+    if _decimal_commas(values):
+        # A spreadsheet set to a decimal comma writes '0,12;0,05;0,3' (a ';' may end the line) or tabs between
+        # them: numpy named '0,12' (or '12\t0') as not a number.
+        raise CloudFileError(f"{path}: line {first + first_line} has decimal commas ({lines[first].strip()[:60]!r}): "
+                             f"write the numbers with '.' decimals")
     if delimiter == ";" and "," in values:
-        # A spreadsheet set to a decimal comma writes '0,12;0,05;0,3' (a ';' may end the line): numpy named '0,12'
-        # as not a number. A line whose values already have '.' decimals ('0.1,0.2;0.3') mixes two separators.
-        shown = repr(lines[first].strip()[:60])
-        if all(_is_number(f.replace(",", ".", 1)) for f in values.split(";") if f.strip()):
-            raise CloudFileError(f"{path}: line {first + first_line} has decimal commas ({shown}): "
-                                 f"write the numbers with '.' decimals")
+        # A line whose values already have '.' decimals ('0.1,0.2;0.3') mixes two separators.
         raise CloudFileError(f"{path}: line {first + first_line} separates its values with both ',' and ';' "
-                             f"({shown}): use one separator")
+                             f"({lines[first].strip()[:60]!r}): use one separator")
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # loadtxt warns (to stderr) on a file of comments only; make it an error
         try:
@@ -197,8 +198,8 @@ def _header_row(path: Path, lines: list[str], first_line: int = 1) -> _HeaderRow
     line = lines[index]
     stripped = line.split("#", 1)[0].strip().removeprefix("//")  # '#' starts a comment, as numpy.loadtxt reads it
     tokens = [t.strip().strip("'\"").lower() for t in stripped.split(_delimiter(stripped))]
-    if any(_is_number(t) for t in tokens):
-        return None
+    if any(_is_number(t) for t in tokens) or _decimal_commas(stripped):
+        return None  # data; decimal commas too, which the caller names (not "not a header row")
     found: dict[str, tuple[int, int, int] | None] = {}
     for kind, triple in _HEADER_NAMES.items():
         at = []
@@ -223,6 +224,19 @@ def _delimiter(line: str) -> str | None:
     """What separates the values of ``line``: ';' (a spreadsheet set to decimal commas), ',' or white space (None)."""
     text = line.split("#", 1)[0]
     return ";" if ";" in text else "," if "," in text else None
+
+
+#: A number written with a decimal comma ('0,12', '-1,5e-3'): digits on both sides, so that '1,' of '1, 2, 3'
+#: (commas and spaces between values) is not one.
+_DECIMAL_COMMA = re.compile(r"[-+]?\d*,\d+(?:[eE][-+]?\d+)?")
+
+
+def _decimal_commas(values: str) -> bool:
+    """Whether ``values`` (a line without its comment) are numbers with decimal commas, separated by ';' or white
+    space ('0,12;0,05;0,3', '0,12\t0,05\t0,3'): each a number, at least one with a decimal comma."""
+    fields = [f.strip() for f in (values.split(";") if ";" in values else values.split()) if f.strip()]
+    return (any("," in f for f in fields)
+            and all(_DECIMAL_COMMA.fullmatch(f) if "," in f else _is_number(f) for f in fields))
 
 
 def _ragged_row(lines: list[str], delimiter: str | None) -> tuple[int, str] | None:

@@ -393,6 +393,18 @@ def test_a_semicolon_separated_csv_is_read_and_decimal_commas_are_named(tmp_path
         load_cloud(tmp_path / "mixed.csv")
 
 
+@pytest.mark.parametrize("separator", [";", "\t", " "])
+def test_decimal_commas_without_a_header_row_are_named(tmp_path, separator):
+    """Without a header row the first line was taken for a bad header ("line 1 is not numbers and not a header row
+    naming x, y and z columns"), or, tab-separated, numpy's "could not convert string '12\t0'": the decimal commas
+    are named as they are after a header row."""
+    path = tmp_path / "dc.csv"
+    path.write_text(f"0,12{separator}0,05{separator}0,3\n0,1{separator}0,2{separator}0,3\n")
+    with pytest.raises(CloudFileError, match=r"dc\.csv: line 1 has decimal commas \('0,12.*'\): write the numbers "
+                                             r"with '\.' decimals$"):
+        load_cloud(path)
+
+
 def test_a_first_row_of_numbers_with_a_comment_is_data_not_a_header(tmp_path, cloud):
     rows = _rows(cloud.points, " ").splitlines()
     (tmp_path / "c.xyz").write_text(rows[0] + "  # the first point\n" + "\n".join(rows[1:]) + "\n")
