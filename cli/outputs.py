@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import errno
 import os
+import re
 import stat
 from collections.abc import Callable, Iterable
 from pathlib import Path
@@ -169,22 +170,44 @@ def check_record_file(path: Path, inputs: Iterable[Path | None], flag: str = "--
 #: A mesh ``--mesh-out`` writes (trimesh's export of each format) starts so: a binary STL with a zeroed 80-byte
 #: header, a PLY or OBJ with trimesh's comment line. A file without these is not one this command wrote.
 _PLY_MARK, _OBJ_MARK = b"comment https://github.com/mikedh/trimesh\n", b"# https://github.com/mikedh/trimesh\n"
+#: A PLY header's face count: a mesh has one above 0. trimesh writes a point cloud with the same comment line, and
+#: a user's scan saved so was replaced by --mesh-out.
+_PLY_FACES = re.compile(rb"^element face (\d+)\s*$", re.M)
 
 
-def written_mesh(suffix: str, head: bytes, size: int) -> bool:
+def written_mesh(suffix: str, head: bytes, size: int, tail: bytes = b"") -> bool:
     """Whether a non-empty file of ``size`` bytes starting with ``head`` (its first
-    :data:`sync.replacing.HEAD_BYTES`) is a mesh as ``--mesh-out`` writes it in the format ``suffix`` names: a
-    binary STL with a zeroed header whose triangle count matches its size, a PLY or OBJ carrying trimesh's comment.
-    A user's CAD export (an STL header naming its tool, an ASCII STL) and any other file are not."""
+    :data:`sync.replacing.HEAD_BYTES`) and ending with ``tail`` (as many last bytes) is a mesh as ``--mesh-out``
+    writes it in the format ``suffix`` names: a binary STL with a zeroed header whose triangle count (above 0)
+    matches its size, a PLY carrying trimesh's comment whose header declares faces, an OBJ carrying it whose last
+    line is a face (trimesh writes the faces last). A user's CAD export (an STL header naming its tool, an ASCII
+    STL), a point cloud trimesh wrote, and any other file are not."""
     suffix = suffix.lower()
     if suffix == ".stl":
-        return (len(head) >= 84 and head[:80] == bytes(80)
-                and size == 84 + 50 * int.from_bytes(head[80:84], "little"))
+        count = int.from_bytes(head[80:84], "little")
+        return len(head) >= 84 and head[:80] == bytes(80) and count > 0 and size == 84 + 50 * count
     if suffix == ".ply":
-        return head.startswith(b"ply\n") and _PLY_MARK in head.split(b"end_header", 1)[0]
+        header = head.split(b"end_header", 1)[0]
+        faces = _PLY_FACES.search(header)
+        return head.startswith(b"ply\n") and _PLY_MARK in header and faces is not None and int(faces[1]) > 0
     if suffix == ".obj":
-        return head.startswith(_OBJ_MARK)
+        lines = tail.split(b"\n")
+        last = next((line for line in reversed(lines) if line.strip()), b"")
+        return head.startswith(_OBJ_MARK) and last.startswith(b"f ")
     return False
+
+
+def _tail(path: Path, size: int) -> bytes:
+    """The last :data:`sync.replacing.HEAD_BYTES` bytes of ``path`` (``size`` bytes long), or b"" if unreadable
+    (then it is not a mesh this command wrote, and is refused)."""
+    from sync.replacing import HEAD_BYTES
+
+    try:
+        with path.open("rb") as f:
+            f.seek(max(0, size - HEAD_BYTES))
+            return f.read(HEAD_BYTES)
+    except OSError:
+        return b""
 
 
 def check_mesh_file(path: Path, inputs: Iterable[Path | None], flag: str, *, suffixes: Iterable[str]) -> None:
@@ -198,7 +221,7 @@ def check_mesh_file(path: Path, inputs: Iterable[Path | None], flag: str, *, suf
     from sync.replacing import found_at
 
     check_output_file(path, inputs, flag, suffixes=suffixes)
-    found = found_at(path, lambda head, size: written_mesh(path.suffix, head, size))
+    found = found_at(path, lambda head, size: written_mesh(path.suffix, head, size, _tail(path, size)))
     if found.kind == "unchecked":
         raise TwinError(f"{flag} {path}: cannot check it ({found.error})")
     if found.kind in ("folder", "special"):  # the mesh moved into place would delete a FIFO or device node

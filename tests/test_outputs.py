@@ -418,6 +418,25 @@ def test_mesh_out_replaces_only_a_mesh_it_wrote(tmp_path, capsys):
     assert not [p.name for p in tmp_path.iterdir() if p.name.startswith(".")]
 
 
+@pytest.mark.parametrize("suffix", [".ply", ".obj", ".stl"])
+def test_mesh_out_does_not_replace_a_file_without_faces(tmp_path, capsys, suffix):
+    """A point cloud trimesh wrote carries the same comment line as --mesh-out's meshes: a user's scan.ply was
+    replaced by the mesh. A mesh has faces: a PLY header's face count above 0, an OBJ ending in faces, an STL's
+    triangle count above 0."""
+    cloud = tmp_path / "box.npy"
+    np.save(cloud, trimesh.creation.box(extents=[0.1, 0.06, 0.04]).sample(2000, return_index=False))
+    scan = tmp_path / f"scan{suffix}"
+    if suffix == ".stl":
+        scan.write_bytes(bytes(84))  # a zeroed header, no triangles
+    else:
+        trimesh.PointCloud(np.random.default_rng(0).random((300, 3)) * 0.1).export(scan)
+    before = scan.read_bytes()
+    assert main(["estimate", str(cloud), "--method", "hull", "--mesh-out", str(scan)]) == 2
+    assert capsys.readouterr().err == (f"twin estimate: error: --mesh-out {scan}: exists and is not a mesh this "
+                                       "command wrote; refusing to replace it\n")
+    assert scan.read_bytes() == before
+
+
 def _own_file(path: Path) -> None:
     """A file of ``path``'s output kind, as its writer makes it: a recording, a rerun file, a mesh."""
     if path.suffix == ".mcap":
