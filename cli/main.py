@@ -498,13 +498,17 @@ def _cmd_estimate(args: argparse.Namespace) -> int:
                                    progress=progress)
             result, cov, bounds, warnings, plane = (fused.estimate, fused.coverage, fused.volume_bounds_m3,
                                                     fused.warnings, fused.plane)
+        read_points = np.concatenate([v.points for v in views])
         if args.units is None:  # depth images too: millimetres read as metres made an 848 m object, exit 0
-            # The estimate's own box: after the strays and the support plane went.
-            _check_units(result.obb.extents, depth=args.intrinsics is not None)
+            # The estimate's own box: after the strays and the support plane went. Its points, if it kept them
+            # ('auto'), else those read: where a few far points make the box vast, they are named.
+            used = read_points if result.points is None else result.points.astype(np.float64)
+            _check_units(result.obb.extents, depth=args.intrinsics is not None, points=used,
+                         keep_strays=args.keep_strays)
         if args.mesh_out is not None:
             _write_mesh(result.vertices, result.faces, args.mesh_out)
         seconds = time.perf_counter() - t0
-        rlog.estimate(args.views[0].stem, result, np.concatenate([v.points for v in views]))
+        rlog.estimate(args.views[0].stem, result, read_points)
     record = estimate_to_json(result, seconds)
     record["volume_bounds_m3"] = None if bounds is None else list(bounds)
     record["coverage"] = cov
@@ -945,15 +949,18 @@ def _units_option(p: argparse.ArgumentParser, what: str, *, checked: bool = Fals
 _PLAUSIBLE = "2 mm to 5 m"
 
 
-def _check_units(extents, *, depth: bool = False) -> None:  # type: ignore[no-untyped-def]
+def _check_units(extents, *, depth: bool = False, points=None, keep_strays: bool = False) -> None:  # type: ignore[no-untyped-def]
     """Refuse an estimate whose object, read as metres, is a size no object here is: ``extents`` (metres) of its
     box, measured after stray points and the support plane are gone (a 5 cm cube written in mm read as 85 m across
     and 125 m^3). --units, given, says the size is meant and only warns. ``depth``: the views are depth images,
     whose unit is --depth-scale's (--units mm is refused beside --intrinsics), so the message names that.
+    ``points`` (metres, the estimate's): when a few far points make the object vast and the rest is of a plausible
+    size, those are named instead of the units (one point 3 m off a box kept by ``keep_strays``, --keep-strays).
 
     Raises:
-        TwinError: the object's size, the plausible range and the option that sets the unit.
+        TwinError: the object's size, the plausible range and the option that sets the unit, or the far points.
     """
+    from estimation.cloud import far_points, without_far_points
     from estimation.units import implausible_size
 
     largest, side = float(max(extents)), implausible_size(extents)
@@ -961,6 +968,11 @@ def _check_units(extents, *, depth: bool = False) -> None:  # type: ignore[no-un
         return
     size = (f"object is {largest:.3g} m across, more than" if side > 0 else
             f"object is {largest * 1000:.3g} mm across, less than")
+    if side > 0 and points is not None and (far := far_points(points)):
+        rest = without_far_points(points)
+        if implausible_size(rest.max(axis=0) - rest.min(axis=0)) == 0:
+            raise TwinError(f"object is {largest:.3g} m across because of {far}: remove them"
+                            + (", or drop --keep-strays, which keeps them" if keep_strays else ""))
     if depth:
         raise TwinError(f"{size} the {_PLAUSIBLE} an object here is: the depth images are probably in other units "
                         f"(check --depth-scale, metres per depth unit: default 0.001 for integer images, 1 for float "

@@ -331,17 +331,34 @@ def far_points(points: np.ndarray) -> str:
     Args:
         points: (n, 3) float64, metres.
     """
+    found = _far(points)
+    if found is None:
+        return ""
+    far, d, reach = found
+    return f"{int(far.sum())} far point(s), up to {d.max():.3g} m from the rest, which lies within {reach:.3g} m"
+
+
+def without_far_points(points: np.ndarray) -> np.ndarray:
+    """``points`` ((n, 3) float64, metres) without the far points :func:`far_points` names (all of them when it
+    names none): the bulk whose size says whether the object, not a few points, is implausibly large."""
+    found = _far(points)
+    return points if found is None else points[~found[0]]
+
+
+def _far(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, float] | None:
+    """The far points of :func:`far_points` (a mask), each point's distance from the median and the reach of
+    the rest; None when there are none or the rest is not solid."""
     # The largest coordinate difference, not the Euclidean norm: its squares overflow past 1e154 m.
     d = np.abs(points - np.median(points, axis=0)).max(axis=1)
     reach = float(np.percentile(d, 99))
     far = d > tol.OUTLIER_REACH * reach
     rest = points[~far][:: max(1, int((~far).sum()) // 20000)]
     if not far.any() or len(rest) < 4:
-        return ""
+        return None
     spread = np.linalg.svd(rest - rest.mean(axis=0), compute_uv=False)
     if spread[2] < tol.FLATNESS_RATIO * spread[0]:
-        return ""
-    return f"{int(far.sum())} far point(s), up to {d.max():.3g} m from the rest, which lies within {reach:.3g} m"
+        return None
+    return far, d, reach
 
 
 def distinct_rows(points: np.ndarray) -> np.ndarray:

@@ -570,6 +570,22 @@ def test_a_cloud_in_other_units_is_refused_unless_units_are_given(tmp_path, caps
     assert out["volume_m3"] == pytest.approx(6e-5, rel=0.01) and any("stray" in w for w in out["warnings"])
 
 
+@pytest.mark.parametrize("method", ["auto", "hull"])
+def test_one_far_point_kept_with_keep_strays_is_named_not_the_units(tmp_path, capsys, method):
+    """A box in metres and one point 3 m off, kept by --keep-strays: "object is 5.25 m across ... the file is
+    probably in other units" blamed the units. The bulk is of a plausible size: the far point is named."""
+    from cli.main import main
+
+    cube = np.asarray(sample_surface(trimesh.creation.box(extents=(0.1, 0.06, 0.04)), 1000, seed=0).points)
+    path = tmp_path / "one_far.xyz"
+    np.savetxt(path, np.vstack([cube, [[3.0, 3.0, 3.0]]]))
+    assert main(["estimate", str(path), "--keep-strays", "--method", method]) == 2
+    err = capsys.readouterr().err
+    assert re.fullmatch(r"twin estimate: error: object is 5\.\d+ m across because of 1 far point\(s\), up to 3(\.\d+)? m "
+                        r"from the rest, which lies within 0\.0\d+ m: remove them, or drop --keep-strays, which keeps "
+                        r"them\n", err), err
+
+
 @pytest.mark.parametrize(("argv", "message"), [
     (["estimate", "c.ply", "--units", "km"], r"argument --units: invalid choice: 'km'"),
     (["estimate", "c.ply", "--density", "abc"], r"argument --density: invalid float value: 'abc'"),
