@@ -83,6 +83,8 @@ def _parse_ply_header(path: Path, head: bytes) -> tuple[str, list[_PlyElement], 
             continue
         key = words[0]
         if key == "format" and len(words) >= 2:
+            if fmt is not None:  # the last line won: "ascii" then "binary_little_endian" read text as floats
+                raise CloudFileError(f"{path}: the PLY header has a format line twice")
             if words[1] not in _PLY_FORMATS:
                 raise CloudFileError(f"{path}: unknown PLY format {words[1][:40]!r}; use one of {list(_PLY_FORMATS)}")
             fmt = words[1]
@@ -130,7 +132,11 @@ def read_ply(path: Path, max_points: int) -> Columns:
         raise CloudFileError(f"{path}: the PLY header has no vertex element")
     vertex = elements[index]
     names = [name for name, _ in vertex.props]
-    missing = [axis for axis in "xyz" if axis not in names or axis in vertex.lists]
+    listed = [axis for axis in "xyz" if axis in vertex.lists]
+    if listed:  # it was "has no x property (has ['x', 'y', 'z'])"
+        raise CloudFileError(f"{path}: the PLY vertex property {'/'.join(listed)} is a list property, not a number "
+                             f"(x, y and z are scalar properties, e.g. 'property float x')")
+    missing = [axis for axis in "xyz" if axis not in names]
     if missing:
         raise CloudFileError(f"{path}: the PLY vertex element has no {'/'.join(missing)} property (has {names})")
     check_max_points(path, vertex.count, max_points)
@@ -138,6 +144,7 @@ def read_ply(path: Path, max_points: int) -> Columns:
     if order is None:
         table, types = _read_ply_ascii(path, size, offset, elements, index, head[:offset].count(b"\n") + 1)
     else:
+        _check_binary_body(path, size, offset, elements, fmt)
         table, types = _read_ply_binary(path, size, offset, elements, index, order)
     faces = sum(e.count for e in elements if e.name == "face")
     if faces and vertex.count < tol.MIN_POINTS:
@@ -161,6 +168,30 @@ def _ply_color_names(names: list[str]) -> tuple[str, str, str]:
         if all(name in names for name in triple):
             return triple
     return ("red", "green", "blue")
+
+
+#: Bytes a text body of numbers is made of; and how many of a binary body's first bytes are looked at.
+_NUMBER_TEXT, _BODY_SAMPLE = frozenset(b"0123456789+-.eE \t\r\n"), 64
+
+
+def _check_binary_body(path: Path, size: int, offset: int, elements: list[_PlyElement], fmt: str) -> None:
+    """Refuse a body of text under a binary ``fmt``: its size is not the one the header's elements give (or they
+    do not give one: list properties) and its first bytes are numbers, spaces and line ends. Read as binary, such
+    a file was "coordinates reach 5.47e+22 m ... 1 far point(s)".
+
+    Raises:
+        CloudFileError: naming the format the header says.
+    """
+    dtypes = [e.dtype("<") for e in elements]
+    if all(d is not None for d in dtypes):
+        if size == offset + sum(e.count * d.itemsize for e, d in zip(elements, dtypes, strict=True)):  # type: ignore[union-attr]
+            return
+    with path.open("rb") as fh:
+        fh.seek(offset)
+        body = fh.read(_BODY_SAMPLE)
+    if body and set(body) <= _NUMBER_TEXT and any(chr(b).isdigit() for b in body) and any(b in b" \t\n" for b in body):
+        raise CloudFileError(f"{path}: the body looks like ASCII text but the header says {fmt}: if it is text, the "
+                             f"format line is 'format ascii 1.0'")
 
 
 def _read_ply_binary(

@@ -559,7 +559,19 @@ PLY_HEAD = "ply\nformat binary_little_endian 1.0\nelement vertex 1\n"
         ("ply\nformat ascii 1.0\nelement vertex 2_000\nend_header\n", r"count '2_000' is not an integer"),
         ("ply\nformat ascii 1.0\nelement vertex +2\nend_header\n", r"count '\+2' is not an integer"),
         (PLY_HEAD + XYZ_FLOAT + "property float x\nend_header\n", r"has property 'x' twice"),
-        (PLY_HEAD + "property list uchar float x\nproperty float y\nproperty float z\nend_header\n", r"no x property"),
+        # It was "has no x property (has ['x', 'y', 'z'])".
+        (PLY_HEAD + "property list uchar float x\nproperty float y\nproperty float z\nend_header\n",
+         r"the PLY vertex property x is a list property, not a number"),
+        # The last format line won; and a text body under a binary header was read as floats ("coordinates reach
+        # 5.47e+22 m ... 1 far point(s)"), or called truncated.
+        ("ply\nformat ascii 1.0\nformat binary_little_endian 1.0\nelement vertex 2\n" + XYZ_FLOAT
+         + "end_header\n0.0123 0.0456 0.0789\n0.01 0.02 0.03\n", r"the PLY header has a format line twice$"),
+        ("ply\nformat binary_little_endian 1.0\nelement vertex 2\n" + XYZ_FLOAT
+         + "end_header\n0.0123 0.0456 0.0789\n0.01 0.02 0.03\n",
+         r"the body looks like ASCII text but the header says binary_little_endian: if it is text, the format line "
+         r"is 'format ascii 1.0'$"),
+        ("ply\nformat binary_big_endian 1.0\nelement vertex 2\n" + XYZ_FLOAT + "end_header\n1 2 3\n4 5 6\n",
+         r"the body looks like ASCII text but the header says binary_big_endian"),
         (PLY_HEAD + XYZ_FLOAT + "property list uchar int idx\nend_header\n" + "\0" * 20, r"list properties \['idx'\]; not supported"),
         ("ply\nformat binary_little_endian 1.0\nelement face 1\nproperty list uchar int vertex_indices\n"
          "element vertex 1\n" + XYZ_FLOAT + "end_header\n", r"cannot skip PLY element 'face'"),
