@@ -1017,8 +1017,22 @@ def test_a_text_line_longer_than_any_row_of_numbers_is_refused_before_parsing(tm
         load_cloud(one_line)
     zeros = tmp_path / "zeros.xyz"
     zeros.write_bytes(bytes(100_000))
-    with pytest.raises(CloudFileError, match=r"a line of 100,000 bytes"):
+    with pytest.raises(CloudFileError, match=r"a line longer than 4,096 bytes \(no line end in 100,000 bytes\)"):
         load_cloud(zeros)
+
+
+def test_a_text_file_without_line_ends_is_refused_at_its_first_block(tmp_path):
+    """A sparse 10 GB .xyz with no line end was scanned to its end (37 s) to say "a line of 10,737,418,240 bytes":
+    the scan stops at the first block whose line runs past the limit (one block read, the message says)."""
+    from estimation.textcloud import TEXT_SCAN_BLOCK
+
+    big = tmp_path / "big.xyz"
+    with big.open("wb") as fh:
+        fh.truncate(50 << 20)  # sparse: three blocks and more
+    with pytest.raises(CloudFileError, match=rf"big\.xyz: a line longer than 4,096 bytes \(no line end in "
+                                             rf"{TEXT_SCAN_BLOCK:,} bytes\), more than a row of numbers holds: not a "
+                                             rf"text point cloud$"):
+        load_cloud(big)
 
 
 def test_a_huge_text_file_is_refused_in_bounded_memory(tmp_path):
@@ -1036,7 +1050,7 @@ def test_a_huge_text_file_is_refused_in_bounded_memory(tmp_path):
             "print(next(line.split()[1] for line in open('/proc/self/status') if line.startswith('VmHWM:')))\n")
     out = subprocess.run([sys.executable, "-c", code, str(big)], capture_output=True, text=True, check=True,
                          cwd=Path(__file__).resolve().parents[1]).stdout.splitlines()
-    assert "a line of 1,073,741,824 bytes, more than a row of numbers holds" in out[0]
+    assert "a line longer than 4,096 bytes (no line end in 16,777,216 bytes)" in out[0]
     assert int(out[1]) < 400_000  # KiB: well under the 1 GiB file
 
 
