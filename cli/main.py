@@ -67,7 +67,10 @@ def main(argv: list[str] | None = None) -> int:
         warnings.showwarning = hold
         try:
             check_args(args)  # before any work: a bad number should not cost a build
-            code = handler(args)
+            # MuJoCo's warnings ("Nan, Inf or huge value in QACC") are held with Python's: see mujoco_warnings.
+            with (contextlib.nullcontext() if args.command in NO_MUJOCO_COMMANDS
+                  else mujoco_warnings(lambda text: warnings.warn(text, MujocoWarning, stacklevel=1))):
+                code = handler(args)
         except TwinError as exc:
             _drop_held(held_log)
             print(f"twin {args.command}: error: {one_line(str(exc))}", file=sys.stderr)
@@ -112,6 +115,32 @@ MAX_HELD_WARNINGS = 20
 #: Commands whose log records are held until they succeed (dropped if they fail, so the error is the one line):
 #: the short ones scripts call. Live commands log as they go (past MAX_HELD_WARNINGS records these do too).
 HELD_LOG_COMMANDS = frozenset({"estimate"})
+
+
+#: Commands that never load MuJoCo (0.2 s to import): its warnings need no handler there.
+NO_MUJOCO_COMMANDS = frozenset({"estimate", "materials", "schema"})
+
+
+class MujocoWarning(RuntimeWarning):
+    """A warning MuJoCo gave (a huge or NaN state, a full contact buffer), held and shown as Python's are."""
+
+
+@contextlib.contextmanager
+def mujoco_warnings(take: Callable[[str], object]) -> Iterator[None]:
+    """Hand MuJoCo's warnings to ``take(text)`` inside the block, then give back the handler there was.
+
+    MuJoCo's own handler prints each on the terminal with a blank line, whatever the command says next (a
+    NaN in scene.xml showed its warning above our error line), and appends it to MUJOCO_LOG.TXT in the
+    working folder, a file the user never asked for. Called from MuJoCo's threads too (it takes the GIL).
+    """
+    import mujoco
+
+    before = mujoco.get_mju_user_warning()
+    mujoco.set_mju_user_warning(take)
+    try:
+        yield
+    finally:
+        mujoco.set_mju_user_warning(before)
 
 
 def _drop_held(held_log) -> None:  # type: ignore[no-untyped-def]
@@ -801,19 +830,24 @@ def _load_twin(args: argparse.Namespace):  # type: ignore[no-untyped-def]
         from cli.modelsize import check_model_size
 
         check_model_size(xml)  # MuJoCo expands <replicate> while it parses: a nested pair never came back
-        try:  # RuntimeError: what MuJoCo's binding raises for a C++ exception (a builtin mesh far too fine)
-            spec = mujoco.MjSpec.from_file(str(xml))
-        except (ValueError, RuntimeError) as exc:
-            raise TwinError(f"{xml}: MuJoCo cannot load it ({exc})") from exc
-        try:  # here, not in Twin: a mesh file gone or a negative size since 'twin build' is the folder's fault
-            model = spec.compile()
-        except (ValueError, RuntimeError) as exc:
-            first = str(exc).strip().splitlines()[0].removeprefix("Error: ") if str(exc).strip() else "no reason given"
-            raise TwinError(f"{path}: MuJoCo cannot compile its scene.xml ({first})") from exc
+        warned: list[str] = []  # what MuJoCo doubts in the XML ("XML contains a 'NaN'"): said in our error line
+        with mujoco_warnings(warned.append):
+            try:  # RuntimeError: what MuJoCo's binding raises for a C++ exception (a builtin mesh far too fine)
+                spec = mujoco.MjSpec.from_file(str(xml))
+            except (ValueError, RuntimeError) as exc:
+                raise TwinError(f"{xml}: MuJoCo cannot load it ({exc})") from exc
+            try:  # here, not in Twin: a mesh file gone or a negative size since 'twin build' is the folder's fault
+                model = spec.compile()
+            except (ValueError, RuntimeError) as exc:
+                first = str(exc).strip().splitlines()[0].removeprefix("Error: ") if str(exc).strip() else "no reason given"
+                also = f"; MuJoCo warned: {warned[0]}" if warned else ""
+                raise TwinError(f"{path}: MuJoCo cannot compile its scene.xml ({first}{also})") from exc
         _check_compiled(xml, model)
+        if warned:  # a folder 'twin build' wrote loads without a warning: this one was edited into doubt
+            raise TwinError(f"{xml}: MuJoCo warns of it: {warned[0]}")
         from scenes.placement import check_placement
 
-        twin = Twin(spec, model)
+        twin = Twin(spec, model, strict=True)  # a run that diverges says so (DivergedError), not "moved 1e29 m"
         try:  # the folder may have been edited since 'twin build' checked it
             check_placement(str(path), twin.model, set(twin.object_ids()), twin.data)
         except Exception:
@@ -824,7 +858,7 @@ def _load_twin(args: argparse.Namespace):  # type: ignore[no-untyped-def]
     from scenes.scenefile import load_scene
 
     built = build_scene(load_scene(path), coacd=_coacd_settings(args), cache_dir=args.cache_dir)
-    return Twin(built.spec, built.model), built
+    return Twin(built.spec, built.model, strict=True), built
 
 
 #: Physics timesteps ``twin run`` takes from a built folder, seconds: 'twin build' writes 1 ms; a 1 ns step
@@ -834,8 +868,15 @@ TIMESTEP_RANGE_S = (1e-5, 0.1)
 
 def _check_compiled(xml: Path, model) -> None:  # type: ignore[no-untyped-def]
     """Refuse an edited folder's model whose timestep is outside TIMESTEP_RANGE_S or whose bodies start at
-    non-finite places (a NaN position ran, logging a non-finite state every step)."""
+    non-finite places (a NaN position ran, logging a non-finite state every step) or further than
+    :data:`sync.messages.MAX_COORDINATE` from their parents.
+
+    Raises:
+        TwinError: naming the file and the value.
+    """
     import numpy as np
+
+    from sync.messages import MAX_COORDINATE
 
     low, high = TIMESTEP_RANGE_S
     step = float(model.opt.timestep)
@@ -845,6 +886,12 @@ def _check_compiled(xml: Path, model) -> None:  # type: ignore[no-untyped-def]
                          ("initial joint position", model.qpos0)):
         if not np.isfinite(values).all():
             raise TwinError(f"{xml}: a {name} is not finite")
+    # A body 1e30 m out ran "successfully": MuJoCo warned of a huge value each step and the twin put it back
+    # where it started, out there. A scene is metres across; no message may carry a coordinate past this either.
+    far = float(np.abs(model.body_pos).max(initial=0.0))
+    if far > MAX_COORDINATE:
+        raise TwinError(f"{xml}: a body position is {refused_number(far, MAX_COORDINATE)} m from its parent, "
+                        f"beyond {MAX_COORDINATE:g} m")
 
 
 def _trajectory(args: argparse.Namespace, twin):  # type: ignore[no-untyped-def]
@@ -860,7 +907,7 @@ def _trajectory(args: argparse.Namespace, twin):  # type: ignore[no-untyped-def]
 def _cmd_run(args: argparse.Namespace) -> int:
     from twin.loop import steps_per_iteration
     from twin.model import DEFAULT_PHYSICS, OPERATOR_REACH, model_reach_corners
-    from twin.sim import run_paced
+    from twin.sim import DivergedError, run_paced
     from twin.trajectory import load_trajectory
 
     if args.rate is not None and not Path(args.scene).is_dir():  # before the build (a folder's own timestep:
@@ -880,11 +927,14 @@ def _cmd_run(args: argparse.Namespace) -> int:
             if args.rate is None:  # one physics step an iteration, whatever the model's timestep
                 args.rate = 1.0 / float(twin.model.opt.timestep)
             start = {i: twin.pose(i) for i in twin.object_ids()}
-            if args.viewer:
-                stats = _run_with_viewer(twin, args, trajectory)
-            else:
-                stats = run_paced(twin, args.duration, args.rate, trajectory=trajectory, realtime=not args.no_realtime,
-                                  rlog=rlog)
+            try:
+                if args.viewer:
+                    stats = _run_with_viewer(twin, args, trajectory)
+                else:
+                    stats = run_paced(twin, args.duration, args.rate, trajectory=trajectory,
+                                      realtime=not args.no_realtime, rlog=rlog)
+            except DivergedError as exc:  # the model's fault: name it
+                raise TwinError(f"{args.scene}: {exc}") from None
             record = {"steps": stats.steps, "rate_hz": args.rate, "step_p50_ms": stats.p50 * 1e3,
                       "step_p99_ms": stats.p99 * 1e3, "step_max_ms": stats.max * 1e3, "missed_deadlines": stats.missed,
                       "wall_s": stats.wall, "sim_time_s": twin.time, "objects": len(twin.object_ids()),

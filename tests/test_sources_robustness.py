@@ -238,6 +238,38 @@ def test_a_folder_that_does_not_compile_is_one_line(tmp_path, capsys, body, mess
     assert f"{folder}: MuJoCo cannot compile its scene.xml (" in err and message in err, err
 
 
+def _ball(pos: str = "0 0 0.5") -> str:
+    return f'<body name="ball" pos="{pos}"><joint name="ball/free" type="free"/><geom type="sphere" size="0.1"/></body>'
+
+
+@pytest.mark.parametrize(
+    ("xml", "message"),
+    [
+        # MuJoCo's own "WARNING: XML contains a 'NaN'" and a blank line came first, and went to MUJOCO_LOG.TXT.
+        ('<option timestep="nan"/>', "timestep nan s is outside"),
+        ('<worldbody><body><inertial pos="0 0 0" mass="nan" diaginertia="1 1 1"/><freejoint/></body></worldbody>',
+         "MuJoCo cannot compile its scene.xml (mass and inertia of moving bodies must be larger than mjMINVAL; "
+         "MuJoCo warned: XML contains a 'NaN'"),
+        ('<worldbody><geom type="sphere" size="0.1" friction="nan"/></worldbody>',
+         "scene.xml: MuJoCo warns of it: XML contains a 'NaN'"),
+        # Both ran, exit 0, reporting a body 1e27 m down (or out), under MuJoCo's "unstable" warnings.
+        (f'<option gravity="0 0 -1e30"/><worldbody>{_ball()}</worldbody>',
+         "built: the simulation diverged at t=0.002 s (a NaN, infinite or huge state in ball)"),
+        (f'<worldbody>{_ball(pos="1e30 0 0.5")}</worldbody>',
+         "a body position is 1e+30 m from its parent, beyond 1000 m"),
+    ],
+)
+def test_an_edited_folder_that_mujoco_warns_of_is_our_one_line_only(tmp_path, capfd, monkeypatch, xml, message):
+    # Before the supersphere case below: once an MjSpec parse has failed on a C++ exception, MuJoCo 4.0.1 spins
+    # forever on the next parse that warns of a NaN, in the same process (with or without a warning handler).
+    monkeypatch.chdir(tmp_path)
+    folder = _folder(tmp_path, f"<mujoco>{xml}</mujoco>")
+    assert main(["run", str(folder), "--duration", "0.01", "--no-realtime"]) == 2
+    out, err = capfd.readouterr()  # the file descriptors: MuJoCo's C handler wrote past sys.stderr
+    assert err.count("\n") == 1 and err.startswith("twin run: error: ") and message in err and not out, err
+    assert not (tmp_path / "MUJOCO_LOG.TXT").exists()
+
+
 @pytest.mark.parametrize(
     ("body", "message"),
     [

@@ -527,6 +527,26 @@ def test_a_non_finite_object_is_put_back_and_the_rest_of_the_twin_runs_on(built,
             twin.set_end_effector(np.array([0.0, np.inf, 0.0]))
 
 
+def test_a_huge_state_is_put_back_and_a_strict_twin_says_it_diverged(built, tmp_path, monkeypatch):
+    from twin.sim import DivergedError
+
+    monkeypatch.chdir(tmp_path)  # MuJoCo writes its warnings to MUJOCO_LOG.TXT in the current folder
+    for strict in (False, True):
+        with Twin(built.spec.copy(), background=False, strict=strict) as twin:
+            twin.step()
+            start = twin.pose("crate")[0]
+            adr, _ = twin._dof("crate")
+            twin.data.qvel[adr + 2] = -1e27  # what gravity of -1e30 m/s^2 left after one step: finite, not a state
+            if strict:
+                with pytest.raises(DivergedError, match=r"^the simulation diverged at t=0\.001 s \(a NaN, infinite "
+                                                        r"or huge state in crate\)"):
+                    twin.step()
+            else:
+                twin.step()
+                assert twin.recovered == 1
+            assert np.allclose(twin.pose("crate")[0], start, atol=1e-4)  # put back either way
+
+
 def test_a_jump_of_the_target_is_followed_at_the_speed_limit(built):
     """A script jumping the target 0.6 m in a microsecond pulled the sphere through the scene at ~30 m/s (its soft
     weld closes a gap in ~20 ms) and flung the crate 0.29 m. The target now moves at EE_MAX_SPEED at most."""

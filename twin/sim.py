@@ -39,6 +39,15 @@ class ModelMismatchError(TwinError, ValueError):
     """A :class:`Twin` was given a model not compiled from its spec."""
 
 
+class DivergedError(TwinError, RuntimeError):
+    """A ``strict`` :class:`Twin`'s state became NaN, infinite or huge: the model is not one that simulates."""
+
+
+#: Largest coordinate or velocity MuJoCo's own check takes as a working state (``mjMAXVAL``, m or m/s): past it,
+#: it warns "Nan, Inf or huge value ... The simulation is unstable". A body 1e29 m below the floor is not a result.
+MAX_STATE = 1e10
+
+
 def _check_compiled_from(spec, model) -> None:  # type: ignore[no-untyped-def]
     """Refuse a ``model`` whose bodies are not ``spec``'s, in order, by name: another scene's model ran with no
     objects (``object_ids()`` was empty) and the spec's next edit would have swapped the scene. A few
@@ -80,13 +89,17 @@ class Twin:
     time) still works, and closing again does nothing.
     """
 
-    def __init__(self, spec, model=None, *, background: bool = True) -> None:  # type: ignore[no-untyped-def]
+    def __init__(self, spec, model=None, *, background: bool = True,  # type: ignore[no-untyped-def]
+                 strict: bool = False) -> None:
         """
         Args:
             spec: the scene's ``mujoco.MjSpec``; later edits copy it.
             model: ``spec`` compiled (None: compiled here). The twin steps it and switches its objects'
                 contact bits between the table's box and its top plane (:mod:`twin.tabletop`).
             background: compile :meth:`edit_async` edits in a thread (see the class).
+            strict: a state gone bad raises :class:`DivergedError` from :meth:`step` instead of being put back
+                and counted: for a run that checks a model (``twin run``), where a divergence is the answer,
+                not a glitch for a live twin to ride out.
 
         Raises:
             TypeError: ``spec`` not an ``MjSpec``, or ``model`` neither None nor an ``MjModel``.
@@ -108,6 +121,7 @@ class Twin:
         mujoco.mj_forward(self.model, self.data)
         self.background = background
         self.failed_edits = 0
+        self.strict = strict
         self.recovered = 0  # objects put back after their state became non-finite
         self._good: tuple[np.ndarray, np.ndarray] | None = None  # last finite (qpos, qvel)
         self._mocap = self._mocap_id()
@@ -150,15 +164,17 @@ class Twin:
         return float(self.data.time)
 
     def step(self, n: int = 1) -> None:
-        """Advance ``n`` physics steps; an object whose state became NaN or infinite is put back.
+        """Advance ``n`` physics steps; an object whose state became NaN, infinite or huge is put back.
 
-        MuJoCo's own answer to a non-finite state is to reset the whole model (its auto-reset, which the
-        twin's models disable): every object would jump to its start. Here only the objects with bad
-        values return to their last good pose, at rest, and are counted in :attr:`recovered` and logged.
+        MuJoCo's own answer to a bad state (NaN, infinite, or past :data:`MAX_STATE`) is to reset the whole
+        model (its auto-reset, which the twin's models disable): every object would jump to its start. Here
+        only the objects with bad values return to their last good pose, at rest, and are counted in
+        :attr:`recovered` and logged; a ``strict`` twin puts them back and raises instead.
 
         Raises:
             ValueError: ``n`` is not a whole number >= 0 (0 steps nothing).
             TwinClosedError: the twin is closed.
+            DivergedError: a ``strict`` twin's state went bad, naming the time and the objects.
         """
         import mujoco
 
@@ -243,10 +259,16 @@ class Twin:
         return mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_BODY, EE_BODY)
 
     def _finite(self) -> bool:
-        return bool(np.isfinite(self.data.qpos).all() and np.isfinite(self.data.qvel).all())
+        """Whether the state is finite and within :data:`MAX_STATE` (NaN fails the comparison too)."""
+        d = self.data
+        return bool(np.abs(d.qpos).max(initial=0.0) <= MAX_STATE and np.abs(d.qvel).max(initial=0.0) <= MAX_STATE)
 
     def _recover(self) -> None:
-        """Put every free body with a non-finite coordinate back where it last was finite, at rest."""
+        """Put every free body with a bad coordinate (:meth:`_finite`) back where it last was good, at rest.
+
+        Raises:
+            DivergedError: the twin is ``strict``; the state is put back first.
+        """
         import mujoco
 
         m, d = self.model, self.data
@@ -256,18 +278,22 @@ class Twin:
             if m.jnt_type[j] != mujoco.mjtJoint.mjJNT_FREE:
                 continue
             q, v = m.jnt_qposadr[j], m.jnt_dofadr[j]
-            if np.isfinite(d.qpos[q:q + 7]).all() and np.isfinite(d.qvel[v:v + 6]).all():
+            if np.abs(d.qpos[q:q + 7]).max() <= MAX_STATE and np.abs(d.qvel[v:v + 6]).max() <= MAX_STATE:
                 continue
             d.qpos[q:q + 7] = good_q[q:q + 7]
             d.qvel[v:v + 6] = 0.0
             self.moved([int(m.jnt_bodyid[j])])
             bad.append((mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_JOINT, j) or f"joint {j}").removesuffix("/free"))
-        rest = ~np.isfinite(d.qvel)  # anything else (not a free body): stop it
+        rest = ~(np.abs(d.qvel) <= MAX_STATE)  # anything else (not a free body): stop it
         d.qvel[rest] = 0.0
         d.qacc_warmstart[:] = 0.0
         self.recovered += len(bad)
-        log.error("non-finite state in %s; put back to the last good pose", ", ".join(bad) or "the model")
         mujoco.mj_forward(m, d)
+        where = ", ".join(bad) or "the model"
+        if self.strict:
+            raise DivergedError(f"the simulation diverged at t={d.time:.4g} s (a NaN, infinite or huge state in "
+                                f"{where}): check the model's options, masses and positions")
+        log.error("non-finite or huge state in %s; put back to the last good pose", where)
 
     @property
     def has_end_effector(self) -> bool:
