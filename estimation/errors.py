@@ -24,6 +24,14 @@ class MaterialError(TwinError, LookupError):
     """An unknown material name or a non-physical density."""
 
 
+class UnknownObjectError(TwinError, KeyError):
+    """An object id the running model does not hold; the message names the ids it does (or the closest)."""
+
+    def __str__(self) -> str:
+        # KeyError's own str() is the repr of its argument: the one-line error would have come out in quotes.
+        return str(self.args[0]) if self.args else ""
+
+
 class ReconstructionError(TwinError, RuntimeError):
     """Surface reconstruction could not produce a usable solid from a valid cloud."""
 

@@ -547,6 +547,29 @@ def test_a_huge_state_is_put_back_and_a_strict_twin_says_it_diverged(built, tmp_
             assert np.allclose(twin.pose("crate")[0], start, atol=1e-4)  # put back either way
 
 
+def test_every_accessor_names_an_unknown_object_and_refuses_an_id_that_is_no_string(built):
+    from estimation.errors import TwinError, UnknownObjectError
+
+    with Twin(built.spec.copy(), background=False) as twin:
+        accessors = (twin.pose, twin.velocity, twin.joint, lambda i: twin.set_pose(i, np.zeros(3), np.ones(4)),
+                     lambda i: twin.set_velocity(i, np.zeros(3), np.zeros(3)))
+        for call in accessors:
+            # A bare KeyError (printed in quotes by the CLI), and None was "no object None", not a TypeError.
+            with pytest.raises(UnknownObjectError, match=r"^no object 'cann' in the model; did you mean 'can'\?$"):
+                call("cann")
+            with pytest.raises(TypeError, match=r"^an object id is a string, got NoneType$"):
+                call(None)
+        with pytest.raises(UnknownObjectError) as caught:
+            twin.pose("nope")
+        assert str(caught.value) == "no object 'nope' in the model; its objects: crate, can"
+        assert isinstance(caught.value, KeyError) and isinstance(caught.value, TwinError)
+        with pytest.raises(UnknownObjectError, match=r"^no object 'nope' in the model; its objects: crate, can$"):
+            twin.remove("nope")
+        assert not twin.has("nope") and twin.has("can")
+        with pytest.raises(TypeError, match="an object id is a string, got list"):
+            twin.has(["can"])
+
+
 def test_a_jump_of_the_target_is_followed_at_the_speed_limit(built):
     """A script jumping the target 0.6 m in a microsecond pulled the sphere through the scene at ~30 m/s (its soft
     weld closes a gap in ~20 ms) and flung the crate 0.29 m. The target now moves at EE_MAX_SPEED at most."""

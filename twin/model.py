@@ -18,7 +18,7 @@ import numpy as np
 
 from estimation.contracts import check_number as number
 from estimation.contracts import shown
-from estimation.errors import MaterialError, SettingsError
+from estimation.errors import MaterialError, SettingsError, UnknownObjectError
 from sync.messages import MAX_COORDINATE, MAX_SCENE_SIZE, MIN_SIZE
 from twin.objects import TwinObject
 from twin.settings import check_number, check_type
@@ -354,11 +354,36 @@ def has_object(spec, object_id: str) -> bool:  # type: ignore[no-untyped-def]
     return spec.joint(f"{object_id}/free") is not None
 
 
+#: Most object ids an unknown-object message lists: a scene of 500 objects would be a line of thousands of characters.
+MAX_LISTED_IDS = 10
+
+
+def unknown_object(object_id: str, known: Sequence[str]) -> UnknownObjectError:
+    """The error for ``object_id`` missing from a model holding the objects ``known``: it names the closest ids
+    (a typo), else the ids there are, at most :data:`MAX_LISTED_IDS` of them."""
+    import difflib
+
+    close = difflib.get_close_matches(object_id, known, n=3, cutoff=0.6)
+    if close:
+        hint = f"; did you mean {', '.join(map(repr, close))}?"
+    elif known:
+        more = f", ... ({len(known)} in all)" if len(known) > MAX_LISTED_IDS else ""
+        hint = f"; its objects: {', '.join(known[:MAX_LISTED_IDS])}{more}"
+    else:
+        hint = "; it has no objects"
+    return UnknownObjectError(f"no object {object_id!r} in the model{hint}")
+
+
 def remove_object(spec, object_id: str) -> None:  # type: ignore[no-untyped-def]
-    """Delete an object's body and its meshes from ``spec``."""
+    """Delete an object's body and its meshes from ``spec``.
+
+    Raises:
+        UnknownObjectError: ``spec`` has no object ``object_id`` (a KeyError too).
+    """
     body = spec.body(object_id)
     if body is None:
-        raise KeyError(f"no object {object_id!r} in the model")
+        raise unknown_object(object_id, [j.name.removesuffix("/free") for j in spec.joints
+                                         if j.name.endswith("/free")])
     prefix = f"{object_id}/"
     meshes = [m for m in spec.meshes if m.name.startswith(prefix)]
     spec.delete(body)

@@ -16,7 +16,7 @@ from sync.clock import REAL_CLOCK, Clock
 from sync.messages import MAX_ANGULAR_SPEED, MAX_COORDINATE, MAX_SPEED
 from twin.debuglog import OFF, DebugLog
 from twin.loop import LoopStats, run_loop, steps_per_iteration
-from twin.model import EE_BODY, EE_TARGET, add_object, free_joint, remove_object
+from twin.model import EE_BODY, EE_TARGET, add_object, free_joint, remove_object, unknown_object
 from twin.objects import TwinObject
 from twin.tabletop import CHECK_EVERY, TopPlane, top_plane
 from twin.trajectory import Trajectory
@@ -384,7 +384,11 @@ class Twin:
         return total
 
     def pose(self, object_id: str) -> tuple[np.ndarray, np.ndarray]:
-        """(position, quaternion w x y z) of an object's centre of mass, world frame."""
+        """(position, quaternion w x y z) of an object's centre of mass, world frame.
+
+        Raises:
+            TypeError: ``object_id`` is not a string. UnknownObjectError: no such object (:meth:`joint`).
+        """
         body, _, _ = self.joint(object_id)
         return self.data.xpos[body].copy(), self.data.xquat[body].copy()
 
@@ -395,15 +399,19 @@ class Twin:
         with it, and the loops ask for every object at every step.
 
         Raises:
-            KeyError: no such object in the model.
+            TypeError: ``object_id`` is not a string (None was "no object None", a list an unhashable-type error).
+            UnknownObjectError: no such object in the model (a KeyError too); the message names the closest
+                ids or the ones there are.
         """
         if self._index_of is not self.model:
             self._index, self._index_of = {}, self.model
+        if not isinstance(object_id, str):
+            raise TypeError(f"an object id is a string, got {type(object_id).__name__}")
         found = self._index.get(object_id)
         if found is None:
             jid = free_joint(self.model, object_id)
             if jid < 0:
-                raise KeyError(f"no object {object_id!r} in the model")
+                raise unknown_object(object_id, self.object_ids())
             m = self.model
             found = self._index[object_id] = (int(m.jnt_bodyid[jid]), int(m.jnt_qposadr[jid]), int(m.jnt_dofadr[jid]))
         return found
@@ -431,7 +439,11 @@ class Twin:
         self.edit(lambda spec: add_object(spec, obj))
 
     def remove(self, object_id: str) -> None:
-        """Remove an object. Raises: TypeError: ``object_id`` is not a string."""
+        """Remove an object.
+
+        Raises:
+            TypeError: ``object_id`` is not a string. UnknownObjectError: no such object (the twin is unchanged).
+        """
         if not isinstance(object_id, str):  # MuJoCo's own message spanned lines ("incompatible function arguments")
             raise TypeError(f"Twin.remove takes an object id (str), got {type(object_id).__name__}")
         self.edit(lambda spec: remove_object(spec, object_id))
@@ -538,7 +550,11 @@ class Twin:
         mujoco.mj_forward(model, data)
 
     def velocity(self, object_id: str) -> tuple[np.ndarray, np.ndarray]:
-        """(linear m/s, angular rad/s) of an object's free joint, both in world axes."""
+        """(linear m/s, angular rad/s) of an object's free joint, both in world axes.
+
+        Raises:
+            TypeError: ``object_id`` is not a string. UnknownObjectError: no such object (:meth:`joint`).
+        """
         adr, xmat = self._dof(object_id)
         return self.data.qvel[adr:adr + 3].copy(), xmat @ self.data.qvel[adr + 3:adr + 6]
 
@@ -546,7 +562,8 @@ class Twin:
         """Set an object's free-joint velocity (linear m/s and angular rad/s, both in world axes).
 
         Raises:
-            KeyError: no such object. ValueError: ``linear`` or ``angular`` not 3 finite numbers, or faster
+            TypeError: ``object_id`` is not a string. UnknownObjectError: no such object (a KeyError too).
+            ValueError: ``linear`` or ``angular`` not 3 finite numbers, or faster
                 than :data:`sync.messages.MAX_SPEED` m/s or :data:`~sync.messages.MAX_ANGULAR_SPEED` rad/s
                 (what the wire takes: 1e300 m/s went into MuJoCo's state and blew the step up).
             TwinClosedError: the twin is closed.
@@ -565,6 +582,11 @@ class Twin:
         return dof, self.data.xmat[body].reshape(3, 3)
 
     def has(self, object_id: str) -> bool:
+        """Whether the running model holds the object ``object_id``.
+
+        Raises:
+            TypeError: ``object_id`` is not a string (as every accessor taking an id).
+        """
         try:
             self.joint(object_id)
         except KeyError:
@@ -577,7 +599,8 @@ class Twin:
         ``forward=False`` skips recomputing positions (the next step does it): for several poses at once.
 
         Raises:
-            KeyError: no such object. ValueError: ``position`` not 3 finite numbers within
+            TypeError: ``object_id`` is not a string. UnknownObjectError: no such object (a KeyError too).
+            ValueError: ``position`` not 3 finite numbers within
                 :data:`sync.messages.MAX_COORDINATE` of the origin, or ``quat`` not 4 finite numbers with a
                 non-zero norm.
             TwinClosedError: the twin is closed.
