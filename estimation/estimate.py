@@ -879,7 +879,9 @@ def from_mesh(vertices: np.ndarray, faces: np.ndarray, density: float, *,
 
     For reference models (the truth a twin is compared with) and for objects whose CAD mesh is known. A mesh
     that is not closed and consistently wound is estimated all the same, ``watertight`` False and a warning
-    saying its volume is not a solid's (half a box's faces gave half its volume, without a word). A closed mesh
+    saying its volume is not a solid's (half a box's faces gave half its volume, without a word); one whose repeated
+    faces are all that keeps it from being closed (coincident copies of a shell) counts each face once, with a
+    warning. A mesh whose size suggests other units is warned of as :func:`estimate` warns of a cloud. A closed mesh
     whose closed parts overlap is the union of its parts: its record's surface and mass properties are the
     union's, with a warning (the sum over the faces counted the shared space twice); nested shells, a hollow
     object's outer shell and its inward-facing inner one, are the hollow solid they bound, as before. A part
@@ -913,9 +915,20 @@ def from_mesh(vertices: np.ndarray, faces: np.ndarray, density: float, *,
     t0 = time.perf_counter()
     merged = _merged(vertices, faces)
     watertight = _is_closed(merged)
-    warnings: tuple[str, ...] = () if watertight else (
-        "the mesh is not closed and consistently wound: its volume is a signed sum over its faces, not a solid's",)
     merged_vertices, merged_faces = np.asarray(merged.vertices), np.asarray(merged.faces, dtype=np.int64)
+    warnings: tuple[str, ...] = ()
+    if not watertight:
+        # Two coincident copies of a closed box share each edge four ways: "not closed and consistently wound",
+        # though each copy is, and twice the mass. Copies of one shell are its union, as overlapping parts are.
+        distinct = _distinct_faces(merged_faces)
+        if len(distinct) < len(merged_faces) and _is_closed(_merged(merged_vertices, distinct)):
+            warnings += (f"the mesh holds {len(merged_faces) - len(distinct)} of its {len(merged_faces)} faces more "
+                         f"than once (coincident copies of a closed shell): each counted once",)
+            watertight, merged_faces = True, distinct
+            vertices, faces = merged_vertices, merged_faces
+        else:
+            warnings += ("the mesh is not closed and consistently wound: its volume is a signed sum over its faces, "
+                         "not a solid's",)
     # Before the sum over the faces: an inside-out part subtracted its volume (one alone gave none at all).
     turned = turned_outward(merged_vertices, merged_faces) if watertight else None
     if turned is not None:
@@ -942,8 +955,11 @@ def from_mesh(vertices: np.ndarray, faces: np.ndarray, density: float, *,
         warnings += (f"closed parts of the mesh may overlap ({overlap.overlapping} of its {overlap.parts} parts have "
                      f"overlapping bounds) but their union was not formed ({overlap.unresolved}): its volume is the "
                      f"sum over its faces, which counts any space they share more than once",)
+    box = oriented_box(vertices)
+    if (hint := units_warning(box.extents)) is not None:  # as estimate() says of a cloud: a box in mm read as m
+        warnings = (hint, *warnings)
     return PhysicalEstimate(
-        method="mesh", mass=props, obb=oriented_box(vertices), vertices=vertices, faces=faces,
+        method="mesh", mass=props, obb=box, vertices=vertices, faces=faces,
         watertight=watertight, points_in=0, points_used=0, cell=0.0,
         timings=Timings(mass_properties=time.perf_counter() - t0), material=material, warnings=warnings)
 
@@ -980,6 +996,15 @@ def _merged(vertices: np.ndarray, faces: np.ndarray):  # type: ignore[no-untyped
     import trimesh
 
     return trimesh.Trimesh(vertices, faces, process=True)
+
+
+def _distinct_faces(faces: np.ndarray) -> np.ndarray:
+    """``faces`` without the repeats of a face (the same three vertices wound the same way), in their order; a
+    face and its reverse are both kept (they bound no volume together, which the closed-mesh check then says)."""
+    start = np.argmin(faces, axis=1)  # each face turned to start at its smallest index keeps its winding
+    canonical = np.take_along_axis(faces, (start[:, None] + np.arange(3)) % 3, axis=1)
+    _, first = np.unique(canonical, axis=0, return_index=True)
+    return faces[np.sort(first)]
 
 
 def _is_closed(mesh) -> bool:  # type: ignore[no-untyped-def]

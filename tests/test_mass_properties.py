@@ -288,3 +288,29 @@ def test_a_mesh_with_no_faces_has_no_parts_to_unite_or_turn():
 
     vertices, faces = np.zeros((1, 3)), np.zeros((0, 3), dtype=np.int64)
     assert overlap_union(vertices, faces) is None and turned_outward(vertices, faces) is None
+
+
+def test_a_mesh_in_other_units_is_warned_of_as_estimate_warns_of_a_cloud():
+    # A 10 cm box in mm read as metres was 1,000,000 kg with no warning; estimate() of its points said "wrong units".
+    from estimation.units import units_warning
+
+    box = _box((0.1, 0.06, 0.04))
+    result = from_mesh(box.vertices * 1000, box.faces, 1000.0)
+    assert result.warnings == ("object is 100 m across; if the points are in mm or cm, scale them to metres "
+                               "(twin estimate --units mm or --units cm)",)
+    assert result.warnings[0] == units_warning(result.obb.extents)  # the one check, worded once
+    assert from_mesh(box.vertices / 1000, box.faces, 1000.0).warnings == (
+        "object is 0.1 mm across; if the points are in metres already, check their scale (twin estimate --units)",)
+    assert from_mesh(box.vertices, box.faces, 1000.0).warnings == ()
+
+
+def test_coincident_copies_of_a_closed_shell_count_once_and_are_named_so():
+    # Two copies of one box share every edge four ways: twice the mass, "not closed and consistently wound".
+    vertices, faces = _parts(_box((0.1, 0.1, 0.1)), _box((0.1, 0.1, 0.1)))
+    result = from_mesh(vertices, faces, 1000.0)
+    assert result.watertight and result.volume == pytest.approx(1e-3, rel=1e-12) and len(result.faces) == 12
+    assert result.warnings == ("the mesh holds 12 of its 24 faces more than once (coincident copies of a closed "
+                               "shell): each counted once",)
+    # A copy wound the other way is no copy: the two bound nothing, as before.
+    with pytest.raises(CloudError, match="encloses no volume"):
+        from_mesh(*_parts(_box((0.1, 0.1, 0.1)), _box((0.1, 0.1, 0.1), inward=True)), 1000.0)
