@@ -15,7 +15,7 @@ import logging
 import math
 from pathlib import Path
 
-from cli.outputs import check_output_folder, claim_output_folder, replace_file
+from cli.outputs import check_output_folder, claim_output_folder, write_output
 from estimation.errors import TwinError, refused_number
 from twin.settings import MAX_WORKERS
 
@@ -26,6 +26,9 @@ FORCE_JND_PCT = 7.0
 
 #: The file that marks a folder as this command's own: only such a folder (or an empty one) is written into.
 MARKER = ".twin-experiment"
+
+#: The command, as its marker and its refusals name it.
+COMMAND = "twin experiment"
 
 #: The files this command writes into --out (none may be an input).
 WRITES = ("results.csv", "report.md", "force_vs_delay.png", "force_vs_mass.png", "divergence.png", "bytes_per_s.png")
@@ -137,7 +140,8 @@ def parse(args: argparse.Namespace):  # type: ignore[no-untyped-def]
     sweep = Sweep(tasks=tasks, delays=tuple(d / 1e3 for d in delays), jitter=args.jitter / 1e3,
                   loss=args.loss_pct / 100, mass_scales=masses, seeds=args.seeds, speed=args.speed)
     sweep.conditions()  # every condition checked before any work
-    check_output_folder(args.out, marker=MARKER, writes=WRITES, inputs=(args.scene, getattr(args, "scene_file", None)))
+    check_output_folder(args.out, marker=MARKER, command=COMMAND, writes=WRITES,
+                        inputs=(args.scene, getattr(args, "scene_file", None)))
     return sweep
 
 
@@ -207,7 +211,7 @@ def run(args: argparse.Namespace) -> int:
     with engine as executor, Progress(TextColumn("sessions"), BarColumn(), MofNCompleteColumn(),
                                       TimeElapsedColumn(), console=Console(stderr=True), transient=False) as bar:
         # Claimed once the engine is up: an unreachable scheduler left an out folder holding only the marker.
-        claim_output_folder(out, marker=MARKER, command="twin experiment")
+        claim_output_folder(out, marker=MARKER, command=COMMAND)
         task = bar.add_task("sessions", total=None)
 
         def progress(done: int, total: int) -> None:
@@ -215,10 +219,10 @@ def run(args: argparse.Namespace) -> int:
 
         rows, traces = run_experiment(scene, sweep, workers=args.workers, executor=executor, recorded=recorded,
                                       progress=progress)
-    replace_file(out / "results.csv", lambda tmp: write_csv(rows, tmp))
+    write_output(out, "results.csv", lambda tmp: write_csv(rows, tmp), marker=MARKER)
     plots = write_plots(rows, traces, out)
     text = report(rows, args, plots, sweep.sensor)
-    replace_file(out / "report.md", lambda tmp: tmp.write_text(text))
+    write_output(out, "report.md", lambda tmp: tmp.write_text(text), marker=MARKER)
     print(f"{len(rows)} rows ({sweep.sensor} sensor) -> {out / 'results.csv'}; plots: {', '.join(p.name for p in plots)}; "
           f"report: {out / 'report.md'}")
     return 0
@@ -315,7 +319,7 @@ def write_plots(rows, traces, out: Path) -> list[Path]:  # type: ignore[no-untyp
 
 def _save(fig, path: Path) -> Path:  # type: ignore[no-untyped-def]
     fig.tight_layout()
-    replace_file(path, lambda tmp: fig.savefig(tmp, dpi=110, format="png"))
+    write_output(path.parent, path.name, lambda tmp: fig.savefig(tmp, dpi=110, format="png"), marker=MARKER)
     import matplotlib.pyplot as plt
 
     plt.close(fig)

@@ -17,6 +17,7 @@ from collections.abc import Callable, Iterable
 from pathlib import Path
 
 from estimation.errors import TwinError
+from sync.replacing import file_sha256, listed_files, marker_text
 
 
 def same_file(a: Path, b: Path) -> bool:
@@ -80,11 +81,13 @@ def check_creatable(out: Path, flag: str = "--out") -> None:
         raise TwinError(f"{flag} {out}: cannot be made ({exc.strerror or exc})") from None
 
 
-def check_output_folder(out: Path, *, marker: str, flag: str = "--out", writes: Iterable[str] = (),
+def check_output_folder(out: Path, *, marker: str, command: str, flag: str = "--out", writes: Iterable[str] = (),
                         inputs: Iterable[Path | None] = ()) -> None:
     """Refuse an output folder this command must not write into: it exists and is not a folder, or holds
-    files and not ``marker`` (so it is not this command's); or one of the files it ``writes`` there is one
-    of the ``inputs``, or a folder, device or pipe (which a file cannot replace).
+    files and not ``marker`` (so it is not this command's); a file the marker lists was edited since
+    ``command`` wrote it (as ``twin build`` refuses its folder, :func:`scenes.build.check_output`); or one of
+    the files it ``writes`` there is one of the ``inputs``, or a folder, device or pipe (which a file cannot
+    replace).
 
     Raises:
         TwinError: naming the folder and why.
@@ -94,6 +97,17 @@ def check_output_folder(out: Path, *, marker: str, flag: str = "--out", writes: 
     if out.exists() and (not out.is_dir() or (any(out.iterdir()) and not (out / marker).is_file())):
         raise TwinError(f"{flag} {out}: exists and is not empty (and not a folder this command wrote); "
                         "choose a new folder")
+    for name, digest in _listed(out, marker).items():
+        # A report.md the user added to was replaced by the re-run, exit 0: their edits are theirs.
+        path = out / name
+        try:
+            # A link planted there is no edit of ours: it is replaced, never written through (replace_file).
+            edited = digest is not None and path.is_file() and not path.is_symlink() and file_sha256(path) != digest
+        except OSError as exc:
+            raise TwinError(f"{flag} {out}: cannot check {name} ({exc.strerror or exc})") from None
+        if edited:
+            raise TwinError(f"{flag} {out}: {name} was edited since {command} wrote it; move the folder aside or "
+                            "give --out a new folder")
     inputs = tuple(inputs)
     for name in writes:
         check_not_input(out / name, inputs, flag)
@@ -107,13 +121,49 @@ def check_output_folder(out: Path, *, marker: str, flag: str = "--out", writes: 
                             "replace")
 
 
+def _listed(out: Path, marker: str) -> dict[str, str | None]:
+    """The files ``out``'s ``marker`` lists with their sha256 (:func:`sync.replacing.listed_files`); none for a
+    folder without one, or with a marker from before the lists (what it wrote is not known: not checked).
+
+    Raises:
+        TwinError: the marker cannot be read.
+    """
+    try:
+        text = (out / marker).read_text(errors="replace") if (out / marker).is_file() else ""
+    except OSError as exc:
+        raise TwinError(f"{out}: cannot read {marker} ({exc.strerror or exc})") from None
+    return listed_files(text) or {}
+
+
 def claim_output_folder(out: Path, *, marker: str, command: str) -> None:
-    """Create ``out`` (checked by :func:`check_output_folder`) and mark it as ``command``'s."""
+    """Create ``out`` (checked by :func:`check_output_folder`) and mark it as ``command``'s, keeping the files its
+    marker lists that are still there (checked unedited): a run that stops before rewriting one still guards it."""
     try:
         out.mkdir(parents=True, exist_ok=True)
-        replace_file(out / marker, lambda tmp: tmp.write_text(f"written by {command}\n"))
+        kept = {name: digest for name, digest in _listed(out, marker).items()
+                if digest is not None and (out / name).is_file()}
+        replace_file(out / marker, lambda tmp: tmp.write_text(marker_text(f"written by {command}", kept)))
     except OSError as exc:  # the file system changed since check_output_folder, or refuses anyway
         raise TwinError(f"{out}: cannot write the output folder ({exc.strerror or exc})") from None
+
+
+def write_output(out: Path, name: str, write: Callable[[Path], object], *, marker: str) -> Path:
+    """Write ``out / name`` as :func:`replace_file` does, and list it with its sha256 in ``out``'s ``marker``
+    (:func:`claim_output_folder` made it), so that the next run refuses to replace it once the user edits it.
+
+    Raises:
+        TwinError: the write, or the marker's, failed (:func:`write_failure`).
+    """
+    path = out / name
+    replace_file(path, write)
+    try:
+        listed = {n: d for n, d in _listed(out, marker).items() if d is not None}
+        listed[name] = file_sha256(path)
+        intro = (out / marker).read_text(errors="replace").splitlines()[:1] or [""]
+    except OSError as exc:
+        raise TwinError(write_failure(exc, out / marker)) from None
+    replace_file(out / marker, lambda tmp: tmp.write_text(marker_text(intro[0], listed)))
+    return path
 
 
 def replace_file(path: Path, write: Callable[[Path], object]) -> None:

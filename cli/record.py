@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from cli.outputs import check_output_folder, claim_output_folder, replace_file
+from cli.outputs import check_output_folder, claim_output_folder, write_output
 from estimation.errors import TwinError, refused_number
 from sync.clock import Clock
 from sync.netem import Conditions, GilbertElliott, Network
@@ -39,6 +39,9 @@ log = logging.getLogger(__name__)
 
 #: The file that marks a folder as ``twin replay``'s own: only such a folder (or an empty one) is written into.
 REPLAY_MARKER = ".twin-replay"
+
+#: The command, as its marker and its refusals name it.
+REPLAY_COMMAND = "twin replay"
 
 #: What ``twin replay --out`` writes there.
 REPLAY_WRITES = ("replay.mcap", "summary.json")
@@ -269,7 +272,7 @@ def replay(path: str | Path, *, script: Path | None = None, units: str = "m", sc
     record = None
     if out is not None:
         check_replay_out(out, recording.path, script, scene)
-        claim_output_folder(out, marker=REPLAY_MARKER, command="twin replay")
+        claim_output_folder(out, marker=REPLAY_MARKER, command=REPLAY_COMMAND)
         record = out / "replay.mcap"
     wall0 = time.perf_counter()
     if progress is not None:
@@ -311,7 +314,7 @@ def replay(path: str | Path, *, script: Path | None = None, units: str = "m", sc
         from cli.main import to_json
 
         text = to_json(summary) + "\n"
-        replace_file(out / "summary.json", lambda tmp: tmp.write_text(text))
+        write_output(out, "summary.json", lambda tmp: tmp.write_text(text), marker=REPLAY_MARKER)
     return ReplayResult(summary, twin, remote)
 
 
@@ -416,4 +419,5 @@ def check_replay_out(out: Path, recording: Path, script: Path | None = None, sce
     Raises:
         TwinError: naming the folder and why.
     """
-    check_output_folder(out, marker=REPLAY_MARKER, writes=REPLAY_WRITES, inputs=(recording, script, scene))
+    check_output_folder(out, marker=REPLAY_MARKER, command=REPLAY_COMMAND, writes=REPLAY_WRITES,
+                        inputs=(recording, script, scene))

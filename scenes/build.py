@@ -7,7 +7,6 @@ object's estimate and the transform from its cloud's or mesh's frame to its body
 
 from __future__ import annotations
 
-import hashlib
 import json
 import os
 import shutil
@@ -23,6 +22,7 @@ from estimation.errors import TwinError
 from scenes.placement import check_placement
 from scenes.scenefile import ObjectSpec, SceneSpec, check_in_workspace
 from scenes.sources import estimate_object, prepare_objects
+from sync.replacing import file_sha256, listed_files, marker_text
 from twin.decompose import DEFAULT_SETTINGS, CoacdSettings, ProgressBar, concavity, skips_coacd
 from twin.model import DEFAULT_PHYSICS, PhysicsSettings, add_object
 from twin.objects import TwinObject
@@ -304,14 +304,10 @@ def _check_output(out: Path, keep: tuple[Path, ...]) -> None:
                     raise BuildError(f"{out}: holds the folder {name}, which no build made; move it out or give "
                                      f"--out a new folder")
                 digest = ours.get(name)
-                if digest is not None and path.is_file() and _sha256(path) != digest:
+                if digest is not None and path.is_file() and file_sha256(path) != digest:
                     # docs/cli.md: `twin run DIR` runs a built folder as it now is, edits included.
                     raise BuildError(f"{out}: {name} was edited since the build wrote it; move the folder aside or "
                                      f"give --out a new folder")
-
-
-#: The line of :data:`MARKER` after which the files the build wrote are listed, one per line.
-_FILES_HEADER = "files:"
 
 
 def _built_files(out: Path) -> dict[str, str | None]:
@@ -321,16 +317,11 @@ def _built_files(out: Path) -> dict[str, str | None]:
     A marker from before the list (builds before 2026-12-04) names none: what such a build wrote is known by
     its layout instead (scene.xml, estimates.json, assets/, objects/).
     """
-    lines = (out / MARKER).read_text(errors="replace").splitlines()
-    if _FILES_HEADER in lines:
-        listed = (line.split("\t", 1) for line in lines[lines.index(_FILES_HEADER) + 1:])
-        return {MARKER: None, **{parts[0]: parts[1] if len(parts) > 1 else None for parts in listed}}
+    listed = listed_files((out / MARKER).read_text(errors="replace"))
+    if listed is not None:
+        return {MARKER: None, **listed}
     return dict.fromkeys([MARKER, "scene.xml", ESTIMATES, *(p.relative_to(out).as_posix() for folder in
                                                            ("assets", OBJECTS) for p in (out / folder).rglob("*"))])
-
-
-def _sha256(path: Path) -> str:
-    return hashlib.sha256(path.read_bytes()).hexdigest()
 
 
 def write_scene(spec, out: Path, *, keep: tuple[Path, ...] = (), built: BuiltScene | None = None) -> Path:  # type: ignore[no-untyped-def]
@@ -375,11 +366,10 @@ def write_scene(spec, out: Path, *, keep: tuple[Path, ...] = (), built: BuiltSce
                 (staging / OBJECTS / f"{obj.id}.xml").write_text(object_xml(obj, staging / OBJECTS))
             record = estimates_record(built)
             (staging / ESTIMATES).write_text(json.dumps(record, indent=1, allow_nan=False) + "\n")
-        written = sorted(f"{p.relative_to(staging).as_posix()}\t{_sha256(p)}" for p in staging.rglob("*")
-                         if p.is_file())
-        (staging / MARKER).write_text("written by 'twin build'; the next build into this folder replaces it, unless it "
-                                      "holds files not listed here, or listed files changed since (their sha256 "
-                                      "follows each)\n" + "\n".join([_FILES_HEADER, *written]) + "\n")
+        written = {p.relative_to(staging).as_posix(): file_sha256(p) for p in staging.rglob("*") if p.is_file()}
+        (staging / MARKER).write_text(marker_text("written by 'twin build'; the next build into this folder replaces "
+                                                  "it, unless it holds files not listed here, or listed files changed "
+                                                  "since (their sha256 follows each)", written))
         import mujoco
 
         mujoco.MjModel.from_xml_path(str(staging / "scene.xml"))  # what we write must load

@@ -12,10 +12,11 @@ reading a FIFO blocks), or a file of any other kind. Each output refuses in its 
 
 from __future__ import annotations
 
+import hashlib
 import os
 import stat
 import tempfile
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
@@ -97,3 +98,30 @@ def hidden_sibling(path: Path, suffix: str) -> tuple[int, Path]:
         Path(name).unlink(missing_ok=True)
         raise
     return fd, Path(name)
+
+
+#: The line of an output folder's marker file after which the files the command wrote there are listed, one a
+#: line: the path in the folder (POSIX), a tab, the sha256 it was written with. ``twin build``, ``twin
+#: experiment`` and ``twin replay`` mark their folders so, and refuse to replace a listed file that changed since:
+#: the user's edits to a report are theirs.
+FILES_HEADER = "files:"
+
+
+def file_sha256(path: Path) -> str:
+    """The sha256 of the file at ``path``, hex. Raises: OSError: it cannot be read."""
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+
+
+def marker_text(intro: str, digests: Mapping[str, str]) -> str:
+    """A marker file's text: ``intro`` (one line), then the files ``digests`` maps to their sha256, by name."""
+    return intro.rstrip("\n") + "\n" + "\n".join([FILES_HEADER, *(f"{name}\t{digests[name]}" for name in sorted(digests))]) + "\n"
+
+
+def listed_files(text: str) -> dict[str, str | None] | None:
+    """The files a marker's ``text`` (:func:`marker_text`) lists, each with its sha256 (None where it gives none);
+    None for a marker that lists none (one written before the lists)."""
+    lines = text.splitlines()
+    if FILES_HEADER not in lines:
+        return None
+    listed = (line.split("\t", 1) for line in lines[lines.index(FILES_HEADER) + 1:] if line)
+    return {parts[0]: parts[1] if len(parts) > 1 else None for parts in listed}

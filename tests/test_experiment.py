@@ -108,7 +108,7 @@ def test_a_direct_link_that_loses_every_packet_has_no_felt_delay(cache):
 
 
 @pytest.mark.slow
-def test_the_cli_writes_every_column_and_the_same_rows_with_workers(rows, cache, tmp_path, monkeypatch):
+def test_the_cli_writes_every_column_and_the_same_rows_with_workers(rows, cache, tmp_path, monkeypatch, capsys):
     monkeypatch.setenv("TWIN_CACHE_DIR", str(cache))
     out = tmp_path / "sweep"
     assert main([*ARGS, "--workers", "2", "--out", str(out)]) == 0
@@ -121,6 +121,17 @@ def test_the_cli_writes_every_column_and_the_same_rows_with_workers(rows, cache,
     for name in ("force_vs_delay.png", "force_vs_mass.png", "divergence.png", "bytes_per_s.png", "report.md"):
         assert (out / name).stat().st_size > 0, name
     assert "Findings" in (out / "report.md").read_text()
+    # A file of its own the user edited is theirs now, as twin build says of its folder: the re-run replaced it, exit 0.
+    capsys.readouterr()
+    for name in ("report.md", "results.csv"):
+        mine = (out / name).read_text() + "my notes\n"
+        (out / name).write_text(mine)
+        assert main([*ARGS, "--delays", "0", "--out", str(out)]) == 2
+        err = capsys.readouterr().err
+        assert err == (f"twin experiment: error: --out {out}: {name} was edited since twin experiment wrote it; move "
+                       "the folder aside or give --out a new folder\n")
+        assert (out / name).read_text() == mine
+        (out / name).write_text(mine.removesuffix("my notes\n"))
     # Its own folder may be written again; another one may not. Links planted in it are replaced, not written
     # through (results.csv -> a user's file elsewhere had that file overwritten).
     victims = {}

@@ -110,7 +110,7 @@ def test_a_replay_is_bit_identical_twice_and_to_the_recorded_session(recorded, c
     assert s["speed_x_realtime"] > 1.0  # faster than real time (no wall-time bound beyond that)
 
 
-def test_a_replay_with_another_trajectory_or_network_differs(recorded, cache, tmp_path):
+def test_a_replay_with_another_trajectory_or_network_differs(recorded, cache, tmp_path, capsys):
     path, _, remote = recorded
     script = tmp_path / "aside.csv"
     script.write_text("t,x,y,z\n0,-0.3,0.0,0.56\n3,-0.3,0.25,0.56\n")  # moves sideways, never touches the crate
@@ -125,6 +125,15 @@ def test_a_replay_with_another_trajectory_or_network_differs(recorded, cache, tm
     assert summary["network"]["downlink"]["delay_ms"] == 30.0 and summary["network"]["seed"] == 3
     assert summary["twin_vs_remote_mm"]["max"] > 0
     assert read_recording(out / "replay.mcap").metadata["command"] == "replay"
+    # A summary the user added to was replaced by the re-run, exit 0; twin build refuses an edited folder so.
+    capsys.readouterr()
+    mine = (out / "summary.json").read_text() + "my notes\n"
+    (out / "summary.json").write_text(mine)
+    assert main(["replay", str(path), "--out", str(out), "--cache-dir", str(cache)]) == 2
+    assert capsys.readouterr().err == (f"twin replay: error: --out {out}: summary.json was edited since twin replay "
+                                       "wrote it; move the folder aside or give --out a new folder\n")
+    assert (out / "summary.json").read_text() == mine
+    (out / "summary.json").write_text(mine.removesuffix("my notes\n"))
     # A link planted in the folder it wrote is replaced, not written through: it overwrote the user's file.
     victim = tmp_path / "victim.txt"
     victim.write_text("mine\n")
