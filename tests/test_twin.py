@@ -566,6 +566,10 @@ def test_every_accessor_names_an_unknown_object_and_refuses_an_id_that_is_no_str
         with pytest.raises(UnknownObjectError, match=r"^no object 'nope' in the model; its objects: crate, can$"):
             twin.remove("nope")
         assert not twin.has("nope") and twin.has("can")
+        for body in (EE_BODY, "world"):  # bodies of the scene, not objects: removing the end effector was allowed
+            with pytest.raises(UnknownObjectError, match=rf"^no object '{body}' in the model"):
+                twin.remove(body)
+        assert twin.model.body(EE_BODY).id > 0
         with pytest.raises(TypeError, match="an object id is a string, got list"):
             twin.has(["can"])
 

@@ -381,7 +381,7 @@ def remove_object(spec, object_id: str) -> None:  # type: ignore[no-untyped-def]
         UnknownObjectError: ``spec`` has no object ``object_id`` (a KeyError too).
     """
     body = spec.body(object_id)
-    if body is None:
+    if body is None or not has_object(spec, object_id):  # "ee" and "world" are bodies, not objects to delete
         raise unknown_object(object_id, [j.name.removesuffix("/free") for j in spec.joints
                                          if j.name.endswith("/free")])
     prefix = f"{object_id}/"
