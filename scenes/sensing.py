@@ -25,7 +25,7 @@ from estimation.segmentation import MIN_CLUSTER_POINTS
 from scenes import association
 from scenes.restfilter import REST_WINDOW, RestFilter
 from scenes.sampling import sample_surface
-from twin.model import free_joint
+from twin.model import free_joint, unknown_object
 from twin.poses import matrix_quat, rotation, to_rotvec
 from twin.workers import lower_priority
 
@@ -139,7 +139,7 @@ class SurfaceSensor:
         """Every object's body frame from the simulator's own arrays: one gather, not a look-up per object.
 
         Raises:
-            KeyError: an object not in the model.
+            UnknownObjectError: an object not in the model (a KeyError too), as ``truth.twin.pose`` says it.
         """
         twin = truth.twin
         model = twin.model  # type: ignore[attr-defined]
@@ -149,7 +149,7 @@ class SurfaceSensor:
             joints = [free_joint(model, i) for i in object_ids]
             missing = [i for i, j in zip(object_ids, joints, strict=True) if j < 0]
             if missing:
-                raise KeyError(f"no object {missing[0]!r} in the model")
+                raise unknown_object(missing[0], twin.object_ids())  # type: ignore[attr-defined]
             cached = self._bodies = (model, list(object_ids), np.array([model.jnt_bodyid[j] for j in joints], int))
         data = twin.data  # type: ignore[attr-defined]
         return data.xpos[cached[2]], data.xquat[cached[2]]
