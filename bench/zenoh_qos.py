@@ -1,7 +1,7 @@
-"""What Zenoh's priority and express flag do to pose latency and CPU on loopback: the choice behind
-``sync.zenoh_transport.QOS``.
+"""What Zenoh's priorities and express flag do to pose latency and CPU on loopback: measured, and not used
+(``sync.zenoh_transport.ZenohTransport.put`` publishes at Zenoh's default; docs/sync.md).
 
-    .venv/bin/python bench/zenoh_qos.py [--repeats 3] [--seconds 5]   # output in bench/results/zenoh_qos.txt
+    .venv/bin/python bench/zenoh_qos.py [--repeats 4] [--seconds 5]   # output in bench/results/zenoh_qos.txt
 
 A publisher process and a subscriber (this process), peer sessions on a free loopback port as the live
 commands open them (``sync.zenoh_transport.make_config``). The publisher sends pose-sized messages (208 bytes,
@@ -9,11 +9,11 @@ its clock in the first 8) on a 1 kHz loop; the subscriber takes each message's a
 one monotonic clock). Two loads:
 
 1. 20 poses a tick (a 20-object scene, every object moving): messages received of those sent, both processes'
-   CPU seconds, latency p50 / p99; for Zenoh's default (priority DATA, batched), real-time priority, and
-   real-time priority with ``express`` (not batched).
+   CPU seconds, latency p50 / p99; for Zenoh's default (priority DATA, batched), the interactive-high and the
+   real-time priorities, and real-time with ``express`` (not batched).
 2. One pose a tick while 8 MB clouds go out ten times a second on another key: latency p50 / p99 / max of the
-   poses, with every message at the default priority and with the poses at real time and the clouds at
-   DATA_LOW (``QOS``).
+   poses, with every message at the default priority and with the poses at interactive-high, the clouds at
+   DATA_LOW (Zenoh keeps a queue per priority on a link: the poses need not wait behind a cloud's fragments).
 
 Configurations alternate within each repeat, in this one process, so machine load hits all alike; the table
 gives the median over repeats.
@@ -40,11 +40,12 @@ CLOUD_BYTES = 8_000_000
 CLOUD_EVERY = 0.1  # seconds
 WARM_UP = 0.5  # seconds of messages left out at the start
 LOADS = {
-    "20 poses a tick": {"default": ({}, {}), "real-time priority": ({"priority": "REAL_TIME"}, {}),
+    "20 poses a tick": {"default": ({}, {}), "interactive-high priority": ({"priority": "INTERACTIVE_HIGH"}, {}),
+                        "real-time priority": ({"priority": "REAL_TIME"}, {}),
                         "real-time, express": ({"priority": "REAL_TIME", "express": True}, {})},
     "1 pose a tick, 8 MB clouds at 10 Hz": {"default": ({}, {}),
-                                             "poses real-time, clouds DATA_LOW": ({"priority": "REAL_TIME"},
-                                                                                 {"priority": "DATA_LOW"})},
+                                             "poses interactive-high, clouds DATA_LOW": (
+                                                 {"priority": "INTERACTIVE_HIGH"}, {"priority": "DATA_LOW"})},
 }
 
 
@@ -114,7 +115,7 @@ def run(seconds: float, per_tick: int, clouds: bool, pose_qos: dict, cloud_qos: 
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--repeats", type=int, default=4)
     parser.add_argument("--seconds", type=float, default=5.0)
     args = parser.parse_args(argv)
     results: dict[tuple[str, str], list[dict]] = {}

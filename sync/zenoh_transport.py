@@ -22,7 +22,6 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 from estimation.errors import TwinError
-from sync.keys import carried_by
 from sync.transport import MAX_REPLIES, MAX_REPLY_BYTES, Answer, OnSample
 
 log = logging.getLogger(__name__)
@@ -471,18 +470,6 @@ def open_session(conf):  # type: ignore[no-untyped-def]
         raise SessionError(f"could not open a Zenoh session: {_zenoh_error(exc)}") from exc
 
 
-#: Keys whose put options are remembered: a bound, as any memo of keys must have (an object has three keys).
-_QOS_MEMO = 4096
-
-#: Zenoh priority by the message a key carries (:func:`sync.keys.carried_by`'s tag). Zenoh keeps a queue per
-#: priority on each link, so the haptic loop's messages (poses, the operator's commands and targets, the force)
-#: are not sent behind the fragments of a cloud of hundreds of kilobytes published a moment before; clouds go
-#: last. The rest (heartbeats, scene info, removals) and any key of no known message: Zenoh's default (DATA).
-#: Not ``express`` (unbatched): at 20 poses a millisecond it tripled both sides' CPU and lost 0.6 % of them
-#: (bench/zenoh_qos.py).
-QOS = {"pose": "REAL_TIME", "operator": "REAL_TIME", "target": "REAL_TIME", "force": "REAL_TIME", "cloud": "DATA_LOW"}
-
-
 class ZenohTransport:
     """:class:`sync.transport.Transport` over an open Zenoh session (which the caller owns and closes).
 
@@ -493,24 +480,10 @@ class ZenohTransport:
     def __init__(self, session) -> None:  # type: ignore[no-untyped-def]
         self.session = session
         self._handles: list[object] = []
-        self._qos: dict[str, dict[str, object]] = {}  # key -> put's keyword arguments, worked out once a key
 
     def put(self, key: str, data: bytes) -> None:
-        """Publish ``data`` on ``key``, at the priority its message has in :data:`QOS`."""
-        options = self._qos.get(key)
-        if options is None:
-            options = self._options(key)
-            if len(self._qos) < _QOS_MEMO:
-                self._qos[key] = options
-        self.session.put(key, data, **options)
-
-    @staticmethod
-    def _options(key: str) -> dict[str, object]:
-        import zenoh
-
-        carried = carried_by(key)
-        priority = None if carried is None else QOS.get(carried[1])
-        return {} if priority is None else {"priority": getattr(zenoh.Priority, priority)}
+        # Zenoh's default priority and batching: bench/zenoh_qos.py measured the others (docs/sync.md).
+        self.session.put(key, data)
 
     def subscribe(self, keyexpr: str, callback: OnSample) -> None:
         self._handles.append(self.session.declare_subscriber(
