@@ -17,7 +17,7 @@ from collections.abc import Callable, Iterable
 from pathlib import Path
 
 from estimation.errors import TwinError
-from sync.replacing import file_sha256, listed_files, marker_text
+from sync.replacing import HEAD_BYTES, file_sha256, found_at, hidden_sibling, listed_files, marker_text
 
 
 def same_file(a: Path, b: Path) -> bool:
@@ -178,8 +178,6 @@ def replace_file(path: Path, write: Callable[[Path], object]) -> None:
     Raises:
         TwinError: the write or the move failed (a full disk, a folder now at ``path``): :func:`write_failure`.
     """
-    from sync.replacing import hidden_sibling
-
     fd, tmp = hidden_sibling(path, path.suffix)
     os.close(fd)
     try:
@@ -250,8 +248,6 @@ def written_mesh(suffix: str, head: bytes, size: int, tail: bytes = b"") -> bool
 def _tail(path: Path, size: int) -> bytes:
     """The last :data:`sync.replacing.HEAD_BYTES` bytes of ``path`` (``size`` bytes long), or b"" if unreadable
     (then it is not a mesh this command wrote, and is refused)."""
-    from sync.replacing import HEAD_BYTES
-
     try:
         with path.open("rb") as f:
             f.seek(max(0, size - HEAD_BYTES))
@@ -268,8 +264,6 @@ def check_mesh_file(path: Path, inputs: Iterable[Path | None], flag: str, *, suf
     Raises:
         TwinError: naming the flag, the file and why.
     """
-    from sync.replacing import found_at
-
     check_output_file(path, inputs, flag, suffixes=suffixes)
     found = found_at(path, lambda head, size: written_mesh(path.suffix, head, size, _tail(path, size)))
     if found.kind == "unchecked":

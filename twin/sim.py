@@ -48,6 +48,11 @@ class DivergedError(TwinError, RuntimeError):
 MAX_STATE = 1e10
 
 
+def _good(*values: np.ndarray) -> bool:
+    """Whether every value is within :data:`MAX_STATE` (NaN fails the comparison, infinity the bound)."""
+    return all(np.abs(v).max(initial=0.0) <= MAX_STATE for v in values)
+
+
 def _check_compiled_from(spec, model) -> None:  # type: ignore[no-untyped-def]
     """Refuse a ``model`` whose bodies are not ``spec``'s, in order, by name: another scene's model ran with no
     objects (``object_ids()`` was empty) and the spec's next edit would have swapped the scene. A few
@@ -260,8 +265,7 @@ class Twin:
 
     def _finite(self) -> bool:
         """Whether the state is finite and within :data:`MAX_STATE` (NaN fails the comparison too)."""
-        d = self.data
-        return bool(np.abs(d.qpos).max(initial=0.0) <= MAX_STATE and np.abs(d.qvel).max(initial=0.0) <= MAX_STATE)
+        return _good(self.data.qpos, self.data.qvel)
 
     def _recover(self) -> None:
         """Put every free body with a bad coordinate (:meth:`_finite`) back where it last was good, at rest.
@@ -278,7 +282,7 @@ class Twin:
             if m.jnt_type[j] != mujoco.mjtJoint.mjJNT_FREE:
                 continue
             q, v = m.jnt_qposadr[j], m.jnt_dofadr[j]
-            if np.abs(d.qpos[q:q + 7]).max() <= MAX_STATE and np.abs(d.qvel[v:v + 6]).max() <= MAX_STATE:
+            if _good(d.qpos[q:q + 7], d.qvel[v:v + 6]):
                 continue
             d.qpos[q:q + 7] = good_q[q:q + 7]
             d.qvel[v:v + 6] = 0.0
