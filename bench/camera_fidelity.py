@@ -37,6 +37,7 @@ RIGS = {
 def camera_estimates(scene, noise_name: str, camera: dict) -> list:  # type: ignore[no-untyped-def]
     """(estimate, friction) per object from a 3-camera scan, in each true mesh's frame."""
     from estimation import estimate, make_cloud
+    from estimation.views import on_support, plane_from_abcd
     from scenes import cameras
     from scenes.remote import Remote
     from scenes.sensing import CameraSensor
@@ -59,6 +60,10 @@ def camera_estimates(scene, noise_name: str, camera: dict) -> list:  # type: ign
         points = (received - pos) @ rot + reference.mass.center_of_mass
         normals = None if received_normals is None else received_normals @ rot
         result = estimate(make_cloud(points, normals), reference.mass.density, material=reference.material)
+        if seen.support is not None:  # as the twin cuts it (twin.runtime.build_from_cloud), in the mesh's frame
+            up = seen.support.normal @ rot
+            offset = seen.support.offset + seen.support.normal @ pos - up @ reference.mass.center_of_mass
+            result = on_support(result, plane_from_abcd((*up, offset)))
         out.append((result, friction))
     remote.close()
     return out

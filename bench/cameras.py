@@ -50,7 +50,7 @@ def run_scene(name: str | Path, cameras: int, noise_name: str = "KINECT_V1", cam
     from estimation import estimate, make_cloud
     from estimation.errors import TwinError
     from estimation.spacing import surface_noise
-    from estimation.views import assess
+    from estimation.views import assess, on_support
     from scenes import cameras as cams
     from scenes.remote import Remote
     from scenes.scenefile import load_scene
@@ -85,8 +85,8 @@ def run_scene(name: str | Path, cameras: int, noise_name: str = "KINECT_V1", cam
         try:
             truth = reference_estimate(spec)[0].volume
             # As the twin gets it: through the wire's codec (points on a 0.1 mm grid, normals a byte per axis).
-            result = estimate(make_cloud(*as_received(seen.points, seen.normals if normals else None)),
-                              reference_estimate(spec)[0].mass.mass / truth)
+            result = on_support(estimate(make_cloud(*as_received(seen.points, seen.normals if normals else None)),
+                                         reference_estimate(spec)[0].mass.mass / truth), seen.support)
             errors[spec.id] = result.volume / truth - 1
             observed = seen.points if seen.completed is None else seen.points[~seen.completed]
             facing = None if seen.normals is None else (

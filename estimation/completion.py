@@ -277,6 +277,8 @@ class Closed:
         points, origins, normals: (k, 3) float64, world frame, metres (normals unit, outward).
         completed: (k,) bool, True for the added points.
         completion: what was added.
+        support: the plane the object was closed on (the support plane, or the top of the object it stands
+            on), or None: nothing of the object lies below it (:func:`estimation.views.on_support`).
     """
 
     points: np.ndarray
@@ -284,6 +286,7 @@ class Closed:
     normals: np.ndarray
     completed: np.ndarray
     completion: Completion
+    support: Plane | None = None
 
 
 def mirror_image(points: np.ndarray, normals: np.ndarray, plane: Plane, *, noise: float,
@@ -493,7 +496,7 @@ def close_on_plane(points: np.ndarray, origins: np.ndarray, normals: np.ndarray,
                   origins=np.concatenate([origins, completion.points + completion.normals]),
                   normals=np.concatenate([normals, completion.normals]),
                   completed=np.concatenate([np.zeros(observed, bool), np.ones(len(completion.points), bool)]),
-                  completion=completion)
+                  completion=completion, support=plane if len(pts) else None)
 
 
 def resting_on(points: np.ndarray, others: np.ndarray, plane: Plane, *, cell: float, noise: float) -> Plane | None:

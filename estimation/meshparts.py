@@ -147,7 +147,7 @@ def turned_outward(vertices: np.ndarray, faces: np.ndarray) -> Turned | None:
     def solid(part: int):  # type: ignore[no-untyped-def]  # the part's solid, whichever way it was wound
         if part not in solids:
             own = parts.faces_of(faces, [part])
-            solids[part] = _solid(vertices, own if parts.volumes[part] > 0 else own[:, ::-1])
+            solids[part] = as_manifold(vertices, own if parts.volumes[part] > 0 else own[:, ::-1])
         return solids[part]
 
     turned = []
@@ -213,17 +213,17 @@ def overlap_union(vertices: np.ndarray, faces: np.ndarray) -> Overlap | None:
     for cavity in np.flatnonzero(volumes < 0):
         # The smallest outward part whose box holds the cavity's and whose solid holds the cavity turned outward.
         around = outward[((low[outward] <= low[cavity]) & (high[cavity] <= high[outward])).all(axis=1)]
-        turned = _solid(vertices, faces_of([int(cavity)])[:, ::-1])
+        turned = as_manifold(vertices, faces_of([int(cavity)])[:, ::-1])
         if turned is None:
             return Overlap(len(outward), int(touching.sum()), float("nan"), None, None,
                            unresolved="manifold3d refused a part as not closed")
         home = next((int(part) for part in around[np.argsort(volumes[around])]
-                     if _holds(_solid(vertices, faces_of([int(part)])), turned)), None)
+                     if _holds(as_manifold(vertices, faces_of([int(part)])), turned)), None)
         if home is None:  # turned_outward turns such a part first
             return Overlap(len(outward), int(touching.sum()), float("nan"), None, None,
                            unresolved="an inward-facing part lies inside no outward part (inside out?)")
         homes[home].append(int(cavity))
-    solids = [_solid(vertices, faces_of(members)) for members in homes.values()]
+    solids = [as_manifold(vertices, faces_of(members)) for members in homes.values()]
     if any(s is None for s in solids):
         return Overlap(len(outward), int(touching.sum()), float("nan"), None, None,
                        unresolved="manifold3d refused a part as not closed")
@@ -237,7 +237,7 @@ def overlap_union(vertices: np.ndarray, faces: np.ndarray) -> Overlap | None:
                    faces=np.asarray(mesh.tri_verts, dtype=np.int64))
 
 
-def _solid(vertices: np.ndarray, faces: np.ndarray):  # type: ignore[no-untyped-def]
+def as_manifold(vertices: np.ndarray, faces: np.ndarray):  # type: ignore[no-untyped-def]
     """The ``manifold3d.Manifold`` bounded by ``faces`` ((f, 3) int64 into ``vertices``, (v, 3) metres), or None
     when manifold3d refuses it (not closed)."""
     import manifold3d
@@ -246,6 +246,22 @@ def _solid(vertices: np.ndarray, faces: np.ndarray):  # type: ignore[no-untyped-
     made = manifold3d.Manifold(manifold3d.Mesh64(np.ascontiguousarray(vertices[used]),
                                                  local.reshape(-1, 3).astype(np.uint64)))
     return made if made.status() == manifold3d.Error.NoError else None
+
+
+def cut_below(vertices: np.ndarray, faces: np.ndarray, normal: np.ndarray, offset: float
+              ) -> tuple[np.ndarray, np.ndarray] | None:
+    """The closed surface ``vertices`` (v, 3) metres, ``faces`` (f, 3) bounds, less all of it below the plane
+    ``normal . x + offset = 0`` (``normal`` (3,) unit, pointing to the side kept), closed across the cut; None
+    when manifold3d refuses the surface (not closed) or nothing is left above the plane.
+    """
+    solid = as_manifold(vertices, faces)
+    if solid is None:
+        return None
+    kept = solid.trim_by_plane(np.asarray(normal, dtype=np.float64), -float(offset))
+    if kept.is_empty():
+        return None
+    mesh = kept.to_mesh64()
+    return np.array(mesh.vert_properties[:, :3], dtype=np.float64), np.asarray(mesh.tri_verts, dtype=np.int64)
 
 
 def _holds(outer, inner) -> bool:  # type: ignore[no-untyped-def]

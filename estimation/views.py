@@ -593,7 +593,8 @@ def estimate_views(views: list[View], density: float, *, support: Plane | str | 
     # Observed normals are refitted (NaN here): with the base and skirt as neighbours, those near the base turn.
     alln = np.where(closed.completed[:, None], closed.normals, np.nan)
     cloud = fused_cloud(closed.points, closed.origins, completed=closed.completed, completed_normals=alln)
-    result = estimate(cloud, density, material=material, keep_strays=keep_strays, progress=progress)
+    result = on_support(estimate(cloud, density, material=material, keep_strays=keep_strays, progress=progress),
+                        closed.support)
     share, bounds = assess(result, points, noise, normals=normals, open_past_frame=completion.open_past_frame)
     warnings.extend(result.warnings)
     if len(completion.points) and completion.base_area > 0:
@@ -655,6 +656,49 @@ def assess(result: PhysicalEstimate, observed: np.ndarray, noise: float, *,
     low, high = honest_bounds(result.volume, result.volume_bounds_m3, total - seen, total, noise=noise,
                               extent=float(result.obb.extents.min()))
     return share, (low, float("inf") if open_past_frame else high)
+
+
+#: A support plane more than ``MAX_BELOW_GIVEN`` of an estimate's points lie this many reconstruction cells
+#: below is not what the object rests on (:func:`on_support`): nothing is cut at it.
+SUPPORT_BELOW_CELLS = 2.0
+
+
+def on_support(result: PhysicalEstimate, plane: Plane | None, *, points: np.ndarray | None = None
+               ) -> PhysicalEstimate:
+    """``result`` with all of its surface below ``plane`` cut away, and its mass properties those of what is left.
+
+    An object closed on the plane it rests on (completion's base, :func:`estimation.completion.close_on_plane`)
+    has nothing below that plane. The reconstruction leaves some there all the same: its cells straddle the base's
+    edge, and the noisy points and normals around that edge push a vertex out (the 20-object clutter seen by three
+    cameras at sigma 1 mm: every object 0.4 to 2.5 mm below its plane). A foot on one side of a base is what a
+    convex hull stands on: a soup can built so rested tilted 1.6 degrees on the twin's table.
+
+    A surface that does not reach below ``plane`` (or ``plane`` None) comes back as it is. With ``points`` ((n, 3)
+    metres, the cloud the estimate was made from), a plane more than ``MAX_BELOW_GIVEN`` of them lie more than
+    ``SUPPORT_BELOW_CELLS`` cells below is not the object's support: nothing is cut, and a warning says so. A
+    surface manifold3d cannot take as closed is not cut either (said in a warning).
+    """
+    from estimation.inertia import mass_properties
+    from estimation.meshparts import cut_below
+
+    if plane is None or len(result.faces) == 0:
+        return result
+    if float(plane.height(result.vertices).min()) >= 0.0:
+        return result
+    if points is not None and len(points):
+        below = float((plane.height(np.asarray(points, np.float64)) < -SUPPORT_BELOW_CELLS * result.cell).mean())
+        if below > MAX_BELOW_GIVEN:
+            return replace(result, warnings=(*result.warnings, f"the support plane given has {100 * below:.0f} % of "
+                                             f"the points below it: not the object's support, nothing cut at it"))
+    cut = cut_below(result.vertices, result.faces, plane.normal, plane.offset)
+    if cut is None:
+        return replace(result, warnings=(*result.warnings, "the surface could not be cut at its support plane "
+                                                           "(not a closed manifold): what lies below it is kept"))
+    vertices, faces = cut
+    mass = mass_properties(vertices, faces, result.mass.density)
+    log.info("cut at the support plane: %.3g cm^3 of %.4g (%.2f %%)", 1e6 * (result.volume - mass.volume),
+             1e6 * result.volume, 100 * (1 - mass.volume / result.volume))
+    return replace(result, vertices=vertices, faces=faces, mass=mass)
 
 
 def with_completion(result: PhysicalEstimate, points: np.ndarray, completed: np.ndarray, *,

@@ -344,7 +344,8 @@ class Remote:
             log.info("%s: seen at last; cloud published", object_id)
         msg = cloud_message(object_id, cloud, stamp_ns=self.clock.stamp_ns(), epoch=self.epoch, seq=seq,
                             material=spec.material, density=spec.density, frame_position=pos, frame_quat=quat,
-                            normals=seen.normals, completed=seen.completed)
+                            normals=seen.normals, completed=seen.completed,
+                            support=None if seen.support is None else seen.support.as_abcd())
         data = self.link.put(self.keys.object(object_id, "cloud"), msg)
         if self.rlog.enabled:
             # The truth's estimate frame is the true mesh's: body frame + COM.

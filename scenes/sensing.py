@@ -21,7 +21,7 @@ from typing import Protocol
 import numpy as np
 
 from estimation.fusion import SurfaceMotions, unseen_motions
-from estimation.segmentation import MIN_CLUSTER_POINTS
+from estimation.segmentation import MIN_CLUSTER_POINTS, Plane
 from scenes import association
 from scenes.restfilter import REST_WINDOW, RestFilter
 from scenes.sampling import sample_surface
@@ -46,6 +46,7 @@ class Observation:
             point), or None.
         completed: (n,) bool, True for points no sensor saw (added by completion, e.g. the base on the
             support plane), or None (all observed).
+        support: the plane the object was closed on (world frame; nothing of it lies below), or None.
     """
 
     points: np.ndarray
@@ -54,6 +55,7 @@ class Observation:
     frame_quat: np.ndarray
     normals: np.ndarray | None = None
     completed: np.ndarray | None = None
+    support: Plane | None = None
 
 
 @dataclass(frozen=True)
@@ -411,7 +413,7 @@ class CameraSensor:
         if current is None or _completed_share(candidate) <= _completed_share(current) - REVIEW_GAIN:
             centre = self._model[object_id][1]
             frame = Observation(candidate.points, candidate.sensor_origins, motion[:3, :3] @ centre + motion[:3, 3],
-                                matrix_quat(motion[:3, :3]), candidate.normals, candidate.completed)
+                                matrix_quat(motion[:3, :3]), candidate.normals, candidate.completed, candidate.support)
             self._better[object_id] = (frame, motion.copy())
             log.info("%s: seen better at t=%.3f (%.0f %% completed, was %.0f %%)", object_id, scan.time,
                      100 * _completed_share(candidate), 100 * _completed_share(current) if current else 100)
@@ -719,7 +721,7 @@ class CameraSensor:
                                 others=np.concatenate(others) if others else None)
         centre = closed.points.mean(axis=0)
         return Observation(closed.points, closed.origins, centre, np.array([1.0, 0.0, 0.0, 0.0]), closed.normals,
-                           closed.completed)
+                           closed.completed, closed.support)
 
     def _icp_model(self, observed: np.ndarray, shot: int) -> np.ndarray:
         """At most ``MODEL_POINTS_CAP`` of ``observed`` (n, 3), drawn from the seed and ``shot``: an ICP model."""

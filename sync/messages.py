@@ -144,6 +144,10 @@ class Cloud(_Msg, tag="cloud"):
     #: support plane, a carved or mirrored side), or empty: all observed. The twin's volume interval then
     #: rests on the observed ones (``estimation.views.with_completion``), as ``twin estimate``'s views do.
     completed: bytes = b""
+    #: The plane the sender closed the object on, ``A x + B y + C z + D = 0`` in the world frame with (A, B, C)
+    #: unit and pointing into the object's side, or None. Nothing of the object lies below it: the twin cuts away
+    #: what its reconstruction puts there (``estimation.views.on_support``).
+    support: tuple[float, float, float, float] | None = None
 
 
 class Pose(_Msg, tag="pose"):
@@ -400,11 +404,12 @@ def _framed_size(msg: Cloud, payload: bytes, size: int, what: str) -> None:
 def cloud_message(object_id: str, points: np.ndarray, *, stamp_ns: int, epoch: int, seq: int,
                   material: str | None, density: float | None, frame_position: np.ndarray,
                   frame_quat: np.ndarray, quantum: float = CLOUD_QUANTUM, normals: np.ndarray | None = None,
-                  completed: np.ndarray | None = None) -> Cloud:
+                  completed: np.ndarray | None = None, support: tuple[float, float, float, float] | None = None
+                  ) -> Cloud:
     """A :class:`Cloud` of ``points`` ((n, 3) metres, world frame), quantised and compressed, with their
     ``normals`` ((n, 3) unit, outward) when given and every one of them is finite and not zero (else the
-    cloud goes without: a receiver would refuse it), and which of them are ``completed`` ((n,) bool; sent
-    when any is).
+    cloud goes without: a receiver would refuse it), which of them are ``completed`` ((n,) bool; sent
+    when any is), and the ``support`` plane it was closed on (A, B, C, D; :attr:`Cloud.support`).
 
     Raises:
         ValueError: ``normals`` or ``completed`` not one per point.
@@ -428,7 +433,7 @@ def cloud_message(object_id: str, points: np.ndarray, *, stamp_ns: int, epoch: i
     return Cloud(v=VERSION, stamp_ns=stamp_ns, object_id=object_id, epoch=epoch, seq=seq, count=count, bits=bits,
                  quantum=quantum, origin=origin, data=data, material=material, density=density,
                  frame_position=_vec(frame_position, 3), frame_quat=_vec(frame_quat, 4), normals=packed,
-                 completed=flags)
+                 completed=flags, support=None if support is None else _vec(support, 4))
 
 
 def as_received(points: np.ndarray, normals: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray | None]:
@@ -553,6 +558,13 @@ def _check_cloud(msg: Cloud) -> None:
         _framed_size(msg, msg.normals, 3 * msg.count, "normals")
     if msg.completed:
         _framed_size(msg, msg.completed, _completed_size(msg.count), "completed flags")
+    if msg.support is not None:
+        _finite(msg, msg.support)
+        _coordinates(msg, msg.support[3:])
+        norm = math.hypot(*msg.support[:3])
+        if not abs(norm - 1.0) <= QUAT_NORM_TOLERANCE:
+            raise MessageError("out-of-range", f"cloud {msg.object_id!r}: support plane normal of length {norm:.6g}, "
+                                               f"not unit")
 
 
 def _ordinals(msg: Message) -> None:

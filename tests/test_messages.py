@@ -145,6 +145,20 @@ def test_completed_flags_travel_with_their_points_and_are_checked():
     assert err.value.reason == "bad-payload"
 
 
+def test_a_clouds_support_plane_travels_with_it_and_is_checked():
+    tilted = (0.0, 0.6, 0.8, -0.75)  # unit normal, 0.75 m from the origin
+    assert decode(encode(_cloud(support=tilted))).support == tilted
+    assert decode(encode(_cloud())).support is None  # a cloud closed on nothing (the surface sensor's)
+    for support, reason in (((0.0, 0.0, 2.0, -0.75), "out-of-range"),  # the twin would cut at the wrong height
+                            ((0.0, 0.0, 1.0, float("nan")), "non-finite"),
+                            ((0.0, 0.0, 1.0, -2000.0), "out-of-range")):
+        with pytest.raises(MessageError) as err:
+            decode(encode(replace(_cloud(), support=support)))
+        assert err.value.reason == reason, support
+    with pytest.raises(ValueError, match="expected 4 numbers"):
+        _cloud(support=(0.0, 0.0, 1.0))
+
+
 def test_a_good_pose_passes_unchanged():
     assert decode(encode(_pose())) == _pose()
     fast = _pose(linvel=(0.0, 99.0, 0.0), angvel=(999.0, 0.0, 0.0))  # within MAX_SPEED, MAX_ANGULAR_SPEED

@@ -1035,3 +1035,31 @@ def test_a_depth_image_at_the_wrong_scale_says_so():
         depth_view(depth, camera, np.eye(3), np.zeros(3))
     points, _ = depth_view(depth / 1000.0, camera, np.eye(3), np.zeros(3))
     assert len(points) > 0.8 * depth.size
+
+
+def test_what_lies_below_the_support_plane_is_cut_away_and_the_mass_follows():
+    from dataclasses import replace
+
+    import trimesh
+
+    from estimation.estimate import from_mesh
+    from estimation.views import on_support, plane_from_abcd
+
+    box = trimesh.creation.box((0.1, 0.1, 0.1))  # z from -0.05 to 0.05
+    whole = from_mesh(np.asarray(box.vertices), np.asarray(box.faces), 1000.0)
+    cut = on_support(whole, plane_from_abcd((0.0, 0.0, 1.0, 0.045)))  # z = -0.045, up into the box
+    assert cut.volume == pytest.approx(0.1 * 0.1 * 0.095, rel=1e-9)
+    assert cut.mass.mass == pytest.approx(cut.volume * 1000.0, rel=1e-12)
+    assert cut.mass.center_of_mass[2] == pytest.approx(0.0025, abs=1e-9)  # the middle of -0.045 .. 0.05
+    assert cut.vertices[:, 2].min() == pytest.approx(-0.045, abs=1e-12) and cut.warnings == whole.warnings
+    # A plane the surface does not reach below leaves the estimate as it is (the same record).
+    assert on_support(whole, plane_from_abcd((0.0, 0.0, 1.0, 0.05))) is whole
+    assert on_support(whole, None) is whole
+    # A plane with most of the cloud below it is not what the object rests on: nothing cut, and said.
+    points = np.random.default_rng(0).uniform(-0.05, 0.05, (1000, 3))
+    high = on_support(replace(whole, cell=0.001), plane_from_abcd((0.0, 0.0, 1.0, -0.02)), points=points)
+    assert high.volume == whole.volume and "not the object's support" in high.warnings[-1]
+    # A surface manifold3d cannot take as closed (a face missing) is kept whole, and said.
+    opened = from_mesh(np.asarray(box.vertices), np.asarray(box.faces)[1:], 1000.0)
+    kept = on_support(opened, plane_from_abcd((0.0, 0.0, 1.0, 0.045)))
+    assert np.array_equal(kept.vertices, opened.vertices) and "could not be cut" in kept.warnings[-1]

@@ -350,7 +350,7 @@ def build_from_cloud(data: bytes, coacd: CoacdSettings, cache_dir: Path | None,
     With ``display``, also a subset of the cloud (world frame at capture) for the rerun view, so the
     loop's process never unpacks a cloud.
     """
-    from estimation.views import with_completion
+    from estimation.views import on_support, plane_from_abcd, with_completion
 
     msg = decode(data)
     assert isinstance(msg, Cloud)
@@ -361,6 +361,8 @@ def build_from_cloud(data: bytes, coacd: CoacdSettings, cache_dir: Path | None,
     # points alone do not (a thin part, a partial view closed by completion).
     normals, completed = unpack_normals(msg), unpack_completed(msg)
     est = estimate(make_cloud(points, normals), density, material=None if mat is None else mat.name)
+    if msg.support is not None:  # nothing of it lies below the plane it was closed on
+        est = on_support(est, plane_from_abcd(msg.support), points=points)
     if completed is not None:  # what the sender added where no sensor saw: the interval rests on the rest
         est = with_completion(est, points, completed, normals=normals)
     friction = DEFAULT_FRICTION if mat is None else mat.friction
