@@ -69,14 +69,15 @@ def _true_surface(mesh, pos: np.ndarray, quat: np.ndarray):  # type: ignore[no-u
 
 
 def _error(moved: np.ndarray, points: np.ndarray, normals: np.ndarray, on_truth: np.ndarray, density: float,
-           truth: float) -> float:
+           truth: float, support) -> float:  # type: ignore[no-untyped-def]
     """Volume error (%) of the cloud ``points`` with the ``moved`` rows replaced by ``on_truth``'s, as the twin gets
-    it (through the wire's codec)."""
+    it (through the wire's codec, cut at the ``support`` plane it was closed on)."""
     from estimation import estimate, make_cloud
+    from estimation.views import on_support
     from sync.messages import as_received
 
     cloud = np.where(moved[:, None], on_truth, points)
-    return 100 * (estimate(make_cloud(*as_received(cloud, normals)), density).volume / truth - 1)
+    return 100 * (on_support(estimate(make_cloud(*as_received(cloud, normals)), density), support).volume / truth - 1)
 
 
 #: ``--noise``'s names, as the tables' titles say them.
@@ -128,7 +129,7 @@ def table_rows(seed: int, cameras: int, completions: _Completions, noise: str = 
             carved[np.flatnonzero(completed)[c.mirrored + c.turned:]] = True
 
             observed = ~completed
-            cloud = (seen.points, seen.normals, on_truth, density, truth)
+            cloud = (seen.points, seen.normals, on_truth, density, truth, seen.support)
             rows.append({
                 "object": f"table{seed}/{spec.id}",
                 "error": _error(np.zeros(len(observed), bool), *cloud),
