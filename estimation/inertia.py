@@ -105,6 +105,18 @@ def mass_properties(
                         origin=apex)
 
 
+def without(props: MassProperties, part: MassProperties) -> MassProperties:
+    """``props`` less ``part``, a piece of the same solid (same frame and density): the mass properties of what
+    is left. Moments subtract; about ``props``' centre of mass so that nothing large cancels.
+    """
+    c = props.center_of_mass
+    central = np.trace(props.inertia) / 2 * np.eye(3) - props.inertia  # integral of rho r r^T about c
+    d = part.center_of_mass - c
+    part_central = np.trace(part.inertia) / 2 * np.eye(3) - part.inertia
+    second = central - (part_central + part.mass * np.outer(d, d))
+    return from_moments(props.volume - part.volume, props.density, -part.mass * d, second, origin=c)
+
+
 def from_moments(volume: float, density: float, first: np.ndarray, second: np.ndarray, *,
                  origin: np.ndarray | None = None) -> MassProperties:
     """Mass properties from the moments of the mass about ``origin``.

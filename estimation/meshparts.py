@@ -248,20 +248,24 @@ def as_manifold(vertices: np.ndarray, faces: np.ndarray):  # type: ignore[no-unt
     return made if made.status() == manifold3d.Error.NoError else None
 
 
-def cut_below(vertices: np.ndarray, faces: np.ndarray, normal: np.ndarray, offset: float
-              ) -> tuple[np.ndarray, np.ndarray] | None:
-    """The closed surface ``vertices`` (v, 3) metres, ``faces`` (f, 3) bounds, less all of it below the plane
-    ``normal . x + offset = 0`` (``normal`` (3,) unit, pointing to the side kept), closed across the cut; None
-    when manifold3d refuses the surface (not closed) or nothing is left above the plane.
+def split_at_plane(vertices: np.ndarray, faces: np.ndarray, normal: np.ndarray, offset: float
+                   ) -> tuple[tuple[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]] | None:
+    """The closed surface ``vertices`` (v, 3) metres, ``faces`` (f, 3) bounds, split by the plane
+    ``normal . x + offset = 0`` (``normal`` (3,) unit) into the solids on its ``normal`` side and behind it, each
+    closed across the cut as (vertices, faces) (no faces: nothing on that side); None when manifold3d refuses the
+    surface (not closed).
     """
     solid = as_manifold(vertices, faces)
     if solid is None:
         return None
-    kept = solid.trim_by_plane(np.asarray(normal, dtype=np.float64), -float(offset))
-    if kept.is_empty():
-        return None
-    mesh = kept.to_mesh64()
-    return np.array(mesh.vert_properties[:, :3], dtype=np.float64), np.asarray(mesh.tri_verts, dtype=np.int64)
+    front, back = solid.split_by_plane(np.asarray(normal, dtype=np.float64), -float(offset))
+
+    def arrays(part) -> tuple[np.ndarray, np.ndarray]:  # type: ignore[no-untyped-def]
+        mesh = part.to_mesh64()
+        return (np.array(mesh.vert_properties[:, :3], dtype=np.float64).reshape(-1, 3),
+                np.asarray(mesh.tri_verts, dtype=np.int64).reshape(-1, 3))
+
+    return arrays(front), arrays(back)
 
 
 def _holds(outer, inner) -> bool:  # type: ignore[no-untyped-def]

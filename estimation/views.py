@@ -30,7 +30,7 @@ from estimation.cloud import check_range, check_sensor_origin, check_spread, dis
 from estimation.completion import ONE_SIDED, close_on_plane, honest_bounds, mean_view_direction
 from estimation.contracts import as_points, shown
 from estimation.coverage import coverage
-from estimation.errors import CloudError, SettingsError, refused_number
+from estimation.errors import CloudError, ReconstructionError, SettingsError, refused_number
 from estimation.estimate import PhysicalEstimate, estimate
 from estimation.fusion import fuse_views, fused_cloud, oriented_normals
 from estimation.segmentation import (
@@ -665,7 +665,8 @@ SUPPORT_BELOW_CELLS = 2.0
 
 def on_support(result: PhysicalEstimate, plane: Plane | None, *, points: np.ndarray | None = None
                ) -> PhysicalEstimate:
-    """``result`` with all of its surface below ``plane`` cut away, and its mass properties those of what is left.
+    """``result`` less all of its solid below ``plane``: its surface cut there, and its mass properties less those
+    of the piece cut away.
 
     An object closed on the plane it rests on (completion's base, :func:`estimation.completion.close_on_plane`)
     has nothing below that plane. The reconstruction leaves some there all the same: its cells straddle the base's
@@ -673,32 +674,48 @@ def on_support(result: PhysicalEstimate, plane: Plane | None, *, points: np.ndar
     cameras at sigma 1 mm: every object 0.4 to 2.5 mm below its plane). A foot on one side of a base is what a
     convex hull stands on: a soup can built so rested tilted 1.6 degrees on the twin's table.
 
-    A surface that does not reach below ``plane`` (or ``plane`` None) comes back as it is. With ``points`` ((n, 3)
-    metres, the cloud the estimate was made from), a plane more than ``MAX_BELOW_GIVEN`` of them lie more than
-    ``SUPPORT_BELOW_CELLS`` cells below is not the object's support: nothing is cut, and a warning says so. A
-    surface manifold3d cannot take as closed is not cut either (said in a warning).
+    The piece's flat-faced mass properties are taken from the estimate's (:func:`estimation.inertia.without`), so
+    what the estimate holds beyond its mesh (the curved slivers of ``estimation.curvature``) stays, and its
+    volume interval moves down by the piece's volume. A surface that does not reach below ``plane`` (or ``plane``
+    None) comes back as it is. With ``points`` ((n, 3) metres, the cloud the estimate was made from), a plane more
+    than ``MAX_BELOW_GIVEN`` of them lie more than ``SUPPORT_BELOW_CELLS`` cells below is not the object's
+    support: nothing is cut, and a warning says so; so does a plane above the whole surface, and a surface
+    manifold3d cannot take as closed.
     """
-    from estimation.inertia import mass_properties
-    from estimation.meshparts import cut_below
+    from estimation.inertia import mass_properties, without
+    from estimation.meshparts import split_at_plane
 
     if plane is None or len(result.faces) == 0:
         return result
     if float(plane.height(result.vertices).min()) >= 0.0:
         return result
+
+    def kept(why: str) -> PhysicalEstimate:
+        return replace(result, warnings=(*result.warnings, f"{why}: nothing cut at the support plane"))
+
     if points is not None and len(points):
         below = float((plane.height(np.asarray(points, np.float64)) < -SUPPORT_BELOW_CELLS * result.cell).mean())
         if below > MAX_BELOW_GIVEN:
-            return replace(result, warnings=(*result.warnings, f"the support plane given has {100 * below:.0f} % of "
-                                             f"the points below it: not the object's support, nothing cut at it"))
-    cut = cut_below(result.vertices, result.faces, plane.normal, plane.offset)
-    if cut is None:
-        return replace(result, warnings=(*result.warnings, "the surface could not be cut at its support plane "
-                                                           "(not a closed manifold): what lies below it is kept"))
-    vertices, faces = cut
-    mass = mass_properties(vertices, faces, result.mass.density)
-    log.info("cut at the support plane: %.3g cm^3 of %.4g (%.2f %%)", 1e6 * (result.volume - mass.volume),
-             1e6 * result.volume, 100 * (1 - mass.volume / result.volume))
-    return replace(result, vertices=vertices, faces=faces, mass=mass)
+            return kept(f"{100 * below:.0f} % of the points lie below the support plane given, so it is not the "
+                        f"object's")
+    split = split_at_plane(result.vertices, result.faces, plane.normal, plane.offset)
+    if split is None:
+        return kept("the surface is not a closed manifold")
+    (vertices, faces), (under_v, under_f) = split
+    if not len(faces):
+        return kept("the whole surface lies below the support plane given, so it is not the object's")
+    if not len(under_f):
+        return result
+    try:
+        under = mass_properties(under_v, under_f, result.mass.density)
+    except ReconstructionError:  # a sliver with no volume to speak of: the mesh is cut, the mass as it was
+        return replace(result, vertices=vertices, faces=faces)
+    log.info("cut at the support plane: %.3g cm^3 of %.4g (%.3f %%)", 1e6 * under.volume, 1e6 * result.volume,
+             100 * under.volume / result.volume)
+    bounds = result.volume_bounds_m3
+    if bounds is not None:
+        bounds = (max(0.0, bounds[0] - under.volume), bounds[1] - under.volume)
+    return replace(result, vertices=vertices, faces=faces, mass=without(result.mass, under), volume_bounds_m3=bounds)
 
 
 def with_completion(result: PhysicalEstimate, points: np.ndarray, completed: np.ndarray, *,

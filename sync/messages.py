@@ -146,7 +146,9 @@ class Cloud(_Msg, tag="cloud"):
     completed: bytes = b""
     #: The plane the sender closed the object on, ``A x + B y + C z + D = 0`` in the world frame with (A, B, C)
     #: unit and pointing into the object's side, or None. Nothing of the object lies below it: the twin cuts away
-    #: what its reconstruction puts there (``estimation.views.on_support``).
+    #: what its reconstruction puts there (``estimation.views.on_support``). Clouds recorded before this field
+    #: decode as without it; a twin from before it drops every cloud of a newer sender as undecodable (an
+    #: array-like struct sends every field, msgspec omits no defaults there): update both sides together.
     support: tuple[float, float, float, float] | None = None
 
 

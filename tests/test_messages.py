@@ -5,6 +5,7 @@ from __future__ import annotations
 import logging
 import math
 
+import msgspec
 import numpy as np
 import pytest
 import zstandard
@@ -151,12 +152,18 @@ def test_a_clouds_support_plane_travels_with_it_and_is_checked():
     assert decode(encode(_cloud())).support is None  # a cloud closed on nothing (the surface sensor's)
     for support, reason in (((0.0, 0.0, 2.0, -0.75), "out-of-range"),  # the twin would cut at the wrong height
                             ((0.0, 0.0, 1.0, float("nan")), "non-finite"),
+                            ((0.0, 0.0, 1.0, float("inf")), "non-finite"),
                             ((0.0, 0.0, 1.0, -2000.0), "out-of-range")):
         with pytest.raises(MessageError) as err:
             decode(encode(replace(_cloud(), support=support)))
         assert err.value.reason == reason, support
     with pytest.raises(ValueError, match="expected 4 numbers"):
         _cloud(support=(0.0, 0.0, 1.0))
+    with pytest.raises(MessageError):  # three numbers on the wire: not a Cloud
+        decode(encode(replace(_cloud(), support=(0.0, 0.0, 1.0))))
+    # A cloud recorded before the field (its array one shorter) decodes as without a plane.
+    old = msgspec.msgpack.decode(encode(_cloud()))[:-1]
+    assert decode(msgspec.msgpack.encode(old)).support is None
 
 
 def test_a_good_pose_passes_unchanged():

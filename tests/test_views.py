@@ -1058,8 +1058,41 @@ def test_what_lies_below_the_support_plane_is_cut_away_and_the_mass_follows():
     # A plane with most of the cloud below it is not what the object rests on: nothing cut, and said.
     points = np.random.default_rng(0).uniform(-0.05, 0.05, (1000, 3))
     high = on_support(replace(whole, cell=0.001), plane_from_abcd((0.0, 0.0, 1.0, -0.02)), points=points)
-    assert high.volume == whole.volume and "not the object's support" in high.warnings[-1]
+    assert high.volume == whole.volume and "so it is not the object's: nothing cut" in high.warnings[-1]
+    above = on_support(whole, plane_from_abcd((0.0, 0.0, 1.0, -0.06)))  # z = 0.06, over the whole box
+    assert above.volume == whole.volume and "the whole surface lies below" in above.warnings[-1]
     # A surface manifold3d cannot take as closed (a face missing) is kept whole, and said.
     opened = from_mesh(np.asarray(box.vertices), np.asarray(box.faces)[1:], 1000.0)
     kept = on_support(opened, plane_from_abcd((0.0, 0.0, 1.0, 0.045)))
-    assert np.array_equal(kept.vertices, opened.vertices) and "could not be cut" in kept.warnings[-1]
+    assert np.array_equal(kept.vertices, opened.vertices) and "not a closed manifold" in kept.warnings[-1]
+
+
+def test_a_cut_at_the_support_plane_keeps_the_inertia_and_curvature_of_what_is_left():
+    from dataclasses import replace
+
+    import trimesh
+
+    from estimation.estimate import from_mesh
+    from estimation.views import on_support, plane_from_abcd
+
+    box = trimesh.creation.box((0.1, 0.06, 0.1))
+    cut = on_support(from_mesh(np.asarray(box.vertices), np.asarray(box.faces), 1000.0),
+                     plane_from_abcd((0.0, 0.0, 1.0, 0.03)))  # z = -0.03: a 0.1 x 0.06 x 0.08 box is left
+    mass = 1000.0 * 0.1 * 0.06 * 0.08
+    expected = mass / 12 * np.array([0.06**2 + 0.08**2, 0.1**2 + 0.08**2, 0.1**2 + 0.06**2])
+    assert np.allclose(np.diag(cut.mass.inertia), expected, rtol=1e-9) and abs(cut.mass.inertia[0, 1]) < 1e-12
+    assert cut.mass.center_of_mass == pytest.approx([0.0, 0.0, 0.01], abs=1e-12)
+    # What an estimate holds beyond its flat mesh (curved slivers, estimation.curvature) is not cut with the
+    # piece below: a ball's estimate cut a hair under its lowest vertex keeps its volume, and its interval moves
+    # down by what was cut.
+    rng = np.random.default_rng(5)
+    d = rng.normal(size=(20_000, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    ball = estimate(make_cloud(0.03 * d, d), 1000.0)
+    assert ball.volume != pytest.approx(float(trimesh.Trimesh(ball.vertices, ball.faces).volume), rel=1e-4)
+    lowest = float(ball.vertices[:, 2].min())
+    hair = on_support(ball, plane_from_abcd((0.0, 0.0, 1.0, -(lowest + 1e-7))))
+    assert len(hair.faces) != len(ball.faces) and hair.volume == pytest.approx(ball.volume, rel=1e-6)
+    sliced = on_support(replace(ball, volume_bounds_m3=(1e-4, 1.2e-4)), plane_from_abcd((0.0, 0.0, 1.0, 0.029)))
+    cut_away = ball.volume - sliced.volume
+    assert cut_away > 0 and sliced.volume_bounds_m3 == pytest.approx((1e-4 - cut_away, 1.2e-4 - cut_away))
