@@ -437,7 +437,8 @@ def prepare_objects(
     if estimates is None:
         estimates = [estimate_object(s) for s in specs]
     visuals = [visual_mesh(est) for est, _ in estimates]
-    shapes = collision_shapes(visuals, coacd, cache_dir=cache_dir, progress=progress)
+    shapes = collision_shapes(visuals, coacd, cache_dir=cache_dir, progress=progress,
+                              surfaces=[est.vertices - est.mass.center_of_mass for est, _ in estimates])
     out = []
     for s, (est, friction), visual, (hulls, cached, primitive) in zip(specs, estimates, visuals, shapes, strict=True):
         obj = TwinObject(id=s.id, estimate=est, friction=friction, visual=visual, hulls=hulls,

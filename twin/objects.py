@@ -474,20 +474,27 @@ def object_at_estimate(object_id: str, est: PhysicalEstimate, friction: float, *
     """
     check_friction(friction, object_id)
     visual = visual_mesh(est)
-    ((hulls, cached, primitive),) = collision_shapes([visual], coacd, cache_dir=cache_dir, progress=False)
+    ((hulls, cached, primitive),) = collision_shapes([visual], coacd, cache_dir=cache_dir, progress=False,
+                                                     surfaces=[est.vertices - est.mass.center_of_mass])
     return TwinObject(id=object_id, estimate=est, friction=friction, visual=visual, hulls=hulls,
                       position=est.mass.center_of_mass.copy(), quat=np.array([1.0, 0, 0, 0]), hull_cached=cached,
                       primitive=primitive)
 
 
 def collision_shapes(visuals: list[Hull], coacd: CoacdSettings = DEFAULT_SETTINGS, *, cache_dir: Path | None = None,
-                     progress: bool = True) -> list[tuple[tuple[Hull, ...], bool, Primitive | None]]:
+                     progress: bool = True, surfaces: list[np.ndarray] | None = None
+                     ) -> list[tuple[tuple[Hull, ...], bool, Primitive | None]]:
     """What collides for each visual mesh (body frame): (hulls, from CoACD's cache, primitive or None).
 
     A mesh that fits a primitive (:func:`fit_primitive`) collides as it, and its hulls are only its convex
     hull, for viewers: CoACD is not run for parts that would not collide (2-5 s each for a camera-scanned
     box, whose noise makes it read as concave). The others go to CoACD (:func:`twin.decompose.decompose_many`,
     cache misses in parallel).
+
+    ``surfaces``: each visual's full-resolution vertices (same frame), when known. A mesh that collides as one
+    convex part then collides as their convex hull, not the decimated mesh's: decimation moves a flat base's
+    edge, and a camera-built pill bottle lying on its side rested turned 3.3 degrees on the decimated mesh's
+    hull, 0.9 on the full one's (bench/camera_fidelity.py).
     """
     from estimation.hull import convex_hull
 
@@ -495,5 +502,9 @@ def collision_shapes(visuals: list[Hull], coacd: CoacdSettings = DEFAULT_SETTING
     rest = [i for i, p in enumerate(primitives) if p is None]
     decomposed = dict(zip(rest, decompose_many([visuals[i] for i in rest], coacd, cache_dir=cache_dir,
                                                progress=progress), strict=True))
+    if surfaces is not None:
+        for i, (hulls, cached) in decomposed.items():
+            if len(hulls) == 1 and len(surfaces[i]) >= 4:
+                decomposed[i] = ([convex_hull(np.asarray(surfaces[i], np.float64))], cached)
     return [(tuple(decomposed[i][0]), decomposed[i][1], None) if p is None
             else ((convex_hull(visuals[i][0]),), False, p) for i, p in enumerate(primitives)]
