@@ -30,7 +30,14 @@ from estimation.units import implausible_size, unit_scale
 from scenes.scenefile import ObjectSpec, SceneError
 from sync.messages import MAX_COORDINATE
 from twin.decompose import DEFAULT_SETTINGS, CoacdSettings
-from twin.objects import DEFAULT_FRICTION, TwinObject, collision_shapes, lowest_point, visual_mesh
+from twin.objects import (
+    DEFAULT_FRICTION,
+    TwinObject,
+    body_vertices,
+    collision_shapes,
+    lowest_point,
+    visual_mesh,
+)
 
 log = logging.getLogger(__name__)
 
@@ -438,7 +445,7 @@ def prepare_objects(
         estimates = [estimate_object(s) for s in specs]
     visuals = [visual_mesh(est) for est, _ in estimates]
     shapes = collision_shapes(visuals, coacd, cache_dir=cache_dir, progress=progress,
-                              surfaces=[est.vertices - est.mass.center_of_mass for est, _ in estimates])
+                              surfaces=[body_vertices(est) for est, _ in estimates])
     out = []
     for s, (est, friction), visual, (hulls, cached, primitive) in zip(specs, estimates, visuals, shapes, strict=True):
         obj = TwinObject(id=s.id, estimate=est, friction=friction, visual=visual, hulls=hulls,

@@ -436,12 +436,17 @@ def decimate(vertices: np.ndarray, faces: np.ndarray, target: int = VISUAL_FACES
 SPECK_AREA_FRACTION = 0.1
 
 
+def body_vertices(est: PhysicalEstimate) -> np.ndarray:
+    """The estimate's full reconstruction's vertices (v, 3) in the body frame: metres from its centre of mass."""
+    return est.vertices - est.mass.center_of_mass
+
+
 def visual_mesh(est: PhysicalEstimate) -> Hull:
     """The estimate's surface as the twin shows and decomposes it: object frame (origin at the centre of
     mass), decimated (:func:`decimate`), specks of noise left out (``SPECK_AREA_FRACTION``). The specks are
     found after decimation: on the ~3000 faces, not the reconstruction's 50-80k (10-50 ms against 120-150
     ms, in every build and estimation worker)."""
-    return without_specks(*decimate(est.vertices - est.mass.center_of_mass, est.faces))
+    return without_specks(*decimate(body_vertices(est), est.faces))
 
 
 def without_specks(vertices: np.ndarray, faces: np.ndarray) -> Hull:
@@ -475,7 +480,7 @@ def object_at_estimate(object_id: str, est: PhysicalEstimate, friction: float, *
     check_friction(friction, object_id)
     visual = visual_mesh(est)
     ((hulls, cached, primitive),) = collision_shapes([visual], coacd, cache_dir=cache_dir, progress=False,
-                                                     surfaces=[est.vertices - est.mass.center_of_mass])
+                                                     surfaces=[body_vertices(est)])
     return TwinObject(id=object_id, estimate=est, friction=friction, visual=visual, hulls=hulls,
                       position=est.mass.center_of_mass.copy(), quat=np.array([1.0, 0, 0, 0]), hull_cached=cached,
                       primitive=primitive)
