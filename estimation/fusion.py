@@ -377,7 +377,7 @@ def icp_target(target: np.ndarray) -> IcpTarget:
 
 
 def register(source: np.ndarray, target: np.ndarray | IcpTarget, *, init: np.ndarray, max_distance: float,
-             iterations: int = 50) -> Registration:
+             iterations: int = 50, hold: SurfaceMotions | None = None) -> Registration:
     """Point-to-plane ICP moving ``source`` onto ``target``.
 
     Open3D's ``registration_icp`` with ``TransformationEstimationPointToPlane`` step for step (each
@@ -394,6 +394,11 @@ def register(source: np.ndarray, target: np.ndarray | IcpTarget, *, init: np.nda
         max_distance: metres, the largest correspondence distance (a few noise sigmas plus the motion
             expected between two registrations).
         iterations: ICP iterations at most.
+        hold: the motions ``source``'s own surface cannot show (:func:`unseen_motions` of it, in its frame):
+            no iteration moves along them, so they stay as ``init`` has them. Without it a can or a marker
+            seen from one side slid 5-13 degrees about its axis from one scan to the next on the noise, and
+            taking that turn away afterwards (:meth:`SurfaceMotions.without`) about an axis fitted a few
+            degrees off left a turn of 2-3 degrees across it.
 
     Raises:
         CloudError: fewer than 3 points on either side.
@@ -408,10 +413,12 @@ def register(source: np.ndarray, target: np.ndarray | IcpTarget, *, init: np.nda
     moving = src - pivot
     transform = shift @ np.asarray(init, dtype=np.float64) @ back
     match = _correspondences(moving, tgt, transform, max_distance)
+    held = None if hold is None or not hold.basis.shape[1] else hold
     for _ in range(iterations):
         if not match.found.any():
             break
-        update = _point_to_plane_step(match, tgt)
+        free = None if held is None else _free_motions(held, transform, pivot)
+        update = _point_to_plane_step(match, tgt, free)
         transform = update @ transform
         before, match = match, _correspondences(moving, tgt, transform, max_distance)
         if abs(before.fitness - match.fitness) < ICP_RELATIVE and abs(before.rmse - match.rmse) < ICP_RELATIVE:
@@ -449,9 +456,25 @@ def _correspondences(moving: np.ndarray, tgt: IcpTarget, transform: np.ndarray, 
     return _Match(moved, index, found, float(found.mean()), rmse)
 
 
-def _point_to_plane_step(match: _Match, tgt: IcpTarget) -> np.ndarray:
+def _free_motions(hold: SurfaceMotions, transform: np.ndarray, pivot: np.ndarray) -> np.ndarray:
+    """(6, 6 - m): the update coordinates (a turn, radians, and a shift, metres, about the target's centroid
+    ``pivot``) an ICP iteration may move in: those orthogonal, with turns scaled by ``hold.scale``, to the
+    ``m`` motions of ``hold``, carried to where ``transform`` (4, 4; source less ``pivot`` to the centred
+    target frame) has the source now."""
+    rot = transform[:3, :3]
+    centre = rot @ (hold.centre - pivot) + transform[:3, 3]
+    turn = rot @ hold.basis[:3] / hold.scale
+    shift = rot @ hold.basis[3:]
+    # A turn w about the source's centre c, with c shifted by s, moves x by w x x + (s - w x c) about the pivot.
+    held = np.vstack([turn * hold.scale, shift - np.cross(turn.T, centre).T])
+    q = np.linalg.qr(held, mode="complete")[0]
+    return np.diag([1 / hold.scale] * 3 + [1.0] * 3) @ q[:, held.shape[1]:]
+
+
+def _point_to_plane_step(match: _Match, tgt: IcpTarget, free: np.ndarray | None = None) -> np.ndarray:
     """(4, 4): the small motion that best moves the matched points onto their targets' tangent planes,
-    linearised in three Euler angles and a shift, the rotation then made exact (Rz Ry Rx, as Open3D)."""
+    linearised in three Euler angles and a shift, the rotation then made exact (Rz Ry Rx, as Open3D); only
+    along the columns of ``free`` (6, k) when given (:func:`_free_motions`)."""
     from scipy.spatial.transform import Rotation
 
     p = match.moved[match.found]
@@ -459,8 +482,12 @@ def _point_to_plane_step(match: _Match, tgt: IcpTarget) -> np.ndarray:
     n = tgt.normals(j)
     jacobian = np.hstack([np.cross(p, n), n])
     residual = np.einsum("ij,ij->i", p - tgt.points[j], n)
+    if free is not None:
+        jacobian = jacobian @ free
     # A least-squares solve: a surface that pins no turn about some axis (a ball) leaves it at zero.
     x = np.linalg.lstsq(jacobian.T @ jacobian, -jacobian.T @ residual, rcond=None)[0]
+    if free is not None:
+        x = free @ x
     out = np.eye(4)
     out[:3, :3] = Rotation.from_euler("xyz", x[:3]).as_matrix()  # extrinsic x, y, z: Rz Ry Rx
     out[:3, 3] = x[3:]

@@ -650,7 +650,8 @@ class CameraSensor:
         target = icp_target(scan.trackable(scan.segments[k].points))  # its normals and tree, once for every fit
         motion = self._motion[object_id]
         distance = max(3 * scan.cell, 0.01)
-        still = register(model, target, init=motion, max_distance=distance)
+        hold = self._surface_motions(object_id, model)
+        still = register(model, target, init=motion, max_distance=distance, hold=hold)
         if still.fitness >= GOOD_FITNESS:
             # Not only cheaper: a symmetric object fits as well turned, and noise would pick a turn.
             return still
@@ -672,8 +673,8 @@ class CameraSensor:
         fits = [still]
         for start in starts:
             # A coarse pass reaches an object that moved further than the fine distance, then a fine one.
-            coarse = register(model, target, init=start, max_distance=COARSE_FACTOR * distance)
-            fits.append(register(model, target, init=coarse.transform, max_distance=distance))
+            coarse = register(model, target, init=start, max_distance=COARSE_FACTOR * distance, hold=hold)
+            fits.append(register(model, target, init=coarse.transform, max_distance=distance, hold=hold))
         top = max(f.fitness for f in fits)
         return min((f for f in fits if f.fitness >= top - FITNESS_TIE), key=lambda f: f.rmse)
 

@@ -614,6 +614,51 @@ def test_the_motions_a_surface_cannot_show_are_its_symmetries(shape, unseen):
         np.testing.assert_allclose(np.cross(after, axis), np.cross(before, axis), atol=2e-3)
 
 
+def test_icp_holds_what_the_surface_cannot_show_and_finds_the_rest():
+    """A marker seen from one side slid 5-13 degrees about its own axis from scan to scan, and taking that turn
+    away after the fit, about an axis fitted a little off, left 2-3 degrees across it (bench/rest_tracking.py's
+    worst track at 1 camera, 3.9 mm and 2.7 degrees). With ``hold`` no ICP iteration moves along it; a 1 degree
+    tilt and a 1.5 mm shift across the axis are still found."""
+    import trimesh
+    from scipy.spatial.transform import Rotation
+
+    from estimation.fusion import register, unseen_motions
+    from scenes.sampling import sample_surface
+
+    mesh = trimesh.creation.cylinder(radius=0.01, height=0.12, sections=96)
+    place = Rotation.from_euler("xyz", [90, 0, 10], degrees=True).as_matrix()
+    centre, axis = np.array([0.3, -0.2, 0.78]), place[:, 2]
+    view = np.array([0.0, -1.0, 0.8]) / np.linalg.norm([0.0, -1.0, 0.8])
+
+    def one_side(seed: int) -> np.ndarray:
+        cloud = sample_surface(mesh, 3000, seed=seed, noise_sigma=0.001)
+        return (cloud.points @ place.T + centre)[(cloud.normals @ place.T) @ view > 0.2]
+
+    tilt = np.cross(axis, [0.0, 0.0, 1.0])
+    tilt /= np.linalg.norm(tilt)
+    truth = np.eye(4)
+    truth[:3, :3] = Rotation.from_rotvec(np.radians(1.0) * tilt).as_matrix()
+    truth[:3, 3] = centre + 0.0015 * np.cross(axis, tilt) - truth[:3, :3] @ centre
+    free_turns = []
+    for seed in range(4):
+        source = one_side(2 * seed)
+        target = one_side(2 * seed + 1) @ truth[:3, :3].T + truth[:3, 3]
+        hold = unseen_motions(source)
+        assert hold.basis.shape[1] == 1
+        for held in (None, hold):
+            fit = register(source, target, init=np.eye(4), max_distance=0.01, hold=held)
+            error = fit.transform @ np.linalg.inv(truth)
+            turn = np.degrees(Rotation.from_matrix(error[:3, :3]).as_rotvec())
+            if held is None:
+                free_turns.append(abs(turn @ axis))
+                continue
+            assert abs(turn @ axis) < 0.3
+            assert np.linalg.norm(np.cross(turn, axis)) < 0.5
+            moved = fit.transform[:3, :3] @ centre + fit.transform[:3, 3]
+            assert np.linalg.norm(moved - (truth[:3, :3] @ centre + truth[:3, 3])) < 0.001
+    assert max(free_turns) > 1.0  # what the hold is for
+
+
 def test_a_flat_object_under_the_cut_does_not_take_its_neighbours_segment():
     # A 3 mm disc flat on the table is cut away with the table; its centre lies within the association box
     # of the box beside it, which it took for its own (a random tabletop's disc came out +1,900 %).
