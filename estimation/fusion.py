@@ -396,8 +396,8 @@ def register(source: np.ndarray, target: np.ndarray | IcpTarget, *, init: np.nda
         iterations: ICP iterations at most.
         hold: the motions ``source``'s own surface cannot show (:func:`unseen_motions` of it, in its frame):
             they stay as ``init`` has them. Two fits, the better kept (:func:`_better`): one where no
-            iteration moves along them, and one moving freely with its motion along them taken away after
-            (:meth:`SurfaceMotions.without`). The second alone let a marker seen from one side slide 5-13
+            iteration turns about their axes (:func:`_free_motions`), and one moving freely with its motion
+            along them taken away after (:meth:`SurfaceMotions.without`). The second alone let a marker seen from one side slide 5-13
             degrees about its axis from one scan to the next on the noise, and taking that turn away about an
             axis fitted a few degrees off left a turn of 2-3 degrees across it; the first alone stopped a
             ring 2.4 mm from its place, in a worse minimum than the second.
@@ -415,13 +415,13 @@ def register(source: np.ndarray, target: np.ndarray | IcpTarget, *, init: np.nda
     moving = src - pivot
     start = shift @ np.asarray(init, dtype=np.float64) @ back
     held = None if hold is None or not hold.basis.shape[1] else hold
-    transform, match = _icp(moving, tgt, start, max_distance, iterations, held, pivot)
+    transform, match = _icp(moving, tgt, start, max_distance, iterations, held)
     if held is not None:
         # A second start of the search: the same ICP moving freely, its motion along ``hold`` then taken
         # away. Held ICP can stop in a worse minimum: a ring seen by three Kinect-model cameras slid 2.4 mm
         # to an RMSE of 2.189 mm, where the free fit, its turn about the axis taken away, matched to
         # 2.143 mm 0.6 mm from its place.
-        loose = _icp(moving, tgt, start, max_distance, iterations, None, pivot)[0]
+        loose = _icp(moving, tgt, start, max_distance, iterations, None)[0]
         step = np.linalg.inv(init) @ back @ loose @ shift
         kept = shift @ np.asarray(init, dtype=np.float64) @ held.without(step) @ back
         other = _correspondences(moving, tgt, kept, max_distance)
@@ -436,14 +436,14 @@ def register(source: np.ndarray, target: np.ndarray | IcpTarget, *, init: np.nda
 
 
 def _icp(moving: np.ndarray, tgt: IcpTarget, transform: np.ndarray, max_distance: float, iterations: int,
-         held: SurfaceMotions | None, pivot: np.ndarray) -> tuple[np.ndarray, _Match]:
+         held: SurfaceMotions | None) -> tuple[np.ndarray, _Match]:
     """Point-to-plane iterations from ``transform`` (4, 4, in the target's centred frame) until fitness and
     RMSE settle; none along ``held`` (carried by :func:`_free_motions`) when given."""
     match = _correspondences(moving, tgt, transform, max_distance)
     for _ in range(iterations):
         if not match.found.any():
             break
-        free = None if held is None else _free_motions(held, transform, pivot)
+        free = None if held is None else _free_motions(held, transform)
         update = _point_to_plane_step(match, tgt, free)
         transform = update @ transform
         before, match = match, _correspondences(moving, tgt, transform, max_distance)
@@ -488,19 +488,19 @@ def _correspondences(moving: np.ndarray, tgt: IcpTarget, transform: np.ndarray, 
     return _Match(moved, index, found, float(found.mean()), rmse)
 
 
-def _free_motions(hold: SurfaceMotions, transform: np.ndarray, pivot: np.ndarray) -> np.ndarray:
-    """(6, 6 - m): the update coordinates (a turn, radians, and a shift, metres, about the target's centroid
-    ``pivot``) an ICP iteration may move in: those orthogonal, with turns scaled by ``hold.scale``, to the
-    ``m`` motions of ``hold``, carried to where ``transform`` (4, 4; source less ``pivot`` to the centred
-    target frame) has the source now."""
-    rot = transform[:3, :3]
-    centre = rot @ (hold.centre - pivot) + transform[:3, 3]
-    turn = rot @ hold.basis[:3] / hold.scale
-    shift = rot @ hold.basis[3:]
-    # A turn w about the source's centre c, with c shifted by s, moves x by w x x + (s - w x c) about the pivot.
-    held = np.vstack([turn * hold.scale, shift - np.cross(turn.T, centre).T])
-    q = np.linalg.qr(held, mode="complete")[0]
-    return np.diag([1 / hold.scale] * 3 + [1.0] * 3) @ q[:, held.shape[1]:]
+def _free_motions(hold: SurfaceMotions, transform: np.ndarray) -> np.ndarray:
+    """(6, 6 - m): the update coordinates (a turn, radians, and a shift, metres) an ICP iteration may move in:
+    every shift, and the turns orthogonal to the ``m`` turn axes of ``hold``, carried to where ``transform``
+    (4, 4) has the source now. A turn about a held axis through any point is a turn about it through the
+    source's centre plus a shift, so the held turn stays as it was wherever the update's turns are taken
+    about; a complement taken in the turns and shifts together tied a seen shift across a can's axis to a
+    turn about it (about a degree for 2 mm, its points' centroid 13 mm off its axis)."""
+    axes = transform[:3, :3] @ hold.basis[:3]
+    q = np.linalg.qr(axes, mode="complete")[0]
+    free = np.zeros((6, 6 - axes.shape[1]))
+    free[:3, :3 - axes.shape[1]] = q[:, axes.shape[1]:]
+    free[3:, 3 - axes.shape[1]:] = np.eye(3)
+    return free
 
 
 def _point_to_plane_step(match: _Match, tgt: IcpTarget, free: np.ndarray | None = None) -> np.ndarray:
