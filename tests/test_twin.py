@@ -547,6 +547,20 @@ def test_a_huge_state_is_put_back_and_a_strict_twin_says_it_diverged(built, tmp_
             assert np.allclose(twin.pose("crate")[0], start, atol=1e-4)  # put back either way
 
 
+def test_the_state_check_bounds_every_entry_exactly():
+    """The 1 kHz check's sum of squares is a shortcut only: many entries each within MAX_STATE are a good state,
+    one past it, a NaN or an infinity a bad one."""
+    from twin.sim import MAX_STATE, _good
+
+    many = np.full(150, MAX_STATE)  # a sum of squares 150 times the bound's square, every entry within it
+    assert _good(many, np.zeros(3)) and _good(np.zeros(0))
+    for bad in (np.nextafter(MAX_STATE, np.inf), -2 * MAX_STATE, np.nan, np.inf, -np.inf):
+        v = np.zeros(126)
+        v[77] = bad
+        assert not _good(np.zeros(7), v)
+        assert not _good(v)
+
+
 def test_every_accessor_names_an_unknown_object_and_refuses_an_id_that_is_no_string(built):
     from estimation.errors import TwinError, UnknownObjectError
 

@@ -46,11 +46,18 @@ class DivergedError(TwinError, RuntimeError):
 #: Largest coordinate or velocity MuJoCo's own check takes as a working state (``mjMAXVAL``, m or m/s): past it,
 #: it warns "Nan, Inf or huge value ... The simulation is unstable". A body 1e29 m below the floor is not a result.
 MAX_STATE = 1e10
+_MAX_SQUARED = MAX_STATE * MAX_STATE
 
 
 def _good(*values: np.ndarray) -> bool:
     """Whether every value is within :data:`MAX_STATE` (NaN fails the comparison, infinity the bound)."""
-    return all(np.abs(v).max(initial=0.0) <= MAX_STATE for v in values)
+    for v in values:
+        # A sum of squares within MAX_STATE**2 bounds every entry, in one dot product: the 1 kHz path runs
+        # this twice a step (2.5 us of numpy for the two arrays of a 20-object twin, 1.1 us this way). Only
+        # past it (or NaN) is each entry looked at.
+        if not v @ v <= _MAX_SQUARED and not np.abs(v).max(initial=0.0) <= MAX_STATE:
+            return False
+    return True
 
 
 def _check_compiled_from(spec, model) -> None:  # type: ignore[no-untyped-def]
