@@ -397,10 +397,10 @@ def register(source: np.ndarray, target: np.ndarray | IcpTarget, *, init: np.nda
         hold: the motions ``source``'s own surface cannot show (:func:`unseen_motions` of it, in its frame):
             they stay as ``init`` has them. Two fits, the better kept (:func:`_better`): one where no
             iteration turns about their axes (:func:`_free_motions`), and one moving freely with its motion
-            along them taken away after (:meth:`SurfaceMotions.without`). The second alone let a marker seen from one side slide 5-13
-            degrees about its axis from one scan to the next on the noise, and taking that turn away about an
-            axis fitted a few degrees off left a turn of 2-3 degrees across it; the first alone stopped a
-            ring 2.4 mm from its place, in a worse minimum than the second.
+            along them taken away after (:meth:`SurfaceMotions.without`). The second alone let a marker seen
+            from one side slide 5-13 degrees about its axis from one scan to the next on the noise, and
+            taking that turn away about an axis fitted a few degrees off left a turn of 2-3 degrees across
+            it; the first alone can stop in a worse minimum than the second (below).
 
     Raises:
         CloudError: fewer than 3 points on either side.
@@ -418,9 +418,9 @@ def register(source: np.ndarray, target: np.ndarray | IcpTarget, *, init: np.nda
     transform, match = _icp(moving, tgt, start, max_distance, iterations, held)
     if held is not None:
         # A second start of the search: the same ICP moving freely, its motion along ``hold`` then taken
-        # away. Held ICP can stop in a worse minimum: a ring seen by three Kinect-model cameras slid 2.4 mm
-        # to an RMSE of 2.189 mm, where the free fit, its turn about the axis taken away, matched to
-        # 2.143 mm 0.6 mm from its place.
+        # away. Held ICP can stop in a worse minimum: on a ring seen by three Kinect-model cameras it
+        # stopped at an RMSE of 2.187 mm, a couple of millimetres from the ring's place, where the free
+        # fit, its turn about the axis taken away, matched to 2.143 mm 0.5 mm from it.
         loose = _icp(moving, tgt, start, max_distance, iterations, None)[0]
         step = np.linalg.inv(init) @ back @ loose @ shift
         kept = shift @ np.asarray(init, dtype=np.float64) @ held.without(step) @ back
