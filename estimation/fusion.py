@@ -413,7 +413,8 @@ def register(source: np.ndarray, target: np.ndarray | IcpTarget, *, init: np.nda
     shift, back = np.eye(4), np.eye(4)
     shift[:3, 3], back[:3, 3] = -pivot, pivot
     moving = src - pivot
-    start = shift @ np.asarray(init, dtype=np.float64) @ back
+    init = np.asarray(init, dtype=np.float64)
+    start = shift @ init @ back
     held = None if hold is None or not hold.basis.shape[1] else hold
     transform, match = _icp(moving, tgt, start, max_distance, iterations, held)
     if held is not None:
@@ -423,7 +424,7 @@ def register(source: np.ndarray, target: np.ndarray | IcpTarget, *, init: np.nda
         # fit, its turn about the axis taken away, matched to 2.143 mm 0.5 mm from it.
         loose = _icp(moving, tgt, start, max_distance, iterations, None)[0]
         step = np.linalg.inv(init) @ back @ loose @ shift
-        kept = shift @ np.asarray(init, dtype=np.float64) @ held.without(step) @ back
+        kept = shift @ init @ held.without(step) @ back
         other = _correspondences(moving, tgt, kept, max_distance)
         if _better(other, match):
             transform, match = kept, other
