@@ -60,6 +60,9 @@ def builds(tmp_path_factory):  # type: ignore[no-untyped-def]
 
 @pytest.mark.slow  # the builds fixture: 11 s
 def test_near_convex_objects_skip_coacd_and_concave_ones_are_decomposed(builds):
+    from estimation.hull import convex_hull
+    from twin.objects import body_vertices
+
     built, _ = builds[2]
     reports = {i: r for i, r in built.reports.items()}
     hulls = {o.id: o.hulls for o in built.objects}
@@ -68,14 +71,12 @@ def test_near_convex_objects_skip_coacd_and_concave_ones_are_decomposed(builds):
     for oid in ("box", "ball", "scan"):
         assert reports[oid].skipped_coacd, (oid, reports[oid].concavity)
         assert reports[oid].concavity <= DEFAULT_SETTINGS.convex_tolerance
-        from estimation.hull import convex_hull
-
         # One hull, an exact convex hull, not CoACD's remeshed part: of the full estimate (body frame) where the
         # hull collides (twin.objects.collision_shapes' surfaces), of the visual mesh where a primitive does and
         # the hull is only to look at.
         (v, _), = hulls[oid]
         obj = next(o for o in built.objects if o.id == oid)
-        surface = obj.visual[0] if obj.primitive is not None else obj.estimate.vertices - obj.estimate.mass.center_of_mass
+        surface = obj.visual[0] if obj.primitive is not None else body_vertices(obj.estimate)
         hv, hf = convex_hull(surface)
         assert len(v) == len(hv) and trimesh.Trimesh(*hulls[oid][0]).volume == pytest.approx(trimesh.Trimesh(hv, hf).volume)
     for oid in ("ring", "bracket"):

@@ -21,7 +21,7 @@ from estimation.materials import aliases, materials
 from scenes.build import BuiltScene, build_scene, estimates_record, write_scene
 from scenes.scenefile import load_scene, parse_scene
 from scenes.sources import source_mesh
-from twin.objects import TwinObject
+from twin.objects import TwinObject, body_vertices
 from twin.runtime import LocalReport
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -111,7 +111,7 @@ def test_source_to_body_maps_a_rotated_mesh_onto_the_body(tmp_path):
     spec = scene.objects[0]
     mesh = source_mesh(spec)
     est = from_mesh(mesh.vertices, mesh.faces, 500.0)
-    visual = (est.vertices - est.mass.center_of_mass, est.faces)
+    visual = (body_vertices(est), est.faces)
     obj = TwinObject(id="b", estimate=est, friction=0.5, visual=visual, hulls=(visual,),
                      position=np.array([0, 0, 0.03]), quat=np.array([1.0, 0, 0, 0]))
     record = estimates_record(BuiltScene(scene, None, None, (obj,), 0.0))["objects"][0]
