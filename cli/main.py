@@ -342,7 +342,7 @@ def _parser() -> argparse.ArgumentParser:
                         "order (replaces a PCD VIEWPOINT header)")
     p.add_argument("--support-plane", nargs="+", metavar="PLANE",
                    help="the plane the object rests on: 'auto' (found in the data, else the horizontal plane "
-                        "through the lowest point, z up) or A B C D with A x + B y + C z + D = 0 (D in file "
+                        "through the lowest point, z up, unless a sensor lies below it: then none) or A B C D with A x + B y + C z + D = 0 (D in file "
                         "units), normal pointing up into the object's side; its points are cut away and the "
                         "object's base is closed on it")
     p.add_argument("--intrinsics", type=float, nargs=4, metavar=("FX", "FY", "CX", "CY"),

@@ -382,19 +382,26 @@ def _within_extent(points: np.ndarray, plane: Plane, inliers: np.ndarray, margin
 MAX_UNDER_OBJECT_SHARE = 0.02
 
 
+def _sensor_below(plane: Plane, views: list[View]) -> str | None:
+    """"the sensor of VIEW lies N mm below it" for the first view whose sensor lies on ``plane`` or below it;
+    None when every sensor is above it (a camera sees a support's top from above)."""
+    for k, view in enumerate(views):
+        height = plane.height(np.atleast_2d(view.origin))  # type: ignore[arg-type]
+        if (height <= 0).any():
+            return f"the sensor of {_label(view, k)} lies {1000 * -float(height.min()):.4g} mm below it"
+    return None
+
+
 def _sensors_above(plane: Plane, views: list[View], what: str) -> None:
     """Raise unless every view's sensor lies on ``plane``'s upper side: a camera sees a support's top from above.
 
     Raises:
         CloudError: a sensor on the plane or below it, naming the view and ``what`` the plane is.
     """
-    for k, view in enumerate(views):
-        height = plane.height(np.atleast_2d(view.origin))  # type: ignore[arg-type]
-        if (height <= 0).any():
-            raise CloudError(f"{what}: the sensor of {_label(view, k)} lies "
-                             f"{1000 * -float(height.min()):.4g} mm below it, and a camera sees what rests on a "
-                             f"plane from above (is the normal up into the object's side, the plane in the views' "
-                             f"frame and units?)")
+    under = _sensor_below(plane, views)
+    if under is not None:
+        raise CloudError(f"{what}: {under}, and a camera sees what rests on a plane from above (is the normal up "
+                         f"into the object's side, the plane in the views' frame and units?)")
 
 
 def _not_through(points: np.ndarray, plane: Plane, h: np.ndarray, cut: float, obj: np.ndarray) -> None:
@@ -519,10 +526,17 @@ def estimate_views(views: list[View], density: float, *, support: Plane | str | 
         found = plane is not None
         if plane is None:
             plane = plane_below(points)
-            _sensors_above(plane, views, "no support plane in the data, and the horizontal plane through the lowest "
-                                         "point assumed instead")
-            warnings.append(f"no support plane in the data; assumed the horizontal plane through the lowest "
-                            f"point (z = {-plane.offset:.4g} m)")
+            under = _sensor_below(plane, views)
+            if under is None:
+                warnings.append(f"no support plane in the data; assumed the horizontal plane through the lowest "
+                                f"point (z = {-plane.offset:.4g} m)")
+            else:
+                # A guess the views contradict: a camera under it could have seen the base. Not the user's
+                # error (they asked for auto), so closed as without a plane, and said.
+                warnings.append(f"no support plane in the data, and the horizontal plane through the lowest point "
+                                f"will not do ({under}): closed without a support plane (give one with "
+                                f"--support-plane A B C D)")
+                plane = None
     elif support is not None:
         plane = _checked_plane(support)
         _sensors_above(plane, views, "support plane")
