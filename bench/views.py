@@ -31,36 +31,47 @@ CROP_MARGIN = 0.01  # metres beyond half the object's diagonal
 CROP_FLOOR = 0.70  # metres: points below (the floor) are not in a user's crop of a table top
 
 
-def run(cameras: int, crop: bool) -> list[tuple[str, float, bool, float, str]]:
-    from estimation.errors import TwinError
-    from estimation.views import View, estimate_views
+def scan_alone(scene, spec, cameras: int, crop: bool):  # type: ignore[no-untyped-def]
+    """``spec`` put alone on ``scene``'s table (its pose in the scene file) and scanned once by ``cameras``
+    cameras of the issue's sigma 1 mm condition: (views as :class:`estimation.views.View` points with their
+    camera's origin, the object's reference estimate from its true mesh). ``crop``: each camera's points
+    within half the object's diagonal plus :data:`CROP_MARGIN` (horizontally) and above :data:`CROP_FLOOR`."""
+    from estimation.views import View
     from scenes import cameras as cams
     from scenes.remote import Remote
-    from scenes.scenefile import load_scene
     from scenes.sensing import CameraSensor
     from scenes.sources import reference_estimate
     from sync.clock import SimClock
     from sync.inprocess import InProcessBus
 
+    alone = dataclasses.replace(scene, objects=(spec,))
+    clock = SimClock()
+    remote = Remote(alone, InProcessBus(clock, {}).transport("remote"), clock=clock, publish=False)
+    sensor = CameraSensor.for_scene(alone, cameras=cameras, seed=1, noise=cams.SIGMA_1MM, width=1280,
+                                    height=720, fov_y_deg=42.0)
+    scan = sensor._current(remote, force=True)
+    ref = reference_estimate(spec)[0]
+    centre = remote.twin.pose(spec.id)[0]
+    remote.close()
+    reach = float(np.linalg.norm(ref.obb.extents)) / 2 + CROP_MARGIN
+    views = []
+    for frame in scan.frames:
+        pts = frame.points()[0]
+        if crop:
+            pts = pts[(np.linalg.norm(pts[:, :2] - centre[:2], axis=1) < reach) & (pts[:, 2] > CROP_FLOOR)]
+        views.append(View(pts, np.asarray(frame.camera.position, float)))
+    return views, ref
+
+
+def run(cameras: int, crop: bool) -> list[tuple[str, float, bool, float, str]]:
+    from estimation.errors import TwinError
+    from estimation.views import estimate_views
+    from scenes.scenefile import load_scene
+
     full = load_scene(ROOT / "scenes" / "data" / "clutter20.toml")
     rows = []
     for k, spec in enumerate(full.objects):
-        scene = dataclasses.replace(full, objects=(spec,))
-        clock = SimClock()
-        remote = Remote(scene, InProcessBus(clock, {}).transport("remote"), clock=clock, publish=False)
-        sensor = CameraSensor.for_scene(scene, cameras=cameras, seed=1, noise=cams.SIGMA_1MM, width=1280,
-                                        height=720, fov_y_deg=42.0)
-        scan = sensor._current(remote, force=True)
-        ref = reference_estimate(spec)[0]
-        centre = remote.twin.pose(spec.id)[0]
-        remote.close()
-        reach = float(np.linalg.norm(ref.obb.extents)) / 2 + CROP_MARGIN
-        views = []
-        for frame in scan.frames:
-            pts = frame.points()[0]
-            if crop:
-                pts = pts[(np.linalg.norm(pts[:, :2] - centre[:2], axis=1) < reach) & (pts[:, 2] > CROP_FLOOR)]
-            views.append(View(pts, np.asarray(frame.camera.position, float)))
+        views, ref = scan_alone(full, spec, cameras, crop)
         try:
             res = estimate_views(views, ref.mass.mass / ref.volume, support="auto")
             low, high = res.volume_bounds_m3
