@@ -72,6 +72,8 @@ def _read_npy_header(fh: BinaryIO, where: str) -> tuple[tuple[int, ...], np.dtyp
         raise CloudFileError(f"{where}: not a readable .npy header ({reason[:200]})") from None
     if dtype.hasobject:
         raise CloudFileError(f"{where}: the array holds Python objects (pickled data), which are not read")
+    if any(type(n) is not int for n in shape):  # a bool is an int to numpy's check, and its readers then raise
+        raise CloudFileError(f"{where}: the .npy header's shape must be whole numbers, got {shape}")
     if any(n < 0 for n in shape):
         raise CloudFileError(f"{where}: the .npy header declares a negative size, shape {shape}")
     return shape, dtype
@@ -105,9 +107,10 @@ def read_numpy(path: Path, max_points: int) -> Columns:
         members = {name.removesuffix(".npy"): name for name in names}
         if "points" not in members:
             raise CloudFileError(f"{path}: an .npz cloud needs a 'points' array (has {sorted(members)})")
-        for key in ("points", "normals", "colors", "sensor_origins"):
+        rows = _check_npz_member(path, archive, members["points"], max_points)
+        for key in ("normals", "colors", "sensor_origins"):
             if key in members:
-                _check_npz_member(path, archive, members[key], max_points)
+                _check_npz_member(path, archive, members[key], max_points, rows)
         # Read from the members checked above, not through np.load's keys: a member named plain 'points' is
         # what np.load returns for 'points' first, and it went unchecked (a 2.4 MB file took 4.8 GB).
         def get(key: str) -> np.ndarray | None:
@@ -119,8 +122,15 @@ def read_numpy(path: Path, max_points: int) -> Columns:
         return Columns(get("points"), get("normals"), get("colors"), get("sensor_origins"))  # type: ignore[arg-type]
 
 
-def _check_npz_member(path: Path, archive: zipfile.ZipFile, name: str, max_points: int) -> None:
-    """Refuse a member whose header claims more rows than allowed or more bytes than it unpacks to."""
+#: Values a point's row of ``normals``, ``colors`` or ``sensor_origins`` may hold (x y z, r g b [a]).
+_PER_POINT = 4
+
+
+def _check_npz_member(path: Path, archive: zipfile.ZipFile, name: str, max_points: int,
+                      rows: int | None = None) -> int:
+    """Refuse a member whose header claims more rows than allowed or more bytes than it unpacks to; one given
+    the ``rows`` of the points, also one larger than :data:`_PER_POINT` values a point (a 2 MB file's
+    'normals' of shape (2000, 125000) unpacked 2 GB before its columns were looked at). Returns the rows."""
     with archive.open(name) as fh:
         shape, dtype = _read_npy_header(fh, f"{path}: member {name!r}")
     key = name.removesuffix(".npy")
@@ -129,9 +139,13 @@ def _check_npz_member(path: Path, archive: zipfile.ZipFile, name: str, max_point
         raise CloudFileError(f"{path}: array {key!r} must be (n, 3), got shape {shape}")
     if shape and shape[0] > max_points:
         check_max_points(path, shape[0], max_points)
-    nbytes = int(np.prod(shape, dtype=object)) * dtype.itemsize
-    if nbytes > archive.getinfo(name).file_size:
+    values = int(np.prod(shape, dtype=object))
+    if rows is not None and values > _PER_POINT * max(rows, 1):
+        raise CloudFileError(f"{path}: array {key!r} claims shape {shape}, more than {_PER_POINT} values for each of "
+                             f"the {rows} points")
+    if values * dtype.itemsize > archive.getinfo(name).file_size:
         raise CloudFileError(f"{path}: truncated: array {key!r} claims shape {shape}, more than its data")
+    return shape[0] if shape else 0
 
 
 def write_numpy(cloud: PointCloud, path: Path, suffix: str) -> None:

@@ -753,6 +753,9 @@ def _npy_with_header(path: Path, version: bytes, header: bytes) -> Path:
      r"x\.npy: the array holds Python objects \(pickled data\), which are not read"),
     (b"\x01\x00", b"{'descr': '<f8', 'fortran_order': False, 'shape': (-4, 3), }\n",
      r"x\.npy: the \.npy header declares a negative size, shape \(-4, 3\)"),
+    # True passes numpy's own check (a bool is an int), and its readers then raised TypeError: a traceback.
+    (b"\x01\x00", b"{'descr': '<f8', 'fortran_order': False, 'shape': (True, 3), }\n",
+     r"x\.npy: the \.npy header's shape must be whole numbers, got \(True, 3\)"),
 ])
 def test_damaged_npy_header_is_one_line_error(tmp_path, version, header, match):
     path = _npy_with_header(tmp_path / "x.npy", version, header)
@@ -980,6 +983,26 @@ def _npy_bytes(rows: int, claimed: int | None = None) -> bytes:
         return data
     end = data.index(b"\n") + 1
     return data[:end].replace(f"({rows}, 3)".encode(), f"({claimed}, 3)".encode()) + data[end:]
+
+
+@pytest.mark.parametrize(("member", "shape"), [("normals", (500, 20_000)), ("colors", (500, 5)),
+                                               ("sensor_origins", (3, 700))])
+def test_npz_member_larger_than_its_points_is_refused_before_reading(tmp_path, member, shape):
+    """Only a member's rows were capped and its bytes compared with what the zip says it unpacks to, which a
+    deflated run of zeros makes honest: 2 MB of 'normals' declared (2000, 125000) unpacked 2 GB before their
+    columns were compared with the points'. A member may hold at most four values a point."""
+    path = tmp_path / "big.npz"
+    ball = np.random.default_rng(0).normal(size=(500, 3))
+    with zipfile.ZipFile(path, "w", compression=zipfile.ZIP_DEFLATED) as archive:
+        buffer = __import__("io").BytesIO()
+        np.save(buffer, ball)
+        archive.writestr("points.npy", buffer.getvalue())
+        buffer = __import__("io").BytesIO()
+        np.save(buffer, np.zeros(shape))
+        archive.writestr(f"{member}.npy", buffer.getvalue())
+    with pytest.raises(CloudFileError, match=rf"big\.npz: array '{member}' claims shape \({shape[0]}, {shape[1]}\), "
+                                             r"more than 4 values for each of the 500 points"):
+        load_cloud(path)
 
 
 def test_npz_members_are_checked_under_the_names_np_load_reads(tmp_path):
