@@ -8,7 +8,11 @@ warning line:
 - a recording of 16 M empty messages packed into four zstd chunks (43 KB: every message 31 bytes, the same);
   before ``sync.recording.MAX_RECORDS_PER_BYTE`` it took 4 GB and 87 s to read (a fuzzing run at 0fbb4fc);
 - a 4096 x 4096 16-bit depth PNG of a box on a floor (~40 KB), estimated as a view; before
-  ``estimation.depthimage.coarsened`` every pixel became a point (2.8 GB, 20 s in that run).
+  ``estimation.depthimage.coarsened`` every pixel became a point (2.8 GB, 20 s in that run);
+- an .npz of 2,000 points whose deflated 'normals' (2 MB) declare (2000, 125000) zeros: unpacked to 2 GB
+  before session 56 (refused now from the member's header: more than four values a point);
+- a PLY whose 1 MB header declares 70,000 empty elements before its vertices: each name was compared with
+  every one before it, minutes of parsing before session 56 (a hostile-input review's find).
 Run it at an older commit for the "before" (``git worktree``; the figures above are that fuzzing run's).
 The first row, ``twin --help`` run the same way, is the baseline: what starting the command costs.
 """
@@ -65,6 +69,43 @@ def big_depth(path: Path) -> None:
     Image.fromarray(depth).save(path, optimize=True)
 
 
+def _ball(n: int = 2000) -> np.ndarray:
+    rng = np.random.default_rng(0)
+    points = rng.normal(size=(n, 3))
+    return 0.05 * points / np.linalg.norm(points, axis=1, keepdims=True)
+
+
+def _npy_header(shape: tuple[int, ...]) -> bytes:
+    header = f"{{'descr': '<f8', 'fortran_order': False, 'shape': {shape!r}, }}"
+    header += " " * (64 - (10 + len(header) + 1) % 64) + "\n"
+    return b"\x93NUMPY\x01\x00" + len(header).to_bytes(2, "little") + header.encode()
+
+
+def npz_member_bomb(path: Path, columns: int = 125_000) -> None:
+    """2,000 good points and a deflated 'normals' member of (2000, ``columns``) zeros: 2 GB unpacked."""
+    import io
+    import zipfile
+
+    with zipfile.ZipFile(path, "w", compression=zipfile.ZIP_DEFLATED, compresslevel=9) as archive:
+        buffer = io.BytesIO()
+        np.save(buffer, _ball())
+        archive.writestr("points.npy", buffer.getvalue())
+        with archive.open("normals.npy", "w", force_zip64=True) as fh:
+            fh.write(_npy_header((2000, columns)))
+            zeros, left = bytes(1 << 24), 2000 * columns * 8
+            while left > 0:
+                fh.write(zeros[:min(left, len(zeros))])
+                left -= len(zeros)
+
+
+def ply_many_elements(path: Path, count: int = 70_000) -> None:
+    """A PLY whose 1 MB header declares ``count`` empty elements before 2,000 good vertices."""
+    elements = "".join(f"element e{i} 0\n" for i in range(count))
+    header = ("ply\nformat binary_little_endian 1.0\n" + elements + "element vertex 2000\nproperty float x\n"
+              "property float y\nproperty float z\nend_header\n")
+    path.write_bytes(header.encode() + _ball().astype("<f4").tobytes())
+
+
 #: Runs the command and prints its exit code and peak memory (KB) last on stderr: a fresh parent per command,
 #: since RUSAGE_CHILDREN's ru_maxrss is the largest of all its children so far.
 _MEASURE = ("import resource, subprocess, sys; code = subprocess.run(sys.argv[1:]).returncode; "
@@ -93,6 +134,12 @@ def main() -> int:
         rows.append(("4096 x 4096 depth PNG, estimated", depth.stat().st_size,
                      *run(["estimate", str(depth), "--intrinsics", "3686", "3686", "2048", "2048",
                            "--support-plane", "auto", "--json"])))
+        bomb = folder / "normals_bomb.npz"
+        npz_member_bomb(bomb)
+        rows.append(("npz, 2 GB of deflated normals", bomb.stat().st_size, *run(["estimate", str(bomb), "--json"])))
+        many = folder / "many_elements.ply"
+        ply_many_elements(many)
+        rows.append(("PLY header of 70,000 elements", many.stat().st_size, *run(["estimate", str(many), "--json"])))
         recording = folder / "packed.mcap"
         packed_recording(recording)
         rows.append((f"{CHUNKS * MESSAGES_PER_CHUNK / 1e6:.0f} M empty messages, replayed", recording.stat().st_size,

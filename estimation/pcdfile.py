@@ -147,6 +147,12 @@ def read_pcd(path: Path, max_points: int) -> Columns:
         if odd:
             raise CloudFileError(f"{path}: a binary_compressed PCD is read with 4-byte float coordinates and normals only, "
                                  f"this one has {', '.join(odd)}; save it as binary or ascii")
+        partial = [nm for nm in _NORMAL_FIELDS if nm in names]
+        if partial and len(partial) < len(_NORMAL_FIELDS):
+            # open3d's reader then crashes the process (SIGSEGV, no error line): found by a hostile-input review.
+            raise CloudFileError(f"{path}: a binary_compressed PCD with {'/'.join(partial)} but not "
+                                 f"{'/'.join(nm for nm in _NORMAL_FIELDS if nm not in names)}: its normals are all three "
+                                 f"or none; save it as binary or ascii")
         return _read_pcd_compressed(path, size, offset, n, dtype.itemsize, origins)
     else:
         raise CloudFileError(f"{path}: unknown PCD DATA kind {data[:40]!r}; use ascii, binary or binary_compressed")

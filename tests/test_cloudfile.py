@@ -522,6 +522,22 @@ def test_fewer_pcd_points_than_claimed(tmp_path, cloud):
         load_cloud(tmp_path / "a.pcd")
 
 
+@pytest.mark.parametrize("renamed", ["normal_x", "normal_z"])
+def test_compressed_pcd_with_part_of_its_normals_is_refused_before_open3d(tmp_path, cloud, renamed):
+    """open3d wrote it; one normal field renamed (the sizes all still agree). Handed to open3d, it crashed the
+    process (SIGSEGV, exit 139, no error line); refused in the test's own process here, so a crash fails it."""
+    import open3d as o3d
+
+    pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(cloud.points))
+    pcd.normals = o3d.utility.Vector3dVector(cloud.normals)
+    path = tmp_path / "n.pcd"
+    assert o3d.io.write_point_cloud(str(path), pcd, compressed=True)
+    path.write_bytes(path.read_bytes().replace(renamed.encode(), b"normal_w", 1))
+    with pytest.raises(CloudFileError, match=rf"a binary_compressed PCD with .* but not {renamed}: its normals are all "
+                                             r"three or none; save it as binary or ascii"):
+        load_cloud(path)
+
+
 def test_compressed_pcd_that_lies_is_refused_before_open3d(tmp_path):
     head = "VERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH 1000\nHEIGHT 1\nPOINTS 1000\nDATA binary_compressed\n"
     path = tmp_path / "z.pcd"
