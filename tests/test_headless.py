@@ -36,7 +36,7 @@ from sync.messages import (
 )
 from sync.ordering import MARK_EXPIRY, MAX_SENDERS
 from twin.poses import rotation
-from twin.runtime import MAX_OBJECTS, MAX_ORPHAN_POSES, Local, LocalSettings, OperatorSettings
+from twin.runtime import MAX_DRAIN, MAX_OBJECTS, MAX_ORPHAN_POSES, Local, LocalSettings, OperatorSettings
 from twin.trajectory import push_trajectory
 
 SMALL = Path(__file__).parent / "data" / "small.toml"
@@ -292,7 +292,8 @@ def test_poses_of_ids_without_a_cloud_are_bounded_and_one_just_before_its_cloud_
                                                                 seen=k % 2 == 0))
             if k % 500 == 0:
                 session.tick()
-        session.tick()
+        while local.inbox.qsize():  # a step takes at most MAX_DRAIN of them
+            session.tick()
         assert local.report.evicted["pose"] == flood - MAX_ORPHAN_POSES
         for held in (local._latest, local._pose_mark, local._unseen):
             assert len(held) <= MAX_ORPHAN_POSES + 2, held  # the ghosts kept, and the crate and can
@@ -321,6 +322,34 @@ def test_a_pose_of_an_earlier_epoch_does_not_move_an_object_its_new_cloud_placed
         assert np.linalg.norm(local.twin.pose("cube")[0] - taken) < 0.005
 
 
+def test_a_flood_of_gones_for_ids_never_seen_is_taken_a_step_at_a_time_and_changes_nothing(cache):
+    """A hostile-input review flooded a twin with valid Gones for ever-new ids over Zenoh: each went through the
+    whole removal (and Twin.has built an unknown-id error with suggestions), and a step that took the full inbox
+    took over a second; the twin's time stood still. A step now takes at most MAX_DRAIN; a Gone of nothing is
+    only remembered (so that the object's late cloud stays out)."""
+    with Headless(load_scene(SMALL), cache_dir=cache) as session:
+        session.run(0.1)
+        local, keys, epoch = session.local, Keys("small"), session.remote.epoch
+        forger = Link(session.bus.transport())
+        objects, poses = sorted(local.objects), {i: local.twin.pose(i)[0] for i in local.objects}
+        flood = 3 * MAX_DRAIN + 7
+        for k in range(flood):
+            forger.put(keys.object(f"ghost{k}", "gone"), Gone(v=VERSION, stamp_ns=0, object_id=f"ghost{k}", epoch=epoch,
+                                                             seq=10**6 + k))
+        assert local.inbox.qsize() == flood
+        start = session.clock.now()
+        for left in (flood - MAX_DRAIN, flood - 2 * MAX_DRAIN, flood - 3 * MAX_DRAIN, 0):
+            session.tick()
+            assert local.inbox.qsize() == left
+        assert session.clock.now() > start  # every tick stepped
+        assert f"ghost{flood - 1}" in local._gone and sorted(local.objects) == objects
+        assert all(np.linalg.norm(local.twin.pose(i)[0] - p) < 1e-3 for i, p in poses.items())
+        # A cloud of a ghost older than its Gone stays out, as for an object the twin had.
+        forger.put(keys.object("ghost3", "cloud"), _box_cloud("ghost3", np.array([0.2, 0.2, 0.53]), epoch=epoch, seq=5))
+        session.run(0.05)
+        assert "ghost3" not in local.objects and "ghost3" not in local.pending
+
+
 def test_of_many_poses_queued_for_one_object_the_loop_handles_only_the_newest(cache):
     with Headless(load_scene(SMALL), cache_dir=cache) as session:
         session.run(0.2)
@@ -334,7 +363,8 @@ def test_of_many_poses_queued_for_one_object_the_loop_handles_only_the_newest(ca
         for k in range(flood, 0, -1):  # the newest first: the rest are older, and all of them skipped
             forger.put(keys.object("crate", "pose"), _pose("crate", (start + np.array([0.05 * k / flood, 0.0, 0.0])).tolist(),
                                                           epoch=remote.epoch, seq=10**6 + k, quat=tuple(quat.tolist())))
-        session.tick()
+        while local.inbox.qsize():  # a step takes at most MAX_DRAIN of them
+            session.tick()
         assert local.report.pose_updates == updates + 1
         assert local.report.out_of_order + local.report.poses_superseded - skipped == flood - 1
         session.run(0.15)  # before a heartbeat pulls the forged mark back: the newest pose is what the twin follows
@@ -371,7 +401,8 @@ def test_a_forged_device_mark_freezes_the_device_no_longer_than_the_mark_expiry(
         # Forged device ids: at most MAX_SENDERS marks are kept.
         for k in range(MAX_SENDERS + 10):
             target(goal, 1, 1, device=f"fake{k}")
-        session.tick()
+        while local.inbox.qsize():
+            session.tick()
         assert len(local._device_marks) == MAX_SENDERS and local.report.evicted["device"] == 11
 
 
@@ -519,7 +550,8 @@ def test_clouds_of_ever_new_ids_are_taken_only_up_to_the_object_limit(cache):
         cube = _box_cloud("cube", np.array([0.0, 0.0, 0.53]), epoch=1, seq=1)
         for k in range(MAX_OBJECTS + 5):  # each would be estimated, then added to the model
             sensor.put(keys.object(f"o{k}", "cloud"), msgspec.structs.replace(cube, object_id=f"o{k}"))
-        local.iterate()
+        while local.inbox.qsize():
+            local.iterate()
         assert local.expected == MAX_OBJECTS
         assert local.link.counters.dropped_by_reason["too-many-objects"] == 5
         # A newer view of an object it has is still taken.

@@ -151,6 +151,10 @@ class Hold:
             return set()
         return {i for i, t in zip(a.ids, a.touched, strict=True) if now - t < self.settings.after}
 
+    def holds(self, object_id: str) -> bool:
+        """Whether a target of ``object_id`` is held here (what :meth:`forget` drops)."""
+        return object_id in self._targets
+
     def forget(self, object_id: str) -> None:
         if self._targets.pop(object_id, None) is not None:  # a flood of Gones for unknown ids costs nothing here
             self._rebuild_with(None)
