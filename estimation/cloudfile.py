@@ -86,7 +86,10 @@ def load_cloud(path: str | Path, *, scale: float = 1.0, max_points: int = MAX_PO
             cols = read_text(path, max_points)
     except CloudFileError:
         raise
-    except (OSError, ValueError, KeyError, EOFError, OverflowError, zipfile.BadZipFile) as exc:
+    # NotImplementedError and RuntimeError: an .npz member zipfile cannot open (deflate64 or another method it
+    # lacks; the encrypted flag).
+    except (OSError, ValueError, KeyError, EOFError, OverflowError, zipfile.BadZipFile, NotImplementedError,
+            RuntimeError) as exc:
         reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         raise CloudFileError(f"{path}: unreadable ({reason})") from exc
     return make_cloud(

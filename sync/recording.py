@@ -678,7 +678,9 @@ def read_recording(path: str | Path) -> Recording:
             # Read to its end: every record parsed, but some byte changed, maybe in the scene or the settings.
             damage = (f"the recording fails its checksum (a byte changed since it was written: its scene, "
                       f"network or messages may not be what was recorded); using its {len(held)} messages")
-        except (McapError, ValueError, struct.error, zlib.error, EOFError, MemoryError, UnicodeDecodeError) as exc:
+        except (McapError, ValueError, struct.error, zlib.error, EOFError, MemoryError, OverflowError,
+                UnicodeDecodeError) as exc:
+            # OverflowError: a length field past 2**63 (one flipped top bit) is no index the reader can slice with.
             # ValueError covers the reader's chunk CRC mismatch; _inflate turns zstd's and lz4's errors into McapError.
             # A name or text field of random bytes: "UnicodeDecodeError: 'utf-8' codec can't ..." named Python's
             # codec, not the file's fault.

@@ -1021,6 +1021,30 @@ def test_npz_member_larger_than_its_points_is_refused_before_reading(tmp_path, m
         load_cloud(path)
 
 
+@pytest.mark.parametrize(("method", "flags", "match"), [(9, 0, "That compression method is not supported"),
+                                                       (0, 1, "is encrypted")])
+def test_npz_member_zipfile_cannot_open_is_one_line_error(tmp_path, method, flags, match):
+    """deflate64 (method 9, as Windows writes large zips) or the encrypted flag: zipfile raised
+    NotImplementedError and RuntimeError, which escaped as tracebacks."""
+    import io
+    import struct
+
+    buffer = io.BytesIO()
+    with zipfile.ZipFile(buffer, "w", compression=zipfile.ZIP_STORED) as archive:
+        member = io.BytesIO()
+        np.save(member, np.random.default_rng(0).normal(size=(500, 3)))
+        archive.writestr("points.npy", member.getvalue())
+    data = bytearray(buffer.getvalue())
+    for signature, flags_at, method_at in ((b"PK\x03\x04", 6, 8), (b"PK\x01\x02", 8, 10)):
+        at = data.find(signature)
+        data[at + flags_at:at + flags_at + 2] = struct.pack("<H", flags)
+        data[at + method_at:at + method_at + 2] = struct.pack("<H", method)
+    path = tmp_path / "odd.npz"
+    path.write_bytes(bytes(data))
+    with pytest.raises(CloudFileError, match=rf"odd\.npz: unreadable \(.*{match}"):
+        load_cloud(path)
+
+
 def test_npz_members_are_checked_under_the_names_np_load_reads(tmp_path):
     # By stem, 'a/points.npy' stood for 'points': its honest header was checked, np.load read the forged
     # 'points.npy' and asked for 894 GiB.

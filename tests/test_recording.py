@@ -679,6 +679,22 @@ def test_a_folder_a_pipe_or_a_device_is_named_not_read(tmp_path, capsys):
         assert words in err and err.count("\n") == 1, err
 
 
+def test_a_chunk_length_past_the_index_range_is_damage_not_a_traceback(recorded, tmp_path):
+    """A hostile-input review flipped the top bit of a chunk's records_length (a field inside the chunk, after
+    its compression name): the reader asked Python to slice 2**63 bytes and OverflowError escaped (exit 1)."""
+    path, _, _ = recorded
+    data = bytearray(path.read_bytes())
+    chunks = _chunk_offsets(bytes(data))
+    start, _ = chunks[len(chunks) // 2]
+    # opcode, length, start and end times, uncompressed size, crc, "zstd" as a 4-byte length and 4 bytes: 45 bytes
+    data[start + 52] ^= 0x80  # records_length's most significant byte
+    damaged = tmp_path / "topbit.mcap"
+    damaged.write_bytes(bytes(data))
+    rec = read_recording(damaged)
+    assert rec.damage is not None and "OverflowError" in rec.damage and "\n" not in rec.damage
+    assert 0 < len(rec.records) < len(read_recording(path).records)
+
+
 def test_an_oversized_record_mid_file_is_damage_and_the_intact_part_replays(recorded, cache, tmp_path, capsys):
     """One byte (the top byte of the middle chunk's length) refused the whole recording with the 128 MiB limit,
     while truncating the file at that byte kept the first half: it is damage at that point, as truncation is."""
