@@ -314,14 +314,17 @@ def _built_files(out: Path) -> dict[str, str | None]:
     """The files (relative, POSIX) the build that wrote ``out`` listed in its marker, the marker included, each
     with the sha256 it was written with (None where the marker gives none: builds before session 38).
 
-    A marker from before the list (builds before 2026-12-04) names none: what such a build wrote is known by
-    its layout instead (scene.xml, estimates.json, assets/, objects/).
+    Raises:
+        BuildError: a marker that lists no files (a build before 2026-12-04, or a marker emptied or cut short):
+            what was written there is not known. Such folders were taken to hold only what their layout says
+            a build writes (scene.xml, estimates.json, assets/, objects/), and a hostile-input review showed what
+            that costs: a user's objects/my_extra.xml and assets/textures/wood.png went with the next build.
     """
     listed = listed_files((out / MARKER).read_text(errors="replace"))
-    if listed is not None:
-        return {MARKER: None, **listed}
-    return dict.fromkeys([MARKER, "scene.xml", ESTIMATES, *(p.relative_to(out).as_posix() for folder in
-                                                           ("assets", OBJECTS) for p in (out / folder).rglob("*"))])
+    if listed is None:
+        raise BuildError(f"{out}: its {MARKER} lists no files (an older build's, or emptied), so what else the "
+                         f"folder holds is not known; move it aside or give --out a new folder")
+    return {MARKER: None, **listed}
 
 
 def write_scene(spec, out: Path, *, keep: tuple[Path, ...] = (), built: BuiltScene | None = None) -> Path:  # type: ignore[no-untyped-def]

@@ -274,6 +274,24 @@ def test_cli_build_never_replaces_what_it_did_not_write(small_scene, tmp_path, m
     assert scene.read_text() == small_scene.read_text() and (mine / "keep.txt").is_file()
 
 
+@pytest.mark.parametrize("marker", ["", "written by 'twin build'\n"])
+def test_cli_build_does_not_replace_a_folder_whose_marker_lists_no_files(small_scene, tmp_path, capsys, marker):
+    """An emptied marker, or one from before the lists: such a folder was taken to hold only what a build's layout
+    holds, and a user's objects/my_extra.xml and assets/textures/wood.png went with the next build (exit 0)."""
+    out = tmp_path / "built"
+    assert main(["build", str(small_scene), "--out", str(out), "--cache-dir", str(tmp_path / "c")]) == 0
+    (out / ".tactile-twin-build").write_text(marker)
+    (out / "objects" / "my_extra.xml").write_text("mine")
+    (out / "assets" / "textures").mkdir()
+    (out / "assets" / "textures" / "wood.png").write_text("mine too")
+    capsys.readouterr()
+    assert main(["build", str(small_scene), "--out", str(out), "--cache-dir", str(tmp_path / "c")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "its .tactile-twin-build lists no files" in err, err
+    assert (out / "objects" / "my_extra.xml").read_text() == "mine"
+    assert (out / "assets" / "textures" / "wood.png").read_text() == "mine too"
+
+
 def test_cli_build_refuses_a_symlinked_out(small_scene, tmp_path, capsys):
     # Replacing a link to an earlier build would fail half way (rmtree refuses links) or follow it.
     earlier = tmp_path / "earlier"
