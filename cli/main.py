@@ -21,7 +21,14 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import NoReturn
 
-from cli.outputs import check_mesh_file, check_not_input, check_record_file, replace_file, write_failure
+from cli.outputs import (
+    check_mesh_file,
+    check_not_input,
+    check_record_file,
+    mark_mesh,
+    replace_file,
+    write_failure,
+)
 from estimation.errors import TwinError, refused_number
 from estimation.materials import MAX_DENSITY, MIN_DENSITY
 from twin.settings import MAX_RATE_HZ
@@ -705,8 +712,13 @@ def _write_mesh(vertices, faces, path: Path) -> None:  # type: ignore[no-untyped
     import trimesh
 
     mesh = trimesh.Trimesh(vertices, faces, process=False)
+
+    def write(tmp: Path) -> None:
+        data = mesh.export(file_type=path.suffix.lstrip(".").lower())
+        tmp.write_bytes(mark_mesh(path.suffix, data if isinstance(data, bytes) else data.encode()))
+
     try:
-        replace_file(path, lambda tmp: mesh.export(tmp, file_type=path.suffix.lstrip(".").lower()))
+        replace_file(path, write)
     except (OSError, ValueError) as exc:
         raise TwinError(f"{path}: cannot write mesh ({exc})") from exc
 

@@ -215,25 +215,43 @@ def check_record_file(path: Path, inputs: Iterable[Path | None], flag: str = "--
     check_record_destination(path, f"{flag} {path}")
 
 
-#: A mesh ``--mesh-out`` writes (trimesh's export of each format) starts so: a binary STL with a zeroed 80-byte
-#: header, a PLY or OBJ with trimesh's comment line. A file without these is not one this command wrote.
-_PLY_MARK, _OBJ_MARK = b"comment https://github.com/mikedh/trimesh\n", b"# https://github.com/mikedh/trimesh\n"
-#: A PLY header's face count: a mesh has one above 0. trimesh writes a point cloud with the same comment line, and
-#: a user's scan saved so was replaced by --mesh-out.
+#: What marks a mesh as one ``--mesh-out`` wrote (:func:`mark_mesh`): the binary STL's 80-byte header, a comment
+#: line in a PLY's header (after its format line) or an OBJ's first line. trimesh's own marks (a zeroed STL header,
+#: its comment line) were taken for this command's until a hostile-input review replaced a user's trimesh-saved
+#: part with exit 0.
+MESH_MARK = b"written by tactile-twin: twin estimate --mesh-out"
+_STL_HEADER = MESH_MARK.ljust(80, b"\0")
+_PLY_MARK, _OBJ_MARK = b"comment " + MESH_MARK + b"\n", b"# " + MESH_MARK + b"\n"
+#: A PLY header's face count: a mesh has one above 0.
 _PLY_FACES = re.compile(rb"^element face (\d+)\s*$", re.M)
+
+
+def mark_mesh(suffix: str, data: bytes) -> bytes:
+    """``data``, a mesh trimesh exported in the format ``suffix`` names (binary STL, PLY, OBJ), with this command's
+    mark (:data:`MESH_MARK`) put in."""
+    suffix = suffix.lower()
+    if suffix == ".stl":
+        return _STL_HEADER + data[80:]
+    if suffix == ".ply":
+        first, _, rest = data.partition(b"\n")
+        fmt, _, rest = rest.partition(b"\n")
+        return first + b"\n" + fmt + b"\n" + _PLY_MARK + rest
+    if suffix == ".obj":
+        return _OBJ_MARK + data
+    raise ValueError(f"no mesh mark for {suffix!r}")
 
 
 def written_mesh(suffix: str, head: bytes, size: int, tail: bytes = b"") -> bool:
     """Whether a non-empty file of ``size`` bytes starting with ``head`` (its first
     :data:`sync.replacing.HEAD_BYTES`) and ending with ``tail`` (as many last bytes) is a mesh as ``--mesh-out``
-    writes it in the format ``suffix`` names: a binary STL with a zeroed header whose triangle count (above 0)
-    matches its size, a PLY carrying trimesh's comment whose header declares faces, an OBJ carrying it whose last
-    line is a face (trimesh writes the faces last). A user's CAD export (an STL header naming its tool, an ASCII
-    STL), a point cloud trimesh wrote, and any other file are not."""
+    writes it in the format ``suffix`` names (:func:`mark_mesh`): a binary STL with this command's header whose
+    triangle count (above 0) matches its size, a PLY carrying its comment whose header declares faces, an OBJ
+    starting with its comment whose last line is a face (trimesh writes the faces last). A user's CAD export, a
+    mesh or point cloud trimesh wrote, and any other file are not."""
     suffix = suffix.lower()
     if suffix == ".stl":
         count = int.from_bytes(head[80:84], "little")
-        return len(head) >= 84 and head[:80] == bytes(80) and count > 0 and size == 84 + 50 * count
+        return len(head) >= 84 and head[:80] == _STL_HEADER and count > 0 and size == 84 + 50 * count
     if suffix == ".ply":
         header = head.split(b"end_header", 1)[0]
         faces = _PLY_FACES.search(header)

@@ -400,7 +400,11 @@ def test_mesh_out_replaces_only_a_mesh_it_wrote(tmp_path, capsys):
     cad.write_bytes(b"exported by a CAD tool".ljust(80, b" ") + (0).to_bytes(4, "little"))
     mine = tmp_path / "mine.ply"
     save_cloud(make_cloud(np.load(cloud)), mine)  # a PLY, but a cloud the user saved, not our mesh
-    for path in (thesis, cad, mine):
+    # A part the user saved with trimesh: it carries trimesh's marks, which were taken for ours (replaced, exit 0).
+    parts = [tmp_path / f"part{suffix}" for suffix in (".stl", ".ply", ".obj")]
+    for part in parts:
+        trimesh.creation.annulus(r_min=0.02, r_max=0.04, height=0.01).export(part)
+    for path in (thesis, cad, mine, *parts):
         before = path.read_bytes()
         assert main(["estimate", str(cloud), "--method", "hull", "--mesh-out", str(path)]) == 2
         err = capsys.readouterr().err
@@ -448,7 +452,9 @@ def _own_file(path: Path) -> None:
     elif path.suffix == ".rrd":
         path.write_bytes(b"RRF2" + bytes(60))
     else:
-        path.write_bytes(trimesh.creation.box().export(file_type="stl"))
+        from cli.outputs import mark_mesh
+
+        path.write_bytes(mark_mesh(path.suffix, trimesh.creation.box().export(file_type="stl")))
 
 
 @pytest.mark.parametrize("suffix", [".mcap", ".rrd", ".stl"])
