@@ -12,7 +12,10 @@ warning line:
 - an .npz of 2,000 points whose deflated 'normals' (2 MB) declare (2000, 125000) zeros: unpacked to 2 GB
   before session 56 (refused now from the member's header: more than four values a point);
 - a PLY whose 1 MB header declares 70,000 empty elements before its vertices: each name was compared with
-  every one before it, minutes of parsing before session 56 (a hostile-input review's find).
+  every one before it, minutes of parsing before session 56 (a hostile-input review's find);
+- a binary PCD of 200,000 points with an unused field of 4096 doubles each (6.5 GB apparent, a sparse file:
+  its bytes column is what it takes on disk): read whole into memory before session 56 (6.5 GB), in blocks
+  of the fields used now (``cloudtable.read_binary_rows``).
 Run it at an older commit for the "before" (``git worktree``; the figures above are that fuzzing run's).
 The first row, ``twin --help`` run the same way, is the baseline: what starting the command costs.
 """
@@ -106,6 +109,16 @@ def ply_many_elements(path: Path, count: int = 70_000) -> None:
     path.write_bytes(header.encode() + _ball().astype("<f4").tobytes())
 
 
+def wide_sparse_pcd(path: Path, points: int = 200_000, count: int = 4096) -> None:
+    """A binary PCD of ``points`` zero points with an unused field of ``count`` doubles each: 6.5 GB apparent, a
+    sparse file of a few KB on disk."""
+    header = (f"VERSION 0.7\nFIELDS x y z pad\nSIZE 4 4 4 8\nTYPE F F F F\nCOUNT 1 1 1 {count}\nWIDTH {points}\n"
+              f"HEIGHT 1\nPOINTS {points}\nDATA binary\n").encode()
+    with path.open("wb") as f:
+        f.write(header)
+        f.truncate(len(header) + points * (12 + 8 * count))
+
+
 #: Runs the command and prints its exit code and peak memory (KB) last on stderr: a fresh parent per command,
 #: since RUSAGE_CHILDREN's ru_maxrss is the largest of all its children so far.
 _MEASURE = ("import resource, subprocess, sys; code = subprocess.run(sys.argv[1:]).returncode; "
@@ -140,6 +153,11 @@ def main() -> int:
         many = folder / "many_elements.ply"
         ply_many_elements(many)
         rows.append(("PLY header of 70,000 elements", many.stat().st_size, *run(["estimate", str(many), "--json"])))
+        wide = folder / "wide_sparse.pcd"
+        wide_sparse_pcd(wide)
+        rows.append(("PCD, 32 KiB unused a point, sparse", wide.stat().st_blocks * 512,
+                     *run(["estimate", str(wide), "--json"])))
+        wide.unlink()
         recording = folder / "packed.mcap"
         packed_recording(recording)
         rows.append((f"{CHUNKS * MESSAGES_PER_CHUNK / 1e6:.0f} M empty messages, replayed", recording.stat().st_size,

@@ -38,6 +38,7 @@ from estimation.cloudtable import (
     header_count,
     header_lines,
     parse_numbers,
+    read_binary_rows,
     read_head,
     read_rows,
     write_table,
@@ -133,7 +134,7 @@ def read_pcd(path: Path, max_points: int) -> Columns:
         check_binary_size(path, size, offset, n, dtype.itemsize, "points")
         if size != offset + n * dtype.itemsize:
             log.warning("%s: %d bytes after the %d points the header claims; ignored", path, size - offset - n * dtype.itemsize, n)
-        table = np.fromfile(path, dtype=dtype, count=n, offset=offset)
+        table = read_binary_rows(path, dtype, n, offset, ("x", "y", "z", *_NORMAL_FIELDS, *_VP_FIELDS, "rgb", "rgba"))
         if len(table) != n:
             raise CloudFileError(f"{path}: truncated: claims {n} points, read {len(table)}")
     elif data == "binary_compressed":

@@ -29,6 +29,7 @@ from estimation.cloudtable import (
     header_count,
     header_lines,
     parse_numbers,
+    read_binary_rows,
     read_head,
     read_rows,
     write_table,
@@ -45,6 +46,8 @@ _PLY_TYPES = {
     "float": "f4", "float32": "f4", "double": "f8", "float64": "f8",
 }  # fmt: skip
 _PLY_FORMATS = {"ascii": None, "binary_little_endian": "<", "binary_big_endian": ">"}
+#: The vertex properties read (:func:`_ply_color_names`); a binary body's others are skipped as it is read.
+_USED = ("x", "y", "z", "nx", "ny", "nz", "red", "green", "blue", "diffuse_red", "diffuse_green", "diffuse_blue")
 
 
 @dataclass
@@ -228,10 +231,10 @@ def _read_ply_binary(
                 "%s: the header accounts for %d bytes but the file has %d; read the %d vertices only",
                 path, expected, size, vertex.count,
             )  # fmt: skip
-    table = np.fromfile(path, dtype=dtype, count=vertex.count, offset=offset)
+    table = read_binary_rows(path, dtype, vertex.count, offset, _USED)
     if len(table) != vertex.count:  # the file shrank since we measured it
         raise CloudFileError(f"{path}: truncated: claims {vertex.count} vertices, read {len(table)}")
-    return table, {name: dtype.fields[name][0] for name in dtype.names}  # type: ignore[index]
+    return table, {name: table.dtype.fields[name][0] for name in table.dtype.names}  # type: ignore[index]
 
 
 def _read_ply_ascii(

@@ -538,6 +538,38 @@ def test_compressed_pcd_with_part_of_its_normals_is_refused_before_open3d(tmp_pa
         load_cloud(path)
 
 
+@pytest.mark.parametrize("suffix", [".pcd", ".ply"])
+def test_a_binary_body_with_wide_unused_fields_is_read_a_block_at_a_time(tmp_path, cloud, monkeypatch, suffix):
+    """Rows were capped, their width not: a PCD of 200,000 points with an unused 32 KiB field a point (6.5 GB, a
+    sparse file) was read whole into memory. Now such fields are skipped as the body is read in blocks; the points,
+    normals and the file's last row come out as a plain read gives them."""
+    import estimation.cloudtable as cloudtable
+
+    n, pad = len(cloud.points), 64
+    if suffix == ".pcd":
+        head = (f"VERSION 0.7\nFIELDS x y z normal_x normal_y normal_z pad\nSIZE 4 4 4 4 4 4 8\nTYPE F F F F F F F\n"
+                f"COUNT 1 1 1 1 1 1 {pad}\nWIDTH {n}\nHEIGHT 1\nPOINTS {n}\nDATA binary\n")
+        order, names = "<", ("x", "y", "z", "normal_x", "normal_y", "normal_z")
+    else:
+        head = (f"ply\nformat binary_big_endian 1.0\nelement vertex {n}\n"
+                + "".join(f"property float {a}\n" for a in ("x", "y", "z", "nx", "ny", "nz"))
+                + "".join(f"property double pad{k}\n" for k in range(pad)) + "end_header\n")
+        order, names = ">", ("x", "y", "z", "nx", "ny", "nz")
+    fields = [(name, order + "f4") for name in names]
+    fields += [("pad", order + "f8", (pad,))] if suffix == ".pcd" else [(f"pad{k}", order + "f8") for k in range(pad)]
+    table = np.zeros(n, np.dtype(fields))
+    for k, name in enumerate(names):
+        table[name] = np.hstack([cloud.points, cloud.normals])[:, k]
+    path = tmp_path / f"wide{suffix}"
+    path.write_bytes(head.encode() + table.tobytes())
+    whole = load_cloud(path)
+    monkeypatch.setattr(cloudtable, "BLOCK_BYTES", 7 * table.dtype.itemsize + 5)  # blocks of 7 rows, the last short
+    blocks = load_cloud(path)
+    np.testing.assert_array_equal(blocks.points, whole.points)
+    np.testing.assert_array_equal(blocks.normals, whole.normals)
+    np.testing.assert_allclose(blocks.points, cloud.points.astype(np.float32), rtol=0, atol=0)
+
+
 def test_compressed_pcd_that_lies_is_refused_before_open3d(tmp_path):
     head = "VERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH 1000\nHEIGHT 1\nPOINTS 1000\nDATA binary_compressed\n"
     path = tmp_path / "z.pcd"
