@@ -50,6 +50,7 @@ import queue
 import struct
 import threading
 import zlib
+from array import array
 from collections import Counter
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
@@ -109,6 +110,11 @@ MAX_RECORDED_TOPIC = 512
 #: file of 16 M empty messages packed into four zstd chunks took 4 GB to read. One a byte leaves 20x room for a
 #: writer that packs tighter than ours and keeps such a file to a few hundred bytes of Python per byte read.
 MAX_RECORDS_PER_BYTE = 1
+
+#: The largest ground-truth record read, bytes of JSON: a transform takes ~250, so a thousand objects (the most a
+#: scene holds) ~250 KB. Parsed, JSON takes ~12 times its size in Python: a 96 KB file of eight 120 MiB truth
+#: records, within every limit above, took 7.5 GB to replay (a hostile-input review's find).
+MAX_TRUTH_RECORD_BYTES = 4 * 2**20
 
 #: The longest replay, twin seconds: the live commands' default session (an hour). A replay also runs no
 #: longer than its recording holds (:meth:`Recording.span_s` plus :data:`RECORDED_TIME_SLACK_S`).
@@ -489,9 +495,14 @@ class Recording:
                 :data:`sync.messages.MAX_COORDINATE` m and a ``rotation`` {x, y, z, w}.
         """
         latest = self.latest_time()
-        rows: dict[str, list[tuple[float, list[float], list[float]]]] = {}
+        # Each object's samples as doubles (time, x y z, w x y z) in a flat array: 64 bytes a sample, where a tuple of
+        # lists took ~300 (an hour of 20 objects at 100 Hz is 7.2 M samples).
+        rows: dict[str, array] = {}
         previous: float | None = None
         for r in self.topic(TRUTH_TOPIC):
+            if len(r.data) > MAX_TRUTH_RECORD_BYTES:
+                raise RecordingError(f"{self.path}: a {r.topic} record of {len(r.data):,} bytes, more than the "
+                                     f"{MAX_TRUTH_RECORD_BYTES >> 20} MiB a thousand objects' poses take")
             msg = self._object(r)
             t = previous = self._not_back(r, self._number(msg, "sim_time", r.topic, 0.0, latest), previous)
             transforms = msg.get("transforms")
@@ -503,9 +514,9 @@ class Recording:
                 object_id = tf["child_frame_id"].removeprefix("truth/")
                 p = self._vector(tf, "translation", "xyz", r.topic, MAX_COORDINATE)
                 x, y, z, w = self._vector(tf, "rotation", "xyzw", r.topic, 1.0 + QUAT_NORM_TOLERANCE)
-                rows.setdefault(object_id, []).append((t, p, [w, x, y, z]))
-        return {i: (np.array([t for t, _, _ in v]), np.array([p for _, p, _ in v]), np.array([q for _, _, q in v]))
-                for i, v in rows.items()}
+                rows.setdefault(object_id, array("d")).extend((t, *p, w, x, y, z))
+        table = {i: np.frombuffer(v, dtype=np.float64).reshape(-1, 8) for i, v in rows.items()}
+        return {i: (v[:, 0].copy(), v[:, 1:4].copy(), v[:, 4:8].copy()) for i, v in table.items()}
 
     def end_time(self) -> float | None:
         """The twin time the end record says the session stopped at (None: no end record, or none given, or a

@@ -440,6 +440,10 @@ def _rewrite(src: Path, dst: Path, *, topic: str | None = None, data: bytes = b"
     ({"session": {"network": json.dumps({"uplink": {"rate_bps": 1e-300}, "downlink": None, "seed": 0})}}, "rate_bps"),
     ({"topic": TARGET_TOPIC, "data": b"[" * 100_000 + b"]" * 100_000}, "/operator/target record is not JSON"),
     ({"topic": TRUTH_TOPIC, "data": b"[" * 100_000 + b"]" * 100_000}, "/truth/transforms record is not JSON"),
+    # 5 MiB of transforms in one record (a review's 96 KB file held eight of 120 MiB: 7.5 GB to replay).
+    ({"topic": TRUTH_TOPIC, "data": b'{"sim_time": 0, "transforms": [' + b",".join(
+        [b'{"child_frame_id": "truth/x", "translation": {"x": 0, "y": 0, "z": 0}, "rotation": {"x": 0, "y": 0, '
+         b'"z": 0, "w": 1}}'] * 50_000) + b"]}"}, "/truth/transforms record of 5,"),
     ({"session": {"network": "[" * 100_000 + "]" * 100_000}}, "unreadable network metadata"),
     # A number written as text would have reached the link model's arithmetic mid-replay.
     ({"session": {"network": json.dumps({"uplink": None, "downlink": {"delay": "0.05"}, "seed": 0})}}, "delay must be a number"),
