@@ -8,6 +8,7 @@ bytes that follow it before any data is read, and arrays of Python objects are r
 
 from __future__ import annotations
 
+import logging
 import tokenize
 import warnings
 import zipfile
@@ -23,6 +24,8 @@ from estimation.errors import CloudFileError
 #: numpy dtype kinds a cloud or depth array may hold: signed and unsigned integers and floats. Complex
 #: values would lose their imaginary part (numpy only warns), booleans, strings and records are no coordinates.
 REAL_KINDS = "iuf"
+
+log = logging.getLogger(__name__)
 
 
 def npy_header(path: Path) -> tuple[tuple[int, ...], np.dtype]:
@@ -110,7 +113,14 @@ def read_numpy(path: Path, max_points: int) -> Columns:
         rows = _check_npz_member(path, archive, members["points"], max_points)
         for key in ("normals", "colors", "sensor_origins"):
             if key in members:
-                _check_npz_member(path, archive, members[key], max_points, rows)
+                try:
+                    _check_npz_member(path, archive, members[key], max_points, rows)
+                except _TooLarge as exc:
+                    if key != "colors":
+                        raise
+                    # Colours of the wrong shape are left out (make_cloud), not refused: these are, unread.
+                    log.warning("%s; left out", exc)
+                    del members[key]
         # Read from the members checked above, not through np.load's keys: a member named plain 'points' is
         # what np.load returns for 'points' first, and it went unchecked (a 2.4 MB file took 4.8 GB).
         def get(key: str) -> np.ndarray | None:
@@ -124,6 +134,10 @@ def read_numpy(path: Path, max_points: int) -> Columns:
 
 #: Values a point's row of ``normals``, ``colors`` or ``sensor_origins`` may hold (x y z, r g b [a]).
 _PER_POINT = 4
+
+
+class _TooLarge(CloudFileError):
+    """An .npz member larger than :data:`_PER_POINT` values a point: refused (colours: left out) before reading."""
 
 
 def _check_npz_member(path: Path, archive: zipfile.ZipFile, name: str, max_points: int,
@@ -141,8 +155,8 @@ def _check_npz_member(path: Path, archive: zipfile.ZipFile, name: str, max_point
         check_max_points(path, shape[0], max_points)
     values = int(np.prod(shape, dtype=object))
     if rows is not None and values > _PER_POINT * max(rows, 1):
-        raise CloudFileError(f"{path}: array {key!r} claims shape {shape}, more than {_PER_POINT} values for each of "
-                             f"the {rows} points")
+        raise _TooLarge(f"{path}: array {key!r} claims shape {shape}, {values:,} values for the {rows} points (at "
+                        f"most {_PER_POINT} a point are read)")
     if values * dtype.itemsize > archive.getinfo(name).file_size:
         raise CloudFileError(f"{path}: truncated: array {key!r} claims shape {shape}, more than its data")
     return shape[0] if shape else 0

@@ -134,7 +134,9 @@ def read_pcd(path: Path, max_points: int) -> Columns:
         check_binary_size(path, size, offset, n, dtype.itemsize, "points")
         if size != offset + n * dtype.itemsize:
             log.warning("%s: %d bytes after the %d points the header claims; ignored", path, size - offset - n * dtype.itemsize, n)
-        table = read_binary_rows(path, dtype, n, offset, ("x", "y", "z", *_NORMAL_FIELDS, *_VP_FIELDS, "rgb", "rgba"))
+        # A colour field is used only with COUNT 1: an unused one named rgb of 4096 values a point read whole.
+        colour = tuple(f for f in ("rgb", "rgba") if f in names and counts[names.index(f)] == 1)
+        table = read_binary_rows(path, dtype, n, offset, ("x", "y", "z", *_NORMAL_FIELDS, *_VP_FIELDS, *colour))
         if len(table) != n:
             raise CloudFileError(f"{path}: truncated: claims {n} points, read {len(table)}")
     elif data == "binary_compressed":

@@ -455,8 +455,8 @@ def estimate_views(views: list[View], density: float, *, support: Plane | str | 
         views: one or more views in one world frame; every view needs an ``origin``.
         density: kg/m^3.
         support: a :class:`Plane` or four numbers A B C D (normal up into the object's side; normalised),
-            ``"auto"`` (found in the data, else
-            the horizontal plane through the lowest point) or None (no plane: nothing is cut or closed).
+            ``"auto"`` (found in the data, else the horizontal plane through the lowest point, unless a
+            sensor lies below that: then none, warned) or None (no plane: nothing is cut or closed).
         material: recorded with the estimate.
         seed: RANSAC's and thinning's randomness (``"auto"``, over :data:`tolerances.VIEW_POINTS`): a whole
             number >= 0, as numpy takes.
