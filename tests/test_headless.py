@@ -426,6 +426,25 @@ def test_the_remote_takes_operator_commands_newest_first_and_inside_the_workspac
         assert np.allclose(command((0.1, 0.0, 0.7), 1, 1), (0.1, 0.0, 0.7))
 
 
+def test_a_joiner_takes_the_whole_state_reply_before_its_loop_runs(cache):
+    """A step takes at most MAX_DRAIN queued messages; joining, the twin took the state reply as one step, so a
+    300-object remote's joiner expected 256 clouds (what `twin demo` prints and sizes its progress bar with)."""
+    bus, clock, keys = InProcessBus(), SimClock(), Keys("s")
+    info = SceneInfo(v=VERSION, stamp_ns=0, name="s", table_size=(1.0, 0.6, 0.04), table_height=0.5,
+                     table_material="wood_pine", ee_radius=0.02, ee_position=(-0.3, 0.0, 0.56))
+    cube = _box_cloud("cube", np.array([0.0, 0.0, 0.53]), epoch=1, seq=1)
+    count = MAX_DRAIN + 44
+    clouds = [(keys.object(f"o{k}", "cloud"), encode(msgspec.structs.replace(cube, object_id=f"o{k}")))
+              for k in range(count)]
+    bus.transport("remote").queryable("twin/s/**", lambda selector: clouds if "objects" in selector
+                                      else [(keys.info, encode(info))])
+    local = Local(bus.transport("twin"), clock=clock, scene="s", settings=LocalSettings(workers=1, cache_dir=cache))
+    try:
+        assert local.expected == count and local.inbox.qsize() == 0
+    finally:
+        local.close()
+
+
 def test_a_cloud_superseded_before_its_estimation_started_is_cancelled(cache):
     # A worker process this time (Headless has none): a bare remote on the in-process bus that answers the scene.
     bus, clock, keys = InProcessBus(), SimClock(), Keys("s")

@@ -496,7 +496,10 @@ class Local:
         self._older: set[int] = set()  # epochs of older remotes whose heartbeats still come (MAX_OLDER_EPOCHS)
         self.link.query(self.keys.state, self._enqueue, timeout=wait)
         self._start = clock.now()
-        self._drain()  # start estimating what the query brought before the loop runs
+        # Start estimating what the query brought before the loop runs: all of it, MAX_DRAIN at a time (taken
+        # 256 at most, a 300-object scene's joiner counted 256 clouds to wait for).
+        for _ in range(-(-self.inbox.qsize() // MAX_DRAIN)):
+            self._drain()
 
     # -- loop ----------------------------------------------------------------------------------------
 
