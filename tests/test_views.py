@@ -995,8 +995,8 @@ def test_a_sensor_below_the_support_plane_is_refused(views):
     """A camera sees what rests on a plane from above: a sensor below a given plane (a VIEWPOINT mirrored, a
     plane in another frame) is refused. The horizontal plane ``auto`` falls back to is a guess, not the user's
     word: one a sensor lies below is dropped, said, and the views are closed as with no plane (it was refused
-    as a given plane is, and a cereal box cropped at the table's edge, seen from a camera below the top's
-    level, could not be estimated with ``auto`` at all)."""
+    as a given plane is, and a cereal box's views cropped at the table's edge, turned into another frame,
+    could not be estimated with ``auto`` at all: bench/rigid_motion.py)."""
     (p0, o0), (p1, o1) = views
     below = [View(p0, o0), View(p1, o1 * [1.0, 1.0, -1.0], name="mirrored")]
     with pytest.raises(CloudError, match=r"support plane: the sensor of mirrored lies \d+ mm below it"):
