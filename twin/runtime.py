@@ -941,17 +941,8 @@ class Local:
                 self.report.out_of_order += 1  # older than the cloud the twin has: not about this object
                 return
             self._forget_later(msg)
-            self._refused.pop(msg.object_id, None)
-            self._jobs.pop(msg.object_id, None)
-            self._clouds.pop(msg.object_id, None)
-            self._offsets.pop(msg.object_id, None)
-            self._taken.pop(msg.object_id, None)
-            self._targets.pop(msg.object_id, None)
-            self._errors.pop(msg.object_id, None)
-            self._latest.pop(msg.object_id, None)
-            self._mapped.pop(msg.object_id, None)
-            self._pose_mark.pop(msg.object_id, None)
-            self._orphans.pop(msg.object_id, None)
+            for held in self._per_object():
+                held.pop(msg.object_id, None)
             self._unseen.discard(msg.object_id)
             self.hold.forget(msg.object_id)
             # An object whose model is compiling now is not in the twin yet: its add's ``done`` removes it.
@@ -968,13 +959,15 @@ class Local:
         if len(self._refused) > MAX_OBJECTS:
             del self._refused[next(iter(self._refused))]
 
+    def _per_object(self) -> tuple[dict, ...]:
+        """Every map the twin keeps by object id (what a :class:`Gone` clears, with ``_unseen`` and the hold)."""
+        return (self._refused, self._jobs, self._clouds, self._offsets, self._taken, self._targets, self._errors,
+                self._latest, self._mapped, self._pose_mark, self._orphans)
+
     def _holds_anything_of(self, object_id: str) -> bool:
         """Whether the twin holds anything of ``object_id``: its model or a job building it, a cloud, pose, mark,
         refusal or correction of it (what a :class:`Gone` removes)."""
-        return (object_id in self._clouds or object_id in self._jobs or object_id in self._refused
-                or object_id in self._offsets or object_id in self._taken or object_id in self._targets
-                or object_id in self._errors or object_id in self._latest or object_id in self._mapped
-                or object_id in self._pose_mark or object_id in self._orphans or object_id in self._unseen
+        return (any(object_id in held for held in self._per_object()) or object_id in self._unseen
                 or self.hold.holds(object_id) or self.twin.has(object_id))
 
     def _forget_later(self, msg: Gone) -> None:

@@ -416,9 +416,7 @@ class Twin:
         """
         if self._index_of is not self.model:
             self._index, self._index_of = {}, self.model
-        if not isinstance(object_id, str):
-            raise TypeError(f"an object id is a string, got {type(object_id).__name__}")
-        found = self._index.get(object_id)
+        found = self._index.get(_checked_id(object_id))
         if found is None:
             jid = free_joint(self.model, object_id)
             if jid < 0:
@@ -598,8 +596,7 @@ class Twin:
         Raises:
             TypeError: ``object_id`` is not a string (as every accessor taking an id).
         """
-        if not isinstance(object_id, str):
-            raise TypeError(f"an object id is a string, got {type(object_id).__name__}")
+        object_id = _checked_id(object_id)
         if self._index_of is self.model and object_id in self._index:
             return True
         # Not through joint(): its error for an unknown id suggests the closest ids (difflib, ~25 us), and a
@@ -733,3 +730,10 @@ def run_paced(twin: Twin, duration: float, rate: float, *, trajectory: Trajector
 
     return run_loop(body, rate=rate, duration=duration, clock=clock,
                     wait=None if realtime else (lambda _left: None))
+
+
+def _checked_id(object_id: object) -> str:
+    """``object_id``, which must be a string (None was "no object None", a list an unhashable-type error)."""
+    if not isinstance(object_id, str):
+        raise TypeError(f"an object id is a string, got {type(object_id).__name__}")
+    return object_id
