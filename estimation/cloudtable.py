@@ -127,6 +127,20 @@ def read_binary_rows(path: Path, dtype: np.dtype, count: int, offset: int, keep:
     return out
 
 
+#: Bytes a text body of numbers is made of; and how many of a binary body's first bytes are looked at.
+_NUMBER_TEXT, _BODY_SAMPLE = frozenset(b"0123456789+-.eE \t\r\n"), 64
+
+
+def text_body(path: Path, offset: int) -> bool:
+    """Whether the body from ``offset`` starts as a text of numbers would (digits, spaces, line ends): a binary
+    format's header over a text body (read as binary: "coordinates reach 5.47e+22 m")."""
+    with path.open("rb") as fh:
+        fh.seek(offset)
+        body = fh.read(_BODY_SAMPLE)
+    return bool(body) and set(body) <= _NUMBER_TEXT and any(chr(b).isdigit() for b in body) and any(
+        b in b" \t\n" for b in body)
+
+
 def check_binary_size(path: Path, size: int, offset: int, claimed: int, itemsize: int, what: str) -> None:
     """Raise unless ``claimed`` records of ``itemsize`` bytes fit between ``offset`` and the end."""
     available = max(0, size - offset)

@@ -41,6 +41,7 @@ from estimation.cloudtable import (
     read_binary_rows,
     read_head,
     read_rows,
+    text_body,
     write_table,
 )
 from estimation.contracts import unit_quaternion
@@ -131,6 +132,10 @@ def read_pcd(path: Path, max_points: int) -> Columns:
     if data == "ascii":
         table = _read_pcd_ascii(path, size, offset, n, names, counts, len(lines) + 1)
     elif data == "binary":
+        if size != offset + n * dtype.itemsize and text_body(path, offset):
+            # Read as binary it was refused as a degenerate cloud, naming grid nodes and clusters, not the body.
+            raise CloudFileError(f"{path}: the body looks like ASCII text but the header says DATA binary: if it is "
+                                 f"text, the line is 'DATA ascii'")
         check_binary_size(path, size, offset, n, dtype.itemsize, "points")
         if size != offset + n * dtype.itemsize:
             log.warning("%s: %d bytes after the %d points the header claims; ignored", path, size - offset - n * dtype.itemsize, n)

@@ -32,6 +32,7 @@ from estimation.cloudtable import (
     read_binary_rows,
     read_head,
     read_rows,
+    text_body,
     write_table,
 )
 from estimation.errors import CloudFileError
@@ -180,10 +181,6 @@ def _ply_color_names(names: list[str]) -> tuple[str, str, str]:
     return ("red", "green", "blue")
 
 
-#: Bytes a text body of numbers is made of; and how many of a binary body's first bytes are looked at.
-_NUMBER_TEXT, _BODY_SAMPLE = frozenset(b"0123456789+-.eE \t\r\n"), 64
-
-
 def _check_binary_body(path: Path, size: int, offset: int, elements: list[_PlyElement], fmt: str) -> None:
     """Refuse a body of text under a binary ``fmt``: its size is not the one the header's elements give (or they
     do not give one: list properties) and its first bytes are numbers, spaces and line ends. Read as binary, such
@@ -196,10 +193,7 @@ def _check_binary_body(path: Path, size: int, offset: int, elements: list[_PlyEl
     if all(d is not None for d in dtypes):
         if size == offset + sum(e.count * d.itemsize for e, d in zip(elements, dtypes, strict=True)):  # type: ignore[union-attr]
             return
-    with path.open("rb") as fh:
-        fh.seek(offset)
-        body = fh.read(_BODY_SAMPLE)
-    if body and set(body) <= _NUMBER_TEXT and any(chr(b).isdigit() for b in body) and any(b in b" \t\n" for b in body):
+    if text_body(path, offset):
         raise CloudFileError(f"{path}: the body looks like ASCII text but the header says {fmt}: if it is text, the "
                              f"format line is 'format ascii 1.0'")
 

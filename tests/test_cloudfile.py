@@ -675,6 +675,10 @@ def test_bad_ply_is_one_line_error(tmp_path, content, match):
          "DATA ascii\n1 2 3 0 0 0 1\n", r"the PCD field 'normal_x' has COUNT 2; a normal's fields hold one value each"),
         ("FIELDS x y z vp_x vp_y vp_z\nSIZE 4 4 4 4 4 4\nTYPE F F F F F F\nCOUNT 1 1 1 1 1 3\nPOINTS 1\n"
          "DATA ascii\n1 2 3 0 0 0 0 1\n", r"the PCD field 'vp_z' has COUNT 3; a viewpoint's fields hold one value each"),
+        # A text body under DATA binary (a common slip) was read as floats and refused as a degenerate cloud,
+        # naming grid nodes and clusters, not the body.
+        ("FIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nPOINTS 2\nDATA binary\n0.0123 0.0456 0.0789\n0.01 0.02 0.03\n",
+         r"the body looks like ASCII text but the header says DATA binary: if it is text, the line is 'DATA ascii'$"),
         # open3d would decompress the points and drop the viewpoints
         ("FIELDS x y z vp_x vp_y vp_z\nSIZE 4 4 4 4 4 4\nTYPE F F F F F F\nPOINTS 1\nDATA binary_compressed\n",
          r"a binary_compressed PCD's vp_x vp_y vp_z fields are not read; save it as binary or ascii"),
