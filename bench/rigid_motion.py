@@ -49,53 +49,49 @@ def moved(views, rot: np.ndarray, shift: np.ndarray):  # type: ignore[no-untyped
     return [View(v.points @ rot.T + shift, np.asarray(v.origin, float) @ rot.T + shift) for v in views]
 
 
-def _spread(views, density: float, top: float, motions: int, rng: np.random.Generator) -> float:  # type: ignore[no-untyped-def]
-    """The largest relative volume change over ``motions`` rigid motions with the support plane given (the table's
-    top at height ``top``, world z up), moved along with the views."""
-    from scipy.spatial.transform import Rotation
-
-    from estimation.views import estimate_views
-
-    base = estimate_views(views, density, support=(0.0, 0.0, 1.0, -top)).estimate.volume
-    worst = 0.0
-    for _ in range(motions):
-        rot = Rotation.random(random_state=rng).as_matrix()
-        shift = rng.uniform(-SHIFT, SHIFT, 3)
-        normal = rot[:, 2]  # the plane's normal (0, 0, 1) turned
-        plane = (*normal, -float(normal @ (rot @ np.array([0.0, 0.0, top]) + shift)))
-        worst = max(worst, abs(estimate_views(moved(views, rot, shift), density, support=plane).estimate.volume / base - 1))
-    return worst
-
-
 def _no_plane(warnings) -> bool:  # type: ignore[no-untyped-def]
     return any("no support plane in the data" in w for w in warnings)
 
 
-def spreads(scene, cameras: int, motions: int, seed: int, label: str) -> list[tuple[str, float, str]]:  # type: ignore[no-untyped-def]
-    """(object id, largest relative volume change over ``motions`` rigid motions, note) for each object."""
+def _worst(views, density: float, motions: int, rng: np.random.Generator,  # type: ignore[no-untyped-def]
+           top: float | None = None) -> tuple[float, bool]:
+    """(largest relative volume change over ``motions`` rigid motions, whether ``auto`` found no plane in any
+    pose). ``top``: the support plane given instead of ``auto``, the table's top at that height (world z up),
+    moved along with the views."""
     from scipy.spatial.transform import Rotation
 
-    from estimation.errors import TwinError
     from estimation.views import estimate_views
+
+    def estimate(rot: np.ndarray, shift: np.ndarray):  # type: ignore[no-untyped-def]
+        support: str | tuple[float, ...] = "auto"
+        if top is not None:
+            normal = rot[:, 2]  # the plane's normal (0, 0, 1) turned
+            support = (*normal, -float(normal @ (rot @ np.array([0.0, 0.0, top]) + shift)))
+        return estimate_views(moved(views, rot, shift), density, support=support)
+
+    first = estimate(np.eye(3), np.zeros(3))
+    base, fell_back, worst = first.estimate.volume, _no_plane(first.warnings), 0.0
+    for _ in range(motions):
+        res = estimate(Rotation.random(random_state=rng).as_matrix(), rng.uniform(-SHIFT, SHIFT, 3))
+        worst = max(worst, abs(res.estimate.volume / base - 1))
+        fell_back |= _no_plane(res.warnings)
+    return worst, fell_back
+
+
+def spreads(scene, cameras: int, motions: int, seed: int, label: str) -> list[tuple[str, float, str]]:  # type: ignore[no-untyped-def]
+    """(object id, largest relative volume change over ``motions`` rigid motions, note) for each object."""
+    from estimation.errors import TwinError
 
     rows = []
     for k, spec in enumerate(scene.objects):
         views, ref = scan_alone(scene, spec, cameras, crop=True)
         density = ref.mass.mass / ref.volume
-        rng = np.random.default_rng([seed, cameras, k])
         try:
-            first = estimate_views(views, density, support="auto")
-            base, fell_back = first.estimate.volume, _no_plane(first.warnings)
-            worst = 0.0
-            for _ in range(motions):
-                rot = Rotation.random(random_state=rng).as_matrix()
-                shift = rng.uniform(-SHIFT, SHIFT, 3)
-                res = estimate_views(moved(views, rot, shift), density, support="auto")
-                worst = max(worst, abs(res.estimate.volume / base - 1))
-                fell_back |= _no_plane(res.warnings)
+            worst, fell_back = _worst(views, density, motions, np.random.default_rng([seed, cameras, k]))
             note = ""
             if fell_back:  # the CLI's remedy, --support-plane A B C D: the table's top, carried along too
-                given = _spread(views, density, scene.table.height, motions, np.random.default_rng([seed, cameras, k]))
+                given = _worst(views, density, motions, np.random.default_rng([seed, cameras, k]),
+                               top=scene.table.height)[0]
                 note = f"{FELL_BACK}; with the table's plane given: {100 * given:.3f} %"
             rows.append((spec.id, worst, note))
         except TwinError as exc:  # the same error before and after a motion is invariant too; said, not counted

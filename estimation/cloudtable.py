@@ -118,11 +118,12 @@ def read_binary_rows(path: Path, dtype: np.dtype, count: int, offset: int, keep:
     with path.open("rb") as fh:
         fh.seek(offset)
         while done < count:
-            block = np.fromfile(fh, dtype=dtype, count=min(rows, count - done))
+            want = min(rows, count - done)
+            block = np.fromfile(fh, dtype=dtype, count=want)
             for name in names:
                 out[name][done:done + len(block)] = block[name]
             done += len(block)
-            if len(block) < min(rows, count - done + len(block)):
+            if len(block) < want:
                 return out[:done]
     return out
 

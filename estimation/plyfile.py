@@ -47,8 +47,10 @@ _PLY_TYPES = {
     "float": "f4", "float32": "f4", "double": "f8", "float64": "f8",
 }  # fmt: skip
 _PLY_FORMATS = {"ascii": None, "binary_little_endian": "<", "binary_big_endian": ">"}
-#: The vertex properties read (:func:`_ply_color_names`); a binary body's others are skipped as it is read.
-_USED = ("x", "y", "z", "nx", "ny", "nz", "red", "green", "blue", "diffuse_red", "diffuse_green", "diffuse_blue")
+#: Colour properties are ``red green blue``, or the same with one of these prefixes (:func:`_ply_color_names`).
+_COLOR_PREFIXES = ("", "diffuse_")
+#: The vertex properties read; a binary body's others are skipped as it is read.
+_USED = ("x", "y", "z", "nx", "ny", "nz", *(f"{p}{c}" for p in _COLOR_PREFIXES for c in ("red", "green", "blue")))
 
 
 @dataclass
@@ -174,7 +176,7 @@ def read_ply(path: Path, max_points: int) -> Columns:
 
 
 def _ply_color_names(names: list[str]) -> tuple[str, str, str]:
-    for prefix in ("", "diffuse_"):
+    for prefix in _COLOR_PREFIXES:
         triple = (f"{prefix}red", f"{prefix}green", f"{prefix}blue")
         if all(name in names for name in triple):
             return triple
