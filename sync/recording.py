@@ -204,7 +204,7 @@ class Recorder:
         # The data section's CRC covers what chunks' CRCs do not: the session metadata (scene, network, seeds),
         # where a flipped digit replayed another scene without a word.
         self._writer = Writer(self._file, chunk_size=CHUNK_BYTES, enable_data_crcs=True)
-        self._writer.start(profile=PROFILE, library="tactile-twin")
+        self._writer.start(profile=PROFILE, library="tactile-twin")  # what written_here() knows it by
         meta = {"schema_version": str(SCHEMA_VERSION), "tool_version": tool_version(),
                 "clock": "real" if clock.realtime else "sim"}
         meta.update({k: v if isinstance(v, str) else json.dumps(v) for k, v in (metadata or {}).items()})
@@ -758,22 +758,37 @@ def check_recording_file(path: Path) -> None:
         raise RecordingError(f"{path}: is not a regular file (a device, pipe or socket), not a recording")
 
 
+def written_here(head: bytes) -> bool:
+    """Whether a file's first bytes are an MCAP recording this program wrote: its magic, then a header record
+    (opcode 1, a uint64 length) whose profile and library strings (uint32 length, then UTF-8) are
+    :data:`PROFILE` and ``tactile-twin``. Another tool's MCAP (a ROS 2 bag) is a user's file."""
+    at = len(MCAP_MAGIC) + 9
+    if not head.startswith(MCAP_MAGIC) or head[len(MCAP_MAGIC):len(MCAP_MAGIC) + 1] != b"\x01":
+        return False
+    strings = []
+    for _ in range(2):
+        size = int.from_bytes(head[at:at + 4], "little")
+        strings.append(head[at + 4:at + 4 + size])
+        at += 4 + size
+    return strings == [PROFILE.encode(), b"tactile-twin"]
+
+
 def check_record_destination(path: Path, label: str | None = None) -> None:
     """Refuse a path a recording must not be renamed onto (:func:`sync.replacing.found_at`): a folder, a device,
-    pipe or socket, or an existing file that is neither empty nor an MCAP recording (a user's own file, which
-    the recording would replace).
+    pipe or socket, or an existing file that is neither empty nor a recording this program wrote
+    (:func:`written_here`; a user's own file, another tool's MCAP included, which the recording would replace).
 
     ``label`` starts the error (default: ``path``), e.g. ``"--record x.mcap"``.
 
     Raises:
         RecordingError: naming the path and why.
     """
-    found = found_at(path, lambda head, _size: head.startswith(MCAP_MAGIC))
+    found = found_at(path, lambda head, _size: written_here(head))
     if not found.replaceable:
         why = {"unchecked": f"cannot check it ({found.error})", "folder": "is a folder, not a recording file",
                "special": "not a regular file",  # the rename would delete the FIFO or device node
                "unreadable": f"cannot read it ({found.error})",
-               "other": "exists and is not an MCAP recording; refusing to replace it"}[found.kind]
+               "other": "exists and is not a recording this program wrote; refusing to replace it"}[found.kind]
         raise RecordingError(f"{path if label is None else label}: {why}")
 
 

@@ -450,7 +450,14 @@ def _own_file(path: Path) -> None:
         with Recorder(path, clock=SimClock()) as r:
             r.target(0.0, np.zeros(3))
     elif path.suffix == ".rrd":
-        path.write_bytes(b"RRF2" + bytes(60))
+        import rerun as rr
+
+        from twin.rerunlog import APP_ID
+
+        stream = rr.RecordingStream(APP_ID)
+        stream.save(str(path))
+        stream.log("p", rr.Points3D([[0.0, 0.0, 0.0]]))
+        stream.disconnect()
     else:
         from cli.outputs import mark_mesh
 

@@ -28,6 +28,7 @@ from sync.recording import (
     Recording,
     RecordingError,
     read_recording,
+    written_here,
 )
 from twin.trajectory import push_trajectory
 
@@ -373,7 +374,7 @@ def test_record_refuses_an_input_or_a_users_file_and_a_failed_start_leaves_the_f
     notes = tmp_path / "notes.mcap"
     notes.write_text("precious\n")
     assert main(["local", "--record", str(notes), "--duration", "1"]) == 2
-    assert "not an MCAP recording" in capsys.readouterr().err and notes.read_text() == "precious\n"
+    assert "not a recording this program wrote" in capsys.readouterr().err and notes.read_text() == "precious\n"
     # A recorder whose session never started leaves an earlier recording as it was, and nothing beside it.
     kept = tmp_path / "kept.mcap"
     kept.write_bytes(before)
@@ -736,11 +737,39 @@ def test_a_recorder_refuses_a_folder_or_a_users_file_when_it_opens(tmp_path):
     notes = tmp_path / "notes.mcap"
     notes.write_text("precious\n")
     for bad, words in [(tmp_path / "dir.mcap", "is a folder, not a recording file"),
-                       (notes, "exists and is not an MCAP recording; refusing to replace it")]:
+                       (notes, "exists and is not a recording this program wrote; refusing to replace it")]:
         with pytest.raises(RecordingError, match=words):
             Recorder(bad, clock=SimClock())
     assert notes.read_text() == "precious\n"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["dir.mcap", "notes.mcap"]  # no .partial
+
+
+def test_another_tools_mcap_is_a_users_file_and_an_own_recording_is_replaced(tmp_path):
+    """An MCAP another tool wrote (a ROS 2 bag) starts with the same magic: only the header's profile and library
+    tell this program's recordings from it."""
+    from mcap.writer import Writer
+
+    bag = tmp_path / "bag.mcap"
+    with bag.open("wb") as f:
+        w = Writer(f)
+        w.start(profile="ros2", library="rosbag2")
+        schema = w.register_schema("std_msgs/String", "ros2msg", b"string data")
+        channel = w.register_channel("/chatter", "cdr", schema)
+        w.add_message(channel, log_time=1, publish_time=1, data=b"hello")
+        w.finish()
+    before = bag.read_bytes()
+    with pytest.raises(RecordingError, match="not a recording this program wrote"):
+        Recorder(bag, clock=SimClock())
+    assert bag.read_bytes() == before
+    own = tmp_path / "own.mcap"
+    Recorder(own, clock=SimClock()).close()
+    first = own.read_bytes()
+    assert written_here(first[:512])
+    r = Recorder(own, clock=SimClock())  # its own earlier recording: replaced
+    r.target(0.0, np.zeros(3))
+    r.close()
+    assert own.read_bytes() != first and written_here(own.read_bytes()[:512])
+    assert not written_here(before[:512]) and not written_here(first[:20])
 
 
 def test_a_failed_final_rename_keeps_the_whole_recording_and_names_it_in_one_line(tmp_path):
@@ -777,8 +806,8 @@ def test_demo_refuses_a_remote_recording_path_it_must_not_replace_before_startin
     notes = tmp_path / "notes.remote.mcap"
     notes.write_text("notes\n")
     (tmp_path / "dd.remote.mcap").mkdir()
-    for record, words in [(tmp_path / "notes.mcap", f"the remote's side goes to {notes}: exists and is not an "
-                                                    "MCAP recording; refusing to replace it"),
+    for record, words in [(tmp_path / "notes.mcap", f"the remote's side goes to {notes}: exists and is not a "
+                                                    "recording this program wrote; refusing to replace it"),
                           (tmp_path / "dd.mcap", "dd.remote.mcap: is a folder, not a recording file")]:
         assert main(["demo", "--scene", str(SMALL), "--duration", "1", "--record", str(record),
                      "--rerun", "save", str(tmp_path / "v.rrd")]) == 2  # refused before rerun starts writing

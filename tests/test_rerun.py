@@ -184,6 +184,18 @@ def test_a_bad_rerun_option_is_exit_2_and_writes_nothing(box_cloud, tmp_path, mo
     assert main(["estimate", str(box_cloud), "--density", "500", "--rerun", "save", str(mine)]) == 2
     assert "exists and is not a rerun recording" in capsys.readouterr().err
     assert mine.read_text() == "my notes\n"
+    import rerun as rr
+
+    theirs = tmp_path / "lab.rrd"  # another application's rerun recording: the user's too
+    stream = rr.RecordingStream("lab")
+    stream.save(str(theirs))
+    stream.log("p", rr.Points3D([[0.0, 0.0, 0.0]]))
+    stream.disconnect()
+    before = theirs.read_bytes()
+    assert before.startswith(b"RRF")
+    assert main(["estimate", str(box_cloud), "--density", "500", "--rerun", "save", str(theirs)]) == 2
+    assert "not a rerun recording this program wrote" in capsys.readouterr().err
+    assert theirs.read_bytes() == before
 
 
 def test_run_logs_objects_once_and_poses_at_the_rerun_rate(tmp_path, capsys):

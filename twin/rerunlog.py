@@ -94,9 +94,14 @@ class RerunTarget:
     rate_hz: float = DEFAULT_RATE_HZ
 
 
-#: How a rerun recording file starts (its stream header: "RRF" and a format version digit): a non-empty existing
-#: file without it is not one ``--rerun save`` may replace (:func:`sync.replacing.found_at`).
+#: How a rerun recording file starts (its stream header: "RRF" and a format version digit). A non-empty existing
+#: file ``--rerun save`` may replace (:func:`sync.replacing.found_at`) has it and names :data:`APP_ID` in its
+#: first bytes (the store info rerun writes first): another application's recording is a user's file.
 RRD_MAGIC = b"RRF"
+
+
+def _written_here(head: bytes) -> bool:
+    return head.startswith(RRD_MAGIC) and APP_ID.encode() in head
 
 
 def parse_target(words: list[str], rate_hz: float = DEFAULT_RATE_HZ) -> RerunTarget:
@@ -117,11 +122,12 @@ def parse_target(words: list[str], rate_hz: float = DEFAULT_RATE_HZ) -> RerunTar
             raise TwinError(f"--rerun save: {path} should be a file name ending in .rrd (e.g. view.rrd)")
         if not path.parent.resolve().is_dir():
             raise TwinError(f"--rerun save: directory {path.parent} does not exist")
-        found = found_at(path, lambda head, _size: head.startswith(RRD_MAGIC))
+        found = found_at(path, lambda head, _size: _written_here(head))
         if found.kind == "unchecked":
             raise TwinError(f"--rerun save: {path}: cannot check it ({found.error})")
         if not found.replaceable:
-            raise TwinError(f"--rerun save: {path} exists and is not a rerun recording; refusing to replace it")
+            raise TwinError(f"--rerun save: {path} exists and is not a rerun recording this program wrote; "
+                            f"refusing to replace it")
         return RerunTarget("save", str(path), rate_hz)
     if mode == "connect" and len(rest) <= 1:
         return RerunTarget("connect", connect_url(rest[0]) if rest else DEFAULT_CONNECT, rate_hz)
