@@ -24,6 +24,13 @@ log = logging.getLogger(__name__)
 #: Faces kept in the visual mesh: enough to look right, light enough for a viewer and for CoACD.
 VISUAL_FACES = 3000
 
+#: Most faces a mesh may have: MuJoCo's STL reader refuses more ("number of faces should be between 1 and
+#: 200000"), and a built folder's meshes are STL files.
+MAX_MESH_FACES = 200_000
+
+#: A decimation that moved the volume is tried again with this many times the faces (:func:`decimate`).
+RETRY_FACTOR = 8
+
 #: fast-simplification's aggressiveness (0-10): 3 keeps the volume within 0.05 % on our test objects
 #: where its default 7 lost up to 2.5 % on thin rings.
 DECIMATION_AGGRESSION = 3.0
@@ -410,7 +417,10 @@ def decimate(vertices: np.ndarray, faces: np.ndarray, target: int = VISUAL_FACES
 
     The mesh is scaled to unit size first: the simplifier's error thresholds are absolute, and at the
     size of a cereal box in metres every collapse looked free (it cut 10-14 % off boxes' volume).
-    A result that still moves the volume by more than 1 % is refused and the full mesh kept.
+    A result that still moves the volume by more than 1 % is refused and the full mesh kept, unless it has more
+    faces than MuJoCo's mesh files take (:data:`MAX_MESH_FACES`): then it is tried again with :data:`RETRY_FACTOR`
+    times the faces, and the finest try is kept even if none holds the volume (the visual and CoACD's input; the
+    mass properties are the estimate's).
     """
     if len(faces) <= target:
         return vertices, faces
@@ -419,14 +429,23 @@ def decimate(vertices: np.ndarray, faces: np.ndarray, target: int = VISUAL_FACES
     from estimation.inertia import signed_volumes
 
     scale = float(np.ptp(vertices, axis=0).max())
-    v, f = fast_simplification.simplify(vertices / scale, faces.astype(np.int32), target_count=target,
-                                        agg=DECIMATION_AGGRESSION)
-    v, f = np.asarray(v, np.float64) * scale, np.asarray(f, np.int64)
-    before, after = signed_volumes(vertices[faces]).sum(), signed_volumes(v[f]).sum()
-    if abs(after / before - 1) > 0.01:
-        log.warning("decimation changed the volume by %.1f %%; keeping the full mesh", 100 * (after / before - 1))
-        return vertices, faces
-    return v, f
+    before = signed_volumes(vertices[faces]).sum()
+    goal = target
+    while True:
+        v, f = fast_simplification.simplify(vertices / scale, faces.astype(np.int32), target_count=goal,
+                                            agg=DECIMATION_AGGRESSION)
+        v, f = np.asarray(v, np.float64) * scale, np.asarray(f, np.int64)
+        change = signed_volumes(v[f]).sum() / before - 1
+        if abs(change) <= 0.01:
+            return v, f
+        if len(faces) <= MAX_MESH_FACES:
+            log.warning("decimation changed the volume by %.1f %%; keeping the full mesh", 100 * change)
+            return vertices, faces
+        if goal * RETRY_FACTOR > MAX_MESH_FACES:
+            log.warning("decimation changed the volume by %.1f %%; kept all the same: the full mesh's %d faces are "
+                        "more than MuJoCo's mesh files take (%d)", 100 * change, len(faces), MAX_MESH_FACES)
+            return v, f
+        goal *= RETRY_FACTOR
 
 
 #: A closed piece of the estimated surface with less than this share of the largest piece's area is a speck
