@@ -27,12 +27,14 @@ import json
 import math
 import os
 import re
+import stat
 import sys
 from collections import Counter
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Annotated, Literal
+from urllib.parse import unquote
 
 import msgspec
 import numpy as np
@@ -551,10 +553,38 @@ def _check_mesh_file(path: Path, where: str) -> None:
     if path.suffix.lower() not in MESH_SUFFIXES:
         raise SceneError(f"{where}: mesh file {path} is not a mesh format we read; use one of "
                          f"{', '.join(MESH_SUFFIXES)}")
-    size = path.stat().st_size
+    size = path.stat().st_size + sum(_gltf_files(path, where))
     if size > MAX_MESH_BYTES:
         raise SceneError(f"{where}: mesh file {path} is {size / 2**20:,.0f} MiB, more than the "
                          f"{MAX_MESH_BYTES / 2**20:,.0f} MiB one object's mesh may take (simplify it first)")
+
+
+def _gltf_files(path: Path, where: str) -> list[int]:
+    """The sizes (bytes) of the files a .gltf's buffers and images name beside it, each checked to be a regular
+    file: one named as a FIFO blocked the loader for ever, and a sparse 2.6 GB buffer passed the mesh's size
+    limit (the .gltf's own 554 bytes) and took 2.7 GB to load. Names outside its folder are trimesh's to refuse."""
+    if path.suffix.lower() != ".gltf":
+        return []
+    try:
+        doc = json.loads(path.read_bytes())
+    except (OSError, ValueError) as exc:
+        raise SceneError(f"{where}: mesh file {path} is not a glTF's JSON ({exc})") from None
+    parts = [item for key in ("buffers", "images") for item in (doc.get(key) or [] if isinstance(doc, dict) else [])]
+    sizes = []
+    for part in parts:
+        uri = part.get("uri") if isinstance(part, dict) else None
+        if not isinstance(uri, str) or uri.startswith("data:"):
+            continue
+        named = path.parent / unquote(uri)
+        try:
+            st = named.stat()
+        except OSError:
+            continue  # missing, or a name the loader refuses: its own error
+        if not stat.S_ISREG(st.st_mode):
+            raise SceneError(f"{where}: mesh file {path} names {uri!r}, which is not a regular file (a folder, device "
+                             f"or pipe)")
+        sizes.append(st.st_size)
+    return sizes
 
 
 def _frame_rotation(o: ObjectDoc, source: str, where: str) -> tuple[Vec3, Vec3, Vec3] | None:

@@ -266,6 +266,29 @@ def test_a_gltf_whose_buffer_lies_outside_its_folder_is_not_read(tmp_path):
         source_mesh(spec)
 
 
+def test_a_gltfs_buffers_are_regular_files_counted_in_its_size(tmp_path):
+    """A buffer named as a FIFO hung ``twin build`` for ever; a sparse 2.6 GB buffer passed the size limit (the
+    .gltf's own few hundred bytes) and took 2.7 GB to load."""
+    import json
+    import os
+
+    import trimesh
+
+    trimesh.creation.box(extents=[0.05] * 3).export(tmp_path / "box.gltf")
+    doc = json.loads((tmp_path / "box.gltf").read_text())
+    buffer = tmp_path / doc["buffers"][0]["uri"]
+    scene = {"name": "x", "objects": [{"id": "a", "mesh": "box.gltf"}]}
+    parse_scene(scene, base=tmp_path)  # as written: read
+    with buffer.open("r+b") as f:
+        f.truncate(300 * 2**20)  # sparse: no disk used
+    with pytest.raises(SceneError, match=r"^object 'a': mesh file .*box\.gltf is 300 MiB, more than the 256 MiB"):
+        parse_scene(scene, base=tmp_path)
+    buffer.unlink()
+    os.mkfifo(buffer)
+    with pytest.raises(SceneError, match=r"names '.*', which is not a regular file \(a folder, device or pipe\)$"):
+        parse_scene(scene, base=tmp_path)
+
+
 def test_a_mesh_with_nan_vertices_is_a_scene_error(tmp_path):
     import numpy as np
     import trimesh
