@@ -307,12 +307,11 @@ def make_config(*, listen: list[str] | None = None, connect: list[str] | None = 
             conf = zenoh.Config.from_file(str(path))
         except Exception as exc:  # zenoh raises its own ZError for JSON5 or schema problems
             raise SessionError(f"zenoh config {path}: {_zenoh_error(exc)}") from exc
-        for key in TLS_FILE_KEYS:  # Zenoh reads them when the session opens: a FIFO hung it, /dev/zero ate memory
-            named = json.loads(conf.get_json(f"transport/link/tls/{key}"))
+        for key in FILE_KEYS:  # Zenoh reads them when the session opens: a FIFO hung it, /dev/zero ate memory
+            named = json.loads(conf.get_json(key))
             # One not made yet is Zenoh's to report when it opens a TLS link (configs/ ships names, not files).
             if named is not None and Path(str(named)).exists():
-                _check_small_file(Path(str(named)), f"zenoh config {path}: transport/link/tls/{key}",
-                                  MAX_CONFIG_BYTES)
+                _check_small_file(Path(str(named)), f"zenoh config {path}: {key}", MAX_CONFIG_BYTES)
     else:
         conf = zenoh.Config()
         conf.insert_json5("mode", json.dumps(mode))
@@ -370,9 +369,12 @@ MAX_CONFIG_BYTES = 1 << 20
 #: segmentation fault) at 15,000 levels; a real config has five or six.
 MAX_CONFIG_DEPTH = 64
 
-#: The files a zenoh config names for TLS (``transport/link/tls/...``), checked as :func:`make_config` reads it.
-TLS_FILE_KEYS = ("root_ca_certificate", "listen_private_key", "listen_certificate", "connect_private_key",
-                 "connect_certificate")
+#: The files a zenoh config names (TLS keys and certificates, authentication dictionaries and keys), checked as
+#: :func:`make_config` reads it: a user-password dictionary that was a FIFO hung the session and ignored Ctrl-C.
+FILE_KEYS = (*(f"transport/link/tls/{key}" for key in ("root_ca_certificate", "listen_private_key", "listen_certificate",
+                                                          "connect_private_key", "connect_certificate")),
+             "transport/auth/usrpwd/dictionary_file",
+             *(f"transport/auth/pubkey/{key}" for key in ("public_key_file", "private_key_file", "known_keys_file")))
 
 
 def _check_small_file(path: Path, what: str, limit: int) -> None:

@@ -543,10 +543,12 @@ def test_a_json5_zenoh_config_that_is_not_an_object_is_refused(text, tmp_path, c
     assert err.count("\n") == 1 and "not a JSON5 object ({ ... }) at the top level" in err, err
 
 
-@pytest.mark.parametrize("make", ["deep", "huge", "folder", "fifo", "tls fifo", "tls device"])
+@pytest.mark.parametrize("make", ["deep", "huge", "folder", "fifo", "tls fifo", "tls device", "dictionary fifo",
+                                  "pubkey device"])
 def test_a_zenoh_config_or_a_file_it_names_that_cannot_be_a_config_is_refused_in_one_line(make, tmp_path, capsys):
     """A config nested 30,000 deep crashed Zenoh's parser (a segmentation fault); a TLS key that was a FIFO hung
-    the session's opening, /dev/zero ate memory; a 200 MB config took 16 GB; a folder was 'no such file'."""
+    the session's opening, /dev/zero ate memory; a 200 MB config took 16 GB; a folder was 'no such file'. An
+    authentication dictionary that was a FIFO hung it too, ignoring Ctrl-C."""
     import os
 
     from cli.main import main
@@ -554,7 +556,9 @@ def test_a_zenoh_config_or_a_file_it_names_that_cannot_be_a_config_is_refused_in
     path = tmp_path / "z.json5"
     said = {"deep": "nested more than 64 levels deep", "huge": "more than the 1,048,576 such a file may hold",
             "folder": "is a folder, not a file", "fifo": "is a device or a pipe, not a file",
-            "tls fifo": "transport/link/tls/listen_private_key", "tls device": "/dev/zero: is a device or a pipe"}[make]
+            "tls fifo": "transport/link/tls/listen_private_key", "tls device": "/dev/zero: is a device or a pipe",
+            "dictionary fifo": "transport/auth/usrpwd/dictionary_file",
+            "pubkey device": "transport/auth/pubkey/public_key_file /dev/zero: is a device or a pipe"}[make]
     if make == "deep":
         path.write_text("{ metadata: " + "{a:" * 30_000 + "1" + "}" * 30_000 + " }")
     elif make == "huge":
@@ -563,6 +567,12 @@ def test_a_zenoh_config_or_a_file_it_names_that_cannot_be_a_config_is_refused_in
         path.mkdir()
     elif make == "fifo":
         os.mkfifo(path)
+    elif make == "dictionary fifo":
+        os.mkfifo(tmp_path / "dict.fifo")
+        path.write_text('{ transport: { auth: { usrpwd: { user: "a", password: "b", dictionary_file: "'
+                        + str(tmp_path / "dict.fifo") + '" } } } }')
+    elif make == "pubkey device":
+        path.write_text('{ transport: { auth: { pubkey: { public_key_file: "/dev/zero" } } } }')
     else:
         key = str(tmp_path / "key.fifo") if make == "tls fifo" else "/dev/zero"
         if make == "tls fifo":
