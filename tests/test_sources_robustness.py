@@ -285,6 +285,8 @@ def test_an_edited_folder_that_mujoco_warns_of_is_our_one_line_only(tmp_path, ca
         # Minutes in compile, or gigabytes, before: refused from the XML.
         ('<size nkey="100000000"/>', "<size nkey> asks for 100,000,000 entries"),
         ('<asset><hfield name="h" nrow="30000" ncol="30000" size="1 1 1 1"/></asset>', "<hfield nrow ncol> asks for"),
+        ('<asset><texture name="t" type="2d" builtin="checker" width="20000" height="20000"/></asset>',
+         "<texture width height> asks for 400,000,000"),
         ('<worldbody><flexcomp type="grid" count="300 300 300" spacing=".01 .01 .01" dim="3" name="f"/></worldbody>',
          "<flexcomp count> asks for 27,000,000"),
     ],
