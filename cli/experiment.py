@@ -129,7 +129,9 @@ def parse(args: argparse.Namespace):  # type: ignore[no-untyped-def]
         raise TwinError(f"--dask: expected 'local' or a scheduler address like tcp://HOST:8786, got {args.dask!r}")
     if args.tasks is None:
         args.tasks = "recorded" if is_recording(args.scene) else "push,press"
-    tasks = tuple(t.strip() for t in args.tasks.split(",") if t.strip())
+    tasks = tuple(t.strip() for t in args.tasks.split(","))
+    if not all(tasks):  # as for the numbers: 'push,,press' is a task left out by mistake
+        raise TwinError(f"--tasks: an empty name in {args.tasks!r}")
     twice = next((t for i, t in enumerate(tasks) if t in tasks[:i]), None)
     if twice is not None:  # as for the numbers: each repeat would run every condition again
         raise TwinError(f"--tasks: {twice} is given twice in {args.tasks!r}")

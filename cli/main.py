@@ -602,7 +602,7 @@ def _estimate_views(args: argparse.Namespace, scale: float) -> list[tuple]:  # t
     its loaded cloud (None for a depth image)."""
     import numpy as np
 
-    from estimation import load_cloud
+    from estimation.cloudfile import MAX_POINTS
     from estimation.errors import CloudError
     from estimation.views import View
 
@@ -619,7 +619,7 @@ def _estimate_views(args: argparse.Namespace, scale: float) -> list[tuple]:  # t
     if depth and args.viewpoint_pose is not None and len(args.viewpoint_pose) != n:
         raise TwinError(f"--viewpoint-pose given {len(args.viewpoint_pose)} times for {n} depth images: give it once "
                         f"per VIEW, in order")
-    views = []
+    views, total = [], 0
     for k, path in enumerate(args.views):
         try:
             if depth:
@@ -633,7 +633,8 @@ def _estimate_views(args: argparse.Namespace, scale: float) -> list[tuple]:  # t
                 points, origin = depth_view(image, camera, rot, pos)
                 view = (View(points, origin, path.name, DepthView(image, 0.0, camera, rot, pos)), None)
             else:
-                cloud = load_cloud(path, scale=scale)
+                cloud = _load_view(path, scale, MAX_POINTS - total)
+                total += len(cloud.points)
                 origin = cloud.sensor_origins
                 if args.viewpoint is not None:
                     origin = np.asarray(args.viewpoint[k], dtype=np.float64) * scale
@@ -644,6 +645,24 @@ def _estimate_views(args: argparse.Namespace, scale: float) -> list[tuple]:  # t
             raise TwinError(exc if str(path) in str(exc) else f"{path}: {exc}") from exc
         views.append(view)
     return views
+
+
+def _load_view(path: Path, scale: float, left: int):  # type: ignore[no-untyped-def]
+    """One VIEW's cloud, refused if it would take the views together past ``cloudfile.MAX_POINTS`` (``left`` of
+    them are left): the cap is per file, and forty copies of a 1M-point file passed 5 GB."""
+    from estimation import load_cloud
+    from estimation.cloudfile import MAX_POINTS
+    from estimation.errors import CloudError
+
+    together = f"{path}: the views together hold more than {MAX_POINTS:,} points, the most one estimate reads"
+    if left < 1:
+        raise TwinError(together)
+    try:
+        return load_cloud(path, scale=scale, max_points=left)
+    except CloudError as exc:
+        if left < MAX_POINTS and "max_points=" in str(exc):
+            raise TwinError(together) from exc
+        raise
 
 
 def estimate_to_json(result, seconds: float) -> dict:  # type: ignore[no-untyped-def]

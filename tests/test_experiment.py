@@ -176,6 +176,8 @@ def test_the_cli_writes_every_column_and_the_same_rows_with_workers(rows, cache,
     # 78 repeats of one delay ran every condition 78 times; 100,000 workers were accepted
     (["--delays", "0,10,10"], "--delays: 10 is given twice in '0,10,10'"),
     (["--tasks", "push, push"], "--tasks: push is given twice in 'push, push'"),
+    (["--tasks", "push,,press"], "--tasks: an empty name in 'push,,press'"),  # was push and press, silently
+    (["--tasks", "push,"], "--tasks: an empty name in 'push,'"),
     (["--workers", "100000"], "--workers must be from 0 to 256, got 100000"),
 ])
 def test_bad_arguments_are_one_line_and_exit_2(extra, message, tmp_path, capsys):

@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from cli.main import main
-from estimation import CloudError, estimate, make_cloud, save_cloud
-from estimation.views import View, estimate_views
+from estimation import CloudError, estimate, load_cloud, make_cloud, save_cloud
+from estimation.views import View, estimate_views, plane_from_abcd
 
 TOP = 0.75  # table top, metres
 # An L-bracket: a 10 x 6 x 1.5 cm foot and a 1.5 x 6 x 7 cm upright, standing on the table.
@@ -304,6 +304,22 @@ def test_bad_options_are_one_line_errors(capsys, pcds, extra, message):
     err = capsys.readouterr().err
     assert err.count("\n") == 1
     assert pytest.importorskip("re").search(message, err), err
+
+
+def test_the_views_together_are_held_to_the_point_cap(capsys, pcds, monkeypatch):
+    """The cap was per file: forty copies of a 1M-point file passed 5 GB."""
+    from estimation import cloudfile
+
+    sizes = [len(load_cloud(p).points) for p in pcds]
+    monkeypatch.setattr(cloudfile, "MAX_POINTS", sum(sizes) - 1)
+    assert main(["estimate", *pcds, "--density", "1000"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"the views together hold more than {sum(sizes) - 1:,} points" in err, err
+    monkeypatch.setattr(cloudfile, "MAX_POINTS", sizes[0])  # the first view fills it: the second is refused
+    assert main(["estimate", *pcds, "--density", "1000"]) == 2
+    assert "the views together hold more than" in capsys.readouterr().err
+    monkeypatch.setattr(cloudfile, "MAX_POINTS", sum(sizes))
+    assert main(["estimate", *pcds, "--density", "1000", "--json"]) == 0
 
 
 def test_a_support_plane_of_huge_coefficients_is_normalised():
