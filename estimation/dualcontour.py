@@ -85,6 +85,8 @@ class DualSurface:
         opposed_cells: cells with sign changes facing both ways along an axis: both faces of a wall
             thinner than about a cell pass through them, and their single vertex cannot be right.
         unmeasured_area: m^2 of surface between band nodes no point reached (holes closed by the shell).
+        unmeasured_patches: (k, 2) float64: that area by connected patch (quads sharing a corner), m^2, and
+            each patch's half width, m (twice its area over its perimeter).
         normals: (v, 3) float64, unit outward: each vertex's surface normal from the points' planes near
             it (the weighted mean normal, or the quadric's dominant direction), not from the mesh.
         smooth: (v,) bool: the planes near the vertex agree (``FLAT_AGREEMENT``, or their quadric has
@@ -101,6 +103,7 @@ class DualSurface:
     unmeasured_area: float
     normals: np.ndarray
     smooth: np.ndarray
+    unmeasured_patches: np.ndarray
 
 
 def contour(points: np.ndarray, normals: np.ndarray, band: Band, values: np.ndarray,
@@ -198,7 +201,32 @@ def contour(points: np.ndarray, normals: np.ndarray, band: Band, values: np.ndar
     unseen = ~supported[quads].any(axis=1)
     return DualSurface(vertices=vertices, faces=tri.astype(np.int64), cells=n_cells,
                        opposed_cells=int(opposed.sum()), unmeasured_area=float(area[unseen].sum()),
-                       normals=vertex_normals, smooth=smooth)
+                       normals=vertex_normals, smooth=smooth,
+                       unmeasured_patches=_patches(quads[unseen], area[unseen], vertices))
+
+
+def _patches(quads: np.ndarray, area: np.ndarray, vertices: np.ndarray) -> np.ndarray:
+    """(k, 2): the area (m^2) and the half width (m, 2 area / perimeter: a disc's radius, a strip's width; at most
+    the radius of a disc of that area) of each connected patch of ``quads`` (q, 4) (quads sharing a corner joined), ``area`` (q,) each quad's."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    if len(quads) == 0:
+        return np.zeros((0, 2))
+    q, n = len(quads), len(vertices)
+    # Quads and vertices as one graph's nodes, each quad linked to its four corners.
+    links = coo_matrix((np.ones(4 * q), (np.repeat(np.arange(q), 4), q + quads.ravel())), shape=(q + n, q + n))
+    labels = np.unique(connected_components(links, directed=False)[1][:q], return_inverse=True)[1]
+    # The rim: quad edges no other quad of the patches shares.
+    edges = np.sort(np.stack([quads, np.roll(quads, -1, axis=1)], axis=2).reshape(-1, 2), axis=1)
+    _, first, count = np.unique(edges, axis=0, return_index=True, return_counts=True)
+    rim = first[count == 1]
+    length = np.linalg.norm(vertices[edges[rim, 0]] - vertices[edges[rim, 1]], axis=1)
+    areas = np.bincount(labels, weights=area)
+    perimeter = np.bincount(labels[rim // 4], weights=length, minlength=len(areas))
+    # No wider than a disc of the same area (the isoperimetric bound), which a patch with no rim (a whole closed
+    # piece no point reached) also takes.
+    return np.stack([areas, np.minimum(2 * areas / np.maximum(perimeter, 1e-300), np.sqrt(areas / np.pi))], axis=1)
 
 
 def _place_vertices(points: np.ndarray, normals: np.ndarray, band: Band, cell_keys: np.ndarray,

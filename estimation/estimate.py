@@ -108,7 +108,8 @@ class PhysicalEstimate:
         normals: (points_used, 3) float32, unit, cloud frame: their outward normals (given or estimated).
         volume_bounds_m3: (low, high) m^3, the volumes the cloud cannot tell apart from the estimate
             ('auto' only, else None): surface the points did not measure (holes closed by the shell)
-            could lie anywhere across the shell, walls thinner than a cell anywhere from nothing
+            could lie anywhere across the shell (a wide patch as deep as it is wide: ``tol.HOLE_DEPTH_SHARE``),
+            coordinates rounded to a lattice by half its step (``estimation.lattice``), walls thinner than a cell anywhere from nothing
             to a cell thick, noise on a curved surface moves it by up to twice sigma^2 times the
             mean curvature (``tol.NOISE_CURVATURE_BIAS``), the slivers added back between the facets and the
             curved surface (``curvature.bulge_volumes``) are known to their own size, and a surface curving
@@ -261,6 +262,7 @@ def _estimate_auto(
     0.51 to 1.31 % at worst. Where the refined pass is still in doubt past the warning's threshold and more
     points would resolve more, further passes take them (``_with_more_points``).
     """
+    from estimation.lattice import lattice_step
     from estimation.spacing import surface_noise
 
     # The principal frame: the grid, and so the result, does not depend on the cloud's rotation.
@@ -291,14 +293,16 @@ def _estimate_auto(
     if run.note is not None:
         warnings.append(run.note)
     curved = _noise_on_curvature(surface, noise, h)
+    step = lattice_step(cloud.points)
+    rounded = _area(surface) * step / 2  # a face along the lattice may be off by half a step (estimation.lattice)
     # The slivers added back model the surface between the vertices to second order: what they leave is not known
     # better than their own size (smooth shapes came out 0.01-0.04 % small without them, within 0.03 % either
     # way with them, and an interval of zero width missed the truth by that much).
-    doubt = run.hole + run.thin + curved + tol.CHORDAL_DOUBT * (run.unresolved + run.chordal)
+    doubt = run.hole + run.deep + run.thin + curved + rounded + tol.CHORDAL_DOUBT * (run.unresolved + run.chordal)
     bounds = (max(0.0, props.volume - doubt), props.volume + doubt)
     bounds = _one_sheet(run, surface, noise, bounds, warnings)  # first: when it holds, what follows is said of (0, inf)
     unmeasured = _unmeasured_share(surface)
-    if run.hole > tol.VOLUME_DOUBT_FRACTION * props.volume:
+    if run.hole + run.deep > tol.VOLUME_DOUBT_FRACTION * props.volume:
         warnings.append(f"{100 * unmeasured:.1f} % of the surface "
                         f"was not measured (holes closed by a {run.closing}-cell shell): the volume is "
                         f"only known to {bounds[0]:.4g}..{bounds[1]:.4g} m^3")
@@ -306,6 +310,10 @@ def _estimate_auto(
         warnings.append(f"the noise ({1000 * noise:.2g} mm) is a large share of the surface's radius of curvature: "
                         f"it may move the volume by up to {100 * curved / props.volume:.2g} %: the volume is only "
                         f"known to {bounds[0]:.4g}..{bounds[1]:.4g} m^3")
+    if rounded > tol.VOLUME_DOUBT_FRACTION * props.volume and np.isfinite(bounds[1]):
+        warnings.append(f"the coordinates lie on a {1000 * step:.3g} mm lattice (rounded when written): a face along "
+                        f"it may be off by up to half a step, so the volume is only known to {bounds[0]:.4g}.."
+                        f"{bounds[1]:.4g} m^3")
     if run.sealed > tol.VOLUME_DOUBT_FRACTION * props.volume:
         # No closing radius closed the cloud for good: the inside is what the widest shell enclosed, behind
         # walls thinner than it or openings it sealed (a hollow ball's mouth, with noise as thick as its
@@ -426,6 +434,7 @@ class _AutoPass:
         points, normals: (m, 3) the points used and their outward normals. h: fine cell, metres.
         surface: the contoured surface. props: its mass properties (box frame). closing: the coarse
         shell's radius, cells. hole, thin: m^3 of volume the cloud leaves open (see ``volume_bounds_m3``).
+        deep: m^3 more behind unmeasured patches wider than the shell (``tol.HOLE_DEPTH_SHARE``).
         encloses: the coarse flood fill found an inside (``grid.Occupancy.encloses``). sealed: m^3 of that
         inside when no closing radius settled it (``grid.Occupancy.unsettled``): it may be open space.
     """
@@ -438,6 +447,7 @@ class _AutoPass:
     closing: int
     hole: float
     thin: float
+    deep: float = 0.0
     encloses: bool = True
     sealed: float = 0.0
     note: str | None = None  # what was done to given normals (normals.orient_given)
@@ -559,15 +569,19 @@ def _auto_pass(cloud: PointCloud, box: OrientedBox, local: np.ndarray, spacing: 
     # The mesh stays flat; its own volume is short of ``props.volume`` by the slivers.
     bulge, missed = slivers(surface.vertices, surface.faces, surface.normals, surface.smooth)
     props = corrected(mass_properties(surface.vertices, surface.faces, density), surface.vertices, surface.faces, bulge)
-    # What the cloud leaves open: unmeasured surface anywhere across the closing shell's half width,
-    # and cells holding both faces of a wall anywhere from none to a whole cell of material (whatever
-    # the mesh put there, the truth may differ by up to the cell).
-    hole = surface.unmeasured_area * (occ.closing + 0.5) * coarse.cell
+    # What the cloud leaves open: unmeasured surface anywhere across the closing shell's half width (and
+    # deeper behind a patch wider than that: ``deep``, which more points would not resolve), and cells holding
+    # both faces of a wall anywhere from none to a whole cell of material (whatever the mesh put there, the
+    # truth may differ by up to the cell).
+    shell = (occ.closing + 0.5) * coarse.cell
+    hole = surface.unmeasured_area * shell
+    area, half_width = surface.unmeasured_patches.T
+    deep = float(area @ np.maximum(0.0, tol.HOLE_DEPTH_SHARE * half_width - shell))
     thin = surface.opposed_cells * h**3
     sealed = occ.unsettled * coarse.cell**3
     lap("mass_properties", t0)
     return _AutoPass(points=points, normals=normals, h=h, surface=surface, props=props, closing=occ.closing,
-                     hole=hole, thin=thin, encloses=occ.encloses, sealed=sealed, note=note, unresolved=float(missed.sum()),
+                     hole=hole, deep=deep, thin=thin, encloses=occ.encloses, sealed=sealed, note=note, unresolved=float(missed.sum()),
                      chordal=float(np.abs(bulge).sum()))
 
 

@@ -164,6 +164,14 @@ VOLUME_DOUBT_FRACTION = 0.005
 #: of curvature (past a fifth, as on a 5 mm ball at 1 mm, the noise reads low and the widening falls short).
 NOISE_CURVATURE_BIAS = 2.0
 
+#: What a patch of surface no point measured may hide, as a share of its half width (twice its area over its
+#: perimeter: a disc's radius, a strip's width): ``volume_bounds_m3`` widens by its area times this times that
+#: half width, where that passes the closing shell's half width. A dome or a dent as deep as the patch is wide:
+#: a hemisphere's volume over its base is 2/3 r. A wide hole's depth is not in the points: a mug whose inner floor
+#: no point reached came out -12 %, the truth outside an interval of the shell's half width (the flood fill
+#: took the base below the hole for outside).
+HOLE_DEPTH_SHARE = 2.0 / 3.0
+
 #: Facets on a curved surface: ``volume_bounds_m3`` widens by this times the slivers added back between the
 #: facets and the surface (``curvature.bulge_volumes``, unsigned: a second-order model, its residual is of its
 #: own size) and by this times the slivers left out where the surface turns faster than the cells resolve
