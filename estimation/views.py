@@ -57,6 +57,10 @@ MIN_PLANE_SHARE = 0.05
 #: the object is behind it, on the side away from the sensors).
 MAX_BELOW_SHARE = 0.05
 
+#: A view with less than this share of its points above the plane in the largest cluster, and more in another,
+#: sees that other cluster as its side of the object (:func:`_views_own_sides`).
+OWN_SIDE_SHARE = 0.5
+
 #: Points above the plane apart from the object (other clusters of ``segmentation.MIN_CLUSTER_POINTS`` or
 #: more) earn a warning beyond this share: a second object, or a plane that is not the support.
 OTHER_CLUSTERS_SHARE = 0.05
@@ -280,10 +284,30 @@ def _largest_above(points: np.ndarray, origins: np.ndarray, plane: Plane, cut: f
     labels = cluster(local, cell=CLUSTER_SPACINGS * _cluster_spacing(above, view_of[keep]))
     if (labels == 0).sum() < 3:
         raise CloudError("no object above the support plane (only scattered points)")
+    joined = _views_own_sides(labels, view_of[keep])
     obj, others = np.zeros(len(points), dtype=bool), np.zeros(len(points), dtype=bool)
-    obj[keep[labels == 0]] = True
-    others[keep[labels > 0]] = True
+    obj[keep[np.isin(labels, joined)]] = True
+    others[keep[(labels >= 0) & ~np.isin(labels, joined)]] = True
     return obj, others
+
+
+def _views_own_sides(labels: np.ndarray, view_of: np.ndarray) -> list[int]:
+    """The cluster labels that are the object: the largest (0), and the cluster holding most of a view's points
+    where that view has little in the largest (under :data:`OWN_SIDE_SHARE` of its points in it, over it in the
+    other): the views are all of the object, so what such a view mostly sees is the object's side the others do
+    not. Two cameras facing each other across a mug see two halves with no point between them: rays graze the
+    mug at its outline and their points thin out there, so the halves lie centimetres apart, and one was dropped
+    as another object (-54 %)."""
+    joined = [0]
+    for view in np.unique(view_of):
+        mine = labels[(view_of == view) & (labels >= 0)]
+        if len(mine) == 0:
+            continue
+        counts = np.bincount(mine)
+        best = int(np.argmax(counts))
+        if best != 0 and counts[0] < OWN_SIDE_SHARE * len(mine) < counts[best] and best not in joined:
+            joined.append(best)
+    return joined
 
 
 def _cluster_spacing(points: np.ndarray, view_of: np.ndarray) -> float:
