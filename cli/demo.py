@@ -40,7 +40,8 @@ def remote_record_path(record: Path) -> Path:
 
 def check_demo_records(record: Path, inputs: tuple[Path | None, ...] = ()) -> None:
     """Refuse, before anything starts, a ``record`` or its remote sibling (:func:`remote_record_path`) that
-    the recordings must not replace: an input, a folder, a device, a file that is not a recording this program wrote.
+    the recordings must not replace: an input, a folder, a device, a file that is not a recording this program
+    wrote.
 
     Raises:
         TwinError: naming ``--record``, the file and why.

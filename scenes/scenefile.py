@@ -569,7 +569,8 @@ def _gltf_files(path: Path, where: str) -> list[int]:
         doc = json.loads(path.read_bytes())
     except (OSError, ValueError) as exc:
         raise SceneError(f"{where}: mesh file {path} is not a glTF's JSON ({exc})") from None
-    parts = [item for key in ("buffers", "images") for item in (doc.get(key) or [] if isinstance(doc, dict) else [])]
+    lists = [doc.get(key) for key in ("buffers", "images")] if isinstance(doc, dict) else []
+    parts = [item for items in lists if isinstance(items, list) for item in items]  # other shapes: the loader's error
     sizes = []
     for part in parts:
         uri = part.get("uri") if isinstance(part, dict) else None

@@ -5,8 +5,9 @@ there is gone. One rule for every output that may meet an earlier file at its pa
 rerun files, ``--rerun save``; meshes, ``--mesh-out``): an output replaces only what is its own, that is nothing,
 an empty regular file (nothing of a user's is lost) or a regular file whose first bytes say this program wrote
 it (an MCAP header naming tactile-twin, a rerun recording of its application id, a mesh's own mark: a file of
-the output's kind alone was not enough, as a ROS 2 bag is an MCAP). Anything else is the user's: a folder, a device, pipe or socket (the rename would delete the node, and
-reading a FIFO blocks), or a file of any other kind. Each output refuses in its own words, naming its flag
+the output's kind alone was not enough, as a ROS 2 bag is an MCAP). Anything else is the user's: a folder, a
+device, pipe or socket (the rename would delete the node, and reading a FIFO blocks), or a file of any other
+kind. Each output refuses in its own words, naming its flag
 (:func:`sync.recording.check_record_destination`, :func:`twin.rerunlog.parse_target`,
 :func:`cli.outputs.check_mesh_file`).
 """

@@ -371,10 +371,12 @@ MAX_CONFIG_DEPTH = 64
 
 #: The files a zenoh config names (TLS keys and certificates, authentication dictionaries and keys), checked as
 #: :func:`make_config` reads it: a user-password dictionary that was a FIFO hung the session and ignored Ctrl-C.
-FILE_KEYS = (*(f"transport/link/tls/{key}" for key in ("root_ca_certificate", "listen_private_key", "listen_certificate",
-                                                          "connect_private_key", "connect_certificate")),
-             "transport/auth/usrpwd/dictionary_file",
-             *(f"transport/auth/pubkey/{key}" for key in ("public_key_file", "private_key_file", "known_keys_file")))
+FILE_KEYS = (
+    *(f"transport/link/tls/{key}" for key in ("root_ca_certificate", "listen_private_key", "listen_certificate",
+                                              "connect_private_key", "connect_certificate")),
+    "transport/auth/usrpwd/dictionary_file",
+    *(f"transport/auth/pubkey/{key}" for key in ("public_key_file", "private_key_file", "known_keys_file")),
+)
 
 
 def _check_small_file(path: Path, what: str, limit: int) -> None:
