@@ -210,17 +210,19 @@ def run(args: argparse.Namespace) -> int:
     sweep = dataclasses.replace(sweep, sensor=sensor)
     out: Path = args.out
     engine = nullcontext(None) if args.dask is None else dask_executor(args.dask, args.workers)
-    with engine as executor, Progress(TextColumn("sessions"), BarColumn(), MofNCompleteColumn(),
-                                      TimeElapsedColumn(), console=Console(stderr=True), transient=False) as bar:
-        # Claimed once the engine is up: an unreachable scheduler left an out folder holding only the marker.
+    with engine as executor:
+        # Claimed once the engine is up (an unreachable scheduler left an out folder holding only the marker), and
+        # before the bar starts: a refused folder printed the bar's empty line above its one-line error.
         claim_output_folder(out, marker=MARKER, command=COMMAND)
-        task = bar.add_task("sessions", total=None)
+        with Progress(TextColumn("sessions"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+                      console=Console(stderr=True), transient=False) as bar:
+            task = bar.add_task("sessions", total=None)
 
-        def progress(done: int, total: int) -> None:
-            bar.update(task, completed=done, total=total)
+            def progress(done: int, total: int) -> None:
+                bar.update(task, completed=done, total=total)
 
-        rows, traces = run_experiment(scene, sweep, workers=args.workers, executor=executor, recorded=recorded,
-                                      progress=progress)
+            rows, traces = run_experiment(scene, sweep, workers=args.workers, executor=executor, recorded=recorded,
+                                          progress=progress)
     write_output(out, "results.csv", lambda tmp: write_csv(rows, tmp), marker=MARKER)
     plots = write_plots(rows, traces, out)
     text = report(rows, args, plots, sweep.sensor)

@@ -195,6 +195,21 @@ def test_an_out_folder_this_command_did_not_write_is_refused(tmp_path, capsys):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["notes.txt"]
 
 
+def test_an_out_folder_refused_at_its_claim_is_one_line_with_no_progress_bar(tmp_path, capsys, monkeypatch):
+    """As root, /proc/x passed the early writability check and was refused when claimed, after the progress bar
+    had started: its empty line came before the error."""
+    import cli.experiment
+    from estimation.errors import TwinError
+
+    def refuse(out, **_):  # type: ignore[no-untyped-def]
+        raise TwinError(f"{out}: cannot write the output folder (No such file or directory)")
+
+    monkeypatch.setattr(cli.experiment, "claim_output_folder", refuse)
+    assert main([*ARGS, "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "cannot write the output folder" in err, repr(err)
+
+
 def test_help_names_both_inputs():
     out = subprocess.run([sys.executable, "-m", "cli.main", "experiment", "--help"], capture_output=True,
                          text=True, check=True, cwd=Path(__file__).parent.parent).stdout
