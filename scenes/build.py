@@ -106,7 +106,8 @@ def build_scene(scene: SceneSpec, *, coacd: CoacdSettings = DEFAULT_SETTINGS, ca
     """Estimate every object, decompose it, and compile the whole scene.
 
     Objects are built independently (:func:`build_object`), in ``workers`` processes (default: one per
-    core, at most one per object; 1 builds them here); the result does not depend on how many.
+    core, at most one per object, as many as the memory holds: :func:`default_workers`; 1 builds them here);
+    the result does not depend on how many.
 
     ``progress``: a progress bar over the objects on stderr, unless ``on_object`` (see :data:`OnObject`)
     reports them instead.
@@ -117,7 +118,8 @@ def build_scene(scene: SceneSpec, *, coacd: CoacdSettings = DEFAULT_SETTINGS, ca
             worker process died.
     """
     t0 = time.perf_counter()
-    workers = default_workers(len(scene.objects)) if workers is None else workers
+    most = max((o.points for o in scene.objects), default=0)
+    workers = default_workers(len(scene.objects), most) if workers is None else workers
     if workers < 1:
         raise ValueError(f"workers must be at least 1, got {workers}")
     built = _build_objects(scene, coacd=coacd, cache_dir=cache_dir, workers=workers, on_object=on_object,
@@ -151,10 +153,33 @@ def _check_posed_inside(scene: SceneSpec, objects: tuple[TwinObject, ...]) -> No
                                     f"{np.array2string(obj.position, precision=4)} m, which")
 
 
-def default_workers(objects: int) -> int:
-    """Processes to build ``objects`` objects in: one per core this process may run on, at most one each."""
+#: Memory a build worker takes per point of its object's sampled cloud (sampling, estimate, reconstruction): a
+#: primitive of 10,000,000 points (``scenes.scenefile.MAX_POINTS``) took about 1.9 GB a worker, 3.9 GB in all on
+#: this 2-core machine (a review, /usr/bin/time), and one worker a core would take cores x that.
+BYTES_PER_POINT = 200
+
+
+def default_workers(objects: int, points: int = 0) -> int:
+    """Processes to build ``objects`` objects in: one per core this process may run on, at most one each, and no
+    more than the memory available holds at :data:`BYTES_PER_POINT` for the largest object's ``points``."""
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
-    return max(1, min(objects, cores))
+    workers = max(1, min(objects, cores))
+    free = available_memory()
+    if points > 0 and free is not None:
+        workers = max(1, min(workers, free // (points * BYTES_PER_POINT)))
+    return workers
+
+
+def available_memory() -> int | None:
+    """Bytes of memory available to start new work without swapping (Linux's MemAvailable); None where unknown."""
+    try:
+        with open("/proc/meminfo", "rb") as f:
+            for line in f:
+                if line.startswith(b"MemAvailable:"):
+                    return int(line.split()[1]) * 1024  # kB
+    except (OSError, ValueError, IndexError):
+        pass
+    return None
 
 
 def build_object(spec: ObjectSpec, *, table_top: float | None, coacd: CoacdSettings = DEFAULT_SETTINGS,

@@ -5,6 +5,7 @@ Real parts throughout: real estimates, real CoACD on a small L-bracket, real spa
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import numpy as np
@@ -154,3 +155,19 @@ def test_scene_points_key_is_what_lowers_the_sample_count(builds):
     est = {o.id: o.estimate for o in built.objects}
     assert est["box"].points_in == 30000 and est["scan"].points_in == 3000
     assert np.isfinite([r.cpu_seconds for r in built.reports.values()]).all()
+
+
+def test_default_workers_are_as_many_as_the_memory_holds(monkeypatch):
+    """A primitive at the most points a scene allows (10 M) took about 1.9 GB a worker, one worker a core."""
+    from scenes import build
+
+    cores = len(os.sched_getaffinity(0))
+    monkeypatch.setattr(build, "available_memory", lambda: None)  # unknown: one a core, at most one an object
+    assert build.default_workers(100, 10_000_000) == cores and build.default_workers(1, 10_000_000) == 1
+    monkeypatch.setattr(build, "available_memory", lambda: 3 * 1_000_000 * build.BYTES_PER_POINT)
+    assert build.default_workers(100, 1_000_000) == min(cores, 3)
+    assert build.default_workers(100, 10_000_000) == 1  # never none, however little is free
+    assert build.default_workers(100, 1000) == cores
+    monkeypatch.undo()
+    free = build.available_memory()
+    assert free is None or free > 0
