@@ -602,7 +602,6 @@ def _estimate_views(args: argparse.Namespace, scale: float) -> list[tuple]:  # t
     its loaded cloud (None for a depth image)."""
     import numpy as np
 
-    from estimation.cloudfile import MAX_POINTS
     from estimation.errors import CloudError
     from estimation.views import View
 
@@ -633,7 +632,7 @@ def _estimate_views(args: argparse.Namespace, scale: float) -> list[tuple]:  # t
                 points, origin = depth_view(image, camera, rot, pos)
                 view = (View(points, origin, path.name, DepthView(image, 0.0, camera, rot, pos)), None)
             else:
-                cloud = _load_view(path, scale, MAX_POINTS - total)
+                cloud = _load_view(path, scale, total)
                 total += len(cloud.points)
                 origin = cloud.sensor_origins
                 if args.viewpoint is not None:
@@ -647,20 +646,21 @@ def _estimate_views(args: argparse.Namespace, scale: float) -> list[tuple]:  # t
     return views
 
 
-def _load_view(path: Path, scale: float, left: int):  # type: ignore[no-untyped-def]
-    """One VIEW's cloud, refused if it would take the views together past ``cloudfile.MAX_POINTS`` (``left`` of
-    them are left): the cap is per file, and forty copies of a 1M-point file passed 5 GB."""
+def _load_view(path: Path, scale: float, total: int):  # type: ignore[no-untyped-def]
+    """One VIEW's cloud, refused if it would take the views together past ``cloudfile.MAX_POINTS`` (``total``
+    read before it): the cap is per file, and forty copies of a 1M-point file passed 5 GB."""
     from estimation import load_cloud
     from estimation.cloudfile import MAX_POINTS
     from estimation.errors import CloudError
 
     together = f"{path}: the views together hold more than {MAX_POINTS:,} points, the most one estimate reads"
+    left = MAX_POINTS - total
     if left < 1:
         raise TwinError(together)
     try:
         return load_cloud(path, scale=scale, max_points=left)
     except CloudError as exc:
-        if left < MAX_POINTS and "max_points=" in str(exc):
+        if total and "max_points=" in str(exc):
             raise TwinError(together) from exc
         raise
 

@@ -86,7 +86,7 @@ class DualSurface:
             thinner than about a cell pass through them, and their single vertex cannot be right.
         unmeasured_area: m^2 of surface between band nodes no point reached (holes closed by the shell).
         unmeasured_patches: (k, 2) float64: that area by connected patch (quads sharing a corner), m^2, and
-            each patch's half width, m (twice its area over its perimeter).
+            each patch's half width, m (twice its area over its perimeter, at most a disc's radius).
         normals: (v, 3) float64, unit outward: each vertex's surface normal from the points' planes near
             it (the weighted mean normal, or the quadric's dominant direction), not from the mesh.
         smooth: (v,) bool: the planes near the vertex agree (``FLAT_AGREEMENT``, or their quadric has
@@ -207,7 +207,8 @@ def contour(points: np.ndarray, normals: np.ndarray, band: Band, values: np.ndar
 
 def _patches(quads: np.ndarray, area: np.ndarray, vertices: np.ndarray) -> np.ndarray:
     """(k, 2): the area (m^2) and the half width (m, 2 area / perimeter: a disc's radius, a strip's width; at most
-    the radius of a disc of that area) of each connected patch of ``quads`` (q, 4) (quads sharing a corner joined), ``area`` (q,) each quad's."""
+    the radius of a disc of that area) of each connected patch of ``quads`` (q, 4), quads sharing a corner joined;
+    ``area`` (q,) is each quad's."""
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
 

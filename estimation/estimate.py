@@ -109,8 +109,8 @@ class PhysicalEstimate:
         volume_bounds_m3: (low, high) m^3, the volumes the cloud cannot tell apart from the estimate
             ('auto' only, else None): surface the points did not measure (holes closed by the shell)
             could lie anywhere across the shell (a wide patch as deep as it is wide: ``tol.HOLE_DEPTH_SHARE``),
-            coordinates rounded to a lattice by half its step (``estimation.lattice``), walls thinner than a cell anywhere from nothing
-            to a cell thick, noise on a curved surface moves it by up to twice sigma^2 times the
+            coordinates rounded to a lattice by half its step (``estimation.lattice``), walls thinner than a
+            cell anywhere from nothing to a cell thick, noise on a curved surface moves it by up to twice sigma^2 times the
             mean curvature (``tol.NOISE_CURVATURE_BIAS``), the slivers added back between the facets and the
             curved surface (``curvature.bulge_volumes``) are known to their own size, and a surface curving
             faster than the cells resolve by what the facets cut off it (``curvature.unresolved_volumes``).
@@ -581,8 +581,8 @@ def _auto_pass(cloud: PointCloud, box: OrientedBox, local: np.ndarray, spacing: 
     sealed = occ.unsettled * coarse.cell**3
     lap("mass_properties", t0)
     return _AutoPass(points=points, normals=normals, h=h, surface=surface, props=props, closing=occ.closing,
-                     hole=hole, deep=deep, thin=thin, encloses=occ.encloses, sealed=sealed, note=note, unresolved=float(missed.sum()),
-                     chordal=float(np.abs(bulge).sum()))
+                     hole=hole, deep=deep, thin=thin, encloses=occ.encloses, sealed=sealed, note=note,
+                     unresolved=float(missed.sum()), chordal=float(np.abs(bulge).sum()))
 
 
 def _with_more_points(before: _AutoPass, run: _AutoPass, budget: int, cloud: PointCloud, box: OrientedBox,

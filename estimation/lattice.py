@@ -15,6 +15,7 @@ SAMPLE = 20_000
 #: How near a whole number of steps a coordinate must be, in steps (float32 files hold ~7 digits).
 TOLERANCE = 1e-3
 
+
 def lattice_step(points: np.ndarray) -> float:
     """The step (metres) of the lattice every point's coordinates lie on, in the points' own axes: the largest
     of the three axes' steps; 0 where an axis' coordinates lie on none (a sensor's cloud, any rotated cloud).
