@@ -911,7 +911,8 @@ def from_mesh(vertices: np.ndarray, faces: np.ndarray, density: float, *,
 
     Raises:
         CloudError: vertices not a finite (v, 3) array within ``tol.MAX_COORDINATE_M``, faces not (f, 3) whole
-            vertex indices within them, or no volume enclosed.
+            vertex indices within them, no volume enclosed, or mass properties no solid has (a surface that
+            passes through itself).
         MaterialError: as :func:`estimate`.
     """
     from estimation.contracts import as_faces
@@ -948,8 +949,10 @@ def from_mesh(vertices: np.ndarray, faces: np.ndarray, density: float, *,
     if turned is not None:
         merged_faces = turned.faces
         vertices, faces = merged_vertices, merged_faces
-        said = "the mesh is wound inside out (its faces face inward)" if turned.total == 1 else (
-            f"{turned.parts} of the mesh's {turned.total} closed parts "
+        whole = "the mesh is wound inside out (its faces face inward)"
+        said = whole if turned.total == 1 or (turned.whole and not turned.parts) else (
+            (f"{whole}, and then {turned.parts} of its {turned.total} closed parts " if turned.whole else
+             f"{turned.parts} of the mesh's {turned.total} closed parts ")
             + ("is wound inside out (its faces face inward, but it lies in no solid, so it is no cavity)"
                if turned.parts == 1 else
                "are wound inside out (their faces face inward, but they lie in no solid, so they are no cavities)"))
@@ -969,6 +972,8 @@ def from_mesh(vertices: np.ndarray, faces: np.ndarray, density: float, *,
         warnings += (f"closed parts of the mesh may overlap ({overlap.overlapping} of its {overlap.parts} parts have "
                      f"overlapping bounds) but their union was not formed ({overlap.unresolved}): its volume is the "
                      f"sum over its faces, which counts any space they share more than once",)
+    if (why := _not_a_solid(props, vertices)) is not None:
+        raise CloudError(f"the mesh's mass properties are no solid's ({why}): does it intersect itself?")
     box = oriented_box(vertices)
     if (hint := units_warning(box.extents)) is not None:  # as estimate() says of a cloud: a box in mm read as m
         warnings = (hint, *warnings)
@@ -976,6 +981,26 @@ def from_mesh(vertices: np.ndarray, faces: np.ndarray, density: float, *,
         method="mesh", mass=props, obb=box, vertices=vertices, faces=faces,
         watertight=watertight, points_in=0, points_used=0, cell=0.0,
         timings=Timings(mass_properties=time.perf_counter() - t0), material=material, warnings=warnings)
+
+
+def _not_a_solid(props: MassProperties, vertices: np.ndarray) -> str | None:
+    """What no solid of ``vertices`` (v, 3) metres could have in ``props`` (kg m^2, metres), or None.
+
+    A closed, consistently wound surface that passes through itself counts some space twice and some less than
+    never: a box with a corner pulled through its base summed to principal moments of -0.0032, -0.0029 and
+    0.0005 kg m^2 and a centre of mass outside its vertices' box. Every solid's principal moments are positive
+    and each is at most the sum of the other two (a flat plate's are equal to it), and its centre of mass lies
+    within its vertices' bounds; a part per million covers rounding.
+    """
+    moments = props.principal_moments
+    slack = 1e-6 * float(np.abs(moments).max(initial=0.0))
+    if moments[0] <= -slack or moments[0] + moments[1] < moments[2] - slack:
+        return f"principal moments {', '.join(f'{m:.3g}' for m in moments)} kg m^2"
+    low, high = vertices.min(axis=0), vertices.max(axis=0)
+    margin = 1e-6 * float(np.max(high - low))
+    if ((props.center_of_mass < low - margin) | (props.center_of_mass > high + margin)).any():
+        return "its centre of mass lies outside its vertices' bounds"
+    return None
 
 
 def box_mesh(box: OrientedBox) -> tuple[np.ndarray, np.ndarray]:
