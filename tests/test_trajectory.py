@@ -140,6 +140,50 @@ def test_a_file_in_millimetres_is_refused_naming_units_and_read_with_them(tmp_pa
                  "--json"]) == 0
 
 
+def test_a_script_in_metres_read_in_mm_or_cm_is_refused_naming_metres(tmp_path, capsys):
+    # Read in mm, a push over the table became targets within 0.6 mm of the world origin, on the floor under the
+    # table: exit 0, and the end effector pressed on the table's top with 97 N (a review's probe, session 58).
+    from cli.main import main
+
+    path = _write(tmp_path, "t,x,y,z\n0,-0.3,0,0.56\n2,0.3,0,0.56\n")
+    for units, far in (("mm", "0.00056"), ("cm", "0.0056")):
+        with pytest.raises(TrajectoryError, match=rf"path.csv: read in \w+ \(--units {units}\) every target lies within "
+                                                  rf"{far} m of the world origin, and read in metres they fit the "
+                                                  r"operator's reach: looks like metres: pass --units m$"):
+            load_trajectory(path, units=units).check_reach(SMALL_BOX)
+    load_trajectory(path).check_reach(SMALL_BOX)
+    # Near the origin in the units given, but 1000 times out would leave the reach: a script in mm, as meant.
+    load_trajectory(_write(tmp_path, "0,-2,0,1\n1,3,0,1\n", "mm.csv"), units="mm").check_reach(SMALL_BOX)
+    assert main(["run", str(SMALL), "--script", str(path), "--units", "mm", "--duration", "0.1", "--no-realtime"]) == 2
+    err = capsys.readouterr().err.lstrip("\n")
+    assert err.count("\n") == 1 and "looks like metres: pass --units m" in err, err
+
+
+def test_clock_times_are_refused_as_seconds_from_the_start(tmp_path):
+    # Unix times held the end effector at the first target for the whole run, exit 0, no word (a review's probe).
+    epoch = _write(tmp_path, "t,x,y,z\n1733590000.0,-0.3,0,0.56\n1733590002.0,0.3,0,0.56\n")
+    with pytest.raises(TrajectoryError, match=r"path.csv: the first waypoint is at t = 1733590000 s, 20,065 days after "
+                                              r"the session starts: t is in seconds from the start \(clock times\? "
+                                              r"subtract the first from each\)$"):
+        load_trajectory(epoch)
+    load_trajectory(_write(tmp_path, "86400,-0.3,0,0.56\n86402,0.3,0,0.56\n", "day.csv"))  # a day's wait: read
+
+
+def test_a_file_of_blank_lines_is_refused_without_reading_each_line_in_python(tmp_path, monkeypatch):
+    # 128 MiB of line ends took about 320 s to say "no waypoints"; lines are counted in C first.
+    import twin.trajectory as trajectory
+
+    monkeypatch.setattr(trajectory, "MAX_LINES", 100)
+    for text, lines in (("\n" * 150, 150), ("\r" * 120, 120), ("\r\n" * 101, 101)):
+        path = _write(tmp_path, text)
+        with pytest.raises(TrajectoryError, match=rf"path.csv: {lines} lines, more than the 100 a trajectory of at most "
+                                                  r"5,000,000 waypoints may take \(blank lines\?\)$"):
+            load_trajectory(path)
+    with pytest.raises(TrajectoryError, match=r"path.csv: no waypoints \(expected rows t,x,y,z\)$"):
+        load_trajectory(_write(tmp_path, "\n" * 60 + "# nothing\n" * 30))
+    assert load_trajectory(_write(tmp_path, "\n" * 60 + "0,0,0,0.5\n")).times.tolist() == [0.0]
+
+
 def test_targets_under_the_floor_or_a_stray_far_one_are_refused_without_a_units_hint(tmp_path):
     under = _write(tmp_path, "t,x,y,z\n0,-0.3,0,0.56\n0.5,0.0,0,-5\n")  # was 25,100 N on the end effector
     with pytest.raises(TrajectoryError, match=r"the target at t = 0.5 s, \(0, 0, -5\) m, is outside the operator's "

@@ -41,6 +41,19 @@ MAX_LINE_CHARS = 64 * 2**10
 #: written in ms runs 2000 s at 0.5 mm/s).
 MS_SPAN_S, MS_SLOWEST_PEAK = 100.0, 1e-3
 
+#: Latest a script's first waypoint may come, seconds from the session's start. A script is seconds from the start:
+#: one whose times were a logger's clock (Unix time, past 1e9 s since 2001) held the end effector at its first
+#: target for the whole run, without a word. A session does not wait a year for its first target.
+MAX_START_S = 365 * 86_400.0
+
+#: Most lines a trajectory file may have: a waypoint each and as many blank or comment lines again. Each line
+#: is looked at in Python where numpy does not read the file (about 2.4 us a line): a 128 MiB file of blank
+#: lines took 320 s to say it held no waypoints.
+MAX_LINES = 2 * MAX_WAYPOINTS
+
+#: What a file with no waypoints is told.
+_NO_WAYPOINTS = "no waypoints (expected rows t,x,y,z)"
+
 #: Unit names as messages say them.
 _UNIT_WORDS = {"m": "metres", "cm": "centimetres", "mm": "millimetres"}
 
@@ -157,6 +170,7 @@ def check_reach(times: np.ndarray, points: np.ndarray, box: tuple[np.ndarray, np
     low, high = (np.asarray(c, dtype=np.float64) for c in box)
     inside = _within(points, low, high)
     if inside.all():
+        _check_not_shrunk(points, low, high, source=source, units=units)
         return
     i = int(np.argmin(inside))
     x, y, z = points[i]
@@ -170,6 +184,22 @@ def check_reach(times: np.ndarray, points: np.ndarray, box: tuple[np.ndarray, np
     raise TrajectoryError(f"{source}: the target at t = {float(times[i]):g} s, ({x:g}, {y:g}, {z:g}) m, is outside the "
                           f"operator's reach (x {low[0]:g} to {high[0]:g}, y {low[1]:g} to {high[1]:g}, z {low[2]:g} to "
                           f"{high[2]:g} m){hint}")
+
+
+def _check_not_shrunk(points: np.ndarray, low: np.ndarray, high: np.ndarray, *, source: str,
+                      units: str | None) -> None:
+    """Refuse a script in metres read in cm or mm: every target then lies within a hundredth of the reach of the
+    world origin (a push over the table read in mm pressed the end effector onto the table from above with 97 N,
+    reaching for a point on the floor), and read in metres all of them fit the reach. A script in the units
+    given is 100 or 1000 times farther out, past the reach read in metres."""
+    if units is None or UNIT_SCALE[units] > UNIT_SCALE["m"] / 100:
+        return
+    grown = points * (UNIT_SCALE["m"] / UNIT_SCALE[units])
+    if _within(grown, low, high).all():
+        far = float(np.abs(points).max())
+        raise TrajectoryError(f"{source}: read in {_UNIT_WORDS[units]} (--units {units}) every target lies within "
+                              f"{far:.3g} m of the world origin, and read in metres they fit the operator's reach: "
+                              f"looks like metres: pass --units m")
 
 
 def _within(points: np.ndarray, low: np.ndarray, high: np.ndarray) -> np.ndarray:
@@ -219,14 +249,36 @@ def load_trajectory(path: str | Path, *, units: str = "m") -> Waypoints:
         raise TrajectoryError(f"{path}: trajectory file is {size / 2**20:,.0f} MiB, more than the "
                               f"{MAX_TRAJECTORY_BYTES / 2**20:,.0f} MiB a trajectory may take (thin its waypoints)")
     _check_encoding(path)
+    _check_line_count(path)
     table = _read_fast(path, scale)
     if table is None:  # numpy refused the file, or it holds a bad value: find which line, and say why
         table = _read_checked(path, scale)
     if len(table) > MAX_WAYPOINTS:
         raise TrajectoryError(f"{path}: more than {MAX_WAYPOINTS:,} waypoints (thin them)")
     times, points = np.ascontiguousarray(table[:, 0]), np.ascontiguousarray(table[:, 1:])
+    if times[0] > MAX_START_S:
+        raise TrajectoryError(f"{path}: the first waypoint is at t = {times[0]:.10g} s, {times[0] / 86_400:,.0f} days "
+                              f"after the session starts: t is in seconds from the start (clock times? subtract "
+                              f"the first from each)")
     _warn_if_milliseconds(path, times, points)
     return Waypoints(times, points, source=str(path), units=units)
+
+
+def _check_line_count(path: Path) -> None:
+    """Refuse a file of more than :data:`MAX_LINES` lines (``\\n``, ``\\r\\n`` or ``\\r`` ended), counted in C a
+    quarter MiB at a time (held no longer), before any line is looked at in Python."""
+    lines = crs = 0
+    try:
+        with path.open("rb") as fh:
+            while chunk := fh.read(2**18):
+                # A "\r\n" split across two chunks counts two lines here: a bound, not a count.
+                lines += chunk.count(b"\n")
+                crs += chunk.count(b"\r") - chunk.count(b"\r\n")
+    except OSError as exc:
+        raise _cannot_read(path, exc) from None
+    if lines + crs > MAX_LINES:
+        raise TrajectoryError(f"{path}: {lines + crs:,} lines, more than the {MAX_LINES:,} a trajectory of at most "
+                              f"{MAX_WAYPOINTS:,} waypoints may take (blank lines?)")
 
 
 def _check_encoding(path: Path) -> None:
@@ -349,9 +401,11 @@ def _read_fast(path: Path, scale: float) -> np.ndarray | None:
         first = next(rows, None)
     finally:
         rows.close()  # closes the file now, not when the generator is collected
-    if first is None or len(first[1]) != len(TRAJECTORY_HEADER):
+    if first is None:  # said here: the line-by-line reader would look at every line again to say it
+        raise TrajectoryError(f"{path}: {_NO_WAYPOINTS}")
+    if len(first[1]) != len(TRAJECTORY_HEADER):
         # numpy allocates max_rows times the first row's columns before it reads on: a 2 KB file of one
-        # 1000-value row asked for 40 GB ("out of memory"). None (no rows) too: the line-by-line reader says.
+        # 1000-value row asked for 40 GB ("out of memory").
         return None
     skip = first[0] - 1
     try:
@@ -401,7 +455,7 @@ def _read_checked(path: Path, scale: float) -> np.ndarray:
         if len(values) > 4 * MAX_WAYPOINTS:
             raise TrajectoryError(f"{path}: more than {MAX_WAYPOINTS:,} waypoints (thin them)")
     if not values:
-        raise TrajectoryError(f"{path}: no waypoints (expected rows t,x,y,z)")
+        raise TrajectoryError(f"{path}: {_NO_WAYPOINTS}")
     return np.frombuffer(values, dtype=np.float64).reshape(-1, 4)
 
 
