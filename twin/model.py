@@ -20,7 +20,7 @@ from estimation.contracts import check_number as number
 from estimation.contracts import shown
 from estimation.errors import MaterialError, SettingsError, UnknownObjectError
 from sync.messages import MAX_COORDINATE, MAX_SCENE_SIZE, MIN_SIZE
-from twin.objects import TwinObject
+from twin.objects import MAX_HULL_VERTICES, TwinObject
 from twin.settings import check_number, check_type
 from twin.tabletop import BOX_BIT, PLANE_BIT, PLANE_NAME
 
@@ -45,8 +45,6 @@ RESERVED_IDS = frozenset({"world", EE_BODY, EE_TARGET})
 #: object yields a force a haptic device can render instead of an impulse.
 EE_WELD_SOLREF = (0.02, 1.0)
 
-#: MuJoCo's per-mesh hull vertex cap for collision (CoACD already caps at 64; this guards raw meshes).
-MAX_HULL_VERTICES = 64
 
 #: The most solver iterations :class:`PhysicsSettings` takes: MuJoCo keeps the count in a C int, and 2**31 was
 #: a multi-line pybind TypeError in :func:`new_spec`.
@@ -332,6 +330,7 @@ def add_object(spec, obj: TwinObject, *, rgba: tuple[float, float, float, float]
     for k, (v, f) in enumerate(obj.hulls):
         name = f"{obj.id}/hull{k}"
         hull = spec.add_mesh(name=name, uservert=v.ravel().tolist(), userface=f.ravel().tolist())
+        # MuJoCo's cap, above what the hulls have (twin.objects.collision_shapes): it guards hulls made elsewhere.
         hull.maxhullvert = MAX_HULL_VERTICES
         hull.info = f"object {obj.id} hull {k}"
         # Under a primitive the hulls are only to look at: no contact type, no affinity.
