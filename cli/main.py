@@ -1176,6 +1176,9 @@ def _cmd_replay(args: argparse.Namespace) -> int:
                         duration=args.replay_duration, out=args.out, cache_dir=args.cache_dir, progress=progress)
     if result.summary["damage"]:
         print(f"twin replay: warning: {result.summary['damage']}", file=sys.stderr)
+    if args.seed is not None and result.summary["network"] is None:  # the seed is the emulated network's only
+        print("twin replay: warning: --seed changed nothing: the replay has no emulated network (the recording had "
+              "none; give --delay, --jitter or --loss)", file=sys.stderr)
     if args.json:
         print(to_json(result.summary))
     else:

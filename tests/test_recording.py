@@ -135,6 +135,13 @@ def test_a_replay_with_another_trajectory_or_network_differs(recorded, cache, tm
                                        "wrote it; move the folder aside or give --out a new folder\n")
     assert (out / "summary.json").read_text() == mine
     (out / "summary.json").write_text(mine.removesuffix("my notes\n"))
+    # A seed with no network to draw for changes nothing, and says so (it was taken without a word).
+    capsys.readouterr()
+    assert main(["replay", str(path), "--seed", "5", "--json", "--duration", "0.2", "--cache-dir", str(cache)]) == 0
+    captured = capsys.readouterr()
+    assert json.loads(captured.out)["network"] is None
+    assert captured.err.endswith("\ntwin replay: warning: --seed changed nothing: the replay has no emulated network "
+                                 "(the recording had none; give --delay, --jitter or --loss)\n"), captured.err
     # A link planted in the folder it wrote is replaced, not written through: it overwrote the user's file.
     victim = tmp_path / "victim.txt"
     victim.write_text("mine\n")
