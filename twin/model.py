@@ -45,7 +45,6 @@ RESERVED_IDS = frozenset({"world", EE_BODY, EE_TARGET})
 #: object yields a force a haptic device can render instead of an impulse.
 EE_WELD_SOLREF = (0.02, 1.0)
 
-
 #: The most solver iterations :class:`PhysicsSettings` takes: MuJoCo keeps the count in a C int, and 2**31 was
 #: a multi-line pybind TypeError in :func:`new_spec`.
 MAX_ITERATIONS = 2**31 - 1

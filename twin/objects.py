@@ -42,8 +42,8 @@ DECIMATION_AGGRESSION = 3.0
 #: (an ellipsoid 2.7 mm, a capsule 1.0 mm), on the remote's simulated scene and in the twin alike.
 HULL_TOLERANCE = 2e-4
 
-#: ...with at most this many vertices (then the farthest lies where they leave it: a 9.4 cm ball 0.23 mm
-#: outside). CoACD's parts have at most ``CoacdSettings.max_ch_vertex``.
+#: ...with at most this many vertices (then some lie farther out: a 9 cm blob takes all 1024, bench/hull_sink.py).
+#: CoACD's parts have at most ``CoacdSettings.max_ch_vertex``.
 MAX_HULL_VERTICES = 1024
 
 #: Friction for objects given by density only.
