@@ -911,8 +911,8 @@ def from_mesh(vertices: np.ndarray, faces: np.ndarray, density: float, *,
 
     Raises:
         CloudError: vertices not a finite (v, 3) array within ``tol.MAX_COORDINATE_M``, faces not (f, 3) whole
-            vertex indices within them, no volume enclosed, or mass properties no solid has (a surface that
-            passes through itself).
+            vertex indices within them, no volume enclosed, or a closed, consistently wound mesh with mass
+            properties no solid has (a surface that passes through itself).
         MaterialError: as :func:`estimate`.
     """
     from estimation.contracts import as_faces
@@ -949,13 +949,13 @@ def from_mesh(vertices: np.ndarray, faces: np.ndarray, density: float, *,
     if turned is not None:
         merged_faces = turned.faces
         vertices, faces = merged_vertices, merged_faces
-        whole = "the mesh is wound inside out (its faces face inward)"
-        said = whole if turned.total == 1 or (turned.whole and not turned.parts) else (
-            (f"{whole}, and then {turned.parts} of its {turned.total} closed parts " if turned.whole else
-             f"{turned.parts} of the mesh's {turned.total} closed parts ")
+        said = "the mesh is wound inside out (its faces face inward)" if turned.whole else (
+            f"{turned.parts} of the mesh's {turned.total} closed parts "
             + ("is wound inside out (its faces face inward, but it lies in no solid, so it is no cavity)"
                if turned.parts == 1 else
-               "are wound inside out (their faces face inward, but they lie in no solid, so they are no cavities)"))
+               "are wound inside out (their faces face inward, but they lie in no solid, so they are no cavities)")
+            + (f", and {turned.cavities} outward part(s) inside wound the same way, turned as cavities"
+               if turned.cavities else ""))
         warnings += (f"{said}: counted turned outward ({turned.volume:.3g} m^3)",)
     try:
         props = mass_properties(vertices, faces, density)
@@ -972,7 +972,9 @@ def from_mesh(vertices: np.ndarray, faces: np.ndarray, density: float, *,
         warnings += (f"closed parts of the mesh may overlap ({overlap.overlapping} of its {overlap.parts} parts have "
                      f"overlapping bounds) but their union was not formed ({overlap.unresolved}): its volume is the "
                      f"sum over its faces, which counts any space they share more than once",)
-    if (why := _not_a_solid(props, vertices)) is not None:
+    # A mesh not closed and consistently wound is a signed sum, said so above; a closed one is a solid's, or it
+    # passes through itself.
+    if watertight and (why := _not_a_solid(props, vertices)) is not None:
         raise CloudError(f"the mesh's mass properties are no solid's ({why}): does it intersect itself?")
     box = oriented_box(vertices)
     if (hint := units_warning(box.extents)) is not None:  # as estimate() says of a cloud: a box in mm read as m

@@ -16,7 +16,7 @@ faces inward or outward parts' bounding boxes overlap.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -55,17 +55,22 @@ class Turned:
 
     Attributes:
         faces: (f, 3) int64, the mesh's faces with each inside-out part's turned (its rows reversed).
-        parts: how many parts were turned on their own (after the whole mesh, when ``whole``).
+        parts: how many inside-out parts were turned outward.
         total: the mesh's closed parts.
-        volume: m^3 the turned parts enclose (``whole``: what the whole mesh encloses, turned).
-        whole: the mesh was wound inside out as a whole, and turned first.
+        volume: m^3 the turned parts enclose, less the cavities turned with them.
+        cavities: how many outward parts inside those were turned inward with them, as their cavities.
     """
 
     faces: np.ndarray
     parts: int
     total: int
     volume: float
-    whole: bool = False
+    cavities: int = 0
+
+    @property
+    def whole(self) -> bool:
+        """Every part was turned: the mesh was wound inside out as a whole."""
+        return self.parts + self.cavities == self.total
 
 
 def part_labels(faces: np.ndarray, vertex_count: int) -> np.ndarray:
@@ -136,7 +141,10 @@ def turned_outward(vertices: np.ndarray, faces: np.ndarray) -> Turned | None:
     (0), or one inside a cavity (1 - 1 = 0), would make the space it bounds count less than nothing: it is a
     solid wound the wrong way, and is turned. Parts are judged largest first, so whatever holds a part has been
     judged before it (a part is smaller than what holds it). Outward parts are taken as they are: one inside
-    another overlaps it (:func:`overlap_union`).
+    another overlaps it (:func:`overlap_union`); but one whose nearest holder was turned was wound as that one
+    was, and is turned with it, its cavity: a hollow object with every face turned has an inward outer shell and
+    an outward inner one, which had filled the cavity (1.0 for 0.875 kg, a review's probe). Its outer shell
+    alone turned, the inner one inward, it is turned as before: a hollow object whose cavity is in its place.
 
     Args:
         vertices: (v, 3) float64, metres.
@@ -149,15 +157,8 @@ def turned_outward(vertices: np.ndarray, faces: np.ndarray) -> Turned | None:
     if not len(faces):  # trimesh calls no faces closed; nothing to turn
         return None
     parts = _parts(vertices, faces)
-    # A mesh whose parts together enclose less than nothing is wound inside out as a whole: a hollow object's
-    # shells both turned, whose inner one, facing outward inside the outer, would be taken for a solid filling the
-    # cavity. It is turned as a whole first; its parts are then judged as any mesh's.
-    whole = float(parts.volumes.sum()) < 0
-    if whole:
-        faces = faces[:, ::-1]
-        parts = replace(parts, volumes=-parts.volumes)
     if not (parts.volumes < 0).any():
-        return Turned(faces, 0, parts.count, float(parts.volumes.sum()), whole=True) if whole else None
+        return None
     sign = np.sign(parts.volumes)
     solids: dict[int, object] = {}
 
@@ -167,33 +168,41 @@ def turned_outward(vertices: np.ndarray, faces: np.ndarray) -> Turned | None:
             solids[part] = as_manifold(vertices, own if parts.volumes[part] > 0 else own[:, ::-1])
         return solids[part]
 
-    turned = []
+    turned, cavities = [], []
+    is_turned = np.zeros(parts.count, dtype=bool)
     for part in np.argsort(-np.abs(parts.volumes), kind="stable"):
         part = int(part)
-        if parts.volumes[part] >= 0:
-            continue
         boxes = ((parts.low <= parts.low[part]) & (parts.high[part] <= parts.high)).all(axis=1)
         boxes[part] = False
-        around = 0.0
+        outward = parts.volumes[part] >= 0
+        if outward and not (boxes & is_turned).any():
+            continue  # outward, in no turned part: as it is
+        held_by: list[int] = []
         if boxes.any():
             inside = solid(part)
-            holders = [solid(int(other)) for other in np.flatnonzero(boxes)]
+            candidates = [int(other) for other in np.flatnonzero(boxes)]
+            holders = [solid(other) for other in candidates]
             if inside is None or any(outer is None for outer in holders):
                 continue  # manifold3d refused one: whether it is held is not known, so it is left as it is
-            around = sum(sign[other] for other, outer in zip(np.flatnonzero(boxes), holders, strict=True)
-                         if _holds(outer, inside))
-        if around < 1:
-            sign[part] = 1.0
+            held_by = [other for other, outer in zip(candidates, holders, strict=True) if _holds(outer, inside)]
+        if outward:
+            # In a part that was wound inside out, the part nearest round it (the smallest holding it): wound as
+            # that one was, it is its cavity (a hollow object's mesh with every face turned).
+            if held_by and is_turned[min(held_by, key=lambda other: abs(parts.volumes[other]))]:
+                sign[part], is_turned[part] = -1.0, True
+                cavities.append(part)
+            continue
+        if sum(sign[other] for other in held_by) < 1:
+            sign[part], is_turned[part] = 1.0, True
             turned.append(part)
     if not turned:
-        return Turned(faces, 0, parts.count, float(parts.volumes.sum()), whole=True) if whole else None
+        return None
     out = faces.copy()
-    for part in turned:
+    for part in turned + cavities:
         rows = parts.order[parts.starts[part]:parts.ends[part]]
         out[rows] = faces[rows, ::-1]
-    volume = float(-parts.volumes[turned].sum())
-    return Turned(out, len(turned), parts.count, float(parts.volumes.sum()) + 2 * volume if whole else volume,
-                  whole=whole)
+    return Turned(out, len(turned), parts.count, float(-parts.volumes[turned].sum() - parts.volumes[cavities].sum()),
+                  cavities=len(cavities))
 
 
 def overlap_union(vertices: np.ndarray, faces: np.ndarray) -> Overlap | None:

@@ -292,13 +292,21 @@ def test_a_hollow_mesh_wound_inside_out_whole_stays_hollow():
     _check_exact(result, [(*cube, 1), (*cavity, -1)])
     assert result.warnings == ("the mesh is wound inside out (its faces face inward): counted turned outward "
                                "(0.000875 m^3)",)
-    # Turned whole, a part that then faces inward apart from every solid is turned on its own too, and said.
+    # Its outer shell alone turned, the cavity's inward as it should be: hollow too, as before (a review found
+    # a first version of this change turning the whole mesh, which made this one the solid ball).
+    vertices, faces = _parts(_box(*cube, inward=True), _box(*cavity, inward=True))
+    result = from_mesh(vertices, faces, 1000.0)
+    _check_exact(result, [(*cube, 1), (*cavity, -1)])
+    assert result.warnings == ("1 of the mesh's 2 closed parts is wound inside out (its faces face inward, but it "
+                               "lies in no solid, so it is no cavity): counted turned outward (0.001 m^3)",)
+    # Beside a part wound right, apart from it: that one is left as it is, and the message counts what was turned.
     brick = ((0.02, 0.04, 0.06), (1.0, 0.2, -0.1))
     vertices, faces = _parts(_box(*cube, inward=True), _box(*cavity), _box(*brick))
     result = from_mesh(vertices, faces, 1000.0)
     _check_exact(result, [(*cube, 1), (*cavity, -1), (*brick, 1)])
-    assert len(result.warnings) == 1 and result.warnings[0].startswith(
-        "the mesh is wound inside out (its faces face inward), and then 1 of its 3 closed parts is wound inside out")
+    assert result.warnings == ("1 of the mesh's 3 closed parts is wound inside out (its faces face inward, but it "
+                               "lies in no solid, so it is no cavity), and 1 outward part(s) inside wound the same way, "
+                               "turned as cavities: counted turned outward (0.000875 m^3)",)
 
 
 def test_closed_parts_touching_at_one_vertex_are_parts_and_their_overlap_counts_once():

@@ -170,7 +170,7 @@ def check_reach(times: np.ndarray, points: np.ndarray, box: tuple[np.ndarray, np
     low, high = (np.asarray(c, dtype=np.float64) for c in box)
     inside = _within(points, low, high)
     if inside.all():
-        _check_not_shrunk(points, low, high, source=source, units=units)
+        _warn_if_shrunk(points, low, high, source=source, units=units)
         return
     i = int(np.argmin(inside))
     x, y, z = points[i]
@@ -186,20 +186,19 @@ def check_reach(times: np.ndarray, points: np.ndarray, box: tuple[np.ndarray, np
                           f"{high[2]:g} m){hint}")
 
 
-def _check_not_shrunk(points: np.ndarray, low: np.ndarray, high: np.ndarray, *, source: str,
-                      units: str | None) -> None:
-    """Refuse a script in metres read in cm or mm: every target then lies within a hundredth of the reach of the
-    world origin (a push over the table read in mm pressed the end effector onto the table from above with 97 N,
-    reaching for a point on the floor), and read in metres all of them fit the reach. A script in the units
-    given is 100 or 1000 times farther out, past the reach read in metres."""
+def _warn_if_shrunk(points: np.ndarray, low: np.ndarray, high: np.ndarray, *, source: str, units: str | None) -> None:
+    """Warn of a script that may be in metres read in cm or mm: every target then lies within a hundredth of the
+    reach of the world origin (a push over the table read in mm reached for the floor under it and pressed the end
+    effector onto the table's top with 97 N, a review's probe), and read in metres all of them fit the reach. A
+    warning, not a refusal: a small scene without a table, its end effector near the origin, has real scripts in
+    cm that small."""
     if units is None or UNIT_SCALE[units] > UNIT_SCALE["m"] / 100:
         return
     grown = points * (UNIT_SCALE["m"] / UNIT_SCALE[units])
     if _within(grown, low, high).all():
-        far = float(np.abs(points).max())
-        raise TrajectoryError(f"{source}: read in {_UNIT_WORDS[units]} (--units {units}) every target lies within "
-                              f"{far:.3g} m of the world origin, and read in metres they fit the operator's reach: "
-                              f"looks like metres: pass --units m")
+        log.warning("%s: read in %s (--units %s) every target lies within %.3g m of the world origin, and read in "
+                    "metres they fit the operator's reach: if the script is in metres, pass --units m", source,
+                    _UNIT_WORDS[units], units, float(np.abs(points).max()))
 
 
 def _within(points: np.ndarray, low: np.ndarray, high: np.ndarray) -> np.ndarray:
