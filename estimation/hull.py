@@ -48,9 +48,9 @@ def simplified_hull(points: np.ndarray, tolerance: float, most: int) -> tuple[np
             hull = ConvexHull(vertices[chosen])
         except QhullError:  # the seeds lie on a plane (a flat hull): the whole hull, as it is
             return vertices, faces
-        beyond, face = _beyond_faces(vertices, hull.equations)
         if len(chosen) >= most:
             return convex_hull(vertices[chosen])
+        beyond, face = _beyond_faces(vertices, hull.equations)
         far = beyond > tolerance
         if not far.any():
             beyond = _distance_outside(vertices, vertices[chosen][hull.simplices], hull.equations)
