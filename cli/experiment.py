@@ -57,7 +57,7 @@ def add_parser(sub) -> None:  # type: ignore[no-untyped-def]
                    help="independent packet loss, percent, each direction, below 100")
     p.add_argument("--mass-scale", default="1",
                    help="twin mass / true mass, comma-separated, each from 0.01 to 100 (default 1)")
-    p.add_argument("--seeds", type=int, default=1, help="network seeds per condition (default 1)")
+    p.add_argument("--seeds", type=int, default=1, help="network seeds per condition, for --jitter or --loss (the seed draws only those; default 1)")
     p.add_argument("--tasks", default=None,
                    help="tasks, comma-separated: push, press, recorded (default: push,press for a scene, "
                         "recorded for a recording)")
@@ -123,6 +123,11 @@ def parse(args: argparse.Namespace):  # type: ignore[no-untyped-def]
         raise TwinError(f"--mass-scale: a mass scale must be from {low:g} to {high:g}, got {refused_number(bad, low, high)}")
     if args.seeds < 1:
         raise TwinError(f"--seeds must be at least 1, got {args.seeds}")
+    if args.seeds > 1 and args.jitter == 0 and args.loss_pct == 0:
+        # The seed draws only the emulated network's jitter and loss: without them every seed is the same session.
+        log.warning("--seeds %d changes nothing without --jitter or --loss (the seed draws only those): running one "
+                    "seed", args.seeds)
+        args.seeds = 1
     if not 0 <= args.workers <= MAX_WORKERS:
         raise TwinError(f"--workers must be from 0 to {MAX_WORKERS}, got {args.workers}")
     if args.dask is not None and args.dask != "local" and "://" not in args.dask:
@@ -353,7 +358,7 @@ def report(rows, args: argparse.Namespace, plots: list[Path], sensor: str) -> st
              f"the remote's {sensor} sensor. "
              "Force errors are against C's force in the same task with no delay, no loss and the true mass; "
              "RMS and peak are % of the truth's peak force, the contact error is the signed error of the mean "
-             f"force magnitude while the truth is in contact. Values are means over seeds.", ""]
+             "force magnitude while the truth is in contact." + (" Values are means over seeds." if args.seeds > 1 else ""), ""]
     for task in tasks:
         lines += [f"## {task}", ""]
         body = []

@@ -167,7 +167,7 @@ def test_the_cli_writes_every_column_and_the_same_rows_with_workers(rows, cache,
     (["--tasks", "push,wave"], "unknown task 'wave' \\(known: push, press\\)"),
     (["--seeds", "0"], "--seeds must be at least 1, got 0"),
     # built a list of 2e11 runs until memory ran out, printing nothing
-    (["--seeds", "99999999999", "--mass-scale", "1"],
+    (["--seeds", "99999999999", "--mass-scale", "1", "--loss", "1"],
      "1 task\\(s\\) x 2 delay\\(s\\) x 1 mass scale\\(s\\) x 99999999999 seed\\(s\\) is 199,999,999,998 runs, more than the "
      "10,000 a sweep holds"),
     # a delay of 1e308 ms passed the checks; its arrival times were infinite (an OverflowError once run)
@@ -186,6 +186,19 @@ def test_bad_arguments_are_one_line_and_exit_2(extra, message, tmp_path, capsys)
     assert err.count("\n") == 1 and err.startswith("twin experiment: error: ")
     assert re.search(message, err), err
     assert not (tmp_path / "o").exists()  # refused before any work
+
+
+@pytest.mark.parametrize(("extra", "seeds"), [([], 1), (["--loss", "1"], 3), (["--jitter", "1", "--delays", "50"], 3)])
+def test_seeds_run_only_where_the_network_draws_at_random(extra, seeds, tmp_path, caplog):
+    """--seeds 3 with neither jitter nor loss ran three identical sessions per condition and reported their mean."""
+    from cli.experiment import parse
+    from cli.main import _parser
+
+    args = _parser().parse_args([*ARGS, "--seeds", "3", *extra, "--out", str(tmp_path / "o")])
+    assert parse(args).seeds == seeds
+    said = [r.getMessage() for r in caplog.records if "--seeds" in r.getMessage()]
+    assert said == ([] if seeds == 3 else ["--seeds 3 changes nothing without --jitter or --loss (the seed draws only "
+                                           "those): running one seed"])
 
 
 def test_an_out_folder_this_command_did_not_write_is_refused(tmp_path, capsys):
