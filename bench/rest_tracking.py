@@ -83,9 +83,7 @@ def main(argv: list[str] | None = None) -> int:
     from scenes.restfilter import REST_WINDOW
 
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    # 24: the mean of 8 fits reaches a bias in a few windows, not in one (a one-view model's dice, one camera,
-    # noise seed 2: 0.97 degrees by scan 10, 1.35 by scan 24).
-    parser.add_argument("--scans", type=int, default=24, help="tracking periods at rest (default 24: 12 s)")
+    parser.add_argument("--scans", type=int, default=12, help="tracking periods at rest (default 12: 6 s)")
     parser.add_argument("--cameras", type=int, nargs="+", default=[1, 2, 3])
     parser.add_argument("--seed", type=int, default=1, help="the cameras' noise draw (default 1)")
     parser.add_argument("--out", type=Path, default=RESULTS)

@@ -302,7 +302,7 @@ def test_at_rest_a_track_is_the_mean_of_its_fits_and_a_move_is_taken_whole():
 
 def test_at_rest_the_model_gathers_each_scan_and_holds_the_track_closer_than_one_view():
     """Fits at rest onto a model of one noisy view carry that view's noise, and ICP of a box seen from one side
-    can slide along it and stay: on two of these four noise draws the one-view tracker's box went 3.7-4.0 mm
+    can slide along it and stay: on two of these four noise draws the one-view tracker's box went 3.3-4.0 mm
     off while it rested."""
     worst_refined, worst_one_view = [], []
     for seed in (4, 5, 6, 7):
