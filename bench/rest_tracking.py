@@ -7,13 +7,11 @@
 The 20-object clutter settles; the rig (the issue's sigma 1 mm cameras at 1280 x 720, as bench/cameras.py)
 observes every object once, then the scene is stepped one tracking period at a time (0.5 s) while nothing
 touches it, and every object is tracked after each step, ``--scans`` times. Each track is compared with the
-object's frame as first observed (nothing moved: the truth is no motion). Three trackers in the same process,
-on the same scans: each scan's own fit (``rest_window=1``, the tracker before averaging); the running mean of
-the fits at rest (``scenes.restfilter.REST_WINDOW``) onto a model of the first view alone (``refine=False``,
-the tracker before the model gathered scans at rest); and the default, whose model gathers each scan while the
-object rests and whose fits are polished by registering the segment onto it (``CameraSensor``'s ``refine``).
-"corrections" counts the poses the remote would have published of objects that did not move: tracks that left
-its deadband (1 mm, 0.5 degree) around the last one published.
+object's frame as first observed (nothing moved: the truth is no motion). Two trackers in the same process,
+on the same scans: each scan's own fit (``rest_window=1``, the tracker before averaging) and the running
+mean of the fits at rest (``scenes.restfilter.REST_WINDOW``, the default). "corrections" counts the poses the
+remote would have published of objects that did not move: tracks that left its deadband (1 mm, 0.5 degree)
+around the last one published.
 """
 
 from __future__ import annotations
@@ -34,7 +32,7 @@ RESULTS = ROOT / "bench" / "results" / "rest_tracking.txt"
 CAMERA = {"width": 1280, "height": 720, "fov_y_deg": 42.0}
 
 
-def run(cameras: int, scans: int, rest_window: int | None, seed: int = 1, refine: bool = True) -> dict:
+def run(cameras: int, scans: int, rest_window: int | None, seed: int = 1) -> dict:
     """Tracks of every clutter20 object over ``scans`` periods at rest: errors (mm, deg) and corrections."""
     from scenes import cameras as cams
     from scenes.remote import Deadband, Remote
@@ -48,7 +46,7 @@ def run(cameras: int, scans: int, rest_window: int | None, seed: int = 1, refine
     clock = SimClock()
     remote = Remote(scene, InProcessBus(clock, {}).transport("remote"), clock=clock, publish=False)
     sensor = CameraSensor.for_scene(scene, cameras=cameras, seed=seed, noise=cams.SIGMA_1MM, rest_window=rest_window,
-                                    refine=refine, **CAMERA)
+                                    **CAMERA)
     sensor._current(remote, force=True)
     frames = {}
     for spec in scene.objects:
@@ -96,10 +94,8 @@ def main(argv: list[str] | None = None) -> int:
         table.add_column(column, justify="right")
     for cameras in args.cameras:
         rows = {}
-        for label, window, refine in (("each scan's fit, one view", 1, False),
-                                      (f"mean of {REST_WINDOW}, one view", None, False),
-                                      (f"mean of {REST_WINDOW}, gathered (default)", None, True)):
-            r = rows[label] = run(cameras, args.scans, window, args.seed, refine)
+        for label, window in (("each scan's fit", 1), (f"mean of {REST_WINDOW} (default)", None)):
+            r = rows[label] = run(cameras, args.scans, window, args.seed)
             table.add_row(str(cameras), label, str(r["objects"]), f"{np.nanmedian(r['mm']):.2f}",
                           f"{np.nanmax(r['mm']):.2f}", f"{np.nanmedian(r['deg']):.2f}", f"{np.nanmax(r['deg']):.2f}",
                           f"{np.nanmax(r['deg'][-1]):.2f}", r["worst"], str(r["corrections"]), f"{r['seconds']:.1f}")

@@ -47,12 +47,10 @@ class RestFilter:
         A step is noise at rest when it moves no model point further than ``REST_GATE`` times the scatter of
         this object's earlier steps at rest (their RMS reach), and never further than ``REST_GATE`` times the
         fit's RMS residual ``rmse`` (metres: all a first step has to go by). Then the track moves by ``1/n``
-        of it, the running mean of the last ``n`` such fits (at most ``window``). After a motion the first is
-        the first fit at rest, taken whole (the last fit in motion may have caught it still sliding). The pose
-        an object was first seen in counts as ``window - 1`` fits: its model is that view, so while it rests
-        that pose is exact, not a noisy fit (counted as one, the first fit at rest moved a 3 cm dice seen by
-        one camera by half its 2.4 degree error). A larger step is motion: the track takes it whole and the
-        count starts again.
+        of it, the running mean of the last ``n`` such fits (at most ``window``). The first is the pose the
+        object was first seen in, or after a motion the first fit at rest (taken whole: the last fit in motion
+        may have caught it still sliding). A larger step is motion: the track takes it whole and the count
+        starts again.
 
         The price: a creep slower than the gate a scan is followed up to the gate late. The gate follows the
         scatter because the residual alone let a can's first 2 mm of being pushed (its fits at rest moved it
@@ -68,12 +66,8 @@ class RestFilter:
         # The scatter's memory is the window too: a new view or noise level shows within a few scans.
         count = min(count + 1, self.window)
         self._scatter[object_id] = (count, scatter + (reach**2 - scatter) / count)
-        n = self._count[object_id] = min(self._count.get(object_id, self.window - 1) + 1, self.window)
+        n = self._count[object_id] = min(self._count.get(object_id, 1) + 1, self.window)
         return partial_motion(step, model.mean(axis=0), 1.0 / n), 1.0 / np.sqrt(n)
-
-    def resting(self, object_id: str) -> bool:
-        """Whether the object's last step was taken for noise at rest (True before its first)."""
-        return self._count.get(object_id, self.window) > 0
 
 
 def partial_motion(step: np.ndarray, centre: np.ndarray, share: float) -> np.ndarray:
