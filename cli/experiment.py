@@ -57,7 +57,8 @@ def add_parser(sub) -> None:  # type: ignore[no-untyped-def]
                    help="independent packet loss, percent, each direction, below 100")
     p.add_argument("--mass-scale", default="1",
                    help="twin mass / true mass, comma-separated, each from 0.01 to 100 (default 1)")
-    p.add_argument("--seeds", type=int, default=1, help="network seeds per condition, for --jitter or --loss (the seed draws only those; default 1)")
+    p.add_argument("--seeds", type=int, default=1,
+                   help="network seeds per condition, for --jitter or --loss (the seed draws only those; default 1)")
     p.add_argument("--tasks", default=None,
                    help="tasks, comma-separated: push, press, recorded (default: push,press for a scene, "
                         "recorded for a recording)")
