@@ -124,11 +124,6 @@ def parse(args: argparse.Namespace):  # type: ignore[no-untyped-def]
         raise TwinError(f"--mass-scale: a mass scale must be from {low:g} to {high:g}, got {refused_number(bad, low, high)}")
     if args.seeds < 1:
         raise TwinError(f"--seeds must be at least 1, got {args.seeds}")
-    if args.seeds > 1 and args.jitter == 0 and args.loss_pct == 0:
-        # The seed draws only the emulated network's jitter and loss: without them every seed is the same session.
-        log.warning("--seeds %d changes nothing without --jitter or --loss (the seed draws only those): running one "
-                    "seed", args.seeds)
-        args.seeds = 1
     if not 0 <= args.workers <= MAX_WORKERS:
         raise TwinError(f"--workers must be from 0 to {MAX_WORKERS}, got {args.workers}")
     if args.dask is not None and args.dask != "local" and "://" not in args.dask:
@@ -148,6 +143,10 @@ def parse(args: argparse.Namespace):  # type: ignore[no-untyped-def]
     sweep = Sweep(tasks=tasks, delays=tuple(d / 1e3 for d in delays), jitter=args.jitter / 1e3,
                   loss=args.loss_pct / 100, mass_scales=masses, seeds=args.seeds, speed=args.speed)
     sweep.conditions()  # every condition checked before any work
+    if sweep.draws < args.seeds:
+        log.warning("--seeds %d changes nothing without --jitter or --loss (the seed draws only those): running one "
+                    "seed", args.seeds)
+        args.seeds = sweep.draws  # what the report says it averaged
     check_output_folder(args.out, marker=MARKER, command=COMMAND, writes=WRITES,
                         inputs=(args.scene, getattr(args, "scene_file", None)))
     return sweep

@@ -619,6 +619,13 @@ class Sweep:
     #: The remote's sensor in every session (:data:`scenes.headless.SENSORS`).
     sensor: str = "surface"
 
+    @property
+    def draws(self) -> int:
+        """The seeds that give different sessions: ``seeds`` where the link draws at random, else 1. The seed
+        draws only the link's jitter and loss (:class:`sync.netem.LinkModel`); without them every seed ran the
+        same session, and a sweep of K seeds K identical ones."""
+        return self.seeds if self.jitter > 0 or self.loss > 0 else 1
+
     def conditions(self) -> list[Condition]:
         """Every run, checked (see :func:`check_condition`). Jitter the distribution cannot take at some delay
         (normal jitter needs ``jitter <= delay / 3``, so any jitter at zero delay) is refused, not clipped.
@@ -635,13 +642,13 @@ class Sweep:
             raise ExperimentError("tasks, delays and mass scales must each have at least one value")
         if not isinstance(self.seeds, int) or self.seeds < 1:
             raise ExperimentError(f"seeds must be a whole number >= 1, got {self.seeds!r}")
-        count = len(self.tasks) * len(self.delays) * len(self.mass_scales) * self.seeds
+        count = len(self.tasks) * len(self.delays) * len(self.mass_scales) * self.draws
         if count > MAX_RUNS:
             raise ExperimentError(f"{len(self.tasks)} task(s) x {len(self.delays)} delay(s) x {len(self.mass_scales)} mass "
-                                  f"scale(s) x {self.seeds} seed(s) is {count:,} runs, more than the {MAX_RUNS:,} a "
+                                  f"scale(s) x {self.draws} seed(s) is {count:,} runs, more than the {MAX_RUNS:,} a "
                                   "sweep holds")
         runs = [Condition(task=t, delay=d, jitter=self.jitter, loss=self.loss, mass_scale=m, seed=s, speed=self.speed)
-                for t in self.tasks for d in self.delays for m in self.mass_scales for s in range(self.seeds)]
+                for t in self.tasks for d in self.delays for m in self.mass_scales for s in range(self.draws)]
         for r in runs:
             check_condition(r)
         return runs

@@ -195,7 +195,10 @@ def test_seeds_run_only_where_the_network_draws_at_random(extra, seeds, tmp_path
     from cli.main import _parser
 
     args = _parser().parse_args([*ARGS, "--seeds", "3", *extra, "--out", str(tmp_path / "o")])
-    assert parse(args).seeds == seeds
+    sweep = parse(args)
+    assert sweep.draws == seeds == args.seeds  # args.seeds: what the report says it averaged over
+    assert len(sweep.conditions()) == len(sweep.tasks) * len(sweep.delays) * len(sweep.mass_scales) * seeds
+    assert sorted({c.seed for c in sweep.conditions()}) == list(range(seeds))
     said = [r.getMessage() for r in caplog.records if "--seeds" in r.getMessage()]
     assert said == ([] if seeds == 3 else ["--seeds 3 changes nothing without --jitter or --loss (the seed draws only "
                                            "those): running one seed"])
