@@ -146,7 +146,6 @@ def parse(args: argparse.Namespace):  # type: ignore[no-untyped-def]
     if sweep.draws < args.seeds:
         log.warning("--seeds %d changes nothing without --jitter or --loss (the seed draws only those): running one "
                     "seed", args.seeds)
-        args.seeds = sweep.draws  # what the report says it averaged
     check_output_folder(args.out, marker=MARKER, command=COMMAND, writes=WRITES,
                         inputs=(args.scene, getattr(args, "scene_file", None)))
     return sweep
@@ -351,14 +350,15 @@ def report(rows, args: argparse.Namespace, plots: list[Path], sensor: str) -> st
     tasks = sorted({r.task for r in rows})
     delays = sorted({r.delay_ms for r in rows})
     masses = sorted({r.mass_scale for r in rows})
+    seeds = len({r.seed for r in rows})  # what the means below are over (one where the link draws nothing)
     m1 = 1.0 if 1.0 in masses else masses[0]
     lines = ["# Latency experiment", "",
              f"Scene `{args.scene}`, delays {args.delays} ms each way, jitter {args.jitter:g} ms, loss {args.loss_pct:g} %, "
-             f"mass scales {args.mass_scale}, {args.seeds} seed(s), tasks {args.tasks}, speed {args.speed:g}, "
+             f"mass scales {args.mass_scale}, {seeds} seed(s), tasks {args.tasks}, speed {args.speed:g}, "
              f"the remote's {sensor} sensor. "
              "Force errors are against C's force in the same task with no delay, no loss and the true mass; "
              "RMS and peak are % of the truth's peak force, the contact error is the signed error of the mean "
-             "force magnitude while the truth is in contact." + (" Values are means over seeds." if args.seeds > 1 else ""), ""]
+             "force magnitude while the truth is in contact." + (" Values are means over seeds." if seeds > 1 else ""), ""]
     for task in tasks:
         lines += [f"## {task}", ""]
         body = []

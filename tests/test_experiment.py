@@ -196,12 +196,27 @@ def test_seeds_run_only_where_the_network_draws_at_random(extra, seeds, tmp_path
 
     args = _parser().parse_args([*ARGS, "--seeds", "3", *extra, "--out", str(tmp_path / "o")])
     sweep = parse(args)
-    assert sweep.draws == seeds == args.seeds  # args.seeds: what the report says it averaged over
+    assert sweep.draws == seeds
     assert len(sweep.conditions()) == len(sweep.tasks) * len(sweep.delays) * len(sweep.mass_scales) * seeds
     assert sorted({c.seed for c in sweep.conditions()}) == list(range(seeds))
     said = [r.getMessage() for r in caplog.records if "--seeds" in r.getMessage()]
     assert said == ([] if seeds == 3 else ["--seeds 3 changes nothing without --jitter or --loss (the seed draws only "
                                            "those): running one seed"])
+
+
+def test_the_report_says_how_many_seeds_its_means_are_over(rows):
+    """It said "means over seeds" of K identical sessions; the count is taken from the rows it averages."""
+    import argparse
+    from dataclasses import replace
+
+    from cli.experiment import report
+
+    args = argparse.Namespace(scene=SMALL, delays="0,50", jitter=0.0, loss_pct=0.0, mass_scale="1,1.5", tasks="push",
+                              speed=2.0)
+    one = report(rows, args, [], "surface")
+    assert "1 seed(s)" in one and "means over seeds" not in one
+    two = report([*rows, *(replace(r, seed=1) for r in rows)], args, [], "surface")
+    assert "2 seed(s)" in two and "Values are means over seeds." in two
 
 
 def test_an_out_folder_this_command_did_not_write_is_refused(tmp_path, capsys):
