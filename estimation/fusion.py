@@ -241,6 +241,13 @@ class SurfaceMotions:
         out[:3, 3] = self.centre + xi[3:] - out[:3, :3] @ self.centre
         return out
 
+    def moved(self, transform: np.ndarray) -> SurfaceMotions:
+        """The same motions of the surface after ``transform`` (4, 4) moved it: centre and axes where it put
+        them (to hold them while registering, onto this surface, points in the frame ``transform`` maps to)."""
+        rot = transform[:3, :3]
+        return SurfaceMotions(rot @ self.centre + transform[:3, 3], self.scale,
+                              np.vstack([rot @ self.basis[:3], rot @ self.basis[3:]]))
+
 
 def unseen_motions(points: np.ndarray, *, k: int = MOTION_NORMAL_NEIGHBOURS,
                    share: float = UNSEEN_MOTION_SHARE) -> SurfaceMotions:

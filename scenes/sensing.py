@@ -20,7 +20,7 @@ from typing import Protocol
 
 import numpy as np
 
-from estimation.fusion import SurfaceMotions, unseen_motions
+from estimation.fusion import IcpTarget, Registration, SurfaceMotions, icp_target, unseen_motions
 from estimation.segmentation import MIN_CLUSTER_POINTS, Plane
 from scenes import association
 from scenes.restfilter import REST_WINDOW, RestFilter
@@ -176,6 +176,10 @@ class CameraSensor:
 
     While an object rests, its track is the running mean of its last fits (``rest_window`` of them at most,
     see :class:`scenes.restfilter.RestFilter`), so each scan's noise does not move it; 1 turns that off.
+    With ``refine`` (the default), each scan's points are added to the ICP model while the object has not
+    moved since the view the model is (``_refine``), and each fit of an object alone in its segment is
+    polished by registering the segment onto the model (``_polish``); False: the model is that one view,
+    each fit as ICP left it (the tracker as it was before, which bench/rest_tracking.py compares with).
 
     Between scans an object is predicted at constant velocity (from its last two tracks), and ICP starts
     from that prediction and, when the segment is the object's alone, from the segment's centroid; the
@@ -200,8 +204,10 @@ class CameraSensor:
     """
 
     def __init__(self, feed, *, track_period: float = 0.5, seed: int = 0,  # type: ignore[no-untyped-def]
-                 background: bool = False, rest_window: int | None = None, segmentation_image: bool = True) -> None:
+                 background: bool = False, rest_window: int | None = None, segmentation_image: bool = True,
+                 refine: bool = True) -> None:
         self.feed = feed
+        self.refine = refine
         self.segmentation_image = segmentation_image
         self.track_period = track_period
         self._rest = RestFilter(REST_WINDOW if rest_window is None else rest_window)  # 1: each scan's own fit
@@ -211,6 +217,8 @@ class CameraSensor:
         self._last: dict[str, np.ndarray] = {}  # object id -> last known position (world, m)
         self._model: dict[str, tuple[np.ndarray, np.ndarray]] = {}  # id -> (ICP model points, frame centre)
         self._motion: dict[str, np.ndarray] = {}  # id -> (4, 4) motion since the model's capture
+        self._gathering: dict[str, int] = {}  # id -> scans its model may still gather (see _refine)
+        self._targets: dict[str, tuple[np.ndarray, IcpTarget]] = {}  # id -> (its model, that prepared for ICP)
         self._unseen: dict[str, tuple[np.ndarray, SurfaceMotions]] = {}  # id -> (its model, what it cannot show)
         self._observed: dict[str, Observation] = {}
         self._tracked: dict[str, tuple[float, Track]] = {}
@@ -238,12 +246,12 @@ class CameraSensor:
     @classmethod
     def for_scene(cls, scene, *, cameras: int = 3, seed: int = 0, track_period: float = 0.5,  # type: ignore[no-untyped-def]
                   noise=None, background: bool = False, rest_window: int | None = None,
-                  segmentation_image: bool = True, **camera: object) -> CameraSensor:
+                  segmentation_image: bool = True, refine: bool = True, **camera: object) -> CameraSensor:
         """The default rig for a scene file: ``cameras`` around its table, the table's workspace.
 
         ``noise``: a :class:`scenes.cameras.DepthNoise` (None: the Kinect model); ``camera`` options go to
-        every :class:`scenes.cameras.Camera`; ``background``, ``rest_window``, ``segmentation_image``: see
-        the class.
+        every :class:`scenes.cameras.Camera`; ``background``, ``rest_window``, ``segmentation_image``,
+        ``refine``: see the class.
         """
         from scenes.cameras import KINECT_V1, WORKSPACE_HEIGHT, CameraFeed, table_ring, table_workspace
 
@@ -255,7 +263,7 @@ class CameraSensor:
         workspace = table_workspace(size, height, reach=max(WORKSPACE_HEIGHT, above))
         feed = CameraFeed(rig, workspace, noise=KINECT_V1 if noise is None else noise, seed=seed)
         return cls(feed, track_period=track_period, seed=seed, background=background, rest_window=rest_window,
-                   segmentation_image=segmentation_image)
+                   segmentation_image=segmentation_image, refine=refine)
 
     # -- the Sensor seam -------------------------------------------------------------------------
 
@@ -328,6 +336,7 @@ class CameraSensor:
         observed = scan.trackable(seen.points[~seen.completed])  # type: ignore[index]
         self._model[object_id] = (self._icp_model(observed, shot), seen.frame_position)
         self._motion[object_id] = self._reviewed[object_id] = np.eye(4)
+        self._gathering[object_id] = GATHER_SCANS
         self._observed[object_id] = seen
         self._tracked[object_id] = (scan.time, Track(seen.frame_position, seen.frame_quat, np.zeros(3), np.zeros(3),
                                                      time=scan.time))
@@ -391,6 +400,7 @@ class CameraSensor:
         observed = self._scan.trackable(seen.points[~seen.completed])  # type: ignore[union-attr,index]
         back = (observed - motion[:3, 3]) @ motion[:3, :3]  # R^T (x - t)
         self._model[object_id] = (self._icp_model(back, shot), self._model[object_id][1])
+        self._gathering.pop(object_id, None)  # moved back by a fit: not in the frame it was seen in
         self._rest.restart(object_id)
         self._observed[object_id] = seen
         return seen
@@ -447,6 +457,8 @@ class CameraSensor:
                     self._lose(object_id, "%s: ICP put %.0f %% of it where the cameras see through, in a segment "
                                "it shares; keeping the last pose", object_id, 100 * through)
                     result = None
+        if result is not None and self.refine and self._alone(scan, k, object_id):
+            result = self._polish(scan, k, object_id, model, result)
         if result is not None and (missed := self._lost.pop(object_id, 0)):
             log.info("%s: tracked again at t=%.3f after %d lost scan(s)", object_id, scan.time, missed)
         if result is None:
@@ -460,6 +472,8 @@ class CameraSensor:
             step = self._surface_motions(object_id, model).without(np.linalg.inv(before) @ result.transform)
             step, shrink = self._rest.step(object_id, model, step, result.rmse)
             motion = self._motion[object_id] = before @ step
+            if self.refine:
+                self._refine(scan, k, object_id)
             position = motion[:3, :3] @ centre + motion[:3, 3]
             linvel, angvel = self._update_velocity(object_id, position, motion[:3, :3] @ before[:3, :3].T, scan.time)
             track = Track(position, matrix_quat(motion[:3, :3]), linvel, angvel,
@@ -467,6 +481,56 @@ class CameraSensor:
             self._review(scan, k, object_id, motion, linvel)
         self._tracked[object_id] = (scan.time, track)
         return track
+
+    def _polish(self, scan, k: int, object_id: str, model: np.ndarray, fit: Registration) -> Registration:  # type: ignore[no-untyped-def]
+        """ICP's ``fit`` of the object's ``model`` to segment ``k`` (the object's alone) polished the other way
+        round: the segment's points registered onto the model, from the inverse of the fit, with the motions
+        the model cannot show held; the fit as it was if that matches under ``MIN_FITNESS`` of them.
+
+        The model onto the segment reads the tangent planes of the scan, each fitted to a few noisy points: on
+        a torus 4.4 cm across seen by one camera (some 200 points a scan) the fits of later scans onto eight
+        scans' points leaned 0.6 degrees on average one way; the segment onto those points, whose planes are
+        fitted to eight scans' worth, 0.05 degrees (/tmp harness on bench/rest_tracking.py's scans, session 59)."""
+        from estimation.fusion import register
+
+        points = scan.trackable(scan.segments[k].points)
+        if len(points) < 3:
+            return fit
+        target = self._targets.get(object_id)
+        if target is None or target[0] is not model:
+            target = self._targets[object_id] = (model, icp_target(model))
+        hold = self._surface_motions(object_id, model).moved(fit.transform)
+        back = register(points, target[1], init=np.linalg.inv(fit.transform), max_distance=_match_distance(scan),
+                        hold=hold)
+        if back.fitness < MIN_FITNESS:
+            return fit
+        return replace(fit, transform=np.linalg.inv(back.transform))
+
+    def _refine(self, scan, k: int, object_id: str) -> None:  # type: ignore[no-untyped-def]
+        """Add segment ``k``'s points to the object's ICP model while the object rests in the view the model
+        was taken from: alone in its segment, for ``GATHER_SCANS`` scans at most, up to ``MODEL_POINTS_CAP``
+        points.
+
+        Fits at rest answer to that one noisy view: averaging them takes their own noise away, not the
+        model's, and a 3 cm dice seen by one camera (some 300 points) settled over a degree turned. An object
+        that has not moved is where it was, so a later scan's points are in the model's frame with no fit
+        applied, and each scan added takes the model's noise down; placed by a fit, they would carry its
+        error. A step the rest filter takes for motion ends it; a scan whose step it holds is left out. A
+        creep under the filter's gate does not end it, and one camera's fits are too noisy to tell a creep
+        from rest within a few scans (a 5 cm box's at 0.6 m reached 2-4 mm at rest): it goes into the model
+        for ``GATHER_SCANS`` scans, blurring it by as many scans' creep. What the model's surface cannot show
+        stays as its first view found it."""
+        model, centre = self._model[object_id]
+        left = 0 if self._rest.moved(object_id) else self._gathering.get(object_id, 0)
+        if (not left or not self._rest.resting(object_id) or len(model) >= MODEL_POINTS_CAP
+                or not self._alone(scan, k, object_id)):
+            self._gathering[object_id] = left
+            return
+        self._gathering[object_id] = left - 1
+        more = scan.trackable(scan.segments[k].points)
+        refined = self._icp_model(np.concatenate([model, more]), len(model))
+        self._unseen[object_id] = (refined, self._surface_motions(object_id, model))
+        self._model[object_id] = (refined, centre)
 
     def _lose(self, object_id: str, msg: str, *args: object) -> None:
         """Count a scan that lost ``object_id``'s track, and say so: at WARNING when it is lost, at DEBUG while
@@ -649,7 +713,7 @@ class CameraSensor:
 
         target = icp_target(scan.trackable(scan.segments[k].points))  # its normals and tree, once for every fit
         motion = self._motion[object_id]
-        distance = max(3 * scan.cell, 0.01)
+        distance = _match_distance(scan)
         hold = self._surface_motions(object_id, model)
         still = register(model, target, init=motion, max_distance=distance, hold=hold)
         if still.fitness >= GOOD_FITNESS:
@@ -737,6 +801,12 @@ class CameraSensor:
                        normals=seen.normals[keep], completed=seen.completed[keep])  # type: ignore[index]
 
 
+def _match_distance(scan) -> float:  # type: ignore[no-untyped-def]
+    """Metres: the farthest a point and its match may be apart in ICP on ``scan``: three clustering cells, at
+    least a centimetre."""
+    return max(3 * scan.cell, 0.01)
+
+
 def _seen_through(scan, model: np.ndarray, transform: np.ndarray) -> float:  # type: ignore[no-untyped-def]
     """The share of ``model`` ((n, 3) object frame, metres) moved by ``transform`` (4, 4) that some camera of
     ``scan`` saw through, a clustering cell's slack (0 without views)."""
@@ -766,6 +836,11 @@ REVIEW_GAIN = 0.05
 
 #: Points of an object's first fused cloud kept as its ICP model.
 MODEL_POINTS_CAP = 4000
+
+#: Scans at rest an object's ICP model gathers after its first view, at most (see ``CameraSensor._refine``):
+#: as many as the rest filter averages. One camera's 300 points a scan of a 3 cm dice reach some 2,700; a
+#: longer gathering would take more of a creep too slow for the track to show into the model.
+GATHER_SCANS = REST_WINDOW
 
 
 

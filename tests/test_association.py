@@ -119,16 +119,45 @@ def test_rest_filter_averages_small_steps_and_takes_a_large_one_whole():
     rest = RestFilter(window=4)
     small = _turn_z(0.0, (0.0004, 0.0, 0.0))
     got, shrink = rest.step("a", model, small, rmse=0.001)  # 0.4 mm against a 3 mm gate: noise
-    assert np.allclose(got[:3, 3], small[:3, 3] / 2) and shrink == pytest.approx(1 / np.sqrt(2))
-    for n in (3, 4, 4):  # the window caps the mean
+    # The pose first seen counts as window - 1 fits (the model is that view): the first fit moves it a quarter.
+    assert np.allclose(got[:3, 3], small[:3, 3] / 4) and shrink == pytest.approx(1 / 2)
+    assert rest.resting("a")
+    for n in (4, 4):  # the window caps the mean
         got, shrink = rest.step("a", model, small, rmse=0.001)
         assert np.allclose(got[:3, 3], small[:3, 3] / n) and shrink == pytest.approx(1 / np.sqrt(n))
     push = _turn_z(0.0, (0.02, 0.0, 0.0))
     got, shrink = rest.step("a", model, push, rmse=0.001)  # 2 cm: motion, whole
-    assert np.allclose(got, push) and shrink == 1.0
+    assert np.allclose(got, push) and shrink == 1.0 and not rest.resting("a")
     got, _ = rest.step("a", model, small, rmse=0.001)  # the first fit at rest after a motion: whole too
     assert np.allclose(got[:3, 3], small[:3, 3])
     rest.restart("a")  # a new model: its pose counts as one fit
     got, _ = rest.step("a", model, small, rmse=0.001)
     assert np.allclose(got[:3, 3], small[:3, 3] / 2)
     assert np.allclose(RestFilter(window=1).step("b", model, small, rmse=0.001)[0], small)  # 1: each fit whole
+
+
+def test_rest_filter_holds_one_step_past_the_scatter_but_within_the_residual():
+    """The fits' reach has a long tail: one step past the scatter's gate is held (the track stays) and the next
+    decides: back within it, noise; past it again, motion, taken whole from the track."""
+    model = np.random.default_rng(0).uniform(-0.02, 0.02, (300, 3))
+    rest = RestFilter(window=4)
+    small = _turn_z(0.0, (0.0004, 0.0, 0.0))
+    for _ in range(3):
+        rest.step("a", model, small, rmse=0.001)  # scatter 0.4 mm: gate 1.2 mm; the residual's 3 mm
+    odd = _turn_z(0.0, (0.002, 0.0, 0.0))
+    got, shrink = rest.step("a", model, odd, rmse=0.001)
+    assert np.allclose(got, np.eye(4)) and shrink == pytest.approx(1 / 2)
+    assert not rest.resting("a") and not rest.moved("a")
+    got, _ = rest.step("a", model, small, rmse=0.001)  # back: it was noise
+    assert np.allclose(got[:3, 3], small[:3, 3] / 4) and rest.resting("a")
+    rest.step("a", model, odd, rmse=0.001)
+    got, shrink = rest.step("a", model, odd, rmse=0.001)  # twice in a row: motion
+    assert np.allclose(got, odd) and shrink == 1.0 and rest.moved("a")
+    rest.step("a", model, small, rmse=0.001)  # the first fit at rest after it, whole
+    for _ in range(2):
+        rest.step("a", model, small, rmse=0.001)
+    far = _turn_z(0.0, (0.004, 0.0, 0.0))  # past the residual's gate: motion at once
+    got, _ = rest.step("a", model, far, rmse=0.001)
+    assert np.allclose(got, far) and rest.moved("a")
+    got, _ = rest.step("a", model, odd, rmse=0.001)  # moving, nothing is held
+    assert np.allclose(got, odd)
