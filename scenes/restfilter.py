@@ -41,6 +41,12 @@ class RestFilter:
         self._count[object_id] = 1
         self._held.discard(object_id)
 
+    def forget(self, object_id: str) -> None:
+        """The object is seen anew (a new model in a new frame): nothing of its earlier fits counts."""
+        self._count.pop(object_id, None)
+        self._scatter.pop(object_id, None)
+        self._held.discard(object_id)
+
     def step(self, object_id: str, model: np.ndarray, step: np.ndarray, rmse: float) -> tuple[np.ndarray, float]:
         """``step`` ((4, 4), what ICP found since the last track, acting on the ``model``'s points (n, 3),
         metres), averaged with the fits before it while the object rests; and the factor its uncertainty

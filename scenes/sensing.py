@@ -217,7 +217,7 @@ class CameraSensor:
         self._last: dict[str, np.ndarray] = {}  # object id -> last known position (world, m)
         self._model: dict[str, tuple[np.ndarray, np.ndarray]] = {}  # id -> (ICP model points, frame centre)
         self._motion: dict[str, np.ndarray] = {}  # id -> (4, 4) motion since the model's capture
-        self._gathering: dict[str, int] = {}  # id -> scans its model may still gather (see _refine)
+        self._gathering: dict[str, tuple[float, np.ndarray]] = {}  # id -> (gathers until, s; its view's centroid)
         self._targets: dict[str, tuple[np.ndarray, IcpTarget]] = {}  # id -> (its model, that prepared for ICP)
         self._unseen: dict[str, tuple[np.ndarray, SurfaceMotions]] = {}  # id -> (its model, what it cannot show)
         self._observed: dict[str, Observation] = {}
@@ -336,7 +336,10 @@ class CameraSensor:
         observed = scan.trackable(seen.points[~seen.completed])  # type: ignore[index]
         self._model[object_id] = (self._icp_model(observed, shot), seen.frame_position)
         self._motion[object_id] = self._reviewed[object_id] = np.eye(4)
-        self._gathering[object_id] = GATHER_SCANS
+        # Its model is a new view, in a new frame: the fits averaged so far answered to the old one.
+        self._rest.forget(object_id)
+        self._gathering[object_id] = (scan.time + (GATHER_SCANS + 0.5) * self.track_period,
+                                      observed.mean(axis=0) if len(observed) else seen.frame_position)
         self._observed[object_id] = seen
         self._tracked[object_id] = (scan.time, Track(seen.frame_position, seen.frame_quat, np.zeros(3), np.zeros(3),
                                                      time=scan.time))
@@ -473,7 +476,7 @@ class CameraSensor:
             step, shrink = self._rest.step(object_id, model, step, result.rmse)
             motion = self._motion[object_id] = before @ step
             if self.refine:
-                self._refine(scan, k, object_id)
+                self._refine(scan, k, object_id, result.rmse)
             position = motion[:3, :3] @ centre + motion[:3, 3]
             linvel, angvel = self._update_velocity(object_id, position, motion[:3, :3] @ before[:3, :3].T, scan.time)
             track = Track(position, matrix_quat(motion[:3, :3]), linvel, angvel,
@@ -506,28 +509,39 @@ class CameraSensor:
             return fit
         return replace(fit, transform=np.linalg.inv(back.transform))
 
-    def _refine(self, scan, k: int, object_id: str) -> None:  # type: ignore[no-untyped-def]
-        """Add segment ``k``'s points to the object's ICP model while the object rests in the view the model
-        was taken from: alone in its segment, for ``GATHER_SCANS`` scans at most, up to ``MODEL_POINTS_CAP``
-        points.
+    def _refine(self, scan, k: int, object_id: str, rmse: float) -> None:  # type: ignore[no-untyped-def]
+        """Add segment ``k``'s points to the object's ICP model while the object rests where the view the model
+        was taken from saw it: alone in its segment, for ``GATHER_SCANS`` tracking periods at most, up to
+        ``MODEL_POINTS_CAP`` points.
 
         Fits at rest answer to that one noisy view: averaging them takes their own noise away, not the
         model's, and a 3 cm dice seen by one camera (some 300 points) settled over a degree turned. An object
         that has not moved is where it was, so a later scan's points are in the model's frame with no fit
-        applied, and each scan added takes the model's noise down; placed by a fit, they would carry its
-        error. A step the rest filter takes for motion ends it; a scan whose step it holds is left out. A
-        creep under the filter's gate does not end it, and one camera's fits are too noisy to tell a creep
-        from rest within a few scans (a 5 cm box's at 0.6 m reached 2-4 mm at rest): it goes into the model
-        for ``GATHER_SCANS`` scans, blurring it by as many scans' creep. What the model's surface cannot show
-        stays as its first view found it."""
+        applied, and each scan added takes the model's noise down; placed by the polished fit instead, the
+        hex nut at one camera kept 2.3 degrees of its first view's bias. So a scan that moved it must not be
+        added: a step the rest filter takes for motion ends the gathering, a scan whose step it holds is left
+        out, and so is, for good, a segment whose centroid is further from the view's than the fit's RMS
+        residual ``rmse`` (metres): a nudge under the rest gate, whose scans would otherwise have gone into
+        the model unmoved and kept the track between the two poses (a box nudged 3 mm at one camera stayed
+        2.3 mm off). At rest the centroid moves less than the residual (one camera of tests/test_cameras.py's
+        rig: 0.5-1.9 mm against a 2 mm residual; a 3 mm nudge moved it 3-4 mm). A smaller nudge or a creep is
+        taken in, blurring the model by up to the residual. What the model's surface cannot show stays as
+        its first view found it."""
         model, centre = self._model[object_id]
-        left = 0 if self._rest.moved(object_id) else self._gathering.get(object_id, 0)
-        if (not left or not self._rest.resting(object_id) or len(model) >= MODEL_POINTS_CAP
-                or not self._alone(scan, k, object_id)):
-            self._gathering[object_id] = left
+        until, centroid = self._gathering.get(object_id, (-np.inf, centre))
+        if self._rest.moved(object_id):
+            until = -np.inf
+        if scan.time > until or not self._rest.resting(object_id) or len(model) >= MODEL_POINTS_CAP \
+                or not self._alone(scan, k, object_id):
+            self._gathering[object_id] = (until, centroid)
             return
-        self._gathering[object_id] = left - 1
         more = scan.trackable(scan.segments[k].points)
+        shift = float(np.linalg.norm(more.mean(axis=0) - centroid)) if len(more) else np.inf
+        if shift > rmse:
+            log.debug("%s: its points at t=%.3f are %.2f mm from its first view's; its model gathers no more",
+                      object_id, scan.time, 1e3 * shift)
+            self._gathering[object_id] = (-np.inf, centroid)
+            return
         refined = self._icp_model(np.concatenate([model, more]), len(model))
         self._unseen[object_id] = (refined, self._surface_motions(object_id, model))
         self._model[object_id] = (refined, centre)
@@ -837,9 +851,10 @@ REVIEW_GAIN = 0.05
 #: Points of an object's first fused cloud kept as its ICP model.
 MODEL_POINTS_CAP = 4000
 
-#: Scans at rest an object's ICP model gathers after its first view, at most (see ``CameraSensor._refine``):
-#: as many as the rest filter averages. One camera's 300 points a scan of a 3 cm dice reach some 2,700; a
-#: longer gathering would take more of a creep too slow for the track to show into the model.
+#: Tracking periods after its first view in which an object's ICP model gathers the scans of it at rest, at
+#: most (see ``CameraSensor._refine``): as many as the rest filter averages by default. One camera's 300
+#: points a scan of a 3 cm dice reach some 2,700; a longer gathering would take more of a creep too slow to
+#: show into the model.
 GATHER_SCANS = REST_WINDOW
 
 

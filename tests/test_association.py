@@ -161,3 +161,10 @@ def test_rest_filter_holds_one_step_past_the_scatter_but_within_the_residual():
     assert np.allclose(got, far) and rest.moved("a")
     got, _ = rest.step("a", model, odd, rmse=0.001)  # moving, nothing is held
     assert np.allclose(got, odd)
+    for _ in range(3):
+        rest.step("a", model, small, rmse=0.001)
+    rest.step("a", model, odd, rmse=0.001)  # held ...
+    rest.forget("a")  # ... and seen anew: nothing of it counts, the new first pose is window - 1 fits
+    assert rest.resting("a") and not rest.moved("a")
+    got, _ = rest.step("a", model, odd, rmse=0.001)  # 2 mm within the residual's 3 mm: noise, a quarter
+    assert np.allclose(got[:3, 3], odd[:3, 3] / 4)
