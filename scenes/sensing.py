@@ -217,7 +217,7 @@ class CameraSensor:
         self._last: dict[str, np.ndarray] = {}  # object id -> last known position (world, m)
         self._model: dict[str, tuple[np.ndarray, np.ndarray]] = {}  # id -> (ICP model points, frame centre)
         self._motion: dict[str, np.ndarray] = {}  # id -> (4, 4) motion since the model's capture
-        self._gathering: dict[str, tuple[float, np.ndarray]] = {}  # id -> (gathers until, s; its view's centroid)
+        self._gathering: dict[str, tuple[float, np.ndarray]] = {}  # id -> (gathers until scan no., view's centroid)
         self._targets: dict[str, tuple[np.ndarray, IcpTarget]] = {}  # id -> (its model, that prepared for ICP)
         self._unseen: dict[str, tuple[np.ndarray, SurfaceMotions]] = {}  # id -> (its model, what it cannot show)
         self._observed: dict[str, Observation] = {}
@@ -338,8 +338,11 @@ class CameraSensor:
         self._motion[object_id] = self._reviewed[object_id] = np.eye(4)
         # Its model is a new view, in a new frame: the fits averaged so far answered to the old one.
         self._rest.forget(object_id)
-        self._gathering[object_id] = (scan.time + (GATHER_SCANS + 0.5) * self.track_period,
-                                      observed.mean(axis=0) if len(observed) else seen.frame_position)
+        # The centroid of all its points in this scan, not of the subsample: a few hundred of them drawn at
+        # random were 2-3 mm from the scans at rest.
+        whole = scan.trackable(segment.points)  # type: ignore[union-attr]
+        self._gathering[object_id] = (self.feed.stats.scans + GATHER_SCANS,
+                                      whole.mean(axis=0) if len(whole) else seen.frame_position)
         self._observed[object_id] = seen
         self._tracked[object_id] = (scan.time, Track(seen.frame_position, seen.frame_quat, np.zeros(3), np.zeros(3),
                                                      time=scan.time))
@@ -511,8 +514,8 @@ class CameraSensor:
 
     def _refine(self, scan, k: int, object_id: str, rmse: float) -> None:  # type: ignore[no-untyped-def]
         """Add segment ``k``'s points to the object's ICP model while the object rests where the view the model
-        was taken from saw it: alone in its segment, for ``GATHER_SCANS`` tracking periods at most, up to
-        ``MODEL_POINTS_CAP`` points.
+        was taken from saw it: alone in its segment, for the ``GATHER_SCANS`` scans after that view at most
+        (gathered or not), up to ``MODEL_POINTS_CAP`` points.
 
         Fits at rest answer to that one noisy view: averaging them takes their own noise away, not the
         model's, and a 3 cm dice seen by one camera (some 300 points) settled over a degree turned. An object
@@ -525,13 +528,15 @@ class CameraSensor:
         the model unmoved and kept the track between the two poses (a box nudged 3 mm at one camera stayed
         2.3 mm off). At rest the centroid moves less than the residual (one camera of tests/test_cameras.py's
         rig: 0.5-1.9 mm against a 2 mm residual; a 3 mm nudge moved it 3-4 mm). A smaller nudge or a creep is
-        taken in, blurring the model by up to the residual. What the model's surface cannot show stays as
-        its first view found it."""
+        taken in, blurring the model by up to the residual, and so is a turn under the rest gate, which
+        hardly moves the centroid (a review turned that box 2-3 degrees about its vertical axis: the track
+        stayed 1.7-2.6 degrees off, where the one-view tracker settled within 0.6; not mended). What the
+        model's surface cannot show stays as its first view found it."""
         model, centre = self._model[object_id]
         until, centroid = self._gathering.get(object_id, (-np.inf, centre))
         if self._rest.moved(object_id):
             until = -np.inf
-        if scan.time > until or not self._rest.resting(object_id) or len(model) >= MODEL_POINTS_CAP \
+        if self.feed.stats.scans > until or not self._rest.resting(object_id) or len(model) >= MODEL_POINTS_CAP \
                 or not self._alone(scan, k, object_id):
             self._gathering[object_id] = (until, centroid)
             return
@@ -851,8 +856,8 @@ REVIEW_GAIN = 0.05
 #: Points of an object's first fused cloud kept as its ICP model.
 MODEL_POINTS_CAP = 4000
 
-#: Tracking periods after its first view in which an object's ICP model gathers the scans of it at rest, at
-#: most (see ``CameraSensor._refine``): as many as the rest filter averages by default. One camera's 300
+#: Scans after its first view in which an object's ICP model gathers the scans of it at rest, at most (see
+#: ``CameraSensor._refine``): as many as the rest filter averages by default. One camera's 300
 #: points a scan of a 3 cm dice reach some 2,700; a longer gathering would take more of a creep too slow to
 #: show into the model.
 GATHER_SCANS = REST_WINDOW

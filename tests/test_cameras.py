@@ -336,7 +336,7 @@ def test_a_creep_is_gathered_only_while_the_points_stay_near_the_first_view_and_
     for seed in (4, 5):
         sizes: list[int] = []
         crept = _rest_tracks(None, 28, seed=seed, sizes=sizes, creep=0.0005, creep_scans=16)
-        assert sizes[1] > sizes[0] and sizes[8] == sizes[-1], sizes  # gathered, then no more
+        assert sizes[1] > sizes[0] and sizes[4] == sizes[-1], sizes  # gathered, then no more
         assert crept[-1, 0] < 0.0015, crept[:, 0]
 
 
